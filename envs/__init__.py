@@ -1,0 +1,1 @@
+"""Gymnasium environments over the CSG and ShapeAssembly renderers (registrations only)."""

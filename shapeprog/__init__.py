@@ -1,0 +1,1 @@
+"""ShapeAssembly: a language of attached cuboids, its differentiable executor, corpus and metrics."""

@@ -1,0 +1,1 @@
+"""Training entry point (LightningCLI). Filled in by the neural-parser work."""
