@@ -1,0 +1,66 @@
+"""CSGNet: the CSG language, its batched renderer, metrics and (later) neural shape parsers.
+
+Entry points:
+
+* :func:`parse` / :func:`to_text`: program text <-> :class:`Program`.
+* :func:`vocabulary`: the 2D (400) and 3D (6635) token tables.
+* :func:`render`: programs -> bool arrays ``(N, 64, 64)`` or ``(N, 64, 64, 64)``.
+* :mod:`csgnet.metrics`: chamfer distance and IoU as the paper computes them.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from .lang import Draw, Op, ParseError, Program, is_valid, parse, parse_lines, to_text
+from .vocab import Vocabulary, vocabulary
+
+__all__ = [
+    "Draw",
+    "Op",
+    "ParseError",
+    "Program",
+    "Vocabulary",
+    "is_valid",
+    "parse",
+    "parse_lines",
+    "render",
+    "to_text",
+    "vocabulary",
+]
+
+
+def render(programs, dim: int = 2, device=None) -> np.ndarray:
+    """Render programs to bool arrays.
+
+    Args:
+        programs: a program (text or :class:`Program`), a sequence of them, or token indices
+            ``(N, T)`` (int array or tensor, padded with ``$``).
+        dim: 2 or 3.
+        device: torch device for the batched renderer (default CPU).
+
+    Returns:
+        ``(N, 64, 64)`` bool in 2D, ``(N, 64, 64, 64)`` in 3D (``N = 1`` for a single program).
+        Invalid programs render all False.
+    """
+    import torch
+
+    from . import render as _r
+
+    if isinstance(programs, (str, Program)):
+        programs = [programs]
+    if isinstance(programs, (np.ndarray, torch.Tensor)):
+        out = _r.render_tokens(torch.as_tensor(programs, device=device), dim)
+    else:
+        out = _r.render_programs(list(programs), dim, device)
+    return out.cpu().numpy()
+
+
+def __getattr__(name):  # lazy submodules: csgnet.metrics etc. without work at import
+    import importlib
+
+    if name in {"metrics", "export", "data", "render_np", "primitives"}:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'csgnet' has no attribute {name!r}")

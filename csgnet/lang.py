@@ -1,0 +1,403 @@
+"""The CSG language of CSGNet: tokens, programs, parsing, printing and validity.
+
+A program is a postfix sequence of tokens. A draw token pushes a primitive, an operator pops two
+shapes and pushes their combination; the result is the top of the stack at the end.
+
+Text formats (``../specs/csg.md`` section (a)):
+
+* 2D: ``c(x,y,r)`` circle, ``s(x,y,r)`` square, ``t(x,y,r)`` triangle.
+* 3D: ``sp(x,y,z,r)`` sphere, ``cu(x,y,z,r)`` cube, ``cy(x,y,z,r,h)`` cylinder, or the vocabulary's
+  truncated forms ``p(...)``, ``u(...)``, ``y(...)``; both parse to the same program.
+* Operators ``+`` (union), ``*`` (intersection), ``-`` (subtraction, earlier minus later); ``$`` stops.
+
+Parsing is strict where the reference parser was silent: an unknown character, an unknown primitive,
+a wrong number of parameters, a non-integer parameter, a negative radius and (with ``strict=True``) a
+stack underflow or an unfinished stack raise :class:`ParseError`, which names the program, the token and
+its 0-based character position. Whitespace between tokens is ignored, and everything after the first
+``$`` is dropped, as for network output. Unlike the reference, positions may be negative integers
+(``c(-4,10,12)``): such shapes are clipped to the canvas. Radii and heights must be non-negative.
+
+This module needs only the standard library.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Iterable, Iterator, Sequence, Union
+
+__all__ = [
+    "ParseError",
+    "Draw",
+    "Op",
+    "Program",
+    "Node",
+    "parse",
+    "parse_lines",
+    "to_text",
+    "is_valid",
+    "prefix_status",
+    "PRIMITIVES",
+    "OPERATORS",
+    "STOP",
+]
+
+STOP = "$"
+OPERATORS = {"+": "union", "*": "intersect", "-": "subtract"}
+
+# kind letter -> (name, dimension, parameter names). The letter is the one the vocabulary uses.
+PRIMITIVES = {
+    "c": ("circle", 2, ("x", "y", "r")),
+    "s": ("square", 2, ("x", "y", "r")),
+    "t": ("triangle", 2, ("x", "y", "r")),
+    "p": ("sphere", 3, ("x", "y", "z", "r")),
+    "u": ("cube", 3, ("x", "y", "z", "r")),
+    "y": ("cylinder", 3, ("x", "y", "z", "r", "h")),
+}
+# The long (dataset / README) names of the 3D primitives.
+LONG_3D = {"p": "sp", "u": "cu", "y": "cy"}
+_FROM_LONG_3D = {v: k for k, v in LONG_3D.items()}
+
+
+class ParseError(ValueError):
+    """A program text that is not a valid CSG program.
+
+    Attributes:
+        program: the text being parsed.
+        position: 0-based character offset of the offending token (``None`` if not applicable).
+        token: the offending token text.
+        file: the file the program came from, if any.
+        line: the 1-based line in ``file``, if any.
+    """
+
+    def __init__(self, message: str, program: str = "", position: int | None = None,
+                 token: str | None = None, file: str | None = None, line: int | None = None):
+        self.reason = message
+        self.program = program
+        self.position = position
+        self.token = token
+        self.file = file
+        self.line = line
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = ""
+        if self.file is not None:
+            where = f"{self.file}:{self.line}:" if self.line is not None else f"{self.file}:"
+            if self.position is not None:
+                where += f"{self.position + 1}:"
+            where += " "
+        elif self.position is not None:
+            where = f"at character {self.position}: "
+        text = f"{where}{self.reason}"
+        if self.token is not None:
+            text += f" (token {self.token!r})"
+        if self.program:
+            shown = self.program if len(self.program) <= 200 else self.program[:197] + "..."
+            text += f" in program {shown!r}"
+        return text
+
+    def located(self, file: str, line: int) -> "ParseError":
+        """The same error, attributed to ``file`` at 1-based ``line``."""
+        return ParseError(self.reason, self.program, self.position, self.token, file, line)
+
+
+@dataclass(frozen=True)
+class Draw:
+    """A primitive. ``kind`` is the vocabulary letter (``c s t`` in 2D, ``p u y`` in 3D)."""
+
+    kind: str
+    params: tuple[int, ...]
+
+    def __post_init__(self):
+        if self.kind not in PRIMITIVES:
+            raise ValueError(f"unknown primitive kind {self.kind!r}; expected one of {sorted(PRIMITIVES)}")
+        name, _, names = PRIMITIVES[self.kind]
+        if len(self.params) != len(names):
+            raise ValueError(f"{name} takes {len(names)} parameters {names}, got {len(self.params)}")
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in self.params):
+            raise ValueError(f"{name} parameters must be integers, got {self.params}")
+
+    @property
+    def dim(self) -> int:
+        return PRIMITIVES[self.kind][1]
+
+    @property
+    def name(self) -> str:
+        return PRIMITIVES[self.kind][0]
+
+    def text(self, long: bool = True) -> str:
+        """``c(32,32,8)``; in 3D ``sp(...)`` (``long=True``) or the vocabulary form ``p(...)``."""
+        head = LONG_3D[self.kind] if (long and self.kind in LONG_3D) else self.kind
+        return f"{head}({','.join(str(v) for v in self.params)})"
+
+
+@dataclass(frozen=True)
+class Op:
+    """A boolean operator: ``+`` union, ``*`` intersection, ``-`` subtraction (earlier minus later)."""
+
+    op: str
+
+    def __post_init__(self):
+        if self.op not in OPERATORS:
+            raise ValueError(f"unknown operator {self.op!r}; expected one of {list(OPERATORS)}")
+
+    def text(self, long: bool = True) -> str:
+        return self.op
+
+
+Token = Union[Draw, Op]
+
+
+@dataclass(frozen=True)
+class Node:
+    """A CSG tree node: ``op`` applied to ``left`` (earlier operand) and ``right`` (later operand)."""
+
+    op: str
+    left: "Node | Draw"
+    right: "Node | Draw"
+
+
+@dataclass(frozen=True)
+class Program:
+    """A postfix CSG program.
+
+    Attributes:
+        tokens: the postfix tokens (no stop symbol).
+        dim: 2 or 3.
+    """
+
+    tokens: tuple[Token, ...]
+    dim: int = 2
+
+    def __post_init__(self):
+        if self.dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, got {self.dim}")
+        for t in self.tokens:
+            if isinstance(t, Draw) and t.dim != self.dim:
+                raise ValueError(f"{t.name} is a {t.dim}D primitive in a {self.dim}D program")
+            if not isinstance(t, (Draw, Op)):
+                raise TypeError(f"program tokens must be Draw or Op, got {type(t).__name__}")
+
+    def __len__(self) -> int:
+        return len(self.tokens)
+
+    def __iter__(self) -> Iterator[Token]:
+        return iter(self.tokens)
+
+    @property
+    def draws(self) -> tuple[Draw, ...]:
+        return tuple(t for t in self.tokens if isinstance(t, Draw))
+
+    @property
+    def is_valid(self) -> bool:
+        """Every prefix has more draws than operators and the stack ends with one shape."""
+        return is_valid(self)
+
+    def text(self, long: bool = True) -> str:
+        """The program text (no ``$``). In 3D, ``long=False`` gives the vocabulary form ``p(...)``."""
+        return "".join(t.text(long) for t in self.tokens)
+
+    def __str__(self) -> str:
+        return self.text()
+
+    def depth(self) -> int:
+        """The maximum stack depth reached while executing (valid or not)."""
+        d = best = 0
+        for t in self.tokens:
+            d = d + 1 if isinstance(t, Draw) else d - 1
+            best = max(best, d)
+        return best
+
+    def tree(self) -> "Node | Draw":
+        """The program as a CSG tree. Raises ``ValueError`` for an invalid program."""
+        stack: list = []
+        for i, t in enumerate(self.tokens):
+            if isinstance(t, Draw):
+                stack.append(t)
+            else:
+                if len(stack) < 2:
+                    raise ValueError(f"stack underflow at token {i} ({t.op!r}) of {self.text()!r}")
+                b = stack.pop()
+                a = stack.pop()
+                stack.append(Node(t.op, a, b))
+        if len(stack) != 1:
+            raise ValueError(f"program {self.text()!r} leaves {len(stack)} shapes on the stack")
+        return stack[0]
+
+    @staticmethod
+    def from_tree(tree: "Node | Draw") -> "Program":
+        """The postfix program of a CSG tree."""
+        out: list[Token] = []
+
+        def walk(n):
+            if isinstance(n, Draw):
+                out.append(n)
+            else:
+                walk(n.left)
+                walk(n.right)
+                out.append(Op(n.op))
+
+        walk(tree)
+        dim = out[0].dim if out else 2
+        return Program(tuple(out), dim)
+
+
+def to_text(program: Program, long: bool = True) -> str:
+    """The text of ``program`` (see :meth:`Program.text`)."""
+    return program.text(long)
+
+
+# ---------------------------------------------------------------------------------------------
+# validity
+
+def prefix_status(tokens: Sequence[Token | str]) -> str:
+    """Classify a token prefix: ``"invalid"`` (some operator lacks two operands), ``"complete"`` (one
+    shape on the stack) or ``"open"`` (valid so far, more than one shape on the stack, or empty).
+
+    Tokens may be :class:`Draw`/:class:`Op` or type letters (``"d"`` for a draw, an operator char).
+    """
+    draws = ops = 0
+    for t in tokens:
+        is_draw = isinstance(t, Draw) or t == "d"
+        if is_draw:
+            draws += 1
+        else:
+            ops += 1
+        if draws <= ops:
+            return "invalid"
+    if draws == 0:
+        return "open"
+    return "complete" if draws - 1 == ops else "open"
+
+
+def is_valid(program: Program | Sequence[Token]) -> bool:
+    """The spec's whole-expression check: every prefix has D > O and D - 1 = O at the end.
+
+    An empty program is invalid. Invalid programs render as an empty canvas.
+    """
+    tokens = program.tokens if isinstance(program, Program) else program
+    return len(tokens) > 0 and prefix_status(tokens) == "complete"
+
+
+# ---------------------------------------------------------------------------------------------
+# parsing
+
+_TOKEN_RE = re.compile(
+    r"\s+"  # whitespace (ignored)
+    r"|(?P<op>[+*\-])"
+    r"|(?P<stop>\$)"
+    r"|(?P<head>[A-Za-z_]+)\((?P<args>[^()]*)\)"
+    r"|(?P<bad>[A-Za-z_]+\(?[^()+*$\-]*|.)"
+)
+_INT_RE = re.compile(r"[+-]?\d+")
+
+
+def _parse_args(args: str, head: str, name: str, names: tuple[str, ...], text: str, pos: int):
+    parts = args.split(",")
+    token = f"{head}({args})"
+    if len(parts) != len(names):
+        raise ParseError(
+            f"{name} takes {len(names)} parameters ({','.join(names)}), got {len(parts)}",
+            text, pos, token)
+    values = []
+    for pname, part in zip(names, parts):
+        s = part.strip()
+        if not _INT_RE.fullmatch(s):
+            what = "missing" if s == "" else f"non-integer {s!r}"
+            raise ParseError(f"{name} parameter {pname} is {what}: parameters are integers", text, pos, token)
+        v = int(s)
+        if pname in ("r", "h") and v < 0:
+            raise ParseError(f"{name} parameter {pname} must be >= 0, got {v}", text, pos, token)
+        values.append(v)
+    return tuple(values)
+
+
+def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
+    """Parse a program text.
+
+    Args:
+        text: e.g. ``"c(32,32,28)c(32,32,24)-"`` or ``"sp(32,32,32,8)cu(16,16,16,12)+"``. Text after the
+            first ``$`` is ignored.
+        dim: 2 or 3.
+        strict: if true, the program must be valid (no stack underflow, one shape left at the end,
+            not empty). If false, structurally invalid programs are returned (they render empty).
+
+    Returns:
+        The :class:`Program`.
+
+    Raises:
+        ParseError: naming the token and its position.
+    """
+    if dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3, got {dim}")
+    if not isinstance(text, str):
+        raise TypeError(f"program text must be a str, got {type(text).__name__}")
+    tokens: list[Token] = []
+    positions: list[int] = []
+    pos = 0
+    n = len(text)
+    while pos < n:
+        m = _TOKEN_RE.match(text, pos)
+        assert m is not None  # the last alternative matches any character
+        kind = next((g for g in ("op", "stop", "head", "bad") if m.group(g) is not None), None)
+        if kind == "stop":
+            break
+        if kind == "op":
+            tokens.append(Op(m.group("op")))
+            positions.append(pos)
+        elif kind == "head":
+            head = m.group("head")
+            letter = head if head in PRIMITIVES else _FROM_LONG_3D.get(head)
+            if letter is None or PRIMITIVES[letter][1] != dim:
+                known = "c, s, t" if dim == 2 else "sp, cu, cy (or p, u, y)"
+                raise ParseError(f"unknown {dim}D primitive {head!r}; expected one of {known}",
+                                 text, pos, m.group(0))
+            name, _, names = PRIMITIVES[letter]
+            params = _parse_args(m.group("args"), head, name, names, text, pos)
+            tokens.append(Draw(letter, params))
+            positions.append(pos)
+        elif kind == "bad":
+            raise ParseError("malformed token", text, pos, m.group(0))
+        pos = m.end()
+    if strict:
+        if not tokens:
+            raise ParseError("empty program", text, 0 if text else None)
+        draws = ops = 0
+        for t, p in zip(tokens, positions):
+            if isinstance(t, Draw):
+                draws += 1
+            else:
+                ops += 1
+                if draws <= ops:
+                    raise ParseError(f"stack underflow: operator {t.op!r} needs two shapes on the stack",
+                                     text, p, t.op)
+        if draws - 1 != ops:
+            raise ParseError(f"unfinished program: {draws - ops} shapes left on the stack "
+                             f"({draws - ops - 1} more operators needed)", text, len(text))
+    return Program(tuple(tokens), dim)
+
+
+def parse_lines(lines: Iterable[str], dim: int = 2, file: str = "<string>", strict: bool = True,
+                errors: str = "raise") -> list[Program] | tuple[list[Program], list[ParseError]]:
+    """Parse a dataset: one program per line, blank lines skipped.
+
+    Args:
+        errors: ``"raise"`` raises the first :class:`ParseError` (naming ``file`` and the line);
+            ``"collect"`` returns ``(programs, errors)``, with every good program kept.
+    """
+    programs, errs = [], []
+    for i, line in enumerate(lines, start=1):
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            programs.append(parse(line, dim, strict))
+        except ParseError as e:
+            err = e.located(file, i)
+            if errors == "raise":
+                raise err from None
+            errs.append(err)
+    if errors == "collect":
+        return programs, errs
+    return programs
