@@ -47,7 +47,7 @@ def render(programs, dim: int = 2, device=None) -> np.ndarray:
     """
     import torch
 
-    from . import render as _r
+    from . import renderer as _r
 
     if isinstance(programs, (str, Program)):
         programs = [programs]
@@ -61,6 +61,6 @@ def render(programs, dim: int = 2, device=None) -> np.ndarray:
 def __getattr__(name):  # lazy submodules: csgnet.metrics etc. without work at import
     import importlib
 
-    if name in {"metrics", "export", "data", "render_np", "primitives"}:
+    if name in {"metrics", "export", "data", "render_np", "renderer", "primitives"}:
         return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'csgnet' has no attribute {name!r}")

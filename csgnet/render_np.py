@@ -2,7 +2,7 @@
 
 Readable rather than fast. Each primitive is rasterised pixel by pixel from the shared geometry in
 :mod:`csgnet.primitives`, then the postfix program runs on a Python list used as a stack. The batched
-renderer (:mod:`csgnet.render`) must equal this path on every program; the tests check that.
+renderer (:mod:`csgnet.renderer`) must equal this path on every program; the tests check that.
 
 2D: ``img[row=y, col=x]`` of shape (64, 64); out-of-canvas parts are clipped.
 3D: ``vol[x, y, z]`` of shape (64, 64, 64); out-of-canvas parts are clipped (never wrapped).
