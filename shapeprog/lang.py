@@ -1,0 +1,548 @@
+"""ShapeAssembly: the language (AST, parser, printer). Standard library only.
+
+A program is a tree of blocks. The corpus format (one file per shape) is::
+
+    Assembly Program_0 {
+    \tbbox = Cuboid(0.893, 1.558, 1.019, True)
+    \tProgram_1 = Cuboid(0.89, 0.528, 1.017, True)
+    \tattach(Program_1, bbox, 0.5, 0.0, 0.5, 0.499, 0.001, 0.5)
+    }
+    Assembly Program_1 {
+    \tbbox = Cuboid(0.89, 0.528, 1.017, True)
+    ...
+    }
+
+A cuboid named ``Program_<m>`` is a non-leaf part whose contents are the block
+``Assembly Program_<m>``. The *flat* format (``examples/ex-0.txt``) is a single block
+without the ``Assembly`` wrapper and without indentation.
+
+Statements (one per line)::
+
+    NAME = Cuboid(l, h, w, aligned)          l, h, w: extents along local x, y (up), z
+    attach(A, B, x1, y1, z1, x2, y2, z2)     point (x1,y1,z1) of A goes to (x2,y2,z2) of B
+    squeeze(A, B, C, face, u, v)             face in right|left|top|bot|front|back
+    reflect(A, axis)                         axis in X|Y|Z
+    translate(A, axis, n, d)                 n copies spanning d (fraction of the bbox)
+
+Numbers are printed with Python's ``repr`` (the corpus numbers are exactly that form,
+so ``to_text(parse(text)) == text`` byte for byte for every corpus file).
+
+Decision on the stray trailing comma (``squeeze(...),`` in ``ex-0.txt``): it is accepted
+with a :class:`ParseWarning` naming ``file:line``; it is not reproduced when printing.
+
+Example:
+    >>> p = parse("bbox = Cuboid(1.0, 1.0, 1.0, True)\\ncube0 = Cuboid(0.5, 0.1, 0.5, True)\\n"
+    ...           "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n")
+    >>> p.flat, len(p.root.statements), p.root.statements[2].b
+    (True, 3, 'bbox')
+    >>> to_text(p) == "bbox = Cuboid(1.0, 1.0, 1.0, True)\\ncube0 = Cuboid(0.5, 0.1, 0.5, True)\\n" \\
+    ...     "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n"
+    True
+"""
+from __future__ import annotations
+
+import dataclasses
+import re
+import warnings
+from dataclasses import dataclass
+from typing import Iterator, Union
+
+__all__ = [
+    "AXES",
+    "FACES",
+    "Attach",
+    "Block",
+    "Cuboid",
+    "ParseError",
+    "ParseWarning",
+    "Program",
+    "Reflect",
+    "Squeeze",
+    "Statement",
+    "Translate",
+    "parse",
+    "statement_lines",
+    "to_text",
+]
+
+#: Face names; index k of the local axis they are normal to is FACE_AXIS[face].
+FACES = ("right", "left", "top", "bot", "front", "back")
+AXES = ("X", "Y", "Z")
+
+
+class ParseError(ValueError):
+    """A program text that is not ShapeAssembly.
+
+    Attributes:
+        file: the file name given to :func:`parse` (or ``"<string>"``).
+        line: 1-based line number.
+        column: 1-based column of the offending token (a TAB counts as one column).
+        token: the offending token text ('' at the end of a line).
+        reason: the message without the location.
+    """
+
+    def __init__(self, reason: str, file: str, line: int, column: int, token: str):
+        self.reason, self.file, self.line, self.column, self.token = reason, file, line, column, token
+        super().__init__(f"{file}:{line}:{column}: {reason}")
+
+
+class ParseWarning(UserWarning):
+    """A tolerated irregularity in a program text (e.g. a stray trailing comma)."""
+
+
+# ----------------------------------------------------------------------------- AST
+
+
+@dataclass(frozen=True)
+class Cuboid:
+    """``name = Cuboid(l, h, w, aligned)``; extents along local x, y (up), z."""
+
+    name: str
+    l: float
+    h: float
+    w: float
+    aligned: bool
+
+
+@dataclass(frozen=True)
+class Attach:
+    """``attach(a, b, x1, y1, z1, x2, y2, z2)``: move ``a`` so that its local point
+    (x1, y1, z1) meets the local point (x2, y2, z2) of ``b``."""
+
+    a: str
+    b: str
+    x1: float
+    y1: float
+    z1: float
+    x2: float
+    y2: float
+    z2: float
+
+
+@dataclass(frozen=True)
+class Squeeze:
+    """``squeeze(a, b, c, face, u, v)``: place ``a`` between ``b`` (on side ``face``)
+    and ``c`` (opposite side); (u, v) are the free coordinates in increasing axis order."""
+
+    a: str
+    b: str
+    c: str
+    face: str
+    u: float
+    v: float
+
+
+@dataclass(frozen=True)
+class Reflect:
+    """``reflect(a, axis)``: a mirrored copy of ``a`` through the bbox's centre plane."""
+
+    a: str
+    axis: str
+
+
+@dataclass(frozen=True)
+class Translate:
+    """``translate(a, axis, n, d)``: ``n`` copies of ``a``, the last one ``d`` (a fraction
+    of the bbox extent along ``axis``) away from ``a``."""
+
+    a: str
+    axis: str
+    n: int
+    d: float
+
+
+Statement = Union[Cuboid, Attach, Squeeze, Reflect, Translate]
+
+
+@dataclass(frozen=True)
+class Block:
+    """``Assembly <name> { statements }``; ``statements[0]`` is ``bbox = Cuboid(...)``."""
+
+    name: str
+    statements: tuple[Statement, ...]
+
+    @property
+    def bbox(self) -> Cuboid:
+        return self.statements[0]  # type: ignore[return-value]
+
+    def cuboids(self) -> list[Cuboid]:
+        return [s for s in self.statements if isinstance(s, Cuboid)]
+
+
+@dataclass(frozen=True)
+class Program:
+    """A ShapeAssembly program: blocks in breadth-first (file) order, root first.
+
+    ``flat`` is True for the single-block format without the ``Assembly`` wrapper.
+    """
+
+    blocks: tuple[Block, ...]
+    flat: bool = False
+
+    @property
+    def root(self) -> Block:
+        return self.blocks[0]
+
+    def block(self, name: str) -> Block:
+        """The block called ``name`` (e.g. ``"Program_2"``); KeyError if absent."""
+        for b in self.blocks:
+            if b.name == name:
+                return b
+        raise KeyError(name)
+
+    def children(self, block: Block) -> list[Block | None]:
+        """One entry per Cuboid line of ``block`` (bbox first): the sub-program block or None."""
+        names = {b.name: b for b in self.blocks}
+        return [names.get(c.name) if c.name.startswith("Program_") else None for c in block.cuboids()]
+
+
+# --------------------------------------------------------------------------- printer
+
+
+def _num(x: float, decimals: int | None) -> str:
+    if decimals is not None:
+        x = round(float(x), decimals)
+    x = float(x)
+    if x == 0.0:
+        x = 0.0  # no "-0.0"
+    return repr(x)
+
+
+def statement_text(s: Statement, decimals: int | None = None) -> str:
+    """One statement as text, without indentation or newline."""
+    f = lambda x: _num(x, decimals)  # noqa: E731
+    if isinstance(s, Cuboid):
+        return f"{s.name} = Cuboid({f(s.l)}, {f(s.h)}, {f(s.w)}, {s.aligned})"
+    if isinstance(s, Attach):
+        nums = ", ".join(f(v) for v in (s.x1, s.y1, s.z1, s.x2, s.y2, s.z2))
+        return f"attach({s.a}, {s.b}, {nums})"
+    if isinstance(s, Squeeze):
+        return f"squeeze({s.a}, {s.b}, {s.c}, {s.face}, {f(s.u)}, {f(s.v)})"
+    if isinstance(s, Reflect):
+        return f"reflect({s.a}, {s.axis})"
+    if isinstance(s, Translate):
+        return f"translate({s.a}, {s.axis}, {int(s.n)}, {f(s.d)})"
+    raise TypeError(f"not a ShapeAssembly statement: {type(s).__name__}")
+
+
+def to_text(program: Program, decimals: int | None = None) -> str:
+    """Print ``program`` in its format (corpus or flat); ``decimals`` rounds every number.
+
+    Numbers are written as ``repr(float)``, so parsed corpus files come back byte for byte.
+    """
+    out = []
+    if program.flat:
+        for s in program.root.statements:
+            out.append(statement_text(s, decimals) + "\n")
+        return "".join(out)
+    for b in program.blocks:
+        out.append(f"Assembly {b.name} {{\n")
+        for s in b.statements:
+            out.append("\t" + statement_text(s, decimals) + "\n")
+        out.append("}\n")
+    return "".join(out)
+
+
+def statement_lines(program: Program) -> list[list[int]]:
+    """0-based file line index of every statement, per block (as printed by :func:`to_text`)."""
+    res, line = [], 0
+    for b in program.blocks:
+        if not program.flat:
+            line += 1  # "Assembly ... {"
+        res.append(list(range(line, line + len(b.statements))))
+        line += len(b.statements) + (0 if program.flat else 1)
+    return res
+
+
+# ---------------------------------------------------------------------------- parser
+
+_TOKEN = re.compile(
+    r"\s*(?:(?P<num>[+-]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][+-]?\d+)?)|(?P<name>[A-Za-z_][A-Za-z_0-9]*)"
+    r"|(?P<punct>[(),={}])|(?P<bad>\S))"
+)
+_HEADER = re.compile(r"^Assembly\s+(Program_\d+)\s*\{\s*$")
+_ARGS = {
+    "Cuboid": ("num", "num", "num", "bool"),
+    "attach": ("name", "name") + ("num",) * 6,
+    "squeeze": ("name", "name", "name", "face", "num", "num"),
+    "reflect": ("name", "axis"),
+    "translate": ("name", "axis", "int", "num"),
+}
+
+
+class _Line:
+    def __init__(self, text: str, file: str, lineno: int):
+        self.text, self.file, self.lineno = text, file, lineno
+        self.toks: list[tuple[str, str, int]] = []  # (kind, text, col)
+        for m in _TOKEN.finditer(text):
+            kind = m.lastgroup
+            if kind is None:
+                break
+            self.toks.append((kind, m.group(kind), m.start(kind) + 1))
+        self.i = 0
+
+    def error(self, reason: str, tok: tuple[str, str, int] | None = None) -> ParseError:
+        if tok is None:
+            tok = self.toks[self.i] if self.i < len(self.toks) else ("end", "", len(self.text) + 1)
+        return ParseError(reason, self.file, self.lineno, tok[2], tok[1])
+
+    def peek(self):
+        return self.toks[self.i] if self.i < len(self.toks) else None
+
+    def take(self, kind: str | None = None, text: str | None = None, what: str = ""):
+        t = self.peek()
+        if t is None:
+            raise self.error(f"expected {what or text or kind} at end of line")
+        if (kind and t[0] != kind) or (text and t[1] != text):
+            raise self.error(f"expected {what or repr(text) if text else what or kind}, got {t[1]!r}")
+        self.i += 1
+        return t
+
+
+def _parse_statement(ln: _Line) -> tuple[Statement, list[tuple[str, str, int]]]:
+    """Syntax of one statement line; returns the statement and its name tokens."""
+    first = ln.peek()
+    if first is None:
+        raise ln.error("empty line")
+    if first[0] != "name":
+        raise ln.error(f"expected a statement, got {first[1]!r}")
+    decl = None
+    t2 = ln.toks[1] if len(ln.toks) > 1 else None
+    if t2 is not None and t2[1] == "=":
+        decl = ln.take("name")
+        ln.take("punct", "=")
+        cmd = ln.take("name", what="'Cuboid'")
+        if cmd[1] != "Cuboid":
+            raise ln.error(f"unknown command {cmd[1]!r}", cmd)
+    else:
+        cmd = ln.take("name")
+        if cmd[1] not in _ARGS or cmd[1] == "Cuboid":
+            if cmd[1] == "Cuboid":
+                raise ln.error("Cuboid needs a name: 'NAME = Cuboid(...)'", cmd)
+            raise ln.error(f"unknown command {cmd[1]!r}", cmd)
+    ln.take("punct", "(")
+    args: list[tuple[str, str, int]] = []
+    if ln.peek() is not None and ln.peek()[1] == ")":
+        ln.i += 1
+    else:
+        while True:
+            t = ln.peek()
+            if t is None:
+                raise ln.error("missing ')'")
+            if t[0] == "punct" or t[0] == "bad":
+                raise ln.error(f"expected an argument, got {t[1]!r}")
+            args.append(t)
+            ln.i += 1
+            t = ln.take(what="',' or ')'")
+            if t[1] == ")":
+                break
+            if t[1] != ",":
+                raise ln.error(f"expected ',' or ')', got {t[1]!r}", t)
+    rest = ln.toks[ln.i:]
+    if rest:
+        if len(rest) == 1 and rest[0][1] == ",":
+            warnings.warn(
+                f"{ln.file}:{ln.lineno}: ignoring a stray ',' after the statement", ParseWarning, stacklevel=4
+            )
+        else:
+            raise ln.error(f"unexpected {rest[0][1]!r} after the statement", rest[0])
+    spec = _ARGS[cmd[1]]
+    if len(args) != len(spec):
+        raise ln.error(f"{cmd[1]} expects {len(spec)} arguments, got {len(args)}", cmd)
+    vals: list = []
+    names = []
+    for (kind, text, col), want in zip(args, spec):
+        tok = (kind, text, col)
+        if want == "num":
+            if kind != "num":
+                raise ln.error(f"expected a number, got {text!r}", tok)
+            vals.append(float(text))
+        elif want == "int":
+            if kind != "num" or not re.fullmatch(r"\d+", text) or int(text) < 1:
+                raise ln.error(f"expected a positive integer count, got {text!r}", tok)
+            vals.append(int(text))
+        elif want == "bool":
+            if text not in ("True", "False"):
+                raise ln.error(f"expected True or False, got {text!r}", tok)
+            vals.append(text == "True")
+        elif want == "face":
+            if text not in FACES:
+                raise ln.error(f"unknown face {text!r} (expected one of {', '.join(FACES)})", tok)
+            vals.append(text)
+        elif want == "axis":
+            if text not in AXES:
+                raise ln.error(f"unknown axis {text!r} (expected X, Y or Z)", tok)
+            vals.append(text)
+        else:
+            if kind != "name":
+                raise ln.error(f"expected a cuboid name, got {text!r}", tok)
+            vals.append(text)
+            names.append(tok)
+    if decl is not None:
+        return Cuboid(decl[1], *vals), [decl]
+    cls = {"attach": Attach, "squeeze": Squeeze, "reflect": Reflect, "translate": Translate}[cmd[1]]
+    return cls(*vals), names
+
+
+def _check_block(
+    stmts: list[tuple[Statement, _Line, list]], header: _Line | None, file: str
+) -> None:
+    """Semantic checks of one block: bbox first, names known, bbox never moved."""
+    if not stmts:
+        where = header or _Line("", file, 1)
+        raise where.error("empty block")
+    s0, ln0, _ = stmts[0]
+    if not (isinstance(s0, Cuboid) and s0.name == "bbox"):
+        raise ln0.error("a block must start with 'bbox = Cuboid(...)'", ln0.toks[0])
+    known = {"bbox"}
+    count = 1  # cuboids in the block including bbox (for macro names cube<N>)
+    for s, ln, names in stmts:
+        if isinstance(s, Cuboid):
+            if not re.fullmatch(r"bbox|cube\d+|Program_\d+", s.name):
+                raise ln.error(f"bad cuboid name {s.name!r} (expected bbox, cube<k> or Program_<k>)", names[0])
+            if s.name not in known:
+                known.add(s.name)
+                count += 1
+            continue
+        for tok in names:
+            if tok[1] not in known:
+                raise ln.error(f"unknown cuboid {tok[1]!r}", tok)
+        if names[0][1] == "bbox":
+            verb = type(s).__name__.lower()
+            raise ln.error(f"bbox cannot be moved ({verb} of bbox)", names[0])
+        if isinstance(s, Squeeze) and s.b == s.a or isinstance(s, Squeeze) and s.c == s.a:
+            raise ln.error(f"{s.a!r} cannot be squeezed against itself", names[0])
+        if isinstance(s, Attach) and s.a == s.b:
+            raise ln.error(f"{s.a!r} cannot be attached to itself", names[1])
+        new = 1 if isinstance(s, Reflect) else s.n if isinstance(s, Translate) else 0
+        for _ in range(new):
+            known.add(f"cube{count - 1}")
+            count += 1
+
+
+def parse(text: str, file: str = "<string>") -> Program:
+    """Parse a ShapeAssembly program (corpus or flat format).
+
+    Args:
+        text: the program text.
+        file: a name used in error messages.
+
+    Returns:
+        The :class:`Program`.
+
+    Raises:
+        ParseError: with ``file:line:column: reason``; e.g. an unknown command, a wrong
+            argument count, an unknown cuboid, face or axis, a missing sub-program block,
+            or a statement that moves bbox.
+    """
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+    first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    if first is None:
+        raise ParseError("empty program", file, 1, 1, "")
+    flat = not lines[first].lstrip().startswith("Assembly")
+    blocks: list[tuple[_Line | None, str, list]] = []
+    cur = None
+    for i, raw in enumerate(lines):
+        lineno = i + 1
+        if not raw.strip():
+            continue  # blank lines are tolerated (none in the corpus)
+        ln = _Line(raw, file, lineno)
+        if flat:
+            if cur is None:
+                cur = (None, "Program_0", [])
+                blocks.append(cur)
+            if ln.toks and ln.toks[0][1] == "Assembly":
+                raise ln.error("'Assembly' block in a flat program", ln.toks[0])
+            s, names = _parse_statement(ln)
+            cur[2].append((s, ln, names))
+            continue
+        if cur is None:
+            m = _HEADER.match(raw)
+            if not m:
+                raise ln.error("expected 'Assembly Program_<k> {'", ln.toks[0] if ln.toks else None)
+            if any(b[1] == m.group(1) for b in blocks):
+                raise ln.error(f"duplicate block {m.group(1)!r}", ln.toks[1])
+            cur = (ln, m.group(1), [])
+            blocks.append(cur)
+            continue
+        if raw.strip() == "}":
+            _check_block(cur[2], cur[0], file)
+            cur = None
+            continue
+        if ln.toks and ln.toks[0][1] == "Assembly":
+            raise ln.error("missing '}' before the next block", ln.toks[0])
+        s, names = _parse_statement(ln)
+        cur[2].append((s, ln, names))
+    if flat:
+        _check_block(cur[2], None, file)
+    elif cur is not None:
+        raise ParseError("missing '}' at end of file", file, len(lines), len(lines[-1]) + 1, "")
+    # hierarchy: every Program_m Cuboid must have a block; every non-root block one parent.
+    by_name = {b[1]: b for b in blocks}
+    if not flat and blocks[0][1] != "Program_0":
+        hl = blocks[0][0]
+        raise hl.error("the first block must be 'Assembly Program_0'", hl.toks[1])
+    parent: dict[str, str] = {}
+    for hl, name, stmts in blocks:
+        for s, ln, names in stmts:
+            if isinstance(s, Cuboid) and s.name.startswith("Program_"):
+                if s.name not in by_name:
+                    raise ln.error(f"missing sub-program block 'Assembly {s.name}'", names[0])
+                if s.name in parent or s.name == "Program_0" or s.name == name:
+                    raise ln.error(f"sub-program {s.name!r} is declared more than once", names[0])
+                parent[s.name] = name
+    for hl, name, _ in blocks[1:]:
+        if name not in parent:
+            raise hl.error(f"block {name!r} is not used by any parent", hl.toks[1])
+    # reject cycles: walk each block up to the root
+    for hl, name, _ in blocks[1:]:
+        seen, n = set(), name
+        while n in parent:
+            if n in seen:
+                raise hl.error(f"block {name!r} is part of a cycle", hl.toks[1])
+            seen.add(n)
+            n = parent[n]
+    return Program(tuple(Block(name, tuple(s for s, _, _ in stmts)) for _, name, stmts in blocks), flat)
+
+
+def replace_numbers(program: Program, values: Iterator[float]) -> Program:
+    """A copy of ``program`` whose continuous numbers are taken in order from ``values``.
+
+    The order is the text order: per block, per statement, the numbers as they appear
+    (Cuboid l,h,w; attach 6 coordinates; squeeze u,v; translate d).
+    """
+    it = iter(values)
+    blocks = []
+    for b in program.blocks:
+        stmts = []
+        for s in b.statements:
+            if isinstance(s, Cuboid):
+                s = dataclasses.replace(s, l=next(it), h=next(it), w=next(it))
+            elif isinstance(s, Attach):
+                s = dataclasses.replace(s, **{k: next(it) for k in ("x1", "y1", "z1", "x2", "y2", "z2")})
+            elif isinstance(s, Squeeze):
+                s = dataclasses.replace(s, u=next(it), v=next(it))
+            elif isinstance(s, Translate):
+                s = dataclasses.replace(s, d=next(it))
+            stmts.append(s)
+        blocks.append(Block(b.name, tuple(stmts)))
+    return Program(tuple(blocks), program.flat)
+
+
+def numbers(program: Program) -> list[float]:
+    """The continuous numbers of ``program`` in the order used by :func:`replace_numbers`."""
+    out: list[float] = []
+    for b in program.blocks:
+        for s in b.statements:
+            if isinstance(s, Cuboid):
+                out += [s.l, s.h, s.w]
+            elif isinstance(s, Attach):
+                out += [s.x1, s.y1, s.z1, s.x2, s.y2, s.z2]
+            elif isinstance(s, Squeeze):
+                out += [s.u, s.v]
+            elif isinstance(s, Translate):
+                out.append(s.d)
+    return out
