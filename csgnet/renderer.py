@@ -24,6 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
+import threading
+
 import numpy as np
 import torch
 
@@ -39,6 +41,8 @@ __all__ = [
     "render_programs",
     "stack_trace",
     "StackMachine",
+    "PrimitiveCache",
+    "primitive_cache",
     "draw_packed",
     "pack",
     "unpack",
@@ -306,81 +310,168 @@ def encode_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None =
 # ------------------------------------------------------------------------------------------------
 # the stack machine
 
+class _Workspace(threading.local):
+    """Per-thread scratch buffers reused across calls.
+
+    Fresh multi-megabyte CPU allocations are returned to the OS when freed, so every new one pays page
+    faults on first touch (more than the copies themselves cost); reusing the buffers avoids that.
+    """
+
+    def __init__(self):
+        self.buffers: dict = {}
+
+    def get(self, name: str, numel: int, device) -> torch.Tensor:
+        key = (name, str(device))
+        buf = self.buffers.get(key)
+        if buf is None or buf.numel() < numel:
+            buf = torch.empty(max(numel, 1), dtype=torch.int64, device=device)
+            self.buffers[key] = buf
+        return buf[:numel]
+
+
+_WORKSPACE = _Workspace()
+
+
+class PrimitiveCache:
+    """Packed canvases of vocabulary primitives, computed on first use from the shared geometry.
+
+    Nothing is read from disk: an entry is drawn by :func:`draw_packed` the first time a token is seen
+    on a device and kept for the life of the process (2D: 200 KB for all 396 primitives; 3D: 32 KB per
+    primitive, at most 217 MB if every one of the 6631 is used).
+    """
+
+    def __init__(self, dim: int, device):
+        vocab = vocabulary(dim)
+        k, p = vocab.table()
+        self.dim = dim
+        self.kinds = torch.from_numpy(k).to(device)
+        self.params = torch.from_numpy(p).to(device)
+        self.words = torch.empty((len(vocab),) + _canvas_words(dim), dtype=torch.int64, device=device)
+        self.have = torch.zeros(len(vocab), dtype=torch.bool, device=device)
+
+    def get(self, ids: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
+        """(N,) token indices of primitives -> (N, *C) packed canvases (``out``: a (N, words) buffer)."""
+        if ids.numel() == 0:
+            return self.words[ids]
+        missing = torch.unique(ids)
+        missing = missing[~self.have[missing]]
+        if missing.numel():
+            self.words[missing] = draw_packed(self.kinds[missing], self.params[missing], self.dim)
+            self.have[missing] = True
+        flat = self.words.view(self.words.shape[0], -1)
+        if out is not None:
+            return torch.index_select(flat, 0, ids, out=out)
+        return flat.index_select(0, ids).view((-1,) + self.words.shape[1:])
+
+
+_PRIM_CACHES: dict = {}
+
+
+def primitive_cache(dim: int, device) -> PrimitiveCache:
+    """The process-wide :class:`PrimitiveCache` of ``dim`` on ``device``."""
+    key = (dim, str(torch.device(device)))
+    if key not in _PRIM_CACHES:
+        _PRIM_CACHES[key] = PrimitiveCache(dim, device)
+    return _PRIM_CACHES[key]
+
+
 class StackMachine:
     """A batch of stacks of packed canvases, stepped one token position at a time.
 
-    Used by :func:`execute` and, incrementally, by decoders that execute predicted prefixes.
+    Used by :func:`execute` and, incrementally, by decoders that execute predicted prefixes. Only the
+    programs that draw (or apply a given operator) at a step are touched at that step. Slots above the
+    stack pointer are stale and never read.
 
     Args:
         batch: B.
         dim: 2 or 3.
-        depth: stack capacity S (the maximum depth any program reaches; deeper pushes mark the
-            program broken).
+        depth: stack capacity S (a push beyond it marks the program broken).
         device: torch device.
+        workspace: keep the storage in a per-thread scratch area reused by the next machine created
+            with ``workspace=True`` in the same thread (only for a machine whose life ends before the
+            next one starts, as in :func:`execute`).
     """
 
-    def __init__(self, batch: int, dim: int, depth: int, device=None):
+    def __init__(self, batch: int, dim: int, depth: int, device=None, workspace: bool = False):
         self.dim = dim
         self.depth = max(int(depth), 1)
-        self.stack = torch.zeros((batch, self.depth) + _canvas_words(dim), dtype=torch.int64, device=device)
+        # Stale slots above the stack pointer are never read, so the storage need not be cleared.
+        words = int(np.prod(_canvas_words(dim)))
+        alloc = _WORKSPACE.get if workspace else (lambda name, n, dev: torch.empty(n, dtype=torch.int64, device=dev))
+        self.stack = alloc("stack", batch * self.depth * words, device).view((batch, self.depth) + _canvas_words(dim))
+        self._bufa = alloc("a", batch * words, device).view(batch, words)
+        self._bufb = alloc("b", batch * words, device).view(batch, words)
+        # (B*S, words) view: index_select / index_copy_ on 2D rows are plain row copies.
+        self._flat = self.stack.view(batch * self.depth, -1)
         self.sp = torch.zeros(batch, dtype=torch.int64, device=device)
         self.broken = torch.zeros(batch, dtype=torch.bool, device=device)
         self.stopped = torch.zeros(batch, dtype=torch.bool, device=device)
         self._ar = torch.arange(batch, device=device)
 
-    def step(self, kinds: torch.Tensor, prims: torch.Tensor | None = None, params: torch.Tensor | None = None):
+    def step(self, kinds: torch.Tensor, params: torch.Tensor | None = None, token_ids: torch.Tensor | None = None,
+             prims: torch.Tensor | None = None):
         """Apply one token per program.
 
         Args:
             kinds: (B,) int64 kind codes (a stop code stops that program for good).
-            prims: (B, *C) packed primitive canvases for the draw tokens (computed from ``params`` if None).
-            params: (B, 5) parameters, used when ``prims`` is None.
+            params: (B, 5) parameters of the draw tokens (drawn with :func:`draw_packed`).
+            token_ids: (B,) vocabulary indices; draws then come from the :class:`PrimitiveCache`.
+            prims: (B, *C) packed canvases of the draws, if already computed.
         """
-        if prims is None:
-            prims = draw_packed(kinds, params, self.dim)
         self.stopped |= kinds == PAD_CODE
         active = ~self.stopped & ~self.broken
         is_draw = active & (kinds < 6)
         is_op = active & (kinds >= 6) & (kinds <= 8)
-        underflow = is_op & (self.sp < 2)
-        overflow = is_draw & (self.sp >= self.depth)
-        self.broken |= underflow | overflow
-        is_op &= ~underflow
-        is_draw &= ~overflow
-        ar, sp = self._ar, self.sp
-        i_top = (sp - 1).clamp(min=0)
-        i_sec = (sp - 2).clamp(min=0)
-        if bool(is_op.any()):
-            view = (-1,) + (1,) * (self.stack.dim() - 2)
-            a, b = self.stack[ar, i_sec], self.stack[ar, i_top]
-            k = kinds.view(view)
-            res = torch.where(k == _UNION, a | b, torch.where(k == _INTER, a & b, a & ~b))
-            opm = is_op.view(view)
-            self.stack[ar, i_top] = torch.where(opm, torch.zeros_like(b), b)
-            self.stack[ar, i_sec] = torch.where(opm, res, self.stack[ar, i_sec])
-        if bool(is_draw.any()):
-            view = (-1,) + (1,) * (self.stack.dim() - 2)
-            i_push = sp.clamp(max=self.depth - 1)
-            self.stack[ar, i_push] = torch.where(is_draw.view(view), prims, self.stack[ar, i_push])
-        self.sp = sp + is_draw.long() - is_op.long()
-        if bool(self.broken.any()):
-            view = (-1,) + (1,) * (self.stack.dim() - 1)
-            self.stack = torch.where(self.broken.view(view), torch.zeros_like(self.stack), self.stack)
-            self.sp = torch.where(self.broken, torch.zeros_like(self.sp), self.sp)
+        sp = self.sp
+        bad = (is_op & (sp < 2)) | (is_draw & (sp >= self.depth))
+        self.broken |= bad
+        is_op &= ~bad
+        is_draw &= ~bad
+        di = torch.nonzero(is_draw).flatten()
+        if di.numel():
+            n = di.numel()
+            if prims is not None:
+                p = torch.index_select(prims.reshape(prims.shape[0], -1), 0, di, out=self._bufa[:n])
+            elif token_ids is not None:
+                p = primitive_cache(self.dim, kinds.device).get(token_ids[di], out=self._bufa[:n])
+            else:
+                p = draw_packed(kinds[di], params[di], self.dim)
+            self._flat.index_copy_(0, di * self.depth + sp[di], p.reshape(n, -1))
+        for code in (_UNION, _INTER, _SUB):
+            oi = torch.nonzero(is_op & (kinds == code)).flatten()
+            if oi.numel():
+                f1 = oi * self.depth + sp[oi] - 2
+                n = oi.numel()
+                a = torch.index_select(self._flat, 0, f1, out=self._bufa[:n])
+                b = torch.index_select(self._flat, 0, f1 + 1, out=self._bufb[:n])
+                if code == _UNION:
+                    a |= b
+                elif code == _INTER:
+                    a &= b
+                else:
+                    a &= ~b
+                self._flat.index_copy_(0, f1, a)
+        self.sp = torch.where(self.broken, torch.zeros_like(sp), sp + is_draw.long() - is_op.long())
 
     def top(self, k: int) -> torch.Tensor:
         """(B, k, *C) packed: slot 0 = top of stack, empty slots zero."""
         slots = self.sp[:, None] - 1 - torch.arange(k, device=self.sp.device)[None, :]
         ok = slots >= 0
-        got = self.stack[self._ar[:, None], slots.clamp(min=0, max=self.depth - 1)]
+        flat = (self._ar[:, None] * self.depth + slots.clamp(min=0, max=self.depth - 1)).flatten()
+        got = self._flat.index_select(0, flat).view(ok.shape + self.stack.shape[2:])
         view = ok.shape + (1,) * (got.dim() - 2)
-        return torch.where(ok.view(view), got, torch.zeros_like(got))
+        return torch.where(ok.view(view), got, torch.zeros((), dtype=got.dtype, device=got.device))
+
+    @property
+    def valid(self) -> torch.Tensor:
+        """(B,) bool: not broken and exactly one shape on the stack."""
+        return ~self.broken & (self.sp == 1)
 
     def result(self) -> torch.Tensor:
         """(B, *C) packed: the shape of each program that ended with exactly one shape, else empty."""
-        ok = ~self.broken & (self.sp == 1)
         view = (-1,) + (1,) * (self.stack.dim() - 2)
-        return torch.where(ok.view(view), self.stack[:, 0], torch.zeros_like(self.stack[:, 0]))
+        top = self.stack[:, 0]
+        return torch.where(self.valid.view(view), top, torch.zeros((), dtype=top.dtype, device=top.device))
 
 
 @dataclass
@@ -407,7 +498,8 @@ def _max_depth(kinds: torch.Tensor) -> int:
     return max(int(torch.cumsum(delta, dim=1).max()), 1)
 
 
-def execute(kinds: torch.Tensor, params: torch.Tensor, dim: int, trace_k: int | None = None) -> Execution:
+def execute(kinds: torch.Tensor, params: torch.Tensor, dim: int, trace_k: int | None = None,
+            token_ids: torch.Tensor | None = None) -> Execution:
     """Run a batch of encoded programs (see :func:`encode_programs`, :func:`encode_tokens`).
 
     Args:
@@ -415,27 +507,27 @@ def execute(kinds: torch.Tensor, params: torch.Tensor, dim: int, trace_k: int | 
         params: (B, T, 5) int64 parameters.
         dim: 2 or 3.
         trace_k: if set, also record the top ``trace_k`` stack slots after every token.
+        token_ids: (B, T) vocabulary indices of the same programs, if they are vocabulary programs:
+            primitives then come from the :class:`PrimitiveCache` instead of being drawn.
     """
     if kinds.dim() != 2 or params.shape[:2] != kinds.shape or params.shape[-1] != 5:
         raise ValueError(f"expected kinds (B, T) and params (B, T, 5), got {tuple(kinds.shape)} and {tuple(params.shape)}")
     B, T = kinds.shape
-    prims = draw_packed(kinds.reshape(-1), params.reshape(-1, 5), dim).reshape((B, T) + _canvas_words(dim))
-    machine = StackMachine(B, dim, _max_depth(kinds), kinds.device)
+    machine = StackMachine(B, dim, _max_depth(kinds), kinds.device, workspace=True)
     trace = [machine.top(trace_k)] if trace_k else None
     for t in range(T):
-        machine.step(kinds[:, t], prims[:, t])
+        machine.step(kinds[:, t], params[:, t], None if token_ids is None else token_ids[:, t])
         if trace is not None:
             trace.append(machine.top(trace_k))
-    canvas = machine.result()
-    valid = ~machine.broken & (machine.sp == 1)
-    return Execution(canvas, valid, torch.stack(trace) if trace is not None else None)
+    return Execution(machine.result(), machine.valid, torch.stack(trace) if trace is not None else None)
 
 
 def render_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None = None) -> torch.Tensor:
     """Render token-index programs ``(B, T)`` (padded with ``$``) to bool ``(B, 64, 64[, 64])``
     on the tokens' device."""
+    tokens = torch.as_tensor(tokens)
     kinds, params = encode_tokens(tokens, dim, lengths)
-    return unpack(execute(kinds, params, dim).canvas, dim)
+    return unpack(execute(kinds, params, dim, token_ids=tokens.long()).canvas, dim)
 
 
 def render_programs(programs: Sequence[Program | str], dim: int, device=None) -> torch.Tensor:
@@ -457,10 +549,12 @@ def stack_trace(programs, dim: int, k: int | None = None, lengths=None, packed: 
         ``(T+1, B, K, 64, 64[, 64])`` bool: state 0 is the empty stack, state t the stack after t tokens,
         slot 0 the top; empty slots, states after an underflow, are all False.
     """
+    ids = None
     if isinstance(programs, torch.Tensor) or isinstance(programs, np.ndarray):
-        kinds, params = encode_tokens(torch.as_tensor(programs), dim, lengths)
+        ids = torch.as_tensor(programs).long()
+        kinds, params = encode_tokens(ids, dim, lengths)
     else:
         kinds, params = encode_programs(programs, dim)
     k = k or _max_depth(kinds)
-    tr = execute(kinds, params, dim, trace_k=k).trace
+    tr = execute(kinds, params, dim, trace_k=k, token_ids=ids).trace
     return tr if packed else unpack(tr, dim)
