@@ -1,0 +1,107 @@
+import random
+
+import pytest
+
+from csg_testutil import random_program
+from csgnet.lang import Draw, Node, Op, ParseError, Program, is_valid, parse, parse_lines, prefix_status, to_text
+
+EXAMPLE = "c(32,32,28)c(32,32,24)-s(32,32,28)s(32,32,20)-+t(32,32,20)+"
+
+
+def test_parse_2d_example():
+    p = parse(EXAMPLE)
+    assert p.dim == 2 and len(p) == 9 and len(p.draws) == 5
+    assert p.tokens[0] == Draw("c", (32, 32, 28))
+    assert p.tokens[2] == Op("-")
+    assert p.text() == EXAMPLE
+
+
+def test_3d_long_and_vocabulary_forms_parse_to_the_same_program():
+    a = parse("sp(32,32,32,8)cu(16,16,16,12)+cy(24,24,24,8,16)-", dim=3)
+    b = parse("p(32,32,32,8)u(16,16,16,12)+y(24,24,24,8,16)-", dim=3)
+    assert a == b
+    assert a.text() == "sp(32,32,32,8)cu(16,16,16,12)+cy(24,24,24,8,16)-"
+    assert a.text(long=False) == "p(32,32,32,8)u(16,16,16,12)+y(24,24,24,8,16)-"
+
+
+def test_text_after_stop_is_dropped_and_whitespace_ignored():
+    assert parse("c(8,8,8) s(16,16,8)\n+$t(1,2,3)+++") == parse("c(8,8,8)s(16,16,8)+")
+
+
+@pytest.mark.parametrize("dim,n", [(2, 1), (2, 4), (2, 7), (3, 1), (3, 4)])
+def test_round_trip_random_programs(dim, n):
+    rng = random.Random(dim * 10 + n)
+    for _ in range(50):
+        p = random_program(rng, dim, n)
+        assert parse(to_text(p), dim) == p
+        assert parse(p.text(long=False), dim) == p
+        assert to_text(parse(to_text(p), dim)) == to_text(p)
+
+
+def test_tree_view_round_trip_and_operand_order():
+    p = parse("c(8,8,8)s(16,16,8)-t(24,24,8)+")
+    tree = p.tree()
+    assert isinstance(tree, Node) and tree.op == "+"
+    assert tree.left == Node("-", Draw("c", (8, 8, 8)), Draw("s", (16, 16, 8)))
+    assert tree.right == Draw("t", (24, 24, 8))
+    assert Program.from_tree(tree) == p
+
+
+@pytest.mark.parametrize("text,fragment,position", [
+    ("c(32,32,28)q(1,2,3)+", "unknown 2D primitive 'q'", 11),
+    ("c(32,32,28)s(1,2)+", "square takes 3 parameters", 11),
+    ("c(32,32,28)s(1,2.5,3)+", "non-integer '2.5'", 11),
+    ("c(32,32,28)s(1,,3)+", "parameter y is missing", 11),
+    ("c(32,32,28)+", "stack underflow", 11),
+    ("c(32,32,28)s(8,8,8)", "unfinished program", 19),
+    ("c(32,32,28),s(8,8,8)+", "malformed token", 11),
+    ("c(32,32,-4)", "must be >= 0", 0),
+    ("c(32,32,28", "malformed token", 0),
+])
+def test_errors_name_token_and_position(text, fragment, position):
+    with pytest.raises(ParseError) as e:
+        parse(text)
+    assert fragment in str(e.value)
+    assert e.value.position == position
+    assert repr(text) in str(e.value)
+
+
+def test_empty_program_is_an_error_when_strict_and_invalid_otherwise():
+    with pytest.raises(ParseError, match="empty program"):
+        parse("")
+    assert not is_valid(parse("", strict=False))
+
+
+def test_3d_primitive_in_2d_program_is_rejected():
+    with pytest.raises(ParseError, match="unknown 2D primitive 'sp'"):
+        parse("sp(1,2,3,4)", dim=2)
+    with pytest.raises(ParseError, match="cylinder takes 5 parameters"):
+        parse("cy(1,2,3,4)", dim=3)
+
+
+def test_negative_positions_are_allowed():
+    assert parse("c(-4,70,12)").tokens[0].params == (-4, 70, 12)
+
+
+def test_validity_automaton():
+    assert prefix_status([]) == "open"
+    assert prefix_status(["d"]) == "complete"
+    assert prefix_status(["d", "d"]) == "open"
+    assert prefix_status(["d", "+"]) == "invalid"
+    assert prefix_status(["d", "d", "+", "d", "-"]) == "complete"
+    assert not is_valid(parse("c(8,8,8)+s(8,8,8)", strict=False))
+    assert is_valid(parse(EXAMPLE))
+
+
+def test_dataset_lines_report_file_and_line():
+    lines = ["c(8,8,8)", "c(8,8,8)s(8,8,8)+", "c(8,8,8)x(1,2,3)+", "", "t(8,8,8)"]
+    with pytest.raises(ParseError) as e:
+        parse_lines(lines, file="data/train.txt")
+    assert str(e.value).startswith("data/train.txt:3:9: unknown 2D primitive 'x'")
+    progs, errs = parse_lines(lines, file="data/train.txt", errors="collect")
+    assert len(progs) == 3 and len(errs) == 1 and errs[0].line == 3
+
+
+def test_program_rejects_mixed_dimensions():
+    with pytest.raises(ValueError, match="3D primitive in a 2D program"):
+        Program((Draw("p", (1, 2, 3, 4)),), 2)

@@ -1,0 +1,240 @@
+"""Renderer tests: exact pixels against the spec's tables and against scikit-image, stack order,
+the batched renderer against the NumPy path (random programs, off-grid parameters), stack traces."""
+
+import random
+
+import numpy as np
+import pytest
+import torch
+
+import csgnet
+from csg_testutil import random_program
+from csgnet.lang import Draw, Program, parse
+from csgnet.render_np import bresenham, draw_np, render_np
+from csgnet.renderer import encode_programs, execute, pack, render_programs, render_tokens, stack_trace, unpack, StackMachine
+from csgnet.vocab import KIND_CODES, PAD_CODE, vocabulary
+
+skdraw = pytest.importorskip("skimage.draw")
+
+
+def _skimage_2d(kind, x, y, r):
+    """The reference's drawing calls, with modern scikit-image names (the test oracle)."""
+    img = np.zeros((64, 64), bool)
+    if kind == "c":
+        rr, cc = skdraw.disk((y, x), r, shape=(64, 64))
+        img[rr, cc] = True
+        return img
+    if kind == "s":
+        L = r * 1.412
+        rows = [int(y - L / 2.0), int(y - L / 2.0), int(y + L / 2.0), int(y + L / 2.0)]
+        cols = [int(x - L / 2.0), int(x + L / 2.0), int(x + L / 2.0), int(x - L / 2.0)]
+    else:
+        L = 1.732 * r
+        rows = [int(y + L / (2 * 1.732))] * 2 + [int(y - L / 1.732)]
+        cols = [int(x - L / 2.0), int(x + L / 2.0), x]
+    rr, cc = skdraw.polygon(rows, cols, shape=(64, 64))
+    img[rr, cc] = True
+    rr, cc = skdraw.polygon_perimeter(rows, cols, shape=(64, 64))
+    img[rr, cc] = True
+    return img
+
+
+# ------------------------------------------------------------------- exact pixels from the spec
+
+@pytest.mark.parametrize("r,c0,c1", [(8, 26, 37), (12, 23, 40), (16, 20, 43), (20, 17, 46), (24, 15, 48),
+                                     (28, 12, 51), (32, 9, 54)])
+def test_square_columns_at_x32(r, c0, c1):
+    img = csgnet.render(f"s(32,32,{r})")[0]
+    cols = np.nonzero(img.any(axis=0))[0]
+    assert (cols[0], cols[-1]) == (c0, c1)
+    assert img[:, c0:c1 + 1].any(axis=1).sum() == c1 - c0 + 1  # a square: as many rows as columns
+    assert img.sum() == (c1 - c0 + 1) ** 2
+
+
+@pytest.mark.parametrize("r,base,apex,c0,c1", [(8, 36, 24, 25, 38), (16, 40, 16, 18, 45), (32, 48, 0, 4, 59)])
+def test_triangle_vertices_at_32_32(r, base, apex, c0, c1):
+    img = csgnet.render(f"t(32,32,{r})")[0]
+    rows = np.nonzero(img.any(axis=1))[0]
+    assert (rows[0], rows[-1]) == (apex, base)
+    assert np.nonzero(img[base])[0].tolist() == list(range(c0, c1 + 1))
+    assert np.nonzero(img[apex])[0].tolist() == [32]  # the apex points up (smaller rows)
+
+
+def test_circle_is_strict_and_row_is_y():
+    img = csgnet.render("c(20,40,8)")[0]
+    assert img.sum() == 193
+    rows, cols = np.nonzero(img)
+    assert (rows.min(), rows.max(), cols.min(), cols.max()) == (33, 47, 13, 27)
+    assert not img[40, 28] and not img[48, 20] and img[40, 27]  # distance exactly r is off
+
+
+def test_3d_voxel_counts():
+    counts = [int(v.sum()) for v in csgnet.render(["sp(32,32,32,8)", "sp(32,32,32,32)", "cu(32,32,32,32)"], 3)]
+    assert counts == [1419, 124487, 31 ** 3]
+    cyl = csgnet.render("cy(20,30,40,8,16)", 3)[0]
+    zs = np.nonzero(cyl.any(axis=(0, 1)))[0]
+    assert (zs[0], zs[-1]) == (40 - 7, 40 + 7)  # h - 1 voxels along z (axis 2)
+    assert cyl[:, :, 40].sum() == 149  # the disk x^2 + y^2 <= 7^2
+    assert cyl[20 + 7, 30, 40] and not cyl[20 + 8, 30, 40]  # axis 0 is x
+
+
+def test_3d_is_clipped_never_wrapped():
+    vol = csgnet.render("sp(2,60,30,8)", 3)[0]
+    ref = np.zeros((80, 80, 80), bool)
+    i, j, k = np.ogrid[:80, :80, :80]
+    ref = (i - 10) ** 2 + (j - 68) ** 2 + (k - 38) ** 2 <= 49  # same sphere on a padded grid
+    assert (vol == ref[8:72, 8:72, 8:72]).all()
+    assert not vol[60:, :, :].any()  # nothing wrapped around to the far side
+
+
+def test_stack_order_earlier_minus_later():
+    circle_minus_square = csgnet.render("c(32,32,20)s(32,32,12)-")[0]
+    c, s = csgnet.render(["c(32,32,20)", "s(32,32,12)"])
+    assert (circle_minus_square == (c & ~s)).all()
+    assert not (circle_minus_square == (s & ~c)).all()
+    assert (csgnet.render("c(32,32,20)s(32,32,12)*")[0] == (c & s)).all()
+    assert (csgnet.render("c(32,32,20)s(32,32,12)+")[0] == (c | s)).all()
+
+
+def test_invalid_programs_render_empty():
+    progs = [parse(t, strict=False) for t in ["", "c(8,8,8)+", "c(8,8,8)s(16,16,8)", "+c(8,8,8)"]]
+    assert not csgnet.render(progs).any()
+
+
+# ------------------------------------------------------------------- against scikit-image
+
+def test_every_vocabulary_primitive_matches_scikit_image():
+    v = vocabulary(2)
+    ids = torch.arange(v.num_primitives)[:, None]
+    imgs = render_tokens(ids, 2).numpy()
+    for i in range(v.num_primitives):
+        d = v.decode([i]).tokens[0]
+        assert (imgs[i] == _skimage_2d(d.kind, *d.params)).all(), d
+
+
+def test_off_grid_primitives_match_scikit_image():
+    rng = random.Random(7)
+    draws = [Draw(k, (rng.randint(-20, 84), rng.randint(-20, 84), rng.randint(0, 70)))
+             for k in "cst" for _ in range(700)]
+    draws += [Draw("t", (32, 32, r)) for r in (13, 26, 27, 52, 53, 54)]  # float-sensitive apex rows
+    imgs = render_programs([Program((d,), 2) for d in draws], 2).numpy()
+    for d, img in zip(draws, imgs):
+        assert (img == _skimage_2d(d.kind, *d.params)).all(), d
+        assert (img == draw_np(d)).all(), d
+
+
+def test_bresenham_matches_scikit_image_line():
+    rng = random.Random(3)
+    for _ in range(500):
+        r0, c0, r1, c1 = (rng.randint(-8, 72) for _ in range(4))
+        rr, cc = skdraw.line(r0, c0, r1, c1)
+        assert bresenham(r0, c0, r1, c1) == list(zip(rr.tolist(), cc.tolist()))
+
+
+# ------------------------------------------------------------------- batched == NumPy path
+
+@pytest.mark.parametrize("dim,count,max_prims", [(2, 300, 7), (3, 40, 4)])
+@pytest.mark.parametrize("vocab_only", [True, False])
+def test_batched_equals_numpy_path(dim, count, max_prims, vocab_only):
+    rng = random.Random(dim + 10 * vocab_only)
+    progs = [random_program(rng, dim, rng.randint(1, max_prims), vocab_only) for _ in range(count)]
+    # a few broken ones too
+    progs += [Program(p.tokens[:-1], dim) for p in progs[:10]] + [Program(p.tokens[1:], dim) for p in progs[10:15]]
+    out = csgnet.render(progs, dim)
+    for p, o in zip(progs, out):
+        assert (o == render_np(p)).all(), p.text()
+    if vocab_only:  # the token-index path (primitive cache) gives the same
+        v = vocabulary(dim)
+        T = max(len(p) for p in progs)
+        ids = np.full((len(progs), T), v.stop)
+        for i, p in enumerate(progs):
+            ids[i, : len(p)] = v.encode(p)
+        assert (csgnet.render(ids, dim) == out).all()
+
+
+def test_batched_equals_single_calls():
+    rng = random.Random(11)
+    progs = [random_program(rng, 2, rng.randint(1, 7)) for _ in range(40)]
+    batch = csgnet.render(progs)
+    for p, b in zip(progs, batch):
+        assert (csgnet.render(p)[0] == b).all()
+
+
+def test_token_padding_and_lengths():
+    v = vocabulary(2)
+    ids = torch.tensor([v.encode("c(32,32,28)s(32,32,20)-") + [v.stop, 5],
+                        v.encode("c(32,32,28)s(32,32,20)-t(32,32,8)+")])
+    out = render_tokens(ids, 2)
+    assert (out[0].numpy() == csgnet.render("c(32,32,28)s(32,32,20)-")[0]).all()
+    out2 = render_tokens(ids, 2, lengths=torch.tensor([3, 3]))
+    assert (out2[1] == out2[0]).all()
+
+
+# ------------------------------------------------------------------- stack trace
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_stack_trace_matches_numpy_stack(dim):
+    rng = random.Random(5 + dim)
+    progs = [random_program(rng, dim, rng.randint(1, 4 if dim == 3 else 7), vocab_only=True) for _ in range(25)]
+    progs.append(Program(progs[0].tokens[1:] + progs[1].tokens, dim))  # underflows midway
+    tr = stack_trace(progs, dim, k=3).numpy()
+    T = max(len(p) for p in progs)
+    assert tr.shape == (T + 1, len(progs), 3) + (64,) * dim
+    assert not tr[0].any()  # state 0: empty stack
+    for i, p in enumerate(progs):
+        _, states = render_np(p, return_stack=True)
+        for t in range(T + 1):
+            state = states[min(t, len(p))]  # frozen after the end
+            for k in range(3):
+                ref = state[k] if k < len(state) else np.zeros((64,) * dim, bool)
+                assert (tr[t, i, k] == ref).all(), (p.text(), t, k)
+
+
+def test_stack_trace_slot0_of_last_state_is_the_render():
+    v = vocabulary(2)
+    ids = torch.tensor([v.encode("c(32,32,28)s(32,32,20)-t(32,32,8)+")])
+    tr = stack_trace(ids, 2, k=7)
+    assert tr.shape == (6, 1, 7, 64, 64)
+    assert (tr[-1, 0, 0] == render_tokens(ids, 2)[0]).all()
+    assert not tr[-1, 0, 1:].any()
+    assert tr[2, 0, 1].any() and tr[2, 0, 0].any()  # two shapes after two draws; slot 0 is the square
+    assert (tr[2, 0, 0].numpy() == csgnet.render("s(32,32,20)")[0]).all()
+
+
+def test_incremental_machine_equals_execute():
+    rng = random.Random(9)
+    progs = [random_program(rng, 2, rng.randint(1, 7)) for _ in range(30)]
+    kinds, params = encode_programs(progs, 2)
+    m = StackMachine(len(progs), 2, depth=7)
+    for t in range(kinds.shape[1]):
+        m.step(kinds[:, t], params[:, t])
+    assert (m.result() == execute(kinds, params, 2).canvas).all()
+    # stopping: a stop code freezes a program
+    m2 = StackMachine(1, 2, depth=3)
+    k, p = encode_programs(["c(32,32,20)"], 2)
+    m2.step(k[:, 0], p[:, 0])
+    m2.step(torch.tensor([PAD_CODE]), torch.zeros(1, 5, dtype=torch.long))
+    m2.step(torch.tensor([KIND_CODES["s"]]), torch.tensor([[8, 8, 8, 0, 0]]))
+    assert (unpack(m2.result(), 2)[0].numpy() == csgnet.render("c(32,32,20)")[0]).all()
+
+
+def test_pack_unpack_round_trip():
+    rng = np.random.default_rng(0)
+    a = rng.random((3, 64, 64, 64)) > 0.5
+    assert (unpack(pack(a), 3).numpy() == a).all()
+    b = rng.random((5, 64, 64)) > 0.5
+    assert (unpack(pack(b), 2).numpy() == b).all()
+
+
+def test_bad_token_tensor_errors():
+    with pytest.raises(ValueError, match=r"token indices must lie in \[0, 400\)"):
+        render_tokens(torch.tensor([[400]]), 2)
+    with pytest.raises(ValueError, match=r"tokens must be \(B, T\)"):
+        render_tokens(torch.tensor([1, 2]), 2)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no GPU")
+def test_gpu_equals_cpu():
+    rng = random.Random(1)
+    progs = [random_program(rng, 3, rng.randint(1, 4)) for _ in range(20)]
+    assert (csgnet.render(progs, 3, device="cuda") == csgnet.render(progs, 3)).all()
