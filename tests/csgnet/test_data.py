@@ -1,0 +1,263 @@
+import collections
+import math
+import shutil
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+from csgnet.data import (
+    TABLE2,
+    ProgramDataset,
+    Rules,
+    _draw_candidates,
+    check_programs,
+    generate_dataset,
+    jitter,
+    load_dataset,
+    sample_programs,
+    split_sizes,
+)
+from csgnet.lang import Draw, Node, Program
+from csgnet.render_np import render_np
+from csgnet.vocab import vocabulary
+
+SCALE = 0.001
+LENGTHS_2D = [3, 5, 13]
+
+
+@pytest.fixture(scope="module")
+def ds2(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ds")
+    counts = generate_dataset(out, dim=2, scale=SCALE, seed=3, workers=1, lengths=LENGTHS_2D, progress=False)
+    return out, counts
+
+
+@pytest.fixture(scope="module")
+def ds3(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ds3")
+    counts = generate_dataset(out, dim=3, scale=0.0001, seed=0, workers=1, lengths=[3, 7], progress=False,
+                              chunk_size=16)
+    return out, counts
+
+
+# --- an independent check of the rules on the NumPy renderer --------------------------------------
+
+def _on(node) -> np.ndarray:
+    prog = Program((node,), node.dim) if isinstance(node, Draw) else Program.from_tree(node)
+    return render_np(prog)
+
+
+def _rules_hold(program: Program, min_pixels: int, min_change: float = 0.1) -> bool:
+    """Rule (b) ("operands" reading) at every node and rule (c), from NumPy renders of every subtree."""
+    def ok(node) -> bool:
+        if isinstance(node, Draw):
+            return True
+        if not (ok(node.left) and ok(node.right)):
+            return False
+        A, B = _on(node.left), _on(node.right)
+        a, b, ab = int(A.sum()), int(B.sum()), int((A & B).sum())
+        tau = min_change * (a + b)
+        if node.op == "+":
+            return a - ab >= tau and b - ab >= tau
+        if node.op == "*":
+            return a - ab >= tau and b - ab >= tau and ab >= tau
+        return ab >= tau and a - ab >= tau
+
+    return ok(program.tree()) and int(render_np(program).sum()) >= min_pixels
+
+
+# --- sizes, lengths, duplicates, vocabulary ----------------------------------------------------------
+
+def test_split_sizes_are_table2_times_scale():
+    assert split_sizes(2, 0.001)[3] == {"train": 25, "val": 5, "test": 5}
+    assert split_sizes(2, 0.001)[13] == {"train": 350, "val": 20, "test": 100}
+    assert split_sizes(3, 0.0002)[7] == {"train": 80, "val": 8, "test": 16}
+    assert split_sizes(3, 1e-9)[3] == {"train": 1, "val": 1, "test": 1}  # at least one
+    with pytest.raises(ValueError, match="lengths"):
+        split_sizes(3, 0.1, [9])
+
+
+def test_files_sizes_lengths_vocabulary_and_no_duplicates(ds2):
+    out, counts = ds2
+    vocab = vocabulary(2)
+    assert counts == {L: dict(zip(("train", "val", "test"), (round(n * SCALE) for n in TABLE2[2][L])))
+                      for L in LENGTHS_2D}
+    for L in LENGTHS_2D:
+        texts = []
+        for split in ("train", "val", "test"):
+            progs = load_dataset(out, 2, split, [L])[L]
+            assert len(progs) == counts[L][split]
+            lines = (out / "2d" / f"len_{L:02d}" / f"{split}.txt").read_text().splitlines()
+            assert len(lines) == counts[L][split]
+            for p, line in zip(progs, lines):
+                assert len(p) == L and p.is_valid and p.text() == line
+                assert len(vocab.encode(p)) == L  # every primitive is in the vocabulary
+            texts += lines
+        assert len(set(texts)) == len(texts)  # no duplicates within or across the splits
+    meta = (out / "2d" / "meta.json").read_text()
+    assert '"seed": 3' in meta and '"min_pixels": 100' in meta
+
+
+def test_every_operation_passes_the_change_rule_and_min_pixels(ds2, ds3):
+    out, _ = ds2
+    progs = load_dataset(out, 2, "train")
+    sample = progs[3][:10] + progs[5][:10] + progs[13][:15]
+    assert all(_rules_hold(p, 100) for p in sample)
+    out3, _ = ds3
+    progs3 = load_dataset(out3, 3, "val")
+    assert len(progs3[3]) == 1 and len(progs3[7]) == 4
+    assert all(len(p) == 3 for p in progs3[3]) and all(len(p) == 7 for p in progs3[7])
+    assert all(_rules_hold(p, 1000) for p in progs3[3] + progs3[7][:2])
+    assert all(p.text().startswith(("sp(", "cu(", "cy(")) for p in progs3[7])
+
+
+def test_batched_check_equals_numpy_check_on_random_candidates():
+    rules = Rules().resolved(2)
+    cand = _draw_candidates(2, 5, rules, 150, np.random.default_rng(7))
+    got = check_programs(cand, 2, rules)
+    vocab = vocabulary(2)
+    want = np.array([_rules_hold(vocab.decode(row), 100) for row in cand])
+    assert 0 < want.sum() < len(want)  # both outcomes occur
+    assert (got == want).all()
+
+
+def test_literal_sum_rule_is_available():
+    vocab = vocabulary(2)
+    # two disjoint circles: their union changes nothing on the stack total, so "sum" rejects it
+    disjoint = np.array([vocab.encode("c(16,16,8)c(48,48,8)+")])
+    assert check_programs(disjoint, 2, Rules(change_rule="sum"))[0] == False  # noqa: E712
+    assert check_programs(disjoint, 2, Rules())[0] == True  # noqa: E712
+    inside = np.array([vocab.encode("c(32,32,28)c(32,32,8)+")])  # the union adds nothing
+    assert check_programs(inside, 2, Rules())[0] == False  # noqa: E712
+
+
+# --- determinism ------------------------------------------------------------------------------------
+
+def test_same_files_for_any_number_of_workers(tmp_path):
+    kw = dict(dim=2, scale=SCALE, seed=11, lengths=[3, 9], progress=False, chunk_size=64)
+    generate_dataset(tmp_path / "a", workers=1, **kw)
+    generate_dataset(tmp_path / "b", workers=2, **kw)
+    files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
+    assert len(files) == 7  # 2 lengths x 3 splits + meta.json
+    for f in files:
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+    generate_dataset(tmp_path / "c", workers=1, **{**kw, "seed": 12})
+    assert (tmp_path / "c/2d/len_09/train.txt").read_text() != (tmp_path / "a/2d/len_09/train.txt").read_text()
+
+
+def test_unknown_rule_is_rejected(tmp_path):
+    with pytest.raises(TypeError, match="min_pixel"):
+        generate_dataset(tmp_path, min_pixel=5)
+
+
+# --- distributions ----------------------------------------------------------------------------------
+
+def _frequencies(rows: np.ndarray, dim: int) -> collections.Counter:
+    vocab = vocabulary(dim)
+    return collections.Counter(vocab.tokens[i][0] for i in rows.ravel())
+
+
+def test_primitive_types_uniform_when_nothing_is_rejected():
+    rules = Rules(min_change=0.0, min_pixels=0)
+    rows = sample_programs(2, 5, 2000, np.random.default_rng(0), rules)
+    c = _frequencies(rows, 2)
+    n = sum(c[k] for k in "cst")
+    sd = math.sqrt(n / 3 * 2 / 3)
+    for k in "cst":  # binomial, 5 standard deviations
+        assert abs(c[k] - n / 3) < 5 * sd, c
+
+
+def test_primitive_types_roughly_uniform_under_the_rules():
+    rows = sample_programs(2, 9, 600, np.random.default_rng(1))
+    c = _frequencies(rows, 2)
+    n = sum(c[k] for k in "cst")
+    for k in "cst":  # rule (b) favours larger shapes (triangles are the smallest): a documented bias
+        assert 0.25 < c[k] / n < 0.42, c
+
+
+def test_subtract_and_intersect_boosted():
+    rng_a, rng_b = np.random.default_rng(2), np.random.default_rng(2)
+    plain = _frequencies(sample_programs(2, 7, 800, rng_a, Rules(op_weights=(1, 1, 1))), 2)
+    boosted = _frequencies(sample_programs(2, 7, 800, rng_b), 2)
+    n = 800 * 3
+    assert boosted["*"] / n > plain["*"] / n + 0.05
+    assert boosted["-"] / n > plain["-"] / n + 0.02
+    assert plain["+"] > plain["*"]  # rule (b) favours unions, which is why the boost exists
+
+
+# --- loading ----------------------------------------------------------------------------------------
+
+def test_load_reports_file_and_line_of_bad_lines(ds2, tmp_path):
+    src, counts = ds2
+    shutil.copytree(src / "2d", tmp_path / "2d")
+    f = tmp_path / "2d" / "len_03" / "train.txt"
+    lines = f.read_text().splitlines()
+    lines[2] = "c(1,2)s(8,8,8)+"  # line 3: wrong parameter count
+    lines[4] = "c(32,32,8)"  # line 5: a program of the wrong length
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.warns(UserWarning) as rec:
+        progs = load_dataset(tmp_path, 2, "train", [3, 5])
+    msg = str(rec[0].message)
+    assert f"{f}:3:" in msg and f"{f}:5:" in msg and "2 bad line(s)" in msg
+    assert len(progs[3]) == counts[3]["train"] - 2 and len(progs[5]) == counts[5]["train"]
+    with pytest.raises(ValueError) as e:
+        load_dataset(tmp_path, 2, "train", errors="raise")
+    assert f"{f}:3:" in str(e.value) and f"{f}:5:" in str(e.value)
+    with pytest.raises(FileNotFoundError, match="len_07"):
+        load_dataset(tmp_path, 2, "train", [7])
+
+
+# --- torch dataset and jitter -----------------------------------------------------------------------
+
+def test_program_dataset_pads_with_stop():
+    vocab = vocabulary(2)
+    ds = ProgramDataset(["c(32,32,8)s(32,32,8)+", "c(32,32,8)"], dim=2)
+    assert len(ds) == 2 and ds.max_len == 3
+    tok, n = ds[1]
+    assert tok.shape == (4,) and tok.dtype == torch.int64 and int(n) == 1
+    assert tok.tolist() == [vocab.index("c(32,32,8)"), vocab.stop, vocab.stop, vocab.stop]
+    assert vocab.text(ds[0][0].tolist()) == "c(32,32,8)s(32,32,8)+"
+    batch = next(iter(torch.utils.data.DataLoader(ds, batch_size=2)))
+    assert batch[0].shape == (2, 4) and batch[1].tolist() == [3, 1]
+    with pytest.raises(ValueError, match="max_len"):
+        ProgramDataset(["c(32,32,8)s(32,32,8)+"], dim=2, max_len=1)
+
+
+def _images(seed=0, n=6):
+    vocab = vocabulary(2)
+    rows = sample_programs(2, 5, n, np.random.default_rng(seed))
+    return np.stack([render_np(vocab.decode(r)) for r in rows])
+
+
+def test_jitter_identity_and_shapes():
+    imgs = _images()
+    same = jitter(imgs, np.random.default_rng(0), shift=0.0, zoom=0.0)
+    assert same.dtype == bool and same.shape == imgs.shape and (same == imgs).all()
+    t = torch.from_numpy(imgs)
+    out = jitter(t, torch.Generator().manual_seed(0))
+    assert isinstance(out, torch.Tensor) and out.dtype == torch.bool and out.shape == (6, 64, 64)
+    again = jitter(t, torch.Generator().manual_seed(0))
+    assert torch.equal(out, again)
+    with pytest.raises(ValueError, match=r"\(B, 64, 64\)"):
+        jitter(imgs[0], np.random.default_rng(0))
+
+
+def test_jitter_matches_the_affine_formula_and_draw_order():
+    imgs = _images(1, 4)
+    out = jitter(imgs, np.random.default_rng(5))
+    u = np.random.default_rng(5).random((4, 4))  # per image: t_row, t_col, z_row, z_col
+    rows, cols = np.meshgrid(np.arange(64), np.arange(64), indexing="ij")
+    changed = 0
+    for b in range(4):
+        t_row, t_col = -3 + 6 * u[b, 0], -3 + 6 * u[b, 1]
+        z_row, z_col = (1 - 2 / 64) + (4 / 64) * u[b, 2], (1 - 2 / 64) + (4 / 64) * u[b, 3]
+        sr = z_row * (rows - 32.5) + t_row + 32.5
+        sc = z_col * (cols - 32.5) + t_col + 32.5
+        ir = np.clip(np.floor(sr + 0.5), 0, 63).astype(int)
+        ic = np.clip(np.floor(sc + 0.5), 0, 63).astype(int)
+        want = imgs[b][ir, ic]
+        assert (out[b] == want).all()
+        changed += int((out[b] != imgs[b]).sum())
+    assert changed > 0
