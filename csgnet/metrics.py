@@ -15,15 +15,10 @@ How :func:`chamfer` is fast and still exact
 The reference loops over pairs and calls ``cv2.Canny`` and ``cv2.distanceTransform`` twice per pair.
 Here every distinct image is processed once (targets are usually shared by many beams or samples):
 
-1. **Edges.** All distinct images are tiled into one mosaic, each tile surrounded by a one-pixel copy
-   of its own border (``BORDER_REPLICATE``, which is what ``cv2.Canny`` uses for its Sobel filter), and
-   ``cv2.Canny`` runs once on the mosaic. Every pixel not on a tile's outer ring then gets the same
-   decision as a call on the single image. On the outer ring, the single-image call compares against a
-   zero gradient magnitude outside the image, which a mosaic cannot reproduce, so the ring (4 x 64
-   pixels per image) is recomputed in NumPy with OpenCV's integer non-maximum suppression
-   (:func:`_ring_edges`). On a binary 0/255 image every non-zero gradient magnitude is at least 255,
-   above both thresholds (1 and 3), so hysteresis keeps every suppressed-maximum pixel and the edge
-   decision is local.
+1. **Edges.** All distinct images are tiled into one mosaic, each tile framed by a one-pixel copy of
+   its own border, and ``cv2.Canny(dx, dy, 1, 3)`` runs once on the mosaic's Sobel derivatives with
+   the frame's derivatives set to zero (see :func:`edges`): bit-identical to one ``cv2.Canny`` call
+   per image, without the per-call overhead.
 2. **Distances.** ``cv2.distanceTransform(255 - edges, DIST_L2, 3)`` per distinct image (the 3x3
    chamfer mask cannot be tiled: distances would leak between tiles), optionally on several threads
    (OpenCV releases the GIL).
@@ -150,17 +145,23 @@ def _unique_images(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, inverse.ravel()
 
 
-def _distance_maps(edge_maps: np.ndarray, workers: int) -> np.ndarray:
-    """``cv2.distanceTransform(255 - E, DIST_L2, 3)`` of each edge map: (U, 64, 64) bool -> float32."""
+def _distance_maps(edge_maps: np.ndarray, out: np.ndarray, workers: int) -> None:
+    """``cv2.distanceTransform(255 - E, DIST_L2, 3)`` of each edge map, written into ``out``.
+
+    Args:
+        edge_maps: (U, 64, 64) bool.
+        out: (U, 4097) float32; columns 0..4095 receive the flattened distance maps.
+        workers: threads (OpenCV releases the GIL).
+    """
     import cv2
 
     u = edge_maps.shape[0]
-    out = np.empty((u, SIZE, SIZE), np.float32)
     inv = np.where(edge_maps, np.uint8(0), np.uint8(255))
+    maps = out[:, :SIZE * SIZE].reshape(u, SIZE, SIZE)  # a view: cv2 writes in place
 
     def run(lo: int, hi: int) -> None:
         for i in range(lo, hi):
-            out[i] = cv2.distanceTransform(inv[i], cv2.DIST_L2, 3)
+            cv2.distanceTransform(inv[i], cv2.DIST_L2, 3, dst=maps[i])
 
     if workers <= 1 or u < 64:
         run(0, u)
@@ -168,7 +169,6 @@ def _distance_maps(edge_maps: np.ndarray, workers: int) -> np.ndarray:
         bounds = np.linspace(0, u, workers + 1).astype(int)
         with ThreadPoolExecutor(max_workers=workers) as pool:
             list(pool.map(run, bounds[:-1], bounds[1:]))
-    return out
 
 
 def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
@@ -232,37 +232,39 @@ def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
     need[ip[live]] = True
     need[it[live]] = True
     todo = np.flatnonzero(need)
-    e = np.zeros(uniq.shape, bool)
-    if len(todo):
-        e[todo] = edges(uniq[todo])
-    ecount = e.reshape(u, -1).sum(axis=1)
-    bad |= ecount == 0
+    e = edges(uniq[todo]) if len(todo) else np.zeros((0, SIZE, SIZE), bool)
+    ecount = np.zeros(u, np.int64)
+    ecount[todo] = e.reshape(len(todo), SIZE * SIZE).sum(axis=1)
+    bad[todo] |= ecount[todo] == 0
     live = ~bad[ip] & ~bad[it]
-    need[:] = False
-    need[ip[live]] = True
-    need[it[live]] = True
-    todo = np.flatnonzero(need)
-    # distance maps, flattened, plus a zero column 4096 that padded edge-pixel lists point at
-    flat_d = np.zeros((u, SIZE * SIZE + 1), np.float32)
-    if len(todo):
-        flat_d[todo, :-1] = _distance_maps(e[todo], workers).reshape(len(todo), -1)
-
     out = np.full(n, CHAMFER_PENALTY, np.float64)
     ok = np.flatnonzero(live)
     if len(ok) == 0:
         return float(out[0]) if single else out
+    need[:] = False
+    need[ip[ok]] = True
+    need[it[ok]] = True
+    keep = need[todo]  # among the images with edges, those that take part in a scored pair
+    todo, e = todo[keep], e[keep]
+    k = len(todo)
+    pos = np.full(u, -1, np.int64)
+    pos[todo] = np.arange(k)
+    # distance maps, flattened, plus a zero column 4096 that padded edge-pixel lists point at
+    flat_d = np.zeros((k, SIZE * SIZE + 1), np.float32)
+    _distance_maps(e, flat_d, workers)
     # Each sum(D1 * E2) is 255 * (sum of D1 over E2's edge pixels). Edge pixels are listed per image
     # (padded with index 4096, whose distance is 0) so each pair gathers a few hundred values, not 4096.
-    rows, cols = np.nonzero(e.reshape(u, -1))
-    starts = np.concatenate([[0], np.cumsum(ecount)[:-1]])
-    idx = np.full((u, max(1, int(ecount.max()))), SIZE * SIZE, np.int64)
+    cnt = ecount[todo]
+    rows, cols = np.nonzero(e.reshape(k, SIZE * SIZE))
+    starts = np.cumsum(cnt) - cnt
+    idx = np.full((k, int(cnt.max())), SIZE * SIZE, np.int32)
     idx[rows, np.arange(len(rows)) - starts[rows]] = cols
-    esum = ecount.astype(np.float64) * 255.0  # sum of the 0/255 edge array
+    esum = cnt.astype(np.float64) * 255.0  # sum of the 0/255 edge array
     for s in range(0, len(ok), chunk):
         sel = ok[s:s + chunk]
-        a, b = ip[sel], it[sel]
-        ka = int(ecount[a].max())
-        kb = int(ecount[b].max())
+        a, b = pos[ip[sel]], pos[it[sel]]
+        ka = int(cnt[a].max())
+        kb = int(cnt[b].max())
         # float32 distances summed in float64: exact, hence equal to the reference's float64 sums
         s_ab = flat_d[a[:, None], idx[b, :kb]].sum(axis=1, dtype=np.float64) * 255.0  # sum(D1 * E2)
         s_ba = flat_d[b[:, None], idx[a, :ka]].sum(axis=1, dtype=np.float64) * 255.0  # sum(D2 * E1)
