@@ -1,0 +1,234 @@
+"""Export CSG results: canvases to PNG, voxel volumes to OBJ meshes, programs to OpenSCAD source.
+
+Coordinates
+-----------
+A 2D canvas is ``img[row, col]`` with ``row = y`` and ``col = x`` (spec section (b)); a 3D volume is
+``vol[x, y, z]``. In every exported geometry **pixel and voxel centres sit at integer coordinates**: the
+pixel ``img[row, col]`` is the unit square ``[col - 0.5, col + 0.5] x [row - 0.5, row + 0.5]`` and the
+voxel ``vol[i, j, k]`` is the unit cube centred at ``(i, j, k)``. The rendered shape is the union of the
+squares (cubes) of its on pixels (voxels).
+
+OpenSCAD (:func:`to_scad`)
+--------------------------
+* 2D: SCAD's x is the column and SCAD's y is the row. Image rows grow downward, SCAD's y grows upward,
+  so the whole model is wrapped in ``mirror([0, 1, 0])``: the CAD view then looks like the PNG (the
+  triangle's apex points up on screen in both). Squares are exact: the rectangle of the inclusive pixel
+  bounds from :func:`csgnet.primitives.square_bounds`, grown by half a pixel. Circles are
+  ``circle(r)`` with a high ``$fn`` (the raster holds the pixels whose centres are strictly inside).
+  Triangles are the polygon through :func:`csgnet.primitives.triangle_vertices` (the raster also holds
+  the Bresenham outline, so it is up to about half a pixel larger).
+* 3D: ``sphere(r - 1)`` and ``cylinder(r = r - 1)`` (the raster holds the voxels whose centres are
+  within ``r - 1``), the cube and the cylinder's height are exact in voxel units (edge ``2q + 1`` with
+  ``q = (r - 1) // 2``, height ``2 * int((h - 1) / 2) + 1``), the cylinder's axis is z.
+* Booleans follow :meth:`csgnet.lang.Program.tree`: ``+`` -> ``union()``, ``*`` -> ``intersection()``,
+  ``-`` -> ``difference()`` with the earlier operand first (earlier minus later).
+* The model is intersected with the canvas (``[-0.5, 63.5]`` per axis), as the renderer clips.
+
+Files are written atomically: a temporary file in the target directory, then ``os.replace``.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import primitives as P
+from .lang import Draw, Node, Program, parse
+
+__all__ = ["save_png", "voxels_to_mesh", "save_obj", "to_scad", "save_scad"]
+
+SIZE = 64
+
+
+def _atomic_write(path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same directory and ``os.replace``."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.",
+                               suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
+def _to_numpy_bool(a, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    if type(a).__module__.startswith("torch"):
+        a = a.detach().cpu().numpy()
+    a = np.asarray(a)
+    if a.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
+    return a.astype(bool)
+
+
+# ---------------------------------------------------------------------------------------------
+# PNG
+
+def save_png(canvas, path, scale: int = 4) -> Path:
+    """Save a canvas as a black-on-white PNG, upscaled by nearest neighbour.
+
+    Args:
+        canvas: (64, 64) bool (NumPy or torch); True pixels are drawn black.
+        path: the output file.
+        scale: the integer upscaling factor (each pixel becomes ``scale x scale``).
+
+    Returns:
+        The path written.
+    """
+    import io
+
+    from PIL import Image
+
+    img = _to_numpy_bool(canvas, "canvas", (SIZE, SIZE))
+    if not isinstance(scale, int) or scale < 1:
+        raise ValueError(f"scale must be a positive integer, got {scale!r}")
+    gray = np.where(img, np.uint8(0), np.uint8(255))
+    gray = np.repeat(np.repeat(gray, scale, axis=0), scale, axis=1)
+    buf = io.BytesIO()
+    Image.fromarray(gray, mode="L").save(buf, format="PNG")
+    return _atomic_write(path, buf.getvalue())
+
+
+# ---------------------------------------------------------------------------------------------
+# meshes
+
+def voxels_to_mesh(vol) -> tuple[np.ndarray, np.ndarray]:
+    """A closed triangle mesh of a voxel volume (marching cubes at level 0.5).
+
+    The volume is zero-padded by one voxel on every side first, so shapes touching the border get
+    closed surfaces. Vertex coordinates are in voxel units in the ``vol[x, y, z]`` frame (voxel centres
+    at integer coordinates); faces are oriented outward.
+
+    Args:
+        vol: (64, 64, 64) bool (NumPy or torch).
+
+    Returns:
+        vertices (V, 3) float64 and faces (F, 3) int64. An empty volume gives empty arrays.
+    """
+    from skimage.measure import marching_cubes
+
+    v = _to_numpy_bool(vol, "vol", (SIZE, SIZE, SIZE))
+    if not v.any():
+        return np.zeros((0, 3), np.float64), np.zeros((0, 3), np.int64)
+    padded = np.pad(v.astype(np.float32), 1)
+    verts, faces, _, _ = marching_cubes(padded, level=0.5)
+    verts = verts.astype(np.float64) - 1.0
+    faces = faces.astype(np.int64)
+    # orient outward: the signed volume of a closed, outward-oriented mesh is positive
+    a, b, c = verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]]
+    if np.einsum("ij,ij->i", a, np.cross(b, c)).sum() < 0:
+        faces = faces[:, ::-1].copy()
+    return verts, faces
+
+
+def save_obj(vol, path) -> Path:
+    """Save the marching-cubes mesh of a (64, 64, 64) bool volume as a Wavefront OBJ file."""
+    verts, faces = voxels_to_mesh(vol)
+    lines = ["# csgnet voxel mesh: vertices in voxel units, vol[x, y, z] frame, voxel centres at integers"]
+    lines += [f"v {x:.6g} {y:.6g} {z:.6g}" for x, y, z in verts]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    return _atomic_write(path, ("\n".join(lines) + "\n").encode())
+
+
+# ---------------------------------------------------------------------------------------------
+# OpenSCAD
+
+def _num(v) -> str:
+    v = float(v)
+    return str(int(v)) if v.is_integer() else f"{v:.6g}"
+
+
+def _scad_draw(d: Draw, fn: int) -> str:
+    p = d.params
+    if d.kind == "c":
+        x, y, r = p
+        return f"translate([{x}, {y}]) circle(r = {r}, $fn = {fn});  // {d.text()}"
+    if d.kind == "s":
+        x, y, r = p
+        r0, r1, c0, c1 = (int(v) for v in P.square_bounds(x, y, r))
+        return (f"translate([{_num(c0 - 0.5)}, {_num(r0 - 0.5)}]) square([{c1 - c0 + 1}, {r1 - r0 + 1}]);"
+                f"  // {d.text()}: rows {r0}..{r1}, columns {c0}..{c1}")
+    if d.kind == "t":
+        x, y, r = p
+        rb, ra, cl, cr = (int(v) for v in P.triangle_vertices(x, y, r))
+        return (f"polygon([[{cl}, {rb}], [{cr}, {rb}], [{x}, {ra}]]);"
+                f"  // {d.text()}: base row {rb}, apex row {ra}")
+    if d.kind == "p":
+        x, y, z, r = p
+        return f"translate([{x}, {y}, {z}]) sphere(r = {max(r - 1, 0)}, $fn = {fn});  // {d.text()}"
+    if d.kind == "u":
+        x, y, z, r = p
+        q = P.cube_half(r)
+        if q < 0:
+            return f"// {d.text()}: empty"
+        return (f"translate([{_num(x - q - 0.5)}, {_num(y - q - 0.5)}, {_num(z - q - 0.5)}]) "
+                f"cube({2 * q + 1});  // {d.text()}")
+    x, y, z, r, h = p
+    hz = int(P.cylinder_half_height(h))
+    return (f"translate([{x}, {y}, {_num(z - hz - 0.5)}]) cylinder(r = {max(r - 1, 0)}, h = {2 * hz + 1}, "
+            f"$fn = {fn});  // {d.text()}")
+
+
+_SCAD_OPS = {"+": "union", "*": "intersection", "-": "difference"}
+
+
+def _scad_tree(node, fn: int, indent: str) -> list[str]:
+    if isinstance(node, Draw):
+        return [indent + _scad_draw(node, fn)]
+    inner = indent + "    "
+    return ([f"{indent}{_SCAD_OPS[node.op]}() {{"] + _scad_tree(node.left, fn, inner)
+            + _scad_tree(node.right, fn, inner) + [f"{indent}}}"])
+
+
+def to_scad(program, dim: int | None = None, fn: int = 128) -> str:
+    """OpenSCAD source that reproduces a program (see the module docstring for the conventions).
+
+    Args:
+        program: a :class:`~csgnet.lang.Program` or program text (then ``dim`` says 2 or 3, default 2).
+        dim: the dimension of a text program.
+        fn: ``$fn`` for circles, spheres and cylinders.
+
+    Returns:
+        The ``.scad`` text.
+
+    Raises:
+        ValueError: for an invalid program (stack underflow or shapes left over).
+    """
+    if isinstance(program, str):
+        program = parse(program, dim or 2)
+    if not isinstance(program, Program):
+        raise TypeError(f"program must be a Program or program text, got {type(program).__name__}")
+    tree = program.tree()
+    head = [f"// CSG program: {program.text()}",
+            "// Generated by csgnet.export.to_scad. Pixel/voxel centres are at integer coordinates;",
+            "// the canvas spans [-0.5, 63.5] on every axis."]
+    if program.dim == 2:
+        head += ["// 2D: x = image column, y = image row. Image rows grow downward, so the model is",
+                 "// mirrored in y to look like the PNG (triangle apex up)."]
+        body = _scad_tree(tree, fn, "        ")
+        lines = head + ["mirror([0, 1, 0]) {", "    intersection() {"] + body + [
+            "        translate([-0.5, -0.5]) square([64, 64]);  // the canvas (the renderer clips)",
+            "    }", "}"]
+    else:
+        head += ["// 3D: x, y, z = volume axes 0, 1, 2 (vol[x, y, z]); cylinders stand along z."]
+        body = _scad_tree(tree, fn, "    ")
+        lines = head + ["intersection() {"] + body + [
+            "    translate([-0.5, -0.5, -0.5]) cube([64, 64, 64]);  // the canvas (the renderer clips)",
+            "}"]
+    return "\n".join(lines) + "\n"
+
+
+def save_scad(program, path, dim: int | None = None, fn: int = 128) -> Path:
+    """Write :func:`to_scad` of ``program`` to ``path`` (atomically)."""
+    return _atomic_write(path, to_scad(program, dim, fn).encode())
