@@ -1,0 +1,236 @@
+"""Tests for shapeprog.metrics: chamfer, F-score, recon IoU, rootedness, stability."""
+import math
+import os
+
+import numpy as np
+import pytest
+import torch
+
+from shapeprog.geometry import cuboid_corners
+from shapeprog.metrics import (
+    adaptive_threshold,
+    box_distances,
+    chamfer,
+    fscore,
+    nearest_neighbors,
+    rooted_parts,
+    rootedness,
+    stability,
+    voxel_iou,
+)
+
+
+def boxes(centers, dims, axes=None):
+    c = torch.as_tensor(centers, dtype=torch.float64).reshape(-1, 3)
+    d = torch.as_tensor(dims, dtype=torch.float64).reshape(-1, 3)
+    a = torch.eye(3, dtype=torch.float64).expand(c.shape[0], 3, 3) if axes is None else torch.as_tensor(axes, dtype=torch.float64)
+    return cuboid_corners(c, d, a)
+
+
+def rot_y(angle):
+    c, s = math.cos(angle), math.sin(angle)
+    return torch.tensor([[c, 0, -s], [0, 1, 0], [s, 0, c]], dtype=torch.float64)
+
+
+def table(top_y=0.95, leg_h=0.9):
+    legs = [[x, leg_h / 2, z] for x in (-0.45, 0.45) for z in (-0.25, 0.25)]
+    return boxes([[0, top_y, 0]] + legs, [[1.0, 0.1, 0.6]] + [[0.06, leg_h, 0.06]] * 4)
+
+
+# ---------------------------------------------------------------- chamfer / nearest neighbours
+
+def test_nearest_neighbors_match_brute_force_and_chunking():
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.rand(700, 3, generator=g), torch.rand(500, 3, generator=g)
+    d, i = nearest_neighbors(a, b)
+    full = ((a[:, None] - b[None]) ** 2).sum(-1)
+    assert torch.equal(i, full.argmin(1))
+    torch.testing.assert_close(d, full.min(1).values.sqrt())
+    d2, i2 = nearest_neighbors(a, b, chunk_elements=1000)  # two rows per block
+    assert torch.equal(i2, i) and torch.equal(d2, d)
+    _, j = nearest_neighbors(a, a, exclude_self=True)
+    assert not (j == torch.arange(700)).any()
+
+
+def test_chamfer_hand_computed():
+    a = torch.tensor([[0.0, 0.0, 0.0]])
+    b = torch.tensor([[1.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
+    # a->b: 1 ; b->a: (1 + 3) / 2 = 2  (unsquared distances, each direction averaged)
+    assert chamfer(a, b, eps=0.0).item() == pytest.approx(3.0)
+    assert chamfer(b, a, eps=0.0).item() == pytest.approx(3.0)
+    # threshold: relu(d - t)
+    assert chamfer(a, b, threshold=1.5, eps=0.0).item() == pytest.approx(0.0 + (0 + 1.5) / 2)
+    # the reference's sqrt(. + 1e-8)
+    assert chamfer(a, b).item() == pytest.approx(math.sqrt(1 + 1e-8) + (math.sqrt(1 + 1e-8) + math.sqrt(9 + 1e-8)) / 2)
+
+
+def test_chamfer_identical_symmetric_and_grad():
+    g = torch.Generator().manual_seed(1)
+    a, b = torch.rand(40, 3, generator=g, dtype=torch.float64), torch.rand(30, 3, generator=g, dtype=torch.float64)
+    assert chamfer(a, a.clone(), eps=0.0).item() == 0.0
+    assert chamfer(a, a.clone()).item() == pytest.approx(2e-4)
+    assert chamfer(a, b).item() == pytest.approx(chamfer(b, a).item(), rel=1e-12)
+    a.requires_grad_(True)
+    b.requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda x, y: chamfer(x, y), (a, b), eps=1e-7, atol=1e-6)
+
+
+def test_chamfer_large_clouds_bounded_memory():
+    g = torch.Generator().manual_seed(2)
+    a, b = torch.rand(10000, 3, generator=g), torch.rand(10000, 3, generator=g)
+    c = chamfer(a, b)
+    # random uniform clouds in the unit cube: mean NN distance ~ 0.554 * n^(-1/3) ~ 0.026
+    assert 0.04 < c.item() < 0.065
+
+
+def test_chamfer_errors():
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        chamfer(torch.zeros(5, 2), torch.zeros(5, 3))
+    with pytest.raises(ValueError, match="NaN"):
+        chamfer(torch.full((5, 3), float("nan")), torch.zeros(5, 3))
+    with pytest.raises(ValueError, match="no point"):
+        chamfer(torch.zeros(0, 3), torch.zeros(5, 3))
+
+
+# ---------------------------------------------------------------- F-score
+
+def grid_points(n, h):
+    r = torch.arange(n, dtype=torch.float64) * h
+    return torch.stack(torch.meshgrid(r, r, r, indexing="ij"), -1).reshape(-1, 3)
+
+
+def test_adaptive_threshold_on_a_regular_grid():
+    # every point's nearest other point is at the grid spacing
+    assert adaptive_threshold(grid_points(6, 0.1)).item() == pytest.approx(0.1)
+    # 90th percentile, linear interpolation: distances 1 (x9) and 2 (x1) -> quantile 0.9 of squares
+    pts = torch.tensor([[float(i), 0, 0] for i in range(10)] + [[100.0, 0, 0], [102.0, 0, 0]])
+    sq = np.array([1.0] * 10 + [4.0, 4.0])
+    assert adaptive_threshold(pts).item() == pytest.approx(math.sqrt(np.percentile(sq, 90)))
+
+
+def test_fscore_identical_far_and_hand_computed():
+    t = grid_points(5, 0.1)
+    assert fscore(t, t.clone()) == pytest.approx(100.0, abs=1e-6)
+    assert fscore(t + 10.0, t) == 0.0
+    # explicit threshold: half of pred is close, all of target is covered -> P=50, R=100
+    pred = torch.tensor([[0.0, 0, 0], [5.0, 0, 0]])
+    target = torch.tensor([[0.01, 0, 0]])
+    assert fscore(pred, target, threshold=0.05) == pytest.approx(2 * 50 * 100 / (150 + 1e-8))
+    # strict comparison at the threshold
+    assert fscore(pred, target, threshold=0.01) == pytest.approx(0.0)
+
+
+# ---------------------------------------------------------------- recon IoU
+
+def test_voxel_iou():
+    root = torch.tensor([2.0, 1.0, 1.0], dtype=torch.float64)
+    full = boxes([0, 0, 0], root)
+    assert voxel_iou(full, full.clone(), root) == 100.0
+    left, right = boxes([-0.5, 0, 0], [1.0, 1.0, 1.0]), boxes([0.5, 0, 0], [1.0, 1.0, 1.0])
+    # lattice x_i = (i/19 - .5) * 2, shift +-0.05: left covers x <= 0.05 (10 columns), right x >= -0.05 (10)
+    assert voxel_iou(left, right, root) == 0.0
+    assert voxel_iou(left, full, root) == pytest.approx(100.0 * 10 / 20)
+    assert voxel_iou(torch.cat([left, right]), full, root) == 100.0
+    # invariant to the order and the split of the parts
+    assert voxel_iou(torch.cat([right, left]), torch.cat([left, right]), root) == 100.0
+
+
+# ---------------------------------------------------------------- box distances and rootedness
+
+def test_box_distances_hand_cases():
+    c = boxes([[0, 0, 0], [1.3, 0, 0], [1.3, 1.4, 0]], [[1, 1, 1]] * 3)
+    d = box_distances(c)
+    assert d[0, 1] == pytest.approx(0.3) and d[1, 0] == pytest.approx(0.3)
+    assert d[1, 2] == pytest.approx(0.4)
+    assert d[0, 2] == pytest.approx(math.hypot(0.3, 0.4))  # corner to corner
+    # a box rotated 45 degrees about y: its vertical edge points at the other box's face
+    r = boxes([[0, 0, 0], [0.5 + 0.2 + math.sqrt(0.5), 0, 0]], [[1, 1, 1]] * 2,
+              axes=torch.stack([torch.eye(3, dtype=torch.float64), rot_y(math.pi / 4)]))
+    assert box_distances(r)[0, 1] == pytest.approx(0.2)
+    # skew edges: two long bars crossing at a vertical gap of 0.5
+    bars = boxes([[0, 0, 0], [0, 0.6, 0]], [[2, 0.1, 0.1], [0.1, 0.1, 2]])
+    assert box_distances(bars)[0, 1] == pytest.approx(0.5)
+    # overlapping, touching
+    o = boxes([[0, 0, 0], [0.5, 0.2, 0], [1.0, 0, 0]], [[1, 1, 1]] * 3)
+    assert box_distances(o)[0, 1] == 0.0 and box_distances(o)[0, 2] == 0.0
+    # nested: surface to surface (mesh semantics) or 0 as solids
+    nest = boxes([[0, 0, 0], [0.1, 0, 0]], [[1, 1, 1], [0.2, 0.2, 0.2]])
+    assert box_distances(nest)[0, 1] == pytest.approx(0.3)
+    assert box_distances(nest, surface=False)[0, 1] == 0.0
+
+
+def test_box_distances_against_numerical_minimum():
+    from scipy.optimize import minimize
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(0)
+    for seed in range(8):
+        rots = Rotation.random(2, random_state=seed).as_matrix().transpose(0, 2, 1)  # rows = axes
+        centers, dims = rng.uniform(-1, 1, (2, 3)), rng.uniform(0.2, 1.2, (2, 3))
+        c = boxes(centers, dims, axes=torch.tensor(rots))
+        d = box_distances(c, surface=False)[0, 1]
+
+        def f(x):  # squared distance between a point of box 0 and a point of box 1 (local coords)
+            p = centers[0] + x[:3] @ rots[0]
+            q = centers[1] + x[3:] @ rots[1]
+            return float(((p - q) ** 2).sum())
+
+        bounds = [(-h / 2, h / 2) for h in dims[0]] + [(-h / 2, h / 2) for h in dims[1]]
+        best = min(minimize(f, rng.uniform(-0.1, 0.1, 6), bounds=bounds, method="L-BFGS-B", tol=1e-14).fun
+                   for _ in range(3))
+        assert d == pytest.approx(math.sqrt(max(best, 0.0)), abs=1e-5)
+
+
+def test_table_on_its_legs_is_rooted_floating_cuboid_is_not():
+    t = table()
+    assert rootedness(t)
+    assert rooted_parts(t).all()
+    floating = torch.cat([t, boxes([0, 1.6, 0], [0.2, 0.2, 0.2])])
+    assert not rootedness(floating)
+    assert rooted_parts(floating).tolist() == [True] * 5 + [False]
+    # a top hovering above its legs is not rooted (the legs are)
+    hover = table(top_y=1.3)
+    assert rooted_parts(hover).tolist() == [False, True, True, True, True]
+
+
+def test_rootedness_two_percent_of_the_diagonal():
+    # a unit cube on the ground and a second one above it with a gap; the tolerance is 2% of the
+    # bounding-box diagonal sqrt(1 + H^2 + 1) (H = total height)
+    gap_ok = boxes([[0, 0.5, 0], [0, 1.545, 0]], [[1, 1, 1], [1, 1.0, 1]])  # gap 0.045 < 0.02 * 2.4864
+    gap_bad = boxes([[0, 0.5, 0], [0, 1.555, 0]], [[1, 1, 1], [1, 1.0, 1]])  # gap 0.055 > 0.02 * 2.4946
+    assert rootedness(gap_ok)
+    assert not rootedness(gap_bad)
+    assert rootedness(gap_bad, tolerance=0.03)
+
+
+def test_rootedness_accepts_arrays_and_checks_input():
+    assert rootedness(table().numpy())
+    with pytest.raises(ValueError, match=r"\(L, 8, 3\)"):
+        rootedness(np.zeros((2, 4, 3)))
+    with pytest.raises(ValueError, match="NaN"):
+        rootedness(np.full((1, 8, 3), np.nan))
+
+
+# ---------------------------------------------------------------- stability
+
+def test_stability(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    pytest.importorskip("pybullet")
+    assert stability(boxes([0, 0.5, 0], [1, 1, 1]))
+    assert stability(table())
+    # a heavy block balanced on a tiny base falls over
+    assert not stability(boxes([[0, 0.025, 0], [0, 1.05, 0]], [[0.05, 0.05, 0.05], [0.5, 2.0, 0.5]]))
+    # a floating overhang: a long heavy beam attached at one end to a thin post
+    assert not stability(boxes([[0, 0.5, 0], [0.8, 1.05, 0]], [[0.1, 1.0, 0.1], [1.6, 0.1, 0.5]]))
+    # not rooted -> not stable
+    assert not stability(torch.cat([table(), boxes([0, 1.6, 0], [0.2, 0.2, 0.2])]))
+    # the paper's looser 10% rule still flags the tipping block
+    assert not stability(boxes([[0, 0.025, 0], [0, 1.05, 0]], [[0.05, 0.05, 0.05], [0.5, 2.0, 0.5]]), tolerance=0.1)
+    # headless and file-free
+    assert os.listdir(tmp_path) == []
+
+
+def test_stability_is_deterministic():
+    shape = boxes([[0, 0.25, 0], [0.3, 0.75, 0]], [[0.6, 0.5, 0.4], [0.5, 0.5, 0.4]])
+    runs = {stability(shape, steps=2000) for _ in range(2)}
+    assert len(runs) == 1
