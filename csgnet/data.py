@@ -69,7 +69,7 @@ import os
 import platform
 import tempfile
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -77,7 +77,7 @@ from typing import Iterable, Sequence
 import numpy as np
 import torch
 
-from .lang import ParseError, Program, parse_lines
+from .lang import Program, parse_lines
 from .vocab import KIND_CODES, OP_CODES, vocabulary
 
 __all__ = [
@@ -86,6 +86,7 @@ __all__ = [
     "Rules",
     "split_sizes",
     "sample_programs",
+    "check_programs",
     "generate_dataset",
     "load_dataset",
     "ProgramDataset",
