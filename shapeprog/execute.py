@@ -1,0 +1,877 @@
+"""Differentiable ShapeAssembly executor (one code path, batched over blocks).
+
+The executor reproduces the reference's ordinary (hierarchical) execution, spec section (b):
+cuboid frames, Cuboid re-declaration, the attach rules *first* / *second* / *general* /
+*aligned* (grid nearest points, 5% gap), squeeze / reflect / translate expansion, bbox
+rules, breadth-first hierarchical placement with per-axis dims scaling (positions not
+scaled) and the reflect flip of sub-programs. The same code computes values and, through
+autograd, gradients with respect to every continuous number of the program text.
+
+How it works:
+    1. *Compile* (static, from the AST): every block becomes a list of primitive ops.
+       Which attach rule a statement uses depends only on the program's structure (how many
+       attachment records the moved cuboid has, its aligned flag), so it is decided here, as
+       are macro names and the sub-program tree.
+    2. *Run* the local programs of all blocks (of one or many programs) in lock step: at
+       step ``t`` the ``t``-th op of every block runs, grouped by rule, as batched tensor
+       ops. Value-dependent decisions (thresholds, roots, nearest points) are masks.
+    3. *Place* the local results breadth first (``apply_delta``, reflect flips).
+
+Continuous parameters are one flat tensor in text order (:func:`program_parameters`;
+the order of :func:`shapeprog.lang.numbers`), so ``execute(p, params=t)`` is
+differentiable in ``t`` and :func:`shapeprog.lang.replace_numbers` writes values back.
+
+Example:
+    >>> from shapeprog.lang import parse
+    >>> p = parse("bbox = Cuboid(1.0, 1.0, 1.0, True)\\ncube0 = Cuboid(0.5, 0.2, 0.5, True)\\n"
+    ...           "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n")
+    >>> s = execute(p)
+    >>> s.centers.tolist()
+    [[0.0, -0.4000000059604645, 0.0]]
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+from .geometry import cuboid_corners, mesh_arrays
+from .lang import AXES, Attach, Cuboid, Program, Reflect, Squeeze, Translate, numbers, statement_lines
+
+__all__ = ["ExecutedShape", "execute", "execute_batch", "program_parameters", "parameter_names"]
+
+EPS = 0.01
+SMALL_EPS = 1e-4
+COS_DIST_THRESH = 0.9
+GRID = 10
+
+# face -> (axis index k, "val"): val is 0 for the positive faces, 1 for the negative ones.
+_FACE = {"right": (0, 0), "left": (0, 1), "top": (1, 0), "bot": (1, 1), "front": (2, 0), "back": (2, 1)}
+_OPP = {"right": "left", "left": "right", "top": "bot", "bot": "top", "front": "back", "back": "front"}
+_DIM_ORDER = (1, 2, 0)  # height, width, length
+
+FIRST, SECOND, GENERAL, ALIGNED = 0, 1, 2, 3
+
+
+# ----------------------------------------------------------------------------- result
+
+
+@dataclass
+class ExecutedShape:
+    """Leaf cuboids of an executed program (bbox cuboids excluded), in the spec's order:
+    breadth-first over program nodes, declared order then macro copies within a node.
+
+    Attributes:
+        centers: (L, 3) float, cuboid centres.
+        dims: (L, 3) float, extents along the cuboid's right/up/front axes.
+        axes: (L, 3, 3) float, rows are the unit right/up/front vectors.
+        corners: (L, 8, 3) float, corners in the spec's order.
+        node: (L,) int64, index of the program block (``Program_k`` -> k) of each leaf.
+        line: (L,) int64, 0-based file line of the statement that created each leaf
+            (its Cuboid line, or the reflect/translate line for macro copies).
+        root_dims: (3,) float, the root bbox dims.
+    """
+
+    centers: torch.Tensor
+    dims: torch.Tensor
+    axes: torch.Tensor
+    corners: torch.Tensor
+    node: torch.Tensor
+    line: torch.Tensor
+    root_dims: torch.Tensor
+
+    def __len__(self) -> int:
+        return self.centers.shape[0]
+
+    def mesh(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(vertices (8L, 3) float, faces (12L, 3) int64), the reference's OBJ layout."""
+        return mesh_arrays(self.corners)
+
+
+# ----------------------------------------------------------------------------- compile
+
+
+@dataclass
+class _AttachOp:
+    a: int
+    b: int
+    mode: int
+    src: tuple  # affine form (c0 (3,), c1 (3,), idx (3,)) in block-param space or None
+    tgt: tuple | None  # affine form, or None for a macro (computed at run time)
+    prior: list  # list of (op index, role 0=subject 1=target) of a's earlier records
+    macro: tuple | None = None  # (orig op j, src slot A, target slot T, kind 'R'|'T', k, i, N, d idx)
+
+
+@dataclass
+class _BlockCode:
+    name: str
+    slots: list[str]
+    init_dims: list  # per slot: 3 param indices (or None -> zeros until copied)
+    ops: list  # ('attach', _AttachOp) | ('setdims', slot, idx3) | ('copy', new, src)
+    slot_line: list[int]
+    slot_source: list[int | None]  # macro copies: the source slot
+    slot_reflect_axis: list[int | None]
+    child_names: list[str | None]  # per Cuboid line (bbox first): sub-program name or None
+    root_idx: tuple  # param indices of the first line (bbox dims)
+
+
+def _aff(consts=(0.0, 0.0, 0.0), scales=(0.0, 0.0, 0.0), idx=(-1, -1, -1)):
+    return (tuple(consts), tuple(scales), tuple(idx))
+
+
+def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
+    """Static lowering of one block; ``offset`` is the index of its first parameter."""
+    slots: dict[str, int] = {}
+    names: list[str] = []
+    init_dims: list = []
+    aligned: list[bool] = []
+    slot_line: list[int] = []
+    slot_source: list = []
+    slot_axis: list = []
+    child_names: list = []
+    ops: list = []
+    records: list[list[tuple[int, int]]] = []  # per slot: (op index, role)
+    move_atts: list[list[int]] = []  # per slot: op indices where it was the subject
+    op_src: list = []  # per attach op index: its src affine form (for macros)
+    n_att = [0]
+    p = offset
+
+    def new_slot(name, dims_idx, al, line, source=None, axis=None):
+        slots[name] = len(names)
+        names.append(name)
+        init_dims.append(dims_idx)
+        aligned.append(al)
+        slot_line.append(line)
+        slot_source.append(source)
+        slot_axis.append(axis)
+        records.append([])
+        move_atts.append([])
+        return slots[name]
+
+    def attach(a, b, src, tgt, macro=None):
+        j = n_att[0]
+        n = len(records[a])
+        if aligned[a]:
+            mode = FIRST if n == 0 else ALIGNED
+        else:
+            mode = FIRST if n == 0 else SECOND if n == 1 else GENERAL
+        ops.append(("attach", _AttachOp(a, b, mode, src, tgt, list(records[a]), macro)))
+        records[b].append((j, 1))
+        records[a].append((j, 0))
+        move_atts[a].append(j)
+        op_src.append(src)
+        n_att[0] += 1
+
+    new_slot("bbox", None, True, lines[0])
+    for si, s in enumerate(block.statements):
+        ln = lines[si]
+        if isinstance(s, Cuboid):
+            idx = (p, p + 1, p + 2)
+            p += 3
+            child_names.append(s.name if s.name.startswith("Program_") else None)
+            if s.name in slots:
+                k = slots[s.name]
+                if si == 0 and k == 0:
+                    init_dims[0] = idx
+                else:
+                    ops.append(("setdims", k, idx))
+            else:
+                new_slot(s.name, idx, s.aligned, ln)
+        elif isinstance(s, Attach):
+            a, b = slots[s.a], slots[s.b]
+            attach(a, b, _aff(scales=(1, 1, 1), idx=(p, p + 1, p + 2)),
+                   _aff(scales=(1, 1, 1), idx=(p + 3, p + 4, p + 5)))
+            p += 6
+        elif isinstance(s, Squeeze):
+            a, b, c = slots[s.a], slots[s.b], slots[s.c]
+            iu, iv = p, p + 1
+            p += 2
+            for face, tgt_slot in ((s.face, b), (_OPP[s.face], c)):
+                k, val = _FACE[face]
+                src_c = [0.5, 0.5, 0.5]
+                src_c[k] = 1.0 - val
+                tc = [0.0, 0.0, 0.0]
+                ts = [1.0, 1.0, 1.0]
+                ti = [-1, -1, -1]
+                tc[k] = float(1 - val) if tgt_slot == 0 else float(val)
+                ts[k] = 0.0
+                free = [d for d in range(3) if d != k]
+                ti[free[0]], ti[free[1]] = iu, iv
+                attach(a, tgt_slot, _aff(consts=src_c), _aff(tc, ts, ti))
+        elif isinstance(s, (Reflect, Translate)):
+            A = slots[s.a]
+            k = AXES.index(s.axis)
+            count = 1 if isinstance(s, Reflect) else s.n
+            didx = -1
+            if isinstance(s, Translate):
+                didx = p
+                p += 1
+            for i in range(1, count + 1):
+                name = f"cube{len(names) - 1}"
+                if name in slots:  # a collision re-dimensions the existing cuboid (as the reference)
+                    new = slots[name]
+                    slot_source[new] = A
+                    slot_axis[new] = k if isinstance(s, Reflect) else None
+                else:
+                    new = new_slot(name, None, aligned[A], ln, A, k if isinstance(s, Reflect) else None)
+                ops.append(("copy", new, A))
+                for j in list(move_atts[A]):
+                    op = _find_attach(ops, j)
+                    c0, c1, ix = op_src[j]
+                    if isinstance(s, Reflect):
+                        c0 = tuple(1.0 - c0[d] if d == k else c0[d] for d in range(3))
+                        c1 = tuple(-c1[d] if d == k else c1[d] for d in range(3))
+                        kind = "R"
+                    else:
+                        kind = "T"
+                    attach(new, op.b, (c0, c1, ix), None, (j, A, op.b, kind, k, i, count, didx))
+        else:  # pragma: no cover - the parser only builds the five kinds
+            raise TypeError(type(s).__name__)
+    return _BlockCode(block.name, names, init_dims, ops, slot_line, slot_source, slot_axis, child_names,
+                      (offset, offset + 1, offset + 2))
+
+
+def _find_attach(ops, j):
+    n = -1
+    for kind, *rest in ops:
+        if kind == "attach":
+            n += 1
+            if n == j:
+                return rest[0]
+    raise IndexError(j)
+
+
+@dataclass
+class _Compiled:
+    """Static structure of one program."""
+
+    program: Program
+    blocks: list[_BlockCode]
+    n_params: int
+    instances: list = field(default_factory=list)  # BFS: (block idx, parent inst, parent slot, flip axis)
+
+
+def _compile(program: Program) -> _Compiled:
+    nums_per_block = []
+    for b in program.blocks:
+        n = 0
+        for s in b.statements:
+            n += 3 if isinstance(s, Cuboid) else 6 if isinstance(s, Attach) else 2 if isinstance(s, Squeeze) \
+                else 1 if isinstance(s, Translate) else 0
+        nums_per_block.append(n)
+    lines = statement_lines(program)
+    blocks, off = [], 0
+    for bi, b in enumerate(program.blocks):
+        blocks.append(_compile_block(b, off, lines[bi]))
+        off += nums_per_block[bi]
+    comp = _Compiled(program, blocks, off)
+    index = {b.name: i for i, b in enumerate(program.blocks)}
+    # breadth-first instances; an instance = one placement of a block
+    queue = [(0, -1, -1, None)]
+    qi = 0
+    while qi < len(queue):
+        bidx, _, _, _ = queue[qi]
+        code = blocks[bidx]
+        for s in range(1, len(code.slots)):
+            child, flip = _child_of(code, s, index)
+            if child is not None:
+                queue.append((child, qi, s, flip))
+        qi += 1
+    comp.instances = queue
+    return comp
+
+
+def _child_of(code: _BlockCode, s: int, index: dict) -> tuple[int | None, int | None]:
+    """Sub-program block of slot ``s`` (and flip axis for reflected copies)."""
+    if s < len(code.child_names):
+        name = code.child_names[s]
+        return (index[name] if name is not None else None), None
+    src = code.slot_source[s]
+    if src is None:
+        return None, None
+    child, _ = _child_of(code, src, index)
+    if child is None:
+        return None, None
+    return child, code.slot_reflect_axis[s]
+
+
+# ----------------------------------------------------------------------------- params
+
+
+def program_parameters(program: Program, dtype: torch.dtype = torch.float32, device=None) -> torch.Tensor:
+    """The continuous numbers of ``program`` as a flat (P,) tensor, in text order.
+
+    Order: per block, per statement: Cuboid (l, h, w), attach (x1, y1, z1, x2, y2, z2),
+    squeeze (u, v), translate (d). Write values back with
+    :func:`shapeprog.lang.replace_numbers`.
+    """
+    return torch.tensor(numbers(program), dtype=dtype, device=device)
+
+
+def parameter_names(program: Program) -> list[str]:
+    """A readable name per entry of :func:`program_parameters`, e.g. ``'Program_1:3:attach.y2'``
+    (block name, 0-based statement index in the block, statement and field)."""
+    out = []
+    fields = {Cuboid: ("l", "h", "w"), Attach: ("x1", "y1", "z1", "x2", "y2", "z2"), Squeeze: ("u", "v"),
+              Translate: ("d",), Reflect: ()}
+    for b in program.blocks:
+        for i, s in enumerate(b.statements):
+            for f in fields[type(s)]:
+                out.append(f"{b.name}:{i}:{type(s).__name__.lower()}.{f}")
+    return out
+
+
+# ----------------------------------------------------------------------------- tensor helpers
+
+
+def _point(pos, dims, ax, coords):
+    """Global point of local ``coords`` (n, 3) on cuboids (n, 3), (n, 3), (n, 3, 3)."""
+    return pos + torch.bmm(((coords - 0.5) * dims).unsqueeze(1), ax).squeeze(1)
+
+
+def _to_local(pos, dims, ax, pts):
+    """Local coordinates of global points ``pts`` (n, m, 3) in cuboids (n, ...)."""
+    rel = pts - pos.unsqueeze(1)
+    return torch.bmm(rel, ax.transpose(1, 2)) / dims.unsqueeze(1) + 0.5
+
+
+def _norm(v):
+    return torch.linalg.vector_norm(v, dim=-1)
+
+
+def _rodrigues(axis, angle):
+    """(n, 3, 3) rotation matrices about unit ``axis`` (n, 3) by ``angle`` (n,)."""
+    n = axis.shape[0]
+    z = torch.zeros(n, dtype=axis.dtype, device=axis.device)
+    x, y, w = axis.unbind(-1)
+    K = torch.stack([z, -w, y, w, z, -x, -y, x, z], -1).reshape(n, 3, 3)
+    eye = torch.eye(3, dtype=axis.dtype, device=axis.device).expand(n, 3, 3)
+    s = torch.sin(angle)[:, None, None]
+    c = torch.cos(angle)[:, None, None]
+    return eye + s * K + (1 - c) * torch.bmm(K, K)
+
+
+def _safe_unit(v, ok):
+    """v / |v| where ``ok``; a fixed unit vector elsewhere (keeps gradients finite)."""
+    e = torch.zeros_like(v)
+    e[:, 0] = 1.0
+    vs = torch.where(ok[:, None], v, e)
+    return vs / _norm(vs)[:, None]
+
+
+def _min_rotation(nb, nc, act):
+    """Rotation matrices (n, 3, 3) taking direction nb to nc where ``act``; identity elsewhere.
+
+    The anti-parallel/parallel degenerate case (cross product exactly zero) follows the
+    reference: a rotation by pi about nb rotated +90 deg about the first world axis on which
+    nb has a non-zero component.
+    """
+    n = nb.shape[0]
+    eye = torch.eye(3, dtype=nb.dtype, device=nb.device).expand(n, 3, 3)
+    nbh = _safe_unit(nb, act)
+    nch = _safe_unit(nc, act)
+    cr = torch.linalg.cross(nbh, nch)
+    crn = _norm(cr)
+    dot = (nbh * nch).sum(-1)
+    with torch.no_grad():
+        degenerate = act & (crn == 0)
+        # acos of a dot product above 1 is NaN in the reference, which gives the identity
+        turn = act & ~degenerate & (dot.abs() <= 1) & (torch.acos(dot.clamp(-1, 1)) != 0)
+    axis = _safe_unit(cr, turn)
+    angle = torch.acos(torch.where(turn, dot, torch.zeros_like(dot)))
+    R = torch.where(turn[:, None, None], _rodrigues(axis, angle), eye)
+    if bool(degenerate.any()):
+        for i in degenerate.nonzero().flatten().tolist():
+            v = nbh[i]
+            k = int((v != 0).nonzero()[0])
+            rot90 = _rodrigues(torch.eye(3, dtype=nb.dtype, device=nb.device)[k:k + 1],
+                               torch.full((1,), math.pi / 2, dtype=nb.dtype, device=nb.device))[0]
+            ax = rot90 @ v
+            ax = ax / _norm(ax)
+            Ri = _rodrigues(ax[None], torch.full((1,), math.pi, dtype=nb.dtype, device=nb.device))[0]
+            R = torch.cat([R[:i], Ri[None], R[i + 1:]])
+    return R
+
+
+def _rotate(ax, R):
+    """Apply rotations R (n, 3, 3) to axis rows ax (n, 3, 3)."""
+    return torch.bmm(ax, R.transpose(1, 2))
+
+
+# ----------------------------------------------------------------------------- attach rules
+
+
+def _rule_first(pos, dims, ax, src, g):
+    return pos + (g - _point(pos, dims, ax, src)), dims, ax
+
+
+def _rule_second(pos, dims, ax, src, g, p_ap, a):
+    """Non-aligned cuboid with exactly one earlier record (p_ap, a)."""
+    b = _point(pos, dims, ax, src)
+    c = g
+    with torch.no_grad():
+        act = _norm(b - c) >= SMALL_EPS
+    dist2 = ((c - a) ** 2).sum(-1)
+    nv = (src - 0.5)[:, :, None] * ax  # (n, 3 dims, 3)
+    qv = (p_ap - 0.5)[:, :, None] * ax
+    m = nv - qv
+    w = (b - a)[:, None, :]
+    A = (m * m).sum(-1)  # (n, 3)
+    B = 2 * (w * m).sum(-1)
+    C = (w * w).sum(-1) - dist2[:, None]
+    disc = B * B - 4 * A * C
+    with torch.no_grad():
+        usable = (nv.abs().sum(-1) + qv.abs().sum(-1)) >= SMALL_EPS
+        valid = usable & (disc > 0)
+    s = (-B + torch.sqrt(torch.where(valid, disc, torch.ones_like(disc)))) / (2 * A + 1e-8)
+    order = list(_DIM_ORDER)
+    with torch.no_grad():
+        score = torch.where(valid, s.abs(), torch.full_like(s, math.inf))[:, order]
+        best = torch.tensor(order, device=pos.device)[score.argmin(-1)]
+        found = valid.any(-1)
+    onehot = torch.nn.functional.one_hot(best, 3).to(dims.dtype)
+    s_best = s.gather(1, best[:, None])
+    # fallback: all three change vectors at once
+    mf = nv.sum(1) - qv.sum(1)
+    wf = b - a
+    Af = (mf * mf).sum(-1)
+    Bf = 2 * (wf * mf).sum(-1)
+    Cf = (wf * wf).sum(-1) - dist2
+    discf = Bf * Bf - 4 * Af * Cf
+    with torch.no_grad():
+        fvalid = ~found & (discf > 0)
+    sf = (-Bf + torch.sqrt(torch.where(fvalid, discf, torch.ones_like(discf)))) / (2 * Af + 1e-8)
+    zero = torch.zeros_like(dims)
+    delta = torch.where(found[:, None], onehot * s_best, torch.where(fvalid[:, None], sf[:, None].expand(-1, 3), zero))
+    dims1 = dims + torch.where(act[:, None], delta, zero)
+    pos1 = pos + (a - _point(pos, dims1, ax, p_ap))
+    nb = _point(pos1, dims1, ax, src) - a
+    nc = c - a
+    with torch.no_grad():
+        rot = act & (_norm(nb) > 0) & (_norm(nc) > 0) & (_norm(nb - nc) >= SMALL_EPS)
+    R = _min_rotation(nb, nc, rot)
+    ax2 = _rotate(ax, R)
+    pos2 = pos1 + (a - _point(pos1, dims1, ax2, p_ap))
+    pos_out = torch.where(act[:, None], pos2, pos)
+    return pos_out, dims1, torch.where(act[:, None, None], ax2, ax)
+
+
+_GRID_CACHE: dict = {}
+
+
+def _grid(dtype, device):
+    key = (dtype, str(device))
+    g = _GRID_CACHE.get(key)
+    if g is None:
+        t = torch.arange(GRID, dtype=dtype, device=device) / (GRID - 1)
+        z, y, x = torch.meshgrid(t, t, t, indexing="ij")
+        g = torch.stack([x, y, z], -1).reshape(-1, 3)  # x fastest, then y, then z
+        _GRID_CACHE[key] = g
+    return g
+
+
+def _nearest_grid_points(p, d, a, pB, dB, aB, G):
+    """Closest pair between the 10x10x10 local grids of cuboids A and B (spec: aligned).
+
+    Returns the local grid coordinates (m, 3) of the A point ``b`` with the smallest distance
+    to B's grid (ties: lowest A index, x fastest) and of its nearest B point ``c``.
+    B's axes are orthonormal, so the nearest B grid point of any point is found per B axis
+    by rounding its local coordinate; no pairwise search is needed. When both frames are
+    the identity (the common case) the problem also separates over A's axes.
+    """
+    m = p.shape[0]
+    t = G[:GRID, 0]  # the 10 grid values i/9
+    eye = torch.eye(3, dtype=a.dtype, device=a.device)
+    ident = (a == eye).flatten(1).all(-1) & (aB == eye).flatten(1).all(-1)
+    r = torch.empty(m, 3, dtype=p.dtype, device=p.device)
+    cl = torch.empty_like(r)
+    fi = ident.nonzero().flatten()
+    if fi.numel():
+        # 1-D problems per axis: A coordinates (m, 3, 10) against B's 10 coordinates.
+        xa = p[fi, :, None] + (t - 0.5) * d[fi, :, None]
+        u = (xa - pB[fi, :, None]) / dB[fi, :, None] + 0.5
+        near = (u * (GRID - 1)).round().clamp(0, GRID - 1) / (GRID - 1)
+        e = ((u - near) * dB[fi, :, None]) ** 2  # (m, 3, 10)
+        i = e.argmin(-1)  # lowest index per axis among the minima
+        r[fi] = t[i]
+        cl[fi] = near.gather(2, i[:, :, None])[:, :, 0]
+    si = (~ident).nonzero().flatten()
+    if si.numel():
+        ptsA = p[si, None, :] + torch.bmm((G[None] - 0.5) * d[si, None, :], a[si])  # (m, 1000, 3)
+        u = _to_local(pB[si], dB[si], aB[si], ptsA)
+        near = (u * (GRID - 1)).round().clamp(0, GRID - 1) / (GRID - 1)
+        d2 = (((u - near) * dB[si, None, :]) ** 2).sum(-1)
+        k = d2.argmin(-1)
+        r[si] = G[k]
+        cl[si] = near[torch.arange(si.numel()), k]
+    return r, cl
+
+
+def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
+    """Aligned cuboid with earlier records: grow towards B (the target point is ignored)."""
+    n = pos.shape[0]
+    with torch.no_grad():
+        cA = cuboid_corners(pos, dims, ax)
+        cB = cuboid_corners(posB, dimsB, axB)
+        uA = _to_local(posB, dimsB, axB, cA)
+        uB = _to_local(pos, dims, ax, cB)
+        touch = ((uA >= 0) & (uA <= 1)).all(-1).any(-1) | ((uB >= 0) & (uB <= 1)).all(-1).any(-1)
+        idx = (~touch).nonzero().flatten()
+    if idx.numel() == 0:
+        return pos, dims, ax
+    p, d, a = pos[idx], dims[idx], ax[idx]
+    pB, dB, aB = posB[idx], dimsB[idx], axB[idx]
+    m = idx.numel()
+    G = _grid(pos.dtype, pos.device)
+    with torch.no_grad():
+        r, cl = _nearest_grid_points(p, d, a, pB, dB, aB, G)
+    b = _point(p, d, a, r)
+    c = _point(pB, dB, aB, cl)
+    with torch.no_grad():
+        big = torch.cat([d, dB], -1).max(-1).values
+        grow = _norm(b - c) >= 0.05 * big
+    o = _point(p, d, a, 1 - r)
+    cv = (r - 0.5) * torch.diagonal(a, dim1=1, dim2=2)
+    with torch.no_grad():
+        nz = cv != 0
+    D = (c - b) / (2 * torch.where(nz, cv, torch.ones_like(cv)))
+    with torch.no_grad():
+        use = nz & (D > 0) & grow[:, None]
+    d1 = d + torch.where(use, D, torch.zeros_like(D))
+    p1 = p + (o - _point(p, d1, a, 1 - r))
+    p1 = torch.where(grow[:, None], p1, p)
+    pos = pos.index_copy(0, idx, p1)
+    dims = dims.index_copy(0, idx, d1)
+    return pos, dims, ax
+
+
+def _cv(ap, ax, k):
+    return (ap[k] - 0.5) * ax[k]
+
+
+def _rule_general(pos, dims, ax, src, g, prev):
+    """Non-aligned cuboid with two or more earlier records ``prev``: list of (ap (3,), g (3,)).
+
+    One cuboid at a time (no corpus program reaches this rule)."""
+    pos, dims, ax, src, g = pos[0], dims[0], ax[0], src[0], g[0]
+    P = lambda pp, dd, aa, cc: pp + ((cc - 0.5) * dd) @ aa  # noqa: E731
+    if len(prev) == 2:
+        colinear = True
+    else:
+        o = prev[0][1]
+        l = prev[1][1] - o
+        colinear = all(float(_norm(torch.linalg.cross(pg - o, l))) <= EPS for _, pg in prev)
+    if colinear:
+        a0, a1 = prev[0][1], prev[1][1]
+        axis = (a0 - a1) / (_norm(a0 - a1) + 1e-8)
+        b = P(pos, dims, ax, src)
+        c = g
+        c_p = c - ((c - b) @ axis) * axis
+        a_p = a0 - ((a0 - b) @ axis) * axis
+        fn = b - a_p
+        noc = c_p - a_p
+        s = _norm(noc) / _norm(fn) - 1
+        if not bool(torch.isnan(s)):
+            nob = fn * (1 + s)
+            if float(_norm(nob)) != 0 and float(_norm(noc)) != 0 and float(_norm(nob - noc)) >= EPS:
+                nobh, noch = nob / _norm(nob), noc / _norm(noc)
+                angle = torch.acos((nobh @ noch).clamp(-1, 1))
+                R = _rodrigues(axis[None], angle[None])[0]
+                if float(_norm(R @ nobh - noch)) > EPS:
+                    R = _rodrigues(-axis[None], angle[None])[0]
+                ax = ax @ R.T
+                pos = pos + (a0 - P(pos, dims, ax, prev[0][0]))
+    b = P(pos, dims, ax, src)
+    t = g - b
+    if float(_norm(t)) >= EPS:
+        pick = None
+        for k in _DIM_ORDER:
+            c0 = _cv(prev[0][0], ax, k)
+            if all(float(_norm(_cv(pa, ax, k) - c0)) < EPS for pa, _ in prev):
+                cvk = _cv(src, ax, k)
+                nrm = _norm(cvk)
+                if float(nrm) > 0 and float((cvk / nrm) @ (t / _norm(t))) > COS_DIST_THRESH:
+                    pick = k  # the reference keeps the *last* qualifying dim (trap 4)
+        if pick is not None:
+            cvk = _cv(src, ax, pick)
+            d = 1 / (_norm(cvk - _cv(prev[0][0], ax, pick)) + 1e-8)
+            s = (t @ (cvk / _norm(cvk))).abs()
+            dims = dims + torch.nn.functional.one_hot(torch.tensor(pick), 3).to(dims.dtype) * (s * d)
+            pos = pos + (prev[0][1] - P(pos, dims, ax, prev[0][0]))
+    return pos[None], dims[None], ax[None]
+
+
+# ----------------------------------------------------------------------------- run
+
+
+def _affine(forms, flat, dtype, device):
+    """Evaluate affine forms c0 + c1 * flat[idx] -> (n, 3)."""
+    c0 = torch.tensor([f[0] for f in forms], dtype=dtype, device=device)
+    c1 = torch.tensor([f[1] for f in forms], dtype=dtype, device=device)
+    ix = torch.tensor([f[2] for f in forms], dtype=torch.int64, device=device)
+    return c0 + c1 * flat[ix]
+
+
+def _run_blocks(codes: list[_BlockCode], offsets: list[int], flat: torch.Tensor):
+    """Execute local programs in lock step. ``flat``: (P+1,) params with a trailing 0.
+
+    Returns per block (pos (S,3), dims (S,3), axes (S,3,3)) tensors of all its slots.
+    """
+    dtype, device = flat.dtype, flat.device
+    nb = len(codes)
+    S = max(len(c.slots) for c in codes)
+    # initial state: dims from the declaring lines, origin, identity axes
+    init = []
+    for c, off in zip(codes, offsets):
+        rows = [(-1, -1, -1) if d is None else tuple(off + i for i in d) for d in c.init_dims]
+        rows += [(-1, -1, -1)] * (S - len(rows))
+        init.append(rows)
+    dims = flat[torch.tensor(init, dtype=torch.int64, device=device)]  # (nb, S, 3)
+    pos = torch.zeros(nb, S, 3, dtype=dtype, device=device)
+    ax = torch.eye(3, dtype=dtype, device=device).repeat(nb, S, 1, 1)
+    n_att = [sum(1 for o in c.ops if o[0] == "attach") for c in codes]
+    rec = torch.zeros(nb, max(n_att + [1]), 3, 3, dtype=dtype, device=device)  # [src, tgt, g]
+    # shift block-local affine indices by their program offset
+    att_counter = [0] * nb
+    T = max(len(c.ops) for c in codes)
+    for t in range(T):
+        groups: dict = {}
+        setd, copy = [], []
+        for bi, c in enumerate(codes):
+            if t >= len(c.ops):
+                continue
+            op = c.ops[t]
+            if op[0] == "attach":
+                o = op[1]
+                groups.setdefault(o.mode, []).append((bi, att_counter[bi], o))
+                att_counter[bi] += 1
+            elif op[0] == "setdims":
+                setd.append((bi, op[1], tuple(offsets[bi] + i for i in op[2])))
+            else:
+                copy.append((bi, op[1], op[2]))
+        if setd:
+            bi = torch.tensor([x[0] for x in setd], device=device)
+            sl = torch.tensor([x[1] for x in setd], device=device)
+            ix = torch.tensor([x[2] for x in setd], device=device)
+            dims.index_put_((bi, sl), flat[ix])
+        if copy:
+            bi = torch.tensor([x[0] for x in copy], device=device)
+            new = torch.tensor([x[1] for x in copy], device=device)
+            src = torch.tensor([x[2] for x in copy], device=device)
+            dims.index_put_((bi, new), dims[bi, src])
+            pos.index_put_((bi, new), torch.zeros(len(copy), 3, dtype=dtype, device=device))
+            ax.index_put_((bi, new), torch.eye(3, dtype=dtype, device=device).expand(len(copy), 3, 3))
+        for mode, items in groups.items():
+            pos, dims, ax, rec = _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec)
+    return pos, dims, ax
+
+
+def _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec):
+    dtype, device = flat.dtype, flat.device
+    n = len(items)
+    bi = torch.tensor([x[0] for x in items], device=device)
+    jj = torch.tensor([x[1] for x in items], device=device)
+    a = torch.tensor([x[2].a for x in items], device=device)
+    b = torch.tensor([x[2].b for x in items], device=device)
+
+    def shift(form, off):
+        return (form[0], form[1], tuple(i + off if i >= 0 else -1 for i in form[2]))
+
+    src_forms, tgt_forms, macro_rows = [], [], []
+    for r, (blk, _, o) in enumerate(items):
+        off = offsets[blk]
+        if o.macro is None:
+            src_forms.append(shift(o.src, off))
+            tgt_forms.append(shift(o.tgt, off))
+        else:
+            # src: complement (or not) of the original record's src, computed from rec below
+            src_forms.append(((0.0,) * 3, (0.0,) * 3, (-1, -1, -1)))
+            tgt_forms.append(((0.0,) * 3, (0.0,) * 3, (-1, -1, -1)))
+            macro_rows.append(r)
+    src = _affine(src_forms, flat, dtype, device)
+    tgt = _affine(tgt_forms, flat, dtype, device)
+    if macro_rows:
+        src, tgt = _macro_points(items, macro_rows, offsets, flat, pos, dims, ax, rec, src, tgt, bi)
+    posB, dimsB, axB = pos[bi, b], dims[bi, b], ax[bi, b]
+    g = _point(posB, dimsB, axB, tgt)
+    posA, dimsA, axA = pos[bi, a], dims[bi, a], ax[bi, a]
+    if mode == FIRST:
+        posA, dimsA, axA = _rule_first(posA, dimsA, axA, src, g)
+    elif mode == SECOND:
+        pj = torch.tensor([x[2].prior[0][0] for x in items], device=device)
+        pr = torch.tensor([x[2].prior[0][1] for x in items], device=device)
+        p_ap = rec[bi, pj, pr]
+        p_g = rec[bi, pj, 2]
+        posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, p_ap, p_g)
+    elif mode == ALIGNED:
+        posA, dimsA, axA = _rule_aligned(posA, dimsA, axA, posB, dimsB, axB)
+    else:
+        outs = []
+        for r, (blk, _, o) in enumerate(items):
+            prev = [(rec[blk, j, role], rec[blk, j, 2]) for j, role in o.prior]
+            outs.append(_rule_general(posA[r:r + 1], dimsA[r:r + 1], axA[r:r + 1], src[r:r + 1], g[r:r + 1], prev))
+        posA = torch.cat([o[0] for o in outs])
+        dimsA = torch.cat([o[1] for o in outs])
+        axA = torch.cat([o[2] for o in outs])
+    pos.index_put_((bi, a), posA)
+    dims.index_put_((bi, a), dimsA)
+    ax.index_put_((bi, a), axA)
+    rec.index_put_((bi, jj), torch.stack([src, tgt, g], 1))
+    return pos, dims, ax, rec
+
+
+def _macro_points(items, rows, offsets, flat, pos, dims, ax, rec, src, tgt, bi_all):
+    """Source/target local points of reflect/translate copies (spec: reflect, translate)."""
+    dtype, device = flat.dtype, flat.device
+    r_idx = torch.tensor(rows, device=device)
+    bi = bi_all[r_idx]
+    ms = [items[r][2].macro for r in rows]
+    j = torch.tensor([m[0] for m in ms], device=device)
+    A = torch.tensor([m[1] for m in ms], device=device)
+    T = torch.tensor([m[2] for m in ms], device=device)
+    k = torch.tensor([m[4] for m in ms], device=device)
+    is_ref = torch.tensor([m[3] == "R" for m in ms], device=device)
+    ap = rec[bi, j, 0]  # the original record's source point on A
+    e = torch.nn.functional.one_hot(k, 3).to(dtype)
+    src_m = torch.where(is_ref[:, None] & (e > 0), 1 - ap, ap)
+    p = _point(pos[bi, A], dims[bi, A], ax[bi, A], ap)
+    # reflect through the plane through the bbox centre (origin) normal to world axis k
+    p_ref = p - 2 * e * p
+    # translate: p + i * (L * d / N) * e, L = local bbox extent along k
+    ii = torch.tensor([float(m[5]) for m in ms], dtype=dtype, device=device)
+    NN = torch.tensor([float(m[6]) for m in ms], dtype=dtype, device=device)
+    didx = torch.tensor([offsets[items[r][0]] + m[7] if m[7] >= 0 else -1 for r, m in zip(rows, ms)],
+                        device=device)
+    L = (dims[bi, 0] * e).sum(-1)
+    step = L * flat[didx] / NN
+    p_tr = p + (ii * step)[:, None] * e
+    pg = torch.where(is_ref[:, None], p_ref, p_tr)
+    loc = _to_local(pos[bi, T], dims[bi, T], ax[bi, T], pg[:, None, :])[:, 0]
+    tgt_m = loc.clamp(0.0, 1.0)
+    src = src.index_copy(0, r_idx, src_m)
+    tgt = tgt.index_copy(0, r_idx, tgt_m)
+    return src, tgt
+
+
+# ----------------------------------------------------------------------------- placement
+
+
+def _place(comps: list[_Compiled], block_base: list[int], flats: list[torch.Tensor], pos, dims, ax):
+    """Breadth-first placement of every program's instances; returns ExecutedShapes."""
+    out = []
+    dtype, device = pos.dtype, pos.device
+    for comp, base, flat in zip(comps, block_base, flats):
+        root_dims = flat[torch.tensor(comp.blocks[0].root_idx, device=device)]
+        lines_pos, lines_dims, lines_ax, node, line = [], [], [], [], []
+        placed = []  # per instance: (pos (S,3), dims (S,3), ax (S,3,3)) in world
+        for inst, (bidx, parent, pslot, flip) in enumerate(comp.instances):
+            code = comp.blocks[bidx]
+            S = len(code.slots)
+            lp, ld, la = pos[base + bidx, :S], dims[base + bidx, :S], ax[base + bidx, :S]
+            if parent < 0:
+                apos = torch.zeros(3, dtype=dtype, device=device)
+                adims = root_dims
+                aax = torch.eye(3, dtype=dtype, device=device)
+            else:
+                pp, pd, pa = placed[parent]
+                apos, adims, aax = pp[pslot], pd[pslot], pa[pslot]
+            rdims = ld[0]
+            if flip is not None:
+                sign = torch.ones(3, dtype=dtype, device=device)
+                sign[flip] = -1.0
+                lp = lp * sign
+                la = -(la * sign)
+            # apply_delta: scale dims per local axis index, rotate positions (not scaled)
+            wd = ld * (adims / rdims)
+            wp = lp @ aax + apos
+            wa = la @ aax
+            placed.append((wp, wd, wa))
+        # leaves: BFS instance order, slots in dict order, bbox and sub-program parts excluded
+        index = {b.name: i for i, b in enumerate(comp.program.blocks)}
+        for inst, (bidx, _, _, _) in enumerate(comp.instances):
+            code = comp.blocks[bidx]
+            keep = [s for s in range(1, len(code.slots)) if _child_of(code, s, index)[0] is None]
+            if not keep:
+                continue
+            kk = torch.tensor(keep, device=device)
+            wp, wd, wa = placed[inst]
+            lines_pos.append(wp[kk])
+            lines_dims.append(wd[kk])
+            lines_ax.append(wa[kk])
+            node.extend([int(code.name.split("_")[1]) if code.name.startswith("Program_") else bidx] * len(keep))
+            line.extend(code.slot_line[s] for s in keep)
+        centers = torch.cat(lines_pos) if lines_pos else torch.zeros(0, 3, dtype=dtype, device=device)
+        dd = torch.cat(lines_dims) if lines_dims else torch.zeros(0, 3, dtype=dtype, device=device)
+        aa = torch.cat(lines_ax) if lines_ax else torch.zeros(0, 3, 3, dtype=dtype, device=device)
+        out.append(ExecutedShape(
+            centers=centers, dims=dd, axes=aa, corners=cuboid_corners(centers, dd, aa),
+            node=torch.tensor(node, dtype=torch.int64, device=device),
+            line=torch.tensor(line, dtype=torch.int64, device=device), root_dims=root_dims,
+        ))
+    return out
+
+
+# ----------------------------------------------------------------------------- public API
+
+
+def execute_batch(programs: list[Program], dtype: torch.dtype = torch.float32, device=None,
+                  params: list[torch.Tensor] | None = None) -> list[ExecutedShape]:
+    """Execute several programs together (their blocks run in lock step).
+
+    Args:
+        programs: parsed programs.
+        dtype: float32 (the reference precision) or float64.
+        device: torch device (default CPU).
+        params: optional list of (P_i,) tensors, one per program (see
+            :func:`program_parameters`); gradients flow to them.
+
+    Returns:
+        One :class:`ExecutedShape` per program; equal to calling :func:`execute` on each.
+    """
+    if not programs:
+        return []
+    comps = [_compile(p) for p in programs]
+    flats = []
+    for i, (p, c) in enumerate(zip(programs, comps)):
+        if params is None or params[i] is None:
+            t = program_parameters(p, dtype, device)
+        else:
+            t = params[i]
+            if t.dim() != 1 or t.shape[0] != c.n_params:
+                raise ValueError(f"`params` for program {i} must have shape ({c.n_params},), got {tuple(t.shape)}")
+            t = t.to(dtype=dtype, device=device)
+        flats.append(t)
+    device = flats[0].device
+    codes, offsets, block_base = [], [], []
+    poff = 0
+    for c, t in zip(comps, flats):
+        block_base.append(len(codes))
+        codes.extend(c.blocks)
+        offsets.extend([poff] * len(c.blocks))
+        poff += t.shape[0]
+    zero = torch.zeros(1, dtype=dtype, device=device)
+    flat = torch.cat(flats + [zero])  # index -1 -> the trailing 0
+    pos, dims, ax = _run_blocks(codes, offsets, flat)
+    pstart, views = 0, []
+    for t in flats:
+        views.append(flat[pstart:pstart + t.shape[0]])
+        pstart += t.shape[0]
+    return _place(comps, block_base, views, pos, dims, ax)
+
+
+def execute(program: Program, dtype: torch.dtype = torch.float32, device=None,
+            params: torch.Tensor | None = None) -> ExecutedShape:
+    """Execute a ShapeAssembly program (the reference's hierarchical execution).
+
+    Args:
+        program: a parsed :class:`~shapeprog.lang.Program`.
+        dtype: float32 (the reference precision, default) or float64.
+        device: torch device (default CPU).
+        params: optional (P,) tensor replacing the program's continuous numbers (text order,
+            see :func:`program_parameters`); the result is differentiable in it.
+
+    Returns:
+        The :class:`ExecutedShape` of the leaf cuboids.
+    """
+    return execute_batch([program], dtype, device, None if params is None else [params])[0]
