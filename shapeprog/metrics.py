@@ -425,14 +425,16 @@ def stability(
     steps: int = 10000,
     contact_tolerance: float = 0.02,
     surface: bool = True,
+    inertia: str = "identity",
 ) -> bool:
     """Whether a shape stays put under gravity after a kick (reference ``check_stability``, pybullet).
 
     The shape must be rooted first (:func:`rootedness`); an unrooted shape is unstable. The world is
     converted to z-up by swapping y and z. Parts are grouped into connected components of the
     contact graph (same 2 % rule, ground excluded). Each group becomes one pybullet multibody: one
-    box link per part with mass = volume (density 1) and pybullet's inertia for that box, joined by
-    fixed joints along a DFS tree. It is placed with its lowest point on the ground plane ``z = 0``.
+    box link per part with mass = volume (density 1) and, as in the reference's URDF, an identity
+    inertia tensor about the part's centre (``inertia="box"`` uses the solid box's inertia
+    instead), joined by fixed joints along a DFS tree. It is placed with its lowest point on the ground plane ``z = 0``.
     Groups do not collide with each other, so each is simulated in its own world. With
     ``v = volume * base`` (``base`` = the smaller horizontal extent of the group's bounding box), the
     group gets an upward force ``(0, 0, 1000 v)`` at its base position and torques ``(0, 4 v, 0)``,
@@ -448,6 +450,8 @@ def stability(
         steps: simulation steps (10,000 in the reference).
         contact_tolerance: contact distance for rootedness and grouping (fraction of the diagonal).
         surface: see :func:`rootedness`.
+        inertia: ``"identity"`` (reference URDF, default) or ``"box"`` (physical solid boxes; much
+            more sensitive to the kick: most corpus chairs then count as unstable).
 
     Returns:
         True when stable.
@@ -455,6 +459,8 @@ def stability(
     Raises:
         ImportError: if pybullet is not installed.
     """
+    if inertia not in ("identity", "box"):
+        raise ValueError(f"`inertia` must be 'identity' or 'box', got {inertia!r}")
     corners = _as_numpy_corners(corners)
     adj = contact_graph(corners, contact_tolerance, surface)
     if not _reachable(adj, adj.shape[0] - 1)[:-1].all():
@@ -518,6 +524,9 @@ def stability(
                 physicsClientId=client,
                 **kw,
             )
+            if inertia == "identity":
+                for link in range(-1, len(group) - 1):
+                    pb.changeDynamics(body, link, localInertiaDiagonal=[1.0, 1.0, 1.0], physicsClientId=client)
             start = np.array(pb.getBasePositionAndOrientation(body, physicsClientId=client)[0])
             base = float(min(hi[0] - lo[0], hi[1] - lo[1]))
             v = float(mass.sum()) * base

@@ -218,14 +218,26 @@ def test_stability(tmp_path, monkeypatch):
     pytest.importorskip("pybullet")
     assert stability(boxes([0, 0.5, 0], [1, 1, 1]))
     assert stability(table())
-    # a heavy block balanced on a tiny base falls over
-    assert not stability(boxes([[0, 0.025, 0], [0, 1.05, 0]], [[0.05, 0.05, 0.05], [0.5, 2.0, 0.5]]))
+    # a tall thin box standing on a tiny base near its edge: its centre of mass is not supported
+    tiny_base = boxes([[0.12, 0.025, 0], [0, 1.05, 0]], [[0.05, 0.05, 0.05], [0.3, 2.0, 0.3]])
+    assert rootedness(tiny_base)
+    assert not stability(tiny_base)
     # a floating overhang: a long heavy beam attached at one end to a thin post
-    assert not stability(boxes([[0, 0.5, 0], [0.8, 1.05, 0]], [[0.1, 1.0, 0.1], [1.6, 0.1, 0.5]]))
+    overhang = boxes([[0, 0.5, 0], [0.8, 1.05, 0]], [[0.1, 1.0, 0.1], [1.6, 0.1, 0.5]])
+    assert not stability(overhang)
+    # the same beam centred on a wide post stands
+    assert stability(boxes([[0, 0.5, 0], [0.0, 1.05, 0]], [[0.4, 1.0, 0.4], [1.6, 0.1, 0.5]]))
     # not rooted -> not stable
     assert not stability(torch.cat([table(), boxes([0, 1.6, 0], [0.2, 0.2, 0.2])]))
-    # the paper's looser 10% rule still flags the tipping block
-    assert not stability(boxes([[0, 0.025, 0], [0, 1.05, 0]], [[0.05, 0.05, 0.05], [0.5, 2.0, 0.5]]), tolerance=0.1)
+    # the paper's looser 10% rule still flags the toppled tower; a 30% rule does not (the base
+    # link, the tiny cube, only rises a little as the tower falls)
+    assert not stability(tiny_base, tolerance=0.1)
+    assert stability(tiny_base, tolerance=0.3)
+    # physical box inertia: a heavy block balanced on a centred tiny cube is knocked over by the kick
+    balanced = boxes([[0, 0.025, 0], [0, 1.05, 0]], [[0.05, 0.05, 0.05], [0.5, 2.0, 0.5]])
+    assert not stability(balanced, inertia="box")
+    with pytest.raises(ValueError, match="inertia"):
+        stability(balanced, inertia="unit")
     # headless and file-free
     assert os.listdir(tmp_path) == []
 
