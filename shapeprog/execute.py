@@ -481,11 +481,16 @@ def _nearest_grid_points(p, d, a, pB, dB, aB, G):
     the identity (the common case) the problem also separates over A's axes.
     """
     m = p.shape[0]
+    out_dtype = p.dtype
+    # Decided in float64 with near-ties (1e-9 in squared distance) going to the lowest A
+    # index, so the choice does not depend on the execution dtype.
+    p, d, a, pB, dB, aB, G = (x.double() for x in (p, d, a, pB, dB, aB, G))
     t = G[:GRID, 0]  # the 10 grid values i/9
     eye = torch.eye(3, dtype=a.dtype, device=a.device)
     ident = (a == eye).flatten(1).all(-1) & (aB == eye).flatten(1).all(-1)
     r = torch.empty(m, 3, dtype=p.dtype, device=p.device)
     cl = torch.empty_like(r)
+    first_min = lambda e: (e <= e.min(-1, keepdim=True).values + 1e-9).to(torch.int8).argmax(-1)  # noqa: E731
     fi = ident.nonzero().flatten()
     if fi.numel():
         # 1-D problems per axis: A coordinates (m, 3, 10) against B's 10 coordinates.
@@ -493,7 +498,7 @@ def _nearest_grid_points(p, d, a, pB, dB, aB, G):
         u = (xa - pB[fi, :, None]) / dB[fi, :, None] + 0.5
         near = (u * (GRID - 1)).round().clamp(0, GRID - 1) / (GRID - 1)
         e = ((u - near) * dB[fi, :, None]) ** 2  # (m, 3, 10)
-        i = e.argmin(-1)  # lowest index per axis among the minima
+        i = first_min(e)  # lowest index per axis among the minima
         r[fi] = t[i]
         cl[fi] = near.gather(2, i[:, :, None])[:, :, 0]
     si = (~ident).nonzero().flatten()
@@ -502,10 +507,10 @@ def _nearest_grid_points(p, d, a, pB, dB, aB, G):
         u = _to_local(pB[si], dB[si], aB[si], ptsA)
         near = (u * (GRID - 1)).round().clamp(0, GRID - 1) / (GRID - 1)
         d2 = (((u - near) * dB[si, None, :]) ** 2).sum(-1)
-        k = d2.argmin(-1)
+        k = first_min(d2)
         r[si] = G[k]
         cl[si] = near[torch.arange(si.numel()), k]
-    return r, cl
+    return r.to(out_dtype), cl.to(out_dtype)
 
 
 def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
