@@ -5,7 +5,7 @@ Example:
     >>> p = shapeprog.parse(shapeprog.corpus.read("chair", 173), "chair/173.txt")
     >>> shape = shapeprog.execute(p)
     >>> tuple(shape.corners.shape)
-    (10, 8, 3)
+    (6, 8, 3)
 """
 from __future__ import annotations
 
