@@ -101,6 +101,7 @@ class _AttachOp:
     tgt: tuple | None  # affine form, or None for a macro (computed at run time)
     prior: list  # list of (op index, role 0=subject 1=target) of a's earlier records
     macro: tuple | None = None  # (orig op j, src slot A, target slot T, kind 'R'|'T', k, i, N, d idx)
+    j: int = 0  # index among the block's attach ops (its record row)
 
 
 @dataclass
@@ -109,6 +110,7 @@ class _BlockCode:
     slots: list[str]
     init_dims: list  # per slot: 3 param indices (or None -> zeros until copied)
     ops: list  # ('attach', _AttachOp) | ('setdims', slot, idx3) | ('copy', new, src)
+    steps: list  # ops grouped by dependency level (ops of one level are independent)
     slot_line: list[int]
     slot_source: list[int | None]  # macro copies: the source slot
     slot_reflect_axis: list[int | None]
@@ -136,6 +138,18 @@ def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
     op_src: list = []  # per attach op index: its src affine form (for macros)
     n_att = [0]
     p = offset
+    levels: list[int] = []
+    last_w: dict[int, int] = {}
+    last_r: dict[int, int] = {}
+
+    def schedule(write: int, reads: tuple) -> None:
+        """Dependency level of the op just appended: after earlier writes and reads of the
+        slot it writes and after earlier writes of the slots it reads."""
+        lvl = 1 + max([last_w.get(write, -1), last_r.get(write, -1)] + [last_w.get(r, -1) for r in reads])
+        last_w[write] = lvl
+        for r in reads:
+            last_r[r] = max(last_r.get(r, -1), lvl)
+        levels.append(lvl)
 
     def new_slot(name, dims_idx, al, line, source=None, axis=None):
         slots[name] = len(names)
@@ -156,7 +170,8 @@ def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
             mode = FIRST if n == 0 else ALIGNED
         else:
             mode = FIRST if n == 0 else SECOND if n == 1 else GENERAL
-        ops.append(("attach", _AttachOp(a, b, mode, src, tgt, list(records[a]), macro)))
+        ops.append(("attach", _AttachOp(a, b, mode, src, tgt, list(records[a]), macro, j)))
+        schedule(a, (b,) if macro is None else (b, macro[1], 0))
         records[b].append((j, 1))
         records[a].append((j, 0))
         move_atts[a].append(j)
@@ -176,6 +191,7 @@ def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
                     init_dims[0] = idx
                 else:
                     ops.append(("setdims", k, idx))
+                    schedule(k, ())
             else:
                 new_slot(s.name, idx, s.aligned, ln)
         elif isinstance(s, Attach):
@@ -216,6 +232,7 @@ def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
                 else:
                     new = new_slot(name, None, aligned[A], ln, A, k if isinstance(s, Reflect) else None)
                 ops.append(("copy", new, A))
+                schedule(new, (A,))
                 for j in list(move_atts[A]):
                     op = _find_attach(ops, j)
                     c0, c1, ix = op_src[j]
@@ -228,7 +245,10 @@ def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
                     attach(new, op.b, (c0, c1, ix), None, (j, A, op.b, kind, k, i, count, didx))
         else:  # pragma: no cover - the parser only builds the five kinds
             raise TypeError(type(s).__name__)
-    return _BlockCode(block.name, names, init_dims, ops, slot_line, slot_source, slot_axis, child_names,
+    steps: list[list] = [[] for _ in range(max(levels, default=-1) + 1)]
+    for op, lvl in zip(ops, levels):
+        steps[lvl].append(op)
+    return _BlockCode(block.name, names, init_dims, ops, steps, slot_line, slot_source, slot_axis, child_names,
                       (offset, offset + 1, offset + 2))
 
 
@@ -612,10 +632,9 @@ def _rule_general(pos, dims, ax, src, g, prev):
 
 def _affine(forms, flat, dtype, device):
     """Evaluate affine forms c0 + c1 * flat[idx] -> (n, 3)."""
-    c0 = torch.tensor([f[0] for f in forms], dtype=dtype, device=device)
-    c1 = torch.tensor([f[1] for f in forms], dtype=dtype, device=device)
+    c = torch.tensor([f[0] + f[1] for f in forms], dtype=dtype, device=device)
     ix = torch.tensor([f[2] for f in forms], dtype=torch.int64, device=device)
-    return c0 + c1 * flat[ix]
+    return c[:, :3] + c[:, 3:] * flat[ix]
 
 
 def _run_blocks(codes: list[_BlockCode], offsets: list[int], flat: torch.Tensor):
@@ -638,32 +657,27 @@ def _run_blocks(codes: list[_BlockCode], offsets: list[int], flat: torch.Tensor)
     n_att = [sum(1 for o in c.ops if o[0] == "attach") for c in codes]
     rec = torch.zeros(nb, max(n_att + [1]), 3, 3, dtype=dtype, device=device)  # [src, tgt, g]
     # shift block-local affine indices by their program offset
-    att_counter = [0] * nb
-    T = max(len(c.ops) for c in codes)
+    T = max(len(c.steps) for c in codes)
     for t in range(T):
         groups: dict = {}
         setd, copy = [], []
         for bi, c in enumerate(codes):
-            if t >= len(c.ops):
+            if t >= len(c.steps):
                 continue
-            op = c.ops[t]
-            if op[0] == "attach":
-                o = op[1]
-                groups.setdefault(o.mode, []).append((bi, att_counter[bi], o))
-                att_counter[bi] += 1
-            elif op[0] == "setdims":
-                setd.append((bi, op[1], tuple(offsets[bi] + i for i in op[2])))
-            else:
-                copy.append((bi, op[1], op[2]))
+            for op in c.steps[t]:
+                if op[0] == "attach":
+                    o = op[1]
+                    groups.setdefault(o.mode, []).append((bi, o.j, o))
+                elif op[0] == "setdims":
+                    setd.append((bi, op[1], tuple(offsets[bi] + i for i in op[2])))
+                else:
+                    copy.append((bi, op[1], op[2]))
         if setd:
-            bi = torch.tensor([x[0] for x in setd], device=device)
-            sl = torch.tensor([x[1] for x in setd], device=device)
-            ix = torch.tensor([x[2] for x in setd], device=device)
+            t_ = torch.tensor([(x[0], x[1]) + x[2] for x in setd], device=device)
+            bi, sl, ix = t_[:, 0], t_[:, 1], t_[:, 2:]
             dims.index_put_((bi, sl), flat[ix])
         if copy:
-            bi = torch.tensor([x[0] for x in copy], device=device)
-            new = torch.tensor([x[1] for x in copy], device=device)
-            src = torch.tensor([x[2] for x in copy], device=device)
+            bi, new, src = torch.tensor(copy, device=device).unbind(1)
             dims.index_put_((bi, new), dims[bi, src])
             pos.index_put_((bi, new), torch.zeros(len(copy), 3, dtype=dtype, device=device))
             ax.index_put_((bi, new), torch.eye(3, dtype=dtype, device=device).expand(len(copy), 3, 3))
@@ -675,10 +689,8 @@ def _run_blocks(codes: list[_BlockCode], offsets: list[int], flat: torch.Tensor)
 def _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec):
     dtype, device = flat.dtype, flat.device
     n = len(items)
-    bi = torch.tensor([x[0] for x in items], device=device)
-    jj = torch.tensor([x[1] for x in items], device=device)
-    a = torch.tensor([x[2].a for x in items], device=device)
-    b = torch.tensor([x[2].b for x in items], device=device)
+    ints = torch.tensor([(x[0], x[1], x[2].a, x[2].b) for x in items], device=device)
+    bi, jj, a, b = ints.unbind(1)
 
     def shift(form, off):
         return (form[0], form[1], tuple(i + off if i >= 0 else -1 for i in form[2]))
@@ -694,8 +706,7 @@ def _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec):
             src_forms.append(((0.0,) * 3, (0.0,) * 3, (-1, -1, -1)))
             tgt_forms.append(((0.0,) * 3, (0.0,) * 3, (-1, -1, -1)))
             macro_rows.append(r)
-    src = _affine(src_forms, flat, dtype, device)
-    tgt = _affine(tgt_forms, flat, dtype, device)
+    src, tgt = _affine(src_forms + tgt_forms, flat, dtype, device).split(n)
     if macro_rows:
         src, tgt = _macro_points(items, macro_rows, offsets, flat, pos, dims, ax, rec, src, tgt, bi)
     posB, dimsB, axB = pos[bi, b], dims[bi, b], ax[bi, b]
@@ -704,8 +715,7 @@ def _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec):
     if mode == FIRST:
         posA, dimsA, axA = _rule_first(posA, dimsA, axA, src, g)
     elif mode == SECOND:
-        pj = torch.tensor([x[2].prior[0][0] for x in items], device=device)
-        pr = torch.tensor([x[2].prior[0][1] for x in items], device=device)
+        pj, pr = torch.tensor([x[2].prior[0] for x in items], device=device).unbind(1)
         p_ap = rec[bi, pj, pr]
         p_g = rec[bi, pj, 2]
         posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, p_ap, p_g)
@@ -729,14 +739,12 @@ def _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec):
 def _macro_points(items, rows, offsets, flat, pos, dims, ax, rec, src, tgt, bi_all):
     """Source/target local points of reflect/translate copies (spec: reflect, translate)."""
     dtype, device = flat.dtype, flat.device
-    r_idx = torch.tensor(rows, device=device)
-    bi = bi_all[r_idx]
     ms = [items[r][2].macro for r in rows]
-    j = torch.tensor([m[0] for m in ms], device=device)
-    A = torch.tensor([m[1] for m in ms], device=device)
-    T = torch.tensor([m[2] for m in ms], device=device)
-    k = torch.tensor([m[4] for m in ms], device=device)
-    is_ref = torch.tensor([m[3] == "R" for m in ms], device=device)
+    ints = torch.tensor([(r, m[0], m[1], m[2], m[4], m[3] == "R",
+                          offsets[items[r][0]] + m[7] if m[7] >= 0 else -1) for r, m in zip(rows, ms)], device=device)
+    r_idx, j, A, T, k, is_ref, didx = ints.unbind(1)
+    is_ref = is_ref.bool()
+    bi = bi_all[r_idx]
     ap = rec[bi, j, 0]  # the original record's source point on A
     e = torch.nn.functional.one_hot(k, 3).to(dtype)
     src_m = torch.where(is_ref[:, None] & (e > 0), 1 - ap, ap)
@@ -744,10 +752,7 @@ def _macro_points(items, rows, offsets, flat, pos, dims, ax, rec, src, tgt, bi_a
     # reflect through the plane through the bbox centre (origin) normal to world axis k
     p_ref = p - 2 * e * p
     # translate: p + i * (L * d / N) * e, L = local bbox extent along k
-    ii = torch.tensor([float(m[5]) for m in ms], dtype=dtype, device=device)
-    NN = torch.tensor([float(m[6]) for m in ms], dtype=dtype, device=device)
-    didx = torch.tensor([offsets[items[r][0]] + m[7] if m[7] >= 0 else -1 for r, m in zip(rows, ms)],
-                        device=device)
+    ii, NN = torch.tensor([(float(m[5]), float(m[6])) for m in ms], dtype=dtype, device=device).unbind(1)
     L = (dims[bi, 0] * e).sum(-1)
     step = L * flat[didx] / NN
     p_tr = p + (ii * step)[:, None] * e
