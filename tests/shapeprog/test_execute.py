@@ -86,6 +86,19 @@ def test_second_attach_counts_target_records():
     assert close(s.dims[1], [0.1, 0.75, 0.1]) and close(s.centers[1], [0.0, -0.125, 0.0])
 
 
+def test_general_rule_scales_the_best_matching_free_dimension():
+    # third attach of a non-aligned cuboid: two colinear records (bottom and top), so orient is
+    # skipped (the target is already in the rotation plane) and maybeScale widens the length:
+    # d = 1 / |cv_x(src) - cv_x(bottom)| = 2, s = |t . x| = 0.15, length += 0.3.
+    p = flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.1, 0.5, 0.1, False)",
+             "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
+             "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)",
+             "attach(cube0, bbox, 1.0, 0.5, 0.5, 0.7, 0.5, 0.5)")
+    s = execute(p, dtype=torch.float64)
+    assert close(s.dims[0], [0.4, 1.0, 0.1]) and close(s.centers[0], [0.0, 0.0, 0.0])
+    assert close(local_point(s, 0, [1.0, 0.5, 0.5]), [0.2, 0.0, 0.0])
+
+
 # ----------------------------------------------------------------------------- aligned
 
 
