@@ -477,18 +477,11 @@ def _rule_second(pos, dims, ax, src, g, p_ap, a):
     return pos_out, dims1, torch.where(act[:, None, None], ax2, ax)
 
 
-_GRID_CACHE: dict = {}
-
-
 def _grid(dtype, device):
-    key = (dtype, str(device))
-    g = _GRID_CACHE.get(key)
-    if g is None:
-        t = torch.arange(GRID, dtype=dtype, device=device) / (GRID - 1)
-        z, y, x = torch.meshgrid(t, t, t, indexing="ij")
-        g = torch.stack([x, y, z], -1).reshape(-1, 3)  # x fastest, then y, then z
-        _GRID_CACHE[key] = g
-    return g
+    """(1000, 3) local grid coordinates i/9, x fastest, then y, then z."""
+    t = torch.arange(GRID, dtype=dtype, device=device) / (GRID - 1)
+    z, y, x = torch.meshgrid(t, t, t, indexing="ij")
+    return torch.stack([x, y, z], -1).reshape(-1, 3)
 
 
 def _nearest_grid_points(p, d, a, pB, dB, aB, G):
@@ -622,7 +615,7 @@ def _rule_general(pos, dims, ax, src, g, prev):
             cvk = _cv(src, ax, pick)
             d = 1 / (_norm(cvk - _cv(prev[0][0], ax, pick)) + 1e-8)
             s = (t @ (cvk / _norm(cvk))).abs()
-            dims = dims + torch.nn.functional.one_hot(torch.tensor(pick), 3).to(dims.dtype) * (s * d)
+            dims = dims + torch.nn.functional.one_hot(torch.tensor(pick, device=dims.device), 3).to(dims.dtype) * (s * d)
             pos = pos + (prev[0][1] - P(pos, dims, ax, prev[0][0]))
     return pos[None], dims[None], ax[None]
 
