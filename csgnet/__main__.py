@@ -34,10 +34,9 @@ def _write_render(program, dim: int, out: Path) -> Path:
             raise SystemExit("error: OBJ output is for 3D programs; use .png, .npy or .scad for 2D")
         return export.save_obj(img, out)
     if suffix == ".npy":
-        tmp = out.with_name(out.name + ".tmp.npy")
-        np.save(tmp, img)
-        tmp.replace(out)
-        return out
+        from shapeio import atomic_write
+
+        return atomic_write(out, lambda f: np.save(f, img, allow_pickle=False))
     raise SystemExit(f"error: unknown output type {suffix!r} for {out}; use .png, .obj, .npy or .scad")
 
 
@@ -119,21 +118,16 @@ def _contact_sheet(images, cols: int = 6):
 
 
 def _save_sheet(sheet, path: Path, scale: int = 3) -> None:
-    import os
-    import tempfile
-
     import cv2
     import numpy as np
+
+    from shapeio import atomic_write
 
     big = np.kron(sheet, np.ones((scale, scale), np.uint8))
     ok, buf = cv2.imencode(".png", big)
     if not ok:
         raise RuntimeError(f"could not encode {path}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    with os.fdopen(fd, "wb") as f:
-        f.write(buf.tobytes())
-    os.replace(tmp, path)
+    atomic_write(path, buf.tobytes(), mkdir=True)
 
 
 def main(argv=None) -> int:

@@ -65,9 +65,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import platform
-import tempfile
 import warnings
 from dataclasses import asdict, dataclass
 from functools import lru_cache
@@ -76,6 +74,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 import torch
+
+from shapeio import atomic_write
 
 from .lang import Program, parse_lines
 from .vocab import KIND_CODES, OP_CODES, vocabulary
@@ -465,19 +465,6 @@ def _worker_init() -> None:
 # ---------------------------------------------------------------------------------------------
 # files
 
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _split_path(root: Path, dim: int, length: int, split: str) -> Path:
     return root / f"{dim}d" / f"len_{length:02d}" / f"{split}.txt"
 
@@ -572,7 +559,7 @@ def generate_dataset(out_dir, dim: int = 2, scale: float = 0.001, seed: int = 0,
             start = 0
             for split in SPLITS:
                 k = sizes[L][split]
-                _atomic_write(_split_path(root, dim, L, split), _lines(np.stack(rows[start:start + k]), dim))
+                atomic_write(_split_path(root, dim, L, split), _lines(np.stack(rows[start:start + k]), dim), mkdir=True)
                 start += k
     finally:
         bar.close()
@@ -593,7 +580,7 @@ def generate_dataset(out_dir, dim: int = 2, scale: float = 0.001, seed: int = 0,
         "versions": {"numpy": np.__version__, "torch": torch.__version__.split("+")[0],
                      "python": platform.python_version()},
     }
-    _atomic_write(root / f"{dim}d" / "meta.json", json.dumps(meta, indent=2) + "\n")
+    atomic_write(root / f"{dim}d" / "meta.json", json.dumps(meta, indent=2) + "\n", mkdir=True)
     return {L: dict(sizes[L]) for L in lengths_}
 
 

@@ -29,38 +29,18 @@ Files are written atomically: a temporary file in the target directory, then ``o
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from shapeio import atomic_write
+
 from . import primitives as P
-from .lang import Draw, Node, Program, parse
+from .lang import Draw, Program, parse
 
 __all__ = ["save_png", "voxels_to_mesh", "save_obj", "to_scad", "save_scad"]
 
 SIZE = 64
-
-
-def _atomic_write(path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same directory and ``os.replace``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.",
-                               suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
 
 
 def _to_numpy_bool(a, name: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -97,7 +77,7 @@ def save_png(canvas, path, scale: int = 4) -> Path:
     gray = np.repeat(np.repeat(gray, scale, axis=0), scale, axis=1)
     buf = io.BytesIO()
     Image.fromarray(gray, mode="L").save(buf, format="PNG")
-    return _atomic_write(path, buf.getvalue())
+    return atomic_write(path, buf.getvalue())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -138,7 +118,7 @@ def save_obj(vol, path) -> Path:
     lines = ["# csgnet voxel mesh: vertices in voxel units, vol[x, y, z] frame, voxel centres at integers"]
     lines += [f"v {x:.6g} {y:.6g} {z:.6g}" for x, y, z in verts]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
-    return _atomic_write(path, ("\n".join(lines) + "\n").encode())
+    return atomic_write(path, ("\n".join(lines) + "\n").encode())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -231,4 +211,4 @@ def to_scad(program, dim: int | None = None, fn: int = 128) -> str:
 
 def save_scad(program, path, dim: int | None = None, fn: int = 128) -> Path:
     """Write :func:`to_scad` of ``program`` to ``path`` (atomically)."""
-    return _atomic_write(path, to_scad(program, dim, fn).encode())
+    return atomic_write(path, to_scad(program, dim, fn).encode())

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import primitives as P
-from .lang import Draw, Op, Program, is_valid
+from .lang import Draw, Program, is_valid
 
 __all__ = ["draw_np", "render_np", "bresenham", "SIZE"]
 

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from . import primitives as P
-from .lang import Draw, Op, Program, parse
+from .lang import Draw, Program, parse
 from .vocab import KIND_CODES, OP_CODES, PAD_CODE, vocabulary
 
 __all__ = [
@@ -227,9 +227,6 @@ def draw_packed(kinds: torch.Tensor, params: torch.Tensor, dim: int) -> torch.Te
 # ------------------------------------------------------------------------------------------------
 # packing
 
-_LUT_CACHE: dict = {}
-
-
 def unpack(words: torch.Tensor, dim: int) -> torch.Tensor:
     """Packed words ``(..., 64)`` (2D) or ``(..., 64, 64)`` (3D) -> bool ``(..., 64, 64[, 64])``."""
     words = words.contiguous()
@@ -279,9 +276,6 @@ def encode_programs(programs: Sequence[Program | str], dim: int, device=None) ->
     return torch.from_numpy(kinds).to(device), torch.from_numpy(params).to(device)
 
 
-_TABLE_CACHE: dict = {}
-
-
 def encode_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None = None):
     """Token indices ``(B, T)`` -> ``kinds (B, T)`` and ``params (B, T, 5)`` on the same device.
 
@@ -294,13 +288,9 @@ def encode_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None =
     if tokens.numel() and (int(tokens.min()) < 0 or int(tokens.max()) >= len(vocab)):
         raise ValueError(f"token indices must lie in [0, {len(vocab)}) for the {dim}D vocabulary, "
                          f"got range [{int(tokens.min())}, {int(tokens.max())}]")
-    key = (dim, str(tokens.device))
-    if key not in _TABLE_CACHE:
-        k, p = vocab.table()
-        _TABLE_CACHE[key] = (torch.from_numpy(k).to(tokens.device), torch.from_numpy(p).to(tokens.device))
-    ktab, ptab = _TABLE_CACHE[key]
+    cache = primitive_cache(dim, tokens.device)
     tokens = tokens.long()
-    kinds, params = ktab[tokens], ptab[tokens]
+    kinds, params = cache.kinds[tokens], cache.params[tokens]
     if lengths is not None:
         pos = torch.arange(tokens.shape[1], device=tokens.device)[None, :]
         kinds = torch.where(pos < torch.as_tensor(lengths, device=tokens.device)[:, None], kinds, PAD_CODE)

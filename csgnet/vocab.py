@@ -11,11 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Iterable, Sequence
+from typing import Iterable
 
 import numpy as np
 
-from .lang import OPERATORS, STOP, Draw, Op, ParseError, Program, parse
+from .lang import OPERATORS, STOP, Draw, Op, Program, parse
 
 __all__ = ["Vocabulary", "vocabulary", "KIND_CODES", "OP_CODES", "STOP_CODE"]
 

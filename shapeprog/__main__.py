@@ -11,10 +11,11 @@ file path. The mesh format follows the ``-o`` suffix: .obj (the reference layout
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import warnings
 from pathlib import Path
+
+from shapeio import atomic_write
 
 
 def _load_program(spec: str):
@@ -98,10 +99,7 @@ def _cmd_fit(args) -> int:
     print(f"{name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score {f0:.1f} -> {f1:.1f}, "
           f"{args.steps} steps in {res.seconds:.1f} s")
     if args.output:
-        tmp = f"{args.output}.tmp"
-        with open(tmp, "w") as f:
-            f.write(res.text)
-        os.replace(tmp, args.output)
+        atomic_write(args.output, res.text)
         print(f"wrote {args.output}")
     else:
         sys.stdout.write(res.text)

@@ -12,15 +12,14 @@ OBJ layout go through trimesh.
 """
 from __future__ import annotations
 
-import io as _io
 import os
-import tempfile
 from pathlib import Path
-from typing import Callable, Optional, Union
+from typing import Union
 
 import numpy as np
 import torch
 
+from shapeio import atomic_write
 from shapeprog.geometry import CUBOID_TRIANGLES
 from shapeprog.picture import part_colors
 
@@ -36,28 +35,6 @@ __all__ = [
 ]
 
 PathLike = Union[str, os.PathLike]
-
-
-def _atomic_write(path: PathLike, write: Callable[[_io.BufferedWriter], None]) -> Path:
-    """Call ``write(f)`` on a temp file next to ``path``, then ``os.replace`` it onto ``path``."""
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{path}: directory {str(folder)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
 
 
 def _corners_array(corners, path: PathLike) -> np.ndarray:
@@ -105,7 +82,7 @@ def write_obj(path: PathLike, corners) -> Path:
         The path written.
     """
     text = obj_text(_corners_array(corners, path))
-    return _atomic_write(path, lambda f: f.write(text.encode("ascii")))
+    return atomic_write(path, lambda f: f.write(text.encode("ascii")))
 
 
 def _trimesh():
@@ -136,7 +113,7 @@ def write_ply(path: PathLike, corners, labels=None) -> Path:
     """
     mesh = _mesh(_corners_array(corners, path), labels)
     data = mesh.export(file_type="ply")
-    return _atomic_write(path, lambda f: f.write(data))
+    return atomic_write(path, lambda f: f.write(data))
 
 
 def write_glb(path: PathLike, corners, labels=None) -> Path:
@@ -160,7 +137,7 @@ def write_glb(path: PathLike, corners, labels=None) -> Path:
         )
         scene.add_geometry(mesh, node_name=f"part_{k}", geom_name=f"part_{k}")
     data = scene.export(file_type="glb")
-    return _atomic_write(path, lambda f: f.write(data))
+    return atomic_write(path, lambda f: f.write(data))
 
 
 def _points_array(x, name: str, path: PathLike) -> np.ndarray:
@@ -201,7 +178,7 @@ def write_points(path: PathLike, points, normals=None) -> Path:
         f.write(header.encode("ascii"))
         f.write(body.tobytes())
 
-    return _atomic_write(path, write)
+    return atomic_write(path, write)
 
 
 def _read_obj_points(path: Path) -> np.ndarray:
@@ -271,7 +248,7 @@ def write_voxels(path: PathLike, grid) -> Path:
     arr = np.asarray(grid)
     if arr.ndim != 3:
         raise ValueError(f"{path}: `grid` must be 3-D (X, Y, Z), got shape {arr.shape}")
-    return _atomic_write(path, lambda f: np.save(f, arr, allow_pickle=False))
+    return atomic_write(path, lambda f: np.save(f, arr, allow_pickle=False))
 
 
 def write_png(path: PathLike, image) -> Path:
@@ -286,4 +263,4 @@ def write_png(path: PathLike, image) -> Path:
     if not ok:  # pragma: no cover - OpenCV failure
         raise ValueError(f"{path}: PNG encoding failed")
     data = buf.tobytes()
-    return _atomic_write(path, lambda f: f.write(data))
+    return atomic_write(path, lambda f: f.write(data))

@@ -1,5 +1,3 @@
-import os
-
 import pytest
 
 
@@ -11,4 +9,3 @@ def _single_thread_torch():
     except ImportError:  # pragma: no cover
         return
     torch.set_num_threads(1)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")

@@ -39,7 +39,7 @@ def test_encode_decode_program_and_cut_at_stop():
     text = "c(32,32,28)c(32,32,24)-s(32,32,28)s(32,32,20)-+t(32,32,20)+"
     ids = v.encode(text)
     assert v.text(ids + [v.stop, 3, 4]) == text
-    assert v.index("sp(8,8,8,8)" if False else "+") == 396
+    assert v.index("+") == 396
     assert vocabulary(3).index("sp(32,32,32,8)") == vocabulary(3).index("p(32,32,32,8)")
 
 

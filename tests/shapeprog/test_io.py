@@ -153,17 +153,3 @@ def test_bad_input_names_the_file_and_leaves_nothing(tmp_path):
         write_obj(tmp_path / "nowhere" / "a.obj", boxes([0, 0, 0], [1, 1, 1]))
     assert target.read_text() == "old\n"
     assert sorted(os.listdir(tmp_path)) == ["shape.obj"]
-
-
-def test_write_is_atomic_on_failure(tmp_path, monkeypatch):
-    target = tmp_path / "m.ply"
-    target.write_text("old\n")
-
-    def boom(f):
-        f.write(b"partial")
-        raise RuntimeError("disk full")
-
-    with pytest.raises(RuntimeError):
-        sio._atomic_write(target, boom)
-    assert target.read_text() == "old\n"
-    assert os.listdir(tmp_path) == ["m.ply"]
