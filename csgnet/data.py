@@ -78,6 +78,7 @@ import torch
 from shapeio import atomic_write
 
 from .lang import Program, parse_lines
+from .renderer import popcount, primitive_cache
 from .vocab import KIND_CODES, OP_CODES, vocabulary
 
 __all__ = [
@@ -239,12 +240,6 @@ def _draw_candidates(dim: int, length: int, rules: Rules, size: int, rng: np.ran
     return tokens
 
 
-def _popcount(words: torch.Tensor) -> np.ndarray:
-    """ON pixels of packed canvases ``(N, *C)`` int64 -> ``(N,)`` int64."""
-    w = words.detach().cpu().numpy()
-    return np.bitwise_count(w).reshape(w.shape[0], -1).sum(axis=1, dtype=np.int64)
-
-
 def check_programs(tokens: np.ndarray | torch.Tensor, dim: int, rules: Rules | None = None) -> np.ndarray:
     """Which programs satisfy rules (b) and (c).
 
@@ -256,54 +251,29 @@ def check_programs(tokens: np.ndarray | torch.Tensor, dim: int, rules: Rules | N
     Returns:
         (B,) bool.
     """
-    from .renderer import StackMachine, draw_packed, encode_tokens
+    from .renderer import StackMachine, encode_tokens
 
     rules = (rules or Rules()).resolved(dim)
     tokens = torch.as_tensor(np.asarray(tokens), dtype=torch.int64)
     if tokens.dim() != 2:
         raise ValueError(f"tokens must be (B, T), got shape {tuple(tokens.shape)}")
     B, T = tokens.shape
-    kinds, params = encode_tokens(tokens, dim)
-    canvas = (64,) if dim == 2 else (64, 64)
-    prims = draw_packed(kinds.reshape(-1), params.reshape(-1, 5), dim).reshape((B, T) + canvas)
+    kinds, _ = encode_tokens(tokens, dim)
     machine = StackMachine(B, dim, T // 2 + 1)
     ok = np.ones(B, dtype=bool)
     kinds_np = kinds.numpy()
     for t in range(T):
-        rows = np.flatnonzero((kinds_np[:, t] >= 6) & (kinds_np[:, t] <= 8) & ok)
+        rows = np.flatnonzero(np.isin(kinds_np[:, t], list(OP_CODES.values())) & ok)
         if rows.size:
-            top = machine.top(2)[torch.from_numpy(rows)]
-            a, b = _popcount(top[:, 1]), _popcount(top[:, 0])
-            ab = _popcount(top[:, 1] & top[:, 0])
+            top = machine.top(2).index_select(0, torch.from_numpy(rows))
+            a, b = popcount(top[:, 1]), popcount(top[:, 0])
+            ab = popcount(top[:, 1] & top[:, 0])
             good = _op_passes(a, b, ab, kinds_np[rows, t], rules)
             ok[rows[~good]] = False
-        machine.step(kinds[:, t], prims=prims[:, t])
-    ok &= _popcount(machine.result()) >= rules.min_pixels
+        machine.step(kinds[:, t], token_ids=tokens[:, t])
+    ok &= popcount(machine.result()) >= rules.min_pixels
     return ok
 
-
-
-_PRIM_CACHE: dict = {}
-
-
-def _primitive_canvases(dim: int, index: np.ndarray) -> torch.Tensor:
-    """Packed canvases ``(N, *C)`` int64 of vocabulary primitives, memoised per process (a pure cache:
-    the renderer's :func:`~csgnet.renderer.draw_packed` is called once per primitive)."""
-    from .renderer import draw_packed
-
-    if dim not in _PRIM_CACHE:
-        vocab = vocabulary(dim)
-        kinds, params = (torch.from_numpy(a) for a in vocab.table())
-        canvas = (64,) if dim == 2 else (64, 64)
-        _PRIM_CACHE[dim] = (torch.zeros((len(vocab),) + canvas, dtype=torch.int64),
-                            np.zeros(len(vocab), dtype=bool), kinds, params)
-    table, have, kinds, params = _PRIM_CACHE[dim]
-    missing = np.unique(index[~have[index]])
-    if missing.size:
-        m = torch.from_numpy(missing)
-        table[m] = draw_packed(kinds[m], params[m], dim)
-        have[missing] = True
-    return table[torch.from_numpy(index)]
 
 
 def _op_passes(a: np.ndarray, b: np.ndarray, ab: np.ndarray, op: np.ndarray, rules: Rules) -> np.ndarray:
@@ -342,8 +312,8 @@ class _Builder:
         types = self.rng.choice(3, size=m, p=self.tw)
         u = self.rng.random(m)
         idx = self.first[types] + np.minimum((u * self.count[types]).astype(np.int64), self.count[types] - 1)
-        canvas = _primitive_canvases(self.dim, idx)
-        return [idx[:, None], canvas, _popcount(canvas), np.zeros(m, dtype=np.int64)]
+        canvas = primitive_cache(self.dim, "cpu").get(torch.from_numpy(idx))
+        return [idx[:, None], canvas, popcount(canvas), np.zeros(m, dtype=np.int64)]
 
     def take(self, k: int, m: int):
         """``m`` subtrees with ``k`` leaves (removed from the pool)."""
@@ -384,7 +354,7 @@ class _Builder:
             choice = self.rng.choice(3, size=m, p=self.ow)
             op, code = self.ops[choice], _OP_KIND[choice]
             la, ra = left[1], right[1]
-            ab = _popcount(la & ra)
+            ab = popcount(la & ra)
             good = _op_passes(left[2], right[2], ab, code, self.rules)
             g = torch.from_numpy(good)
             res = torch.where(torch.from_numpy(code == OP_CODES["+"]).view((-1,) + (1,) * (la.dim() - 1)), la | ra,

@@ -7,7 +7,7 @@
 * :func:`iou` with ``denominator="union"`` (``|A and B| / |A or B|``, NaN when both are empty: the 2D
   synthetic validation and the 2D CAD beam search) or ``denominator="union+1"``
   (``|A and B| / (|A or B| + 1)``: the RL IoU reward, ``test_cad.py`` and all 3D evaluation).
-* :func:`iou_3d`: the 3D evaluation IoU, ``"union+1"`` on ``(N, 64, 64, 64)`` volumes with NaN -> 0.
+* :func:`iou_3d`: the 3D evaluation IoU, ``"union+1"`` on ``(N, 64, 64, 64)`` volumes (never NaN).
 * :func:`reward`: the RL reward ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma``.
 
 How :func:`chamfer` is fast and still exact
@@ -341,9 +341,7 @@ def iou(pred, target, denominator: str = "union"):
 
 
 def iou_3d(pred, target):
-    """The 3D evaluation IoU: ``|A and B| / (|A or B| + 1)`` per volume, NaN replaced by 0.
-
-    (With the +1 the value is never NaN; the replacement mirrors the 3D beam search of the reference.)
+    """The 3D evaluation IoU: ``|A and B| / (|A or B| + 1)`` per volume (never NaN).
 
     Args:
         pred: (N, 64, 64, 64) or (64, 64, 64) bool, NumPy or torch.
@@ -359,11 +357,7 @@ def iou_3d(pred, target):
         raise _shape_error("pred", "(N, 64, 64, 64) or (64, 64, 64)", np.shape(pred))
     if len(np.shape(t)) != 4 or tuple(np.shape(t)[1:]) != (SIZE, SIZE, SIZE):
         raise _shape_error("target", "(N, 64, 64, 64) or (64, 64, 64)", np.shape(target))
-    out = iou(p, t, denominator="union+1")
-    if _is_torch(out):
-        out = out.nan_to_num(0.0)
-    else:
-        out = np.nan_to_num(out, nan=0.0)
+    out = iou(p, t, denominator="union+1")  # never NaN: the denominator is at least 1
     return float(out[0]) if single else out
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "primitive_cache",
     "draw_packed",
     "pack",
+    "popcount",
     "unpack",
     "SIZE",
 ]
@@ -237,6 +238,12 @@ def unpack(words: torch.Tensor, dim: int) -> torch.Tensor:
     shifts = torch.arange(8, dtype=torch.uint8, device=words.device)
     bits = (by.unsqueeze(-1) >> shifts) & 1
     return bits.reshape(words.shape + (SIZE,)).bool()
+
+
+def popcount(words: torch.Tensor) -> np.ndarray:
+    """ON pixels (voxels) of packed canvases ``(N, *C)`` int64 -> ``(N,)`` int64 (NumPy, on the CPU)."""
+    w = words.detach().cpu().numpy()
+    return np.bitwise_count(w).reshape(w.shape[0], -1).sum(axis=1, dtype=np.int64)
 
 
 def pack(canvas: torch.Tensor | np.ndarray) -> torch.Tensor:

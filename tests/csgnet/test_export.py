@@ -110,20 +110,27 @@ def test_scad_errors():
         export.to_scad(csgnet.parse("c(32,32,8)c(10,10,8)", strict=False))
 
 
-def test_atomic_write_leaves_no_temp_files(tmp_path):
+def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
     p = csgnet.parse("c(32,32,16)s(32,32,12)-")
     path = export.save_scad(p, tmp_path / "prog.scad")
     assert path.read_text() == export.to_scad(p)
     export.save_scad(p, tmp_path / "prog.scad")  # overwrite
     assert sorted(os.listdir(tmp_path)) == ["prog.scad"]
-    # a failing write leaves neither the target nor a temp file
-    with pytest.raises(ValueError):
-        export.save_obj(np.zeros((3, 3, 3), bool), tmp_path / "bad.obj")
+    # a write that fails at the final rename leaves the old file and no temp file
+    import shapeio
+
+    def boom(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(shapeio.os, "replace", boom)
+    with pytest.raises(OSError, match="disk full"):
+        export.save_scad(csgnet.parse("c(8,8,8)"), tmp_path / "prog.scad")
     assert sorted(os.listdir(tmp_path)) == ["prog.scad"]
+    assert (tmp_path / "prog.scad").read_text() == export.to_scad(p)
 
 
 @pytest.mark.skipif(shutil.which("openscad") is None, reason="openscad not installed")
-def test_openscad_area_matches_raster(tmp_path):
+def test_openscad_accepts_output(tmp_path):
     for text in ["s(32,32,20)c(20,20,12)+", "c(32,32,24)s(32,32,16)-"]:
         src = export.save_scad(csgnet.parse(text), tmp_path / "p.scad")
         out = tmp_path / "p.svg"
