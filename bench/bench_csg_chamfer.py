@@ -21,38 +21,14 @@ import platform
 import shlex
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import cv2
 
-import cv2  # noqa: E402
-
-import csgnet  # noqa: E402
-from csgnet import metrics  # noqa: E402
-from csgnet.lang import Draw, Op, Program  # noqa: E402
-
-
-def random_programs(n: int, length: int, rng: np.random.Generator) -> list[Program]:
-    """Random valid postfix programs of ``length`` tokens over the 2D vocabulary's primitives."""
-    vocab = csgnet.vocabulary(2)
-    draws = [csgnet.parse(vocab.token(i), 2).tokens[0] for i in range(vocab.num_primitives)]
-    n_draw = (length + 1) // 2
-    out = []
-    for _ in range(n):
-        toks: list = []
-        depth = placed = 0
-        while placed < n_draw or depth > 1:
-            if placed < n_draw and (depth < 2 or rng.random() < 0.5):
-                toks.append(draws[rng.integers(len(draws))])
-                depth += 1
-                placed += 1
-            else:
-                toks.append(Op("+*-"[rng.integers(3)]))
-                depth -= 1
-        out.append(Program(tuple(toks), 2))
-    return out
+import csgnet
+from bench_csg_render import random_programs  # the same random programs as the render benchmark
+from csgnet import metrics
 
 
 def chamfer_pairs_baseline(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -95,8 +71,8 @@ def main(argv=None) -> None:
     rng = np.random.default_rng(args.seed)
     n_t = args.targets if args.targets > 0 else args.pairs
     t0 = time.perf_counter()
-    pred = csgnet.render(random_programs(args.pairs, args.length, rng), 2)
-    tgt_shapes = csgnet.render(random_programs(n_t, args.length, rng), 2)
+    pred = csgnet.render(random_programs(2, args.pairs, args.length, rng), 2)
+    tgt_shapes = csgnet.render(random_programs(2, n_t, args.length, rng), 2)
     target = tgt_shapes[rng.integers(n_t, size=args.pairs)] if args.targets > 0 else tgt_shapes
     print(f"data: {args.pairs} pairs of random length-{args.length} programs, "
           f"{n_t} distinct targets, rendered in {time.perf_counter() - t0:.1f} s; "

@@ -26,7 +26,7 @@ import time
 import numpy as np
 import torch
 
-from csgnet.lang import Draw, Op, Program
+from csgnet.lang import Draw, Program
 from csgnet.renderer import encode_programs, encode_tokens, execute, unpack
 from csgnet.vocab import vocabulary
 
