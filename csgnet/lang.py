@@ -339,7 +339,7 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
     n = len(text)
     while pos < n:
         m = _TOKEN_RE.match(text, pos)
-        assert m is not None  # the last alternative matches any character
+        # the last alternative of _TOKEN_RE matches any character, so m is never None
         kind = next((g for g in ("op", "stop", "head", "bad") if m.group(g) is not None), None)
         if kind == "stop":
             break
