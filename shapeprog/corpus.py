@@ -105,7 +105,6 @@ def example_text(name: str = "ex-0.txt") -> str:
 
 def example_points(name: str = "comp_pc.obj"):
     """The example point cloud as a (N, 3) float32 numpy array (10,000 points of a table)."""
-    import numpy as np
+    from .io import _obj_vertices  # numpy, torch: loaded on first use only
 
-    rows = [ln.split()[1:4] for ln in example_text(name).splitlines() if ln.startswith("v ")]
-    return np.asarray(rows, dtype=np.float32)
+    return _obj_vertices(example_text(name).splitlines(), name)

@@ -20,8 +20,9 @@ import numpy as np
 import torch
 
 from shapeio import atomic_write
-from shapeprog.geometry import CUBOID_TRIANGLES
+from shapeprog.geometry import CUBOID_TRIANGLES, mesh_arrays
 from shapeprog.picture import part_colors
+from shapeprog.sampling import check_corners
 
 __all__ = [
     "write_obj",
@@ -38,32 +39,23 @@ PathLike = Union[str, os.PathLike]
 
 
 def _corners_array(corners, path: PathLike) -> np.ndarray:
-    """Validate ``(L, 8, 3)`` corners and return them as a float32 array (the reference precision)."""
+    """``(L, 8, 3)`` corners (tensor or array) as a validated NumPy array, errors naming ``path``."""
     if isinstance(corners, torch.Tensor):
         corners = corners.detach().cpu().numpy()
-    arr = np.asarray(corners)
-    if arr.ndim != 3 or arr.shape[1:] != (8, 3):
-        raise ValueError(f"{path}: `corners` must have shape (L, 8, 3), got {arr.shape}")
-    if not np.issubdtype(arr.dtype, np.floating):
-        raise TypeError(f"{path}: `corners` must be floating point, got {arr.dtype}")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{path}: `corners` contains NaN or infinite values")
-    return arr
+    return check_corners(np.asarray(corners), where=path, arrays=True)
 
 
-def _mesh_arrays(arr: np.ndarray):
-    n = arr.shape[0]
-    faces = CUBOID_TRIANGLES.numpy()[None] + 8 * np.arange(n)[:, None, None]
-    return arr.reshape(-1, 3), faces.reshape(-1, 3)
+def _obj_text(arr: np.ndarray) -> str:
+    """:func:`obj_text` of an already validated corner array."""
+    verts, faces = (t.numpy() for t in mesh_arrays(torch.from_numpy(arr.astype(np.float32))))
+    lines = [f"v {float(x)} {float(y)} {float(z)}\n" for x, y, z in verts]
+    lines += [f"f {a} {b} {c}\n" for a, b, c in (faces + 1).tolist()]
+    return "".join(lines)
 
 
 def obj_text(corners) -> str:
     """The reference OBJ text of a list of cuboids (see :func:`write_obj`)."""
-    arr = _corners_array(corners, "<obj>").astype(np.float32)
-    verts, faces = _mesh_arrays(arr)
-    lines = [f"v {float(x)} {float(y)} {float(z)}\n" for x, y, z in verts]
-    lines += [f"f {a} {b} {c}\n" for a, b, c in (faces + 1).tolist()]
-    return "".join(lines)
+    return _obj_text(_corners_array(corners, "<obj>"))
 
 
 def write_obj(path: PathLike, corners) -> Path:
@@ -81,7 +73,7 @@ def write_obj(path: PathLike, corners) -> Path:
     Returns:
         The path written.
     """
-    text = obj_text(_corners_array(corners, path))
+    text = _obj_text(_corners_array(corners, path))
     return atomic_write(path, lambda f: f.write(text.encode("ascii")))
 
 
@@ -95,7 +87,7 @@ def _trimesh():
 
 def _mesh(arr: np.ndarray, labels):
     trimesh = _trimesh()
-    verts, faces = _mesh_arrays(arr.astype(np.float64))
+    verts, faces = (t.numpy() for t in mesh_arrays(torch.from_numpy(arr.astype(np.float64))))
     rgb = np.repeat(part_colors(arr.shape[0], labels), 12, axis=0)
     rgba = np.concatenate([rgb, np.full((rgb.shape[0], 1), 255, np.uint8)], axis=1)
     return trimesh.Trimesh(vertices=verts, faces=faces, face_colors=rgba, process=False)
@@ -181,22 +173,27 @@ def write_points(path: PathLike, points, normals=None) -> Path:
     return atomic_write(path, write)
 
 
-def _read_obj_points(path: Path) -> np.ndarray:
+def _obj_vertices(lines, where) -> np.ndarray:
+    """The ``v x y z`` points of OBJ text ``lines`` as ``(N, 3) float32``; errors name ``where:line``."""
     pts = []
-    with open(path, "r", encoding="utf-8", errors="replace") as f:
-        for lineno, line in enumerate(f, 1):
-            parts = line.split()
-            if not parts or parts[0] != "v":
-                continue
-            try:
-                if len(parts) < 4:
-                    raise ValueError
-                pts.append([float(parts[1]), float(parts[2]), float(parts[3])])
-            except ValueError:
-                raise ValueError(f"{path}:{lineno}: expected 'v x y z', got {line.strip()!r}") from None
+    for lineno, line in enumerate(lines, 1):
+        parts = line.split()
+        if not parts or parts[0] != "v":
+            continue
+        try:
+            if len(parts) < 4:
+                raise ValueError
+            pts.append([float(parts[1]), float(parts[2]), float(parts[3])])
+        except ValueError:
+            raise ValueError(f"{where}:{lineno}: expected 'v x y z', got {line.strip()!r}") from None
     if not pts:
-        raise ValueError(f"{path}: no 'v x y z' line found")
+        raise ValueError(f"{where}: no 'v x y z' line found")
     return np.asarray(pts, dtype=np.float32)
+
+
+def _read_obj_points(path: Path) -> np.ndarray:
+    with open(path, "r", encoding="utf-8", errors="replace") as f:
+        return _obj_vertices(f, path)
 
 
 def read_points(path: PathLike, return_normals: bool = False):

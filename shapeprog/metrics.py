@@ -17,6 +17,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 import torch
 
+from shapeprog.geometry import CORNER_SIGNS
 from shapeprog.sampling import check_corners, lattice_voxelize
 
 __all__ = [
@@ -214,9 +215,12 @@ def _frames(corners: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     return c, rot, half
 
 
+#: (8, 3) float64 corner signs in the spec's order.
+_SIGNS = CORNER_SIGNS.double().numpy()
+
+
 def _box_corners(c: np.ndarray, rot: np.ndarray, half: np.ndarray) -> np.ndarray:
-    signs = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], dtype=np.float64)
-    return c[:, None, :] + np.einsum("nk,lk,lkc->lnc", signs, half, rot)
+    return c[:, None, :] + np.einsum("nk,lk,lkc->lnc", _SIGNS, half, rot)
 
 
 _EDGES = np.array(
@@ -318,21 +322,16 @@ def _ground_corners(corners: np.ndarray) -> np.ndarray:
     """The reference's ground: a 10 x 0.01 x 10 box (y-up) whose top is the shape's lowest point."""
     low = corners[..., 1].min()
     half = np.array([5.0, 0.005, 5.0])
-    signs = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], dtype=np.float64)
-    return (np.array([0.0, low - 0.005, 0.0]) + signs * half)[None]
+    return (np.array([0.0, low - 0.005, 0.0]) + _SIGNS * half)[None]
 
 
 def _as_numpy_corners(corners) -> np.ndarray:
+    """Validated float64 corners from a floating-point tensor or any array-like (cast to float64)."""
     if isinstance(corners, torch.Tensor):
-        check_corners(corners)
-        corners = corners.detach().cpu().numpy()
-    corners = np.asarray(corners, dtype=np.float64)
-    if corners.ndim != 3 or corners.shape[1:] != (8, 3):
-        raise ValueError(f"`corners` must have shape (L, 8, 3), got {corners.shape}")
+        corners = check_corners(corners).detach().cpu().numpy()
+    corners = check_corners(np.asarray(corners, dtype=np.float64), arrays=True)
     if corners.shape[0] == 0:
         raise ValueError("`corners` holds no cuboid (L = 0)")
-    if not np.isfinite(corners).all():
-        raise ValueError("`corners` contains NaN or infinite values")
     return corners
 
 
@@ -363,10 +362,14 @@ def _reachable(adj: np.ndarray, start: int) -> np.ndarray:
     return seen
 
 
+def _rooted(adj: np.ndarray) -> np.ndarray:
+    """Parts ``(L,) bool`` reachable from the ground (the last node) of a contact graph."""
+    return _reachable(adj, adj.shape[0] - 1)[:-1]
+
+
 def rooted_parts(corners, tolerance: float = 0.02, surface: bool = True) -> np.ndarray:
     """Which parts ``(L,) bool`` connect to the ground through a chain of contacts (see :func:`rootedness`)."""
-    adj = contact_graph(corners, tolerance, surface)
-    return _reachable(adj, adj.shape[0] - 1)[:-1]
+    return _rooted(contact_graph(corners, tolerance, surface))
 
 
 def rootedness(corners, tolerance: float = 0.02, surface: bool = True) -> bool:
@@ -463,7 +466,7 @@ def stability(
         raise ValueError(f"`inertia` must be 'identity' or 'box', got {inertia!r}")
     corners = _as_numpy_corners(corners)
     adj = contact_graph(corners, contact_tolerance, surface)
-    if not _reachable(adj, adj.shape[0] - 1)[:-1].all():
+    if not _rooted(adj).all():
         return False
     try:
         import pybullet as pb

@@ -13,7 +13,8 @@ from typing import Optional, Union
 import numpy as np
 import torch
 
-from shapeprog.geometry import CUBOID_TRIANGLES
+from shapeprog.geometry import mesh_arrays
+from shapeprog.sampling import check_corners
 
 __all__ = ["render_png", "part_colors", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
 
@@ -115,11 +116,7 @@ def render_png(
     """
     if isinstance(corners, torch.Tensor):
         corners = corners.detach().cpu().numpy()
-    corners = np.asarray(corners, dtype=np.float64)
-    if corners.ndim != 3 or corners.shape[1:] != (8, 3):
-        raise ValueError(f"`corners` must have shape (L, 8, 3), got {corners.shape}")
-    if not np.isfinite(corners).all():
-        raise ValueError("`corners` contains NaN or infinite values")
+    corners = check_corners(np.array(corners, dtype=np.float64), arrays=True)  # a copy: torch.from_numpy below
     if isinstance(size, bool) or not isinstance(size, int) or size < 8:
         raise ValueError(f"`size` must be an int >= 8, got {size!r}")
     import cv2
@@ -130,15 +127,13 @@ def render_png(
     image = np.full((big, big, 3), 255.0)
     if n > 0:
         right, up, back = _camera()
-        pts = corners.reshape(-1, 3)
+        pts, faces = (t.numpy() for t in mesh_arrays(torch.from_numpy(corners)))  # (8 L, 3), (12 L, 3)
         sx, sy, depth = pts @ right, pts @ up, pts @ back
         extent = max(sx.max() - sx.min(), sy.max() - sy.min(), 1e-9)
         scale = big * 0.88 / extent
         cx, cy = (sx.max() + sx.min()) / 2, (sy.max() + sy.min()) / 2
         px = (sx - cx) * scale + big / 2
         py = big / 2 - (sy - cy) * scale
-        tri = CUBOID_TRIANGLES.numpy()
-        faces = (tri[None] + 8 * np.arange(n)[:, None, None]).reshape(-1, 3)  # (12 L, 3)
         tri_xy = np.stack([px[faces], py[faces]], axis=-1)
         tri_z = depth[faces]
         ids = _rasterize(tri_xy, tri_z, big)

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 from typing import Optional, Sequence, Tuple, Union
 
+import numpy as np
 import torch
 
-from shapeprog.geometry import CUBOID_TRIANGLES
+from shapeprog.geometry import CORNER_SIGNS, CUBOID_TRIANGLES
 
 __all__ = ["sample_surface", "triangle_areas", "voxelize", "lattice_voxelize", "inside_cuboids"]
 
@@ -26,22 +27,34 @@ __all__ = ["sample_surface", "triangle_areas", "voxelize", "lattice_voxelize", "
 MAX_TRIANGLE_AREA = 1e6
 
 
-def check_corners(corners: torch.Tensor, name: str = "corners") -> torch.Tensor:
-    """Validate ``corners: (L, 8, 3) float`` and return it.
+def check_corners(corners, name: str = "corners", where=None, arrays: bool = False):
+    """Validate ``corners: (L, 8, 3) float`` and return it unchanged (the one corner validator).
+
+    Args:
+        corners: a ``torch.Tensor`` (or, with ``arrays=True``, a NumPy array).
+        name: the argument name used in messages.
+        where: optional prefix of the messages (e.g. the file being written).
+        arrays: accept NumPy arrays as well as tensors.
 
     Raises:
-        TypeError: if it is not a floating-point tensor.
+        TypeError: if it is not a tensor (or array) or not floating point.
         ValueError: if the shape is not ``(L, 8, 3)`` or a value is NaN or infinite.
     """
-    if not isinstance(corners, torch.Tensor):
-        raise TypeError(f"`{name}` must be a torch.Tensor of shape (L, 8, 3), got {type(corners).__name__}")
-    if corners.dim() != 3 or corners.shape[1:] != (8, 3):
-        raise ValueError(f"`{name}` must have shape (L, 8, 3), got {tuple(corners.shape)}")
-    if not corners.is_floating_point():
-        raise TypeError(f"`{name}` must be a floating-point tensor, got {corners.dtype}")
-    if not torch.isfinite(corners).all():
-        bad = (~torch.isfinite(corners)).reshape(corners.shape[0], -1).any(1).nonzero().flatten().tolist()
-        raise ValueError(f"`{name}` contains NaN or infinite values (cuboids {bad[:10]})")
+    pre = "" if where is None else f"{where}: "
+    if isinstance(corners, torch.Tensor):
+        floating, isfinite = corners.is_floating_point(), torch.isfinite
+    elif arrays and isinstance(corners, np.ndarray):
+        floating, isfinite = np.issubdtype(corners.dtype, np.floating), np.isfinite
+    else:
+        raise TypeError(f"{pre}`{name}` must be a torch.Tensor of shape (L, 8, 3), got {type(corners).__name__}")
+    if corners.ndim != 3 or tuple(corners.shape[1:]) != (8, 3):
+        raise ValueError(f"{pre}`{name}` must have shape (L, 8, 3), got {tuple(corners.shape)}")
+    if not floating:
+        raise TypeError(f"{pre}`{name}` must be floating point, got {corners.dtype}")
+    finite = isfinite(corners)
+    if not finite.all():
+        bad = [i for i, row in enumerate((~finite).reshape(corners.shape[0], -1).any(1).tolist()) if row]
+        raise ValueError(f"{pre}`{name}` contains NaN or infinite values (cuboids {bad[:10]})")
     return corners
 
 
@@ -51,14 +64,17 @@ def _triangles(corners: torch.Tensor) -> torch.Tensor:
     return corners[:, tri].reshape(-1, 3, 3)
 
 
+def _raw_areas(tris: torch.Tensor) -> torch.Tensor:
+    """``|(v1 - v0) x (v2 - v1)|`` (twice the area) of triangles ``(T, 3, 3)``."""
+    return torch.linalg.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 1], dim=-1).norm(dim=-1)
+
+
 def triangle_areas(corners: torch.Tensor) -> torch.Tensor:
     """Areas ``(12 L,)`` of the cuboids' triangles, as the reference computes them for sampling.
 
     ``area = 0.5 * (|(v1 - v0) x (v2 - v1)| + 1e-8)``.
     """
-    tris = _triangles(check_corners(corners))
-    cross = torch.linalg.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 1], dim=-1)
-    return 0.5 * (cross.norm(dim=-1) + 1e-8)
+    return 0.5 * (_raw_areas(_triangles(check_corners(corners))) + 1e-8)
 
 
 def sample_surface(
@@ -99,7 +115,7 @@ def sample_surface(
         raise ValueError("`corners` holds no cuboid (L = 0): there is no surface to sample")
     tris = _triangles(corners)
     v0, v1, v2 = tris[:, 0], tris[:, 1], tris[:, 2]
-    raw = torch.linalg.cross(v1 - v0, v2 - v1, dim=-1).norm(dim=-1)
+    raw = _raw_areas(tris)
     areas = 0.5 * (raw + 1e-8)
     check = raw.detach()
     if not torch.isfinite(check).all():
@@ -241,11 +257,7 @@ def lattice_voxelize(corners: torch.Tensor, root_dims: torch.Tensor, n: int = 20
     axes = [t * root_dims[a] for a in range(3)]
     lattice = torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1).reshape(-1, 3)
     offset = root_dims / (2 * n)
-    signs = torch.tensor(
-        [[sx, sy, sz] for sx in (1.0, -1.0) for sy in (1.0, -1.0) for sz in (1.0, -1.0)],
-        dtype=corners.dtype,
-        device=corners.device,
-    )
+    signs = CORNER_SIGNS.to(corners)
     shifted = (lattice[:, None, :] + signs[None] * offset).reshape(-1, 3)  # (n^3 * 8, 3)
     occ = inside_cuboids(shifted, corners).reshape(-1, 8).any(1)
     return occ.reshape(n, n, n)
