@@ -76,7 +76,7 @@ def _cmd_fit(args) -> int:
     from .execute import execute
     from .fit import fit
     from .io import read_points
-    from .metrics import chamfer, fscore
+    from .metrics import adaptive_threshold, chamfer, fscore
     from .sampling import sample_surface
 
     prog, name = _load_program(args.program)
@@ -87,11 +87,12 @@ def _cmd_fit(args) -> int:
     else:
         pts = torch.as_tensor(read_points(args.points), dtype=torch.float32)
     g = torch.Generator().manual_seed(args.seed)
+    thr = float(adaptive_threshold(pts))  # the target's F-score threshold, the same before and after
 
     def score(p):
         with torch.no_grad():
             x, _ = sample_surface(execute(p).corners, 10000, generator=torch.Generator().manual_seed(args.seed))
-            return float(chamfer(x, pts)), fscore(x, pts)
+            return float(chamfer(x, pts)), fscore(x, pts, threshold=thr)
 
     cd0, f0 = score(prog)
     res = fit(prog, pts, steps=args.steps, lr=args.lr, reg=args.reg, decimals=args.decimals, generator=g)
@@ -123,7 +124,7 @@ def main(argv=None) -> int:
     f = sub.add_parser("fit", help="fit a program's parameters to a point cloud")
     f.add_argument("program", help="corpus id (table/33075) or program file")
     f.add_argument("--points", default="example",
-                   help="point cloud file (.obj 'v' lines, .ply, .xyz) or 'example' (comp_pc.obj)")
+                   help="point cloud file (.obj 'v' lines or .ply) or 'example' (comp_pc.obj)")
     f.add_argument("--steps", type=int, default=400)
     f.add_argument("--lr", type=float, default=1e-3)
     f.add_argument("--reg", type=float, default=1e-3)

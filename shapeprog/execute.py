@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import torch
 
 from .geometry import cuboid_corners, mesh_arrays
-from .lang import AXES, Attach, Cuboid, Program, Reflect, Squeeze, Translate, numbers, statement_lines
+from .lang import AXES, NUM_FIELDS, Attach, Cuboid, Program, Reflect, Squeeze, Translate, numbers, statement_lines
 
 __all__ = ["ExecutedShape", "execute", "execute_batch", "program_parameters", "parameter_names"]
 
@@ -97,7 +97,7 @@ class _AttachOp:
     a: int
     b: int
     mode: int
-    src: tuple  # affine form (c0 (3,), c1 (3,), idx (3,)) in block-param space or None
+    src: tuple  # affine form (c0 (3,), c1 (3,), idx (3,)), idx into the program's parameters (-1: none)
     tgt: tuple | None  # affine form, or None for a macro (computed at run time)
     prior: list  # list of (op index, role 0=subject 1=target) of a's earlier records
     macro: tuple | None = None  # (orig op j, src slot A, target slot T, kind 'R'|'T', k, i, N, d idx)
@@ -115,15 +115,15 @@ class _BlockCode:
     slot_source: list[int | None]  # macro copies: the source slot
     slot_reflect_axis: list[int | None]
     child_names: list[str | None]  # per Cuboid line (bbox first): sub-program name or None
-    root_idx: tuple  # param indices of the first line (bbox dims)
 
 
 def _aff(consts=(0.0, 0.0, 0.0), scales=(0.0, 0.0, 0.0), idx=(-1, -1, -1)):
     return (tuple(consts), tuple(scales), tuple(idx))
 
 
-def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
-    """Static lowering of one block; ``offset`` is the index of its first parameter."""
+def _compile_block(block, offset: int, lines: list[int]) -> tuple[_BlockCode, int]:
+    """Static lowering of one block; ``offset`` is the index of its first parameter in the
+    program's parameters. Returns the code and the index after its last parameter."""
     slots: dict[str, int] = {}
     names: list[str] = []
     init_dims: list = []
@@ -248,8 +248,7 @@ def _compile_block(block, offset: int, lines: list[int]) -> _BlockCode:
     steps: list[list] = [[] for _ in range(max(levels, default=-1) + 1)]
     for op, lvl in zip(ops, levels):
         steps[lvl].append(op)
-    return _BlockCode(block.name, names, init_dims, ops, steps, slot_line, slot_source, slot_axis, child_names,
-                      (offset, offset + 1, offset + 2))
+    return _BlockCode(block.name, names, init_dims, ops, steps, slot_line, slot_source, slot_axis, child_names), p
 
 
 def _find_attach(ops, j):
@@ -270,23 +269,18 @@ class _Compiled:
     blocks: list[_BlockCode]
     n_params: int
     instances: list = field(default_factory=list)  # BFS: (block idx, parent inst, parent slot, flip axis)
+    leaf_slots: list = field(default_factory=list)  # per block: its slots that are leaves (no bbox, no sub-program)
 
 
 def _compile(program: Program) -> _Compiled:
-    nums_per_block = []
-    for b in program.blocks:
-        n = 0
-        for s in b.statements:
-            n += 3 if isinstance(s, Cuboid) else 6 if isinstance(s, Attach) else 2 if isinstance(s, Squeeze) \
-                else 1 if isinstance(s, Translate) else 0
-        nums_per_block.append(n)
     lines = statement_lines(program)
     blocks, off = [], 0
-    for bi, b in enumerate(program.blocks):
-        blocks.append(_compile_block(b, off, lines[bi]))
-        off += nums_per_block[bi]
+    for b, block_lines in zip(program.blocks, lines):
+        code, off = _compile_block(b, off, block_lines)
+        blocks.append(code)
     comp = _Compiled(program, blocks, off)
     index = {b.name: i for i, b in enumerate(program.blocks)}
+    comp.leaf_slots = [[s for s in range(1, len(c.slots)) if _child_of(c, s, index)[0] is None] for c in blocks]
     # breadth-first instances; an instance = one placement of a block
     queue = [(0, -1, -1, None)]
     qi = 0
@@ -333,11 +327,9 @@ def parameter_names(program: Program) -> list[str]:
     """A readable name per entry of :func:`program_parameters`, e.g. ``'Program_1:3:attach.y2'``
     (block name, 0-based statement index in the block, statement and field)."""
     out = []
-    fields = {Cuboid: ("l", "h", "w"), Attach: ("x1", "y1", "z1", "x2", "y2", "z2"), Squeeze: ("u", "v"),
-              Translate: ("d",), Reflect: ()}
     for b in program.blocks:
         for i, s in enumerate(b.statements):
-            for f in fields[type(s)]:
+            for f in NUM_FIELDS[type(s)]:
                 out.append(f"{b.name}:{i}:{type(s).__name__.lower()}.{f}")
     return out
 
@@ -528,7 +520,6 @@ def _nearest_grid_points(p, d, a, pB, dB, aB, G):
 
 def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
     """Aligned cuboid with earlier records: grow towards B (the target point is ignored)."""
-    n = pos.shape[0]
     with torch.no_grad():
         cA = cuboid_corners(pos, dims, ax)
         cB = cuboid_corners(posB, dimsB, axB)
@@ -540,7 +531,6 @@ def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
         return pos, dims, ax
     p, d, a = pos[idx], dims[idx], ax[idx]
     pB, dB, aB = posB[idx], dimsB[idx], axB[idx]
-    m = idx.numel()
     G = _grid(pos.dtype, pos.device)
     with torch.no_grad():
         r, cl = _nearest_grid_points(p, d, a, pB, dB, aB, G)
@@ -649,7 +639,6 @@ def _run_blocks(codes: list[_BlockCode], offsets: list[int], flat: torch.Tensor)
     ax = torch.eye(3, dtype=dtype, device=device).repeat(nb, S, 1, 1)
     n_att = [sum(1 for o in c.ops if o[0] == "attach") for c in codes]
     rec = torch.zeros(nb, max(n_att + [1]), 3, 3, dtype=dtype, device=device)  # [src, tgt, g]
-    # shift block-local affine indices by their program offset
     T = max(len(c.steps) for c in codes)
     for t in range(T):
         groups: dict = {}
@@ -765,7 +754,7 @@ def _place(comps: list[_Compiled], block_base: list[int], flats: list[torch.Tens
     out = []
     dtype, device = pos.dtype, pos.device
     for comp, base, flat in zip(comps, block_base, flats):
-        root_dims = flat[torch.tensor(comp.blocks[0].root_idx, device=device)]
+        root_dims = flat[:3].clone()  # the root bbox line; a copy, not a view of the caller's params
         lines_pos, lines_dims, lines_ax, node, line = [], [], [], [], []
         placed = []  # per instance: (pos (S,3), dims (S,3), ax (S,3,3)) in world
         for inst, (bidx, parent, pslot, flip) in enumerate(comp.instances):
@@ -791,10 +780,9 @@ def _place(comps: list[_Compiled], block_base: list[int], flats: list[torch.Tens
             wa = la @ aax
             placed.append((wp, wd, wa))
         # leaves: BFS instance order, slots in dict order, bbox and sub-program parts excluded
-        index = {b.name: i for i, b in enumerate(comp.program.blocks)}
         for inst, (bidx, _, _, _) in enumerate(comp.instances):
             code = comp.blocks[bidx]
-            keep = [s for s in range(1, len(code.slots)) if _child_of(code, s, index)[0] is None]
+            keep = comp.leaf_slots[bidx]
             if not keep:
                 continue
             kk = torch.tensor(keep, device=device)
@@ -856,11 +844,7 @@ def execute_batch(programs: list[Program], dtype: torch.dtype = torch.float32, d
     zero = torch.zeros(1, dtype=dtype, device=device)
     flat = torch.cat(flats + [zero])  # index -1 -> the trailing 0
     pos, dims, ax = _run_blocks(codes, offsets, flat)
-    pstart, views = 0, []
-    for t in flats:
-        views.append(flat[pstart:pstart + t.shape[0]])
-        pstart += t.shape[0]
-    return _place(comps, block_base, views, pos, dims, ax)
+    return _place(comps, block_base, flats, pos, dims, ax)
 
 
 def execute(program: Program, dtype: torch.dtype = torch.float32, device=None,

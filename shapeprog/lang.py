@@ -50,6 +50,7 @@ from typing import Iterator, Union
 __all__ = [
     "AXES",
     "FACES",
+    "NUM_FIELDS",
     "Attach",
     "Block",
     "Cuboid",
@@ -152,6 +153,16 @@ class Translate:
 
 
 Statement = Union[Cuboid, Attach, Squeeze, Reflect, Translate]
+
+#: The continuous number fields of each statement type, in text order: the order of
+#: :func:`numbers`, :func:`replace_numbers` and the executor's parameter vector.
+NUM_FIELDS = {
+    Cuboid: ("l", "h", "w"),
+    Attach: ("x1", "y1", "z1", "x2", "y2", "z2"),
+    Squeeze: ("u", "v"),
+    Reflect: (),
+    Translate: ("d",),
+}
 
 
 @dataclass(frozen=True)
@@ -519,14 +530,9 @@ def replace_numbers(program: Program, values: Iterator[float]) -> Program:
     for b in program.blocks:
         stmts = []
         for s in b.statements:
-            if isinstance(s, Cuboid):
-                s = dataclasses.replace(s, l=next(it), h=next(it), w=next(it))
-            elif isinstance(s, Attach):
-                s = dataclasses.replace(s, **{k: next(it) for k in ("x1", "y1", "z1", "x2", "y2", "z2")})
-            elif isinstance(s, Squeeze):
-                s = dataclasses.replace(s, u=next(it), v=next(it))
-            elif isinstance(s, Translate):
-                s = dataclasses.replace(s, d=next(it))
+            fields = NUM_FIELDS[type(s)]
+            if fields:
+                s = dataclasses.replace(s, **{f: next(it) for f in fields})
             stmts.append(s)
         blocks.append(Block(b.name, tuple(stmts)))
     return Program(tuple(blocks), program.flat)
@@ -534,15 +540,4 @@ def replace_numbers(program: Program, values: Iterator[float]) -> Program:
 
 def numbers(program: Program) -> list[float]:
     """The continuous numbers of ``program`` in the order used by :func:`replace_numbers`."""
-    out: list[float] = []
-    for b in program.blocks:
-        for s in b.statements:
-            if isinstance(s, Cuboid):
-                out += [s.l, s.h, s.w]
-            elif isinstance(s, Attach):
-                out += [s.x1, s.y1, s.z1, s.x2, s.y2, s.z2]
-            elif isinstance(s, Squeeze):
-                out += [s.u, s.v]
-            elif isinstance(s, Translate):
-                out.append(s.d)
-    return out
+    return [getattr(s, f) for b in program.blocks for s in b.statements for f in NUM_FIELDS[type(s)]]
