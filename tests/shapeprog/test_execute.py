@@ -1,6 +1,5 @@
 """Executor tests: hand-computed programs per rule, invariants, gradients, corpus sample."""
 import math
-import random
 
 import pytest
 import torch
@@ -9,7 +8,6 @@ from shapeprog.execute import execute, execute_batch, parameter_names, program_p
 from shapeprog.lang import parse
 
 FACES = {"right": (0, 1.0), "left": (0, 0.0), "top": (1, 1.0), "bot": (1, 0.0), "front": (2, 1.0), "back": (2, 0.0)}
-OPP = {"right": "left", "left": "right", "top": "bot", "bot": "top", "front": "back", "back": "front"}
 
 
 def flat(*lines):
@@ -283,17 +281,6 @@ def test_redeclared_cuboid_keeps_position():
 
 # ----------------------------------------------------------------------------- gradients
 
-GRAD_PROGRAMS = {
-    "attach_second": HIER,
-    "squeeze_translate": "\n".join([
-        "bbox = Cuboid(1.2, 1.0, 0.9, True)", "cube0 = Cuboid(0.9, 0.1, 0.7, True)",
-        "cube1 = Cuboid(0.1, 0.3, 0.1, False)", "cube2 = Cuboid(0.05, 0.2, 0.05, True)",
-        "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.48, 0.93, 0.52)",
-        "squeeze(cube1, bbox, cube0, bot, 0.21, 0.33)",
-        "attach(cube2, cube0, 0.4, 1.0, 0.6, 0.3, 0.02, 0.2)",
-        "translate(cube2, X, 3, 0.45)", "reflect(cube1, Z)"]) + "\n",
-}
-
 
 def _aligned_grad_program():
     return "\n".join(["bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.9, 0.13, 0.8, True)",
@@ -305,8 +292,20 @@ def _aligned_grad_program():
 
 # Targets on the [0, 1] clamp bounds of reflect/translate are kinks (one-sided derivatives),
 # so the programs below keep them strictly inside.
-@pytest.mark.parametrize("text", [HIER, GRAD_PROGRAMS["squeeze_translate"], _aligned_grad_program()],
-                         ids=["hierarchy_second", "squeeze_translate_reflect", "aligned_growth"])
+GRAD_PROGRAMS = {
+    "hierarchy_second": HIER,
+    "squeeze_translate_reflect": "\n".join([
+        "bbox = Cuboid(1.2, 1.0, 0.9, True)", "cube0 = Cuboid(0.9, 0.1, 0.7, True)",
+        "cube1 = Cuboid(0.1, 0.3, 0.1, False)", "cube2 = Cuboid(0.05, 0.2, 0.05, True)",
+        "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.48, 0.93, 0.52)",
+        "squeeze(cube1, bbox, cube0, bot, 0.21, 0.33)",
+        "attach(cube2, cube0, 0.4, 1.0, 0.6, 0.3, 0.02, 0.2)",
+        "translate(cube2, X, 3, 0.45)", "reflect(cube1, Z)"]) + "\n",
+    "aligned_growth": _aligned_grad_program(),
+}
+
+
+@pytest.mark.parametrize("text", list(GRAD_PROGRAMS.values()), ids=list(GRAD_PROGRAMS))
 def test_gradcheck_all_parameters(text):
     prog = parse(text)
     x0 = program_parameters(prog, dtype=torch.float64).requires_grad_(True)

@@ -37,7 +37,7 @@ def test_fit_recovers_a_stretched_shape_and_writes_corpus_text():
     # the sub-program's bbox line keeps repeating its Program_1 line
     assert q.blocks[1].statements[0].l == q.root.statements[1].l
     assert q.blocks[1].statements[1].l > 0.62  # the table top widened towards 0.7
-    # attach coordinates stay in [0, 1]
+    # the squeeze's u, v stay in [0, 1]
     assert all(0.0 <= v <= 1.0 for v in (q.root.statements[4].u, q.root.statements[4].v))
 
 

@@ -1,4 +1,5 @@
 """Tests for shapeprog.io: reference OBJ layout, trimesh round trips, atomic writes."""
+import functools
 import os
 
 import numpy as np
@@ -7,15 +8,11 @@ import torch
 
 trimesh = pytest.importorskip("trimesh")
 
+import sa_testutil
 from shapeprog import io as sio
-from shapeprog.geometry import cuboid_corners
 from shapeprog.io import read_points, write_glb, write_obj, write_ply, write_points, write_png, write_voxels
 
-
-def boxes(centers, dims):
-    c = torch.as_tensor(centers, dtype=torch.float32).reshape(-1, 3)
-    d = torch.as_tensor(dims, dtype=torch.float32).reshape(-1, 3)
-    return cuboid_corners(c, d, torch.eye(3).expand(c.shape[0], 3, 3))
+boxes = functools.partial(sa_testutil.boxes, dtype=torch.float32)  # the reference precision
 
 
 ONE_CUBOID_OBJ = """v 1.0 2.0 3.0

@@ -1,4 +1,5 @@
 """Language tests: corpus round trip, located errors, the flat format."""
+import dataclasses
 import warnings
 
 import pytest
@@ -45,8 +46,8 @@ def test_ast_structure_and_round_trip():
     assert p.children(p.root) == [None, p.blocks[1], None]
     assert to_text(p) == GOOD and parse(to_text(p)) == p
     assert statement_lines(p) == [[1, 2, 3, 4, 5, 6, 7], [10, 11, 12]]
-    with pytest.raises(Exception):
-        p.blocks[0].statements[0].l = 3.0  # frozen
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        p.blocks[0].statements[0].l = 3.0
 
 
 def test_numbers_replace_and_rounding():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from shapeprog.geometry import cuboid_corners
+from sa_testutil import boxes
 from shapeprog.metrics import (
     adaptive_threshold,
     box_distances,
@@ -18,13 +18,6 @@ from shapeprog.metrics import (
     stability,
     voxel_iou,
 )
-
-
-def boxes(centers, dims, axes=None):
-    c = torch.as_tensor(centers, dtype=torch.float64).reshape(-1, 3)
-    d = torch.as_tensor(dims, dtype=torch.float64).reshape(-1, 3)
-    a = torch.eye(3, dtype=torch.float64).expand(c.shape[0], 3, 3) if axes is None else torch.as_tensor(axes, dtype=torch.float64)
-    return cuboid_corners(c, d, a)
 
 
 def rot_y(angle):

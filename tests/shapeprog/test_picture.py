@@ -3,14 +3,8 @@ import numpy as np
 import pytest
 import torch
 
-from shapeprog.geometry import cuboid_corners
+from sa_testutil import boxes
 from shapeprog.picture import PALETTE, part_colors, render_png
-
-
-def boxes(centers, dims):
-    c = torch.as_tensor(centers, dtype=torch.float64).reshape(-1, 3)
-    d = torch.as_tensor(dims, dtype=torch.float64).reshape(-1, 3)
-    return cuboid_corners(c, d, torch.eye(3, dtype=torch.float64).expand(c.shape[0], 3, 3))
 
 
 def chair():

@@ -4,15 +4,9 @@ import math
 import pytest
 import torch
 
+from sa_testutil import boxes
 from shapeprog.geometry import cuboid_corners
 from shapeprog.sampling import inside_cuboids, lattice_voxelize, sample_surface, triangle_areas, voxelize
-
-
-def boxes(centers, dims, axes=None, dtype=torch.float64):
-    c = torch.as_tensor(centers, dtype=dtype).reshape(-1, 3)
-    d = torch.as_tensor(dims, dtype=dtype).reshape(-1, 3)
-    a = torch.eye(3, dtype=dtype).expand(c.shape[0], 3, 3) if axes is None else torch.as_tensor(axes, dtype=dtype)
-    return cuboid_corners(c, d, a)
 
 
 def rotation(axis, angle, dtype=torch.float64):
