@@ -450,6 +450,15 @@ class StackMachine:
                 self._flat.index_copy_(0, f1, a)
         self.sp = torch.where(self.broken, torch.zeros_like(sp), sp + is_draw.long() - is_op.long())
 
+    def reorder(self, index: torch.Tensor) -> None:
+        """Make row ``i`` a copy of row ``index[i]`` (beam search keeps the parents' stacks)."""
+        index = index.to(self.sp.device).long()
+        if index.shape != self.sp.shape:
+            raise ValueError(f"index must have shape {tuple(self.sp.shape)}, got {tuple(index.shape)}")
+        rows = (index[:, None] * self.depth + torch.arange(self.depth, device=index.device)[None]).flatten()
+        self._flat.copy_(self._flat.index_select(0, rows))
+        self.sp, self.broken, self.stopped = self.sp[index], self.broken[index], self.stopped[index]
+
     def top(self, k: int) -> torch.Tensor:
         """(B, k, *C) packed: slot 0 = top of stack, empty slots zero."""
         slots = self.sp[:, None] - 1 - torch.arange(k, device=self.sp.device)[None, :]

@@ -1,0 +1,304 @@
+"""Decoding CSGNet / CSGNetStack: greedy, sampling and batched beam search (spec section (g)).
+
+All decoders work on a batch of targets at once. For CSGNetStack the predicted prefix of every row
+(every image × beam) is executed incrementally by one :class:`~csgnet.renderer.StackMachine`, and the
+top-K stack maps it holds are the encoder's extra input at the next step, as in the paper: an invalid
+prefix leaves that row's stack all zeros from then on; after ``$`` the row's stack is frozen.
+
+Two behaviours (``mode``):
+
+* ``"improved"`` (default): a row that emitted ``$`` is finished; it is no longer extended and keeps
+  its score, so finished and unfinished hypotheses compete by log-probability.
+* ``"reference"``: the published beam search: every row decodes ``max_len`` steps, ``$`` is fed back as
+  input and the scores of the tokens after it keep accumulating; programs are cut at the first ``$``.
+
+``constrained=True`` (off by default, so that decoding is the paper's unless asked) masks the tokens
+that would make the program impossible to finish validly within ``max_len`` tokens (an operator with
+fewer than two shapes on the stack, ``$`` unless exactly one shape is on it, a primitive when the
+remaining steps cannot reduce the stack any more), so every decoded program is valid.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from .lang import Program
+from .renderer import PAD_CODE, StackMachine, primitive_cache, unpack
+from .vocab import vocabulary
+
+__all__ = ["Decoded", "greedy", "beam_search", "sample", "Sampled"]
+
+_MODES = ("improved", "reference")
+
+
+@dataclass
+class Decoded:
+    """Decoded programs of ``N`` targets, ``k`` per target, best first.
+
+    Attributes:
+        tokens: ``(N, k, T)`` int64 token indices, ``$``-padded after each program.
+        lengths: ``(N, k)`` number of program tokens (before the first ``$``).
+        logprob: ``(N, k)`` the score the hypotheses were ranked by (sum of log-probabilities; ``-inf``
+            for a beam slot that never held a hypothesis).
+        valid: ``(N, k)`` bool, the program is valid (exactly one shape left, no underflow).
+        dim: 2 or 3.
+    """
+
+    tokens: torch.Tensor
+    lengths: torch.Tensor
+    logprob: torch.Tensor
+    valid: torch.Tensor
+    dim: int
+
+    @property
+    def k(self) -> int:
+        return self.tokens.shape[1]
+
+    def text(self, i: int, j: int = 0) -> str:
+        """Text of hypothesis ``j`` of target ``i`` (what the tokens say, valid or not)."""
+        n = int(self.lengths[i, j])
+        return vocabulary(self.dim).text(self.tokens[i, j, :n].tolist())
+
+    def texts(self) -> list[list[str]]:
+        return [[self.text(i, j) for j in range(self.k)] for i in range(self.tokens.shape[0])]
+
+    def program(self, i: int, j: int = 0) -> Program:
+        n = int(self.lengths[i, j])
+        return vocabulary(self.dim).decode(self.tokens[i, j, :n].tolist())
+
+    def flat_tokens(self) -> torch.Tensor:
+        """``(N * k, T)`` tokens with everything from the first ``$`` on set to ``$``."""
+        return self.tokens.reshape(-1, self.tokens.shape[-1])
+
+
+def _token_classes(dim: int, device) -> tuple[torch.Tensor, torch.Tensor, int]:
+    cache = primitive_cache(dim, device)
+    kinds = cache.kinds
+    return kinds < 6, (kinds >= 6) & (kinds <= 8), len(vocabulary(dim)) - 1
+
+
+class _Rows:
+    """Decoding state of ``B`` rows (targets repeated per beam): GRU state, previous token, stack."""
+
+    def __init__(self, model, targets: torch.Tensor, repeat: int, max_len: int):
+        cfg = model.config
+        self.model, self.dim, self.max_len = model, cfg.dim, max_len
+        self.device = targets.device
+        self.is_draw, self.is_op, self.stop = _token_classes(cfg.dim, self.device)
+        self.kinds = primitive_cache(cfg.dim, self.device).kinds
+        self.targets = targets.repeat_interleave(repeat, 0) if repeat > 1 else targets
+        B = self.targets.shape[0]
+        self.B = B
+        if cfg.stack:
+            self.machine = StackMachine(B, cfg.dim, max(max_len, cfg.stack_k), self.device)
+            self.features = None
+        else:
+            self.machine = None
+            f = model.encode(targets)
+            self.features = f.repeat_interleave(repeat, 0) if repeat > 1 else f
+        self.h = None
+        self.prev = torch.full((B,), model.start, dtype=torch.long, device=self.device)
+        self.depth = torch.zeros(B, dtype=torch.long, device=self.device)
+        self.broken = torch.zeros(B, dtype=torch.bool, device=self.device)
+        self.done = torch.zeros(B, dtype=torch.bool, device=self.device)
+        self.length = torch.zeros(B, dtype=torch.long, device=self.device)
+        self.history: list[torch.Tensor] = []
+
+    def logits(self) -> tuple[torch.Tensor, torch.Tensor]:
+        if self.machine is not None:
+            stack = unpack(self.machine.top(self.model.config.stack_k), self.dim)
+            feats = self.model.encode(self.targets, stack)
+        else:
+            feats = self.features
+        return self.model.step(feats, self.prev, self.h)
+
+    def mask(self, logp: torch.Tensor, t: int, constrained: bool, finish: bool) -> torch.Tensor:
+        """Apply the validity constraint and the finished-row rule to log-probabilities ``(B, V)``."""
+        neg = torch.tensor(float("-inf"), dtype=logp.dtype, device=logp.device)
+        if constrained:
+            remaining = self.max_len - t  # tokens left, this one included
+            d = self.depth[:, None]
+            ok = torch.where(self.is_draw[None], d <= remaining - 1,
+                             torch.where(self.is_op[None], d >= 2, d == 1))
+            logp = torch.where(ok, logp, neg)
+        if finish:
+            only_stop = torch.full_like(logp, float("-inf"))
+            only_stop[:, self.stop] = 0.0
+            logp = torch.where(self.done[:, None], only_stop, logp)
+        return logp
+
+    def reorder(self, parent: torch.Tensor) -> None:
+        self.h = self.h_new.index_select(0, parent)
+        for name in ("prev", "depth", "broken", "done", "length", "targets"):
+            setattr(self, name, getattr(self, name).index_select(0, parent))
+        if self.features is not None:
+            self.features = self.features.index_select(0, parent)
+        if self.machine is not None:
+            self.machine.reorder(parent)
+        self.history = [h.index_select(0, parent) for h in self.history]
+
+    def advance(self, tokens: torch.Tensor) -> None:
+        """Append one token per row (rows already finished ignore it)."""
+        kinds = self.kinds[tokens]
+        live = ~self.done
+        stop = tokens == self.stop
+        self.length += (live & ~stop).long()
+        draw, op = self.is_draw[tokens] & live, self.is_op[tokens] & live
+        self.broken |= op & (self.depth < 2)
+        self.depth = self.depth + draw.long() - (op & ~self.broken).long()
+        newly = live & stop
+        if self.machine is not None:
+            self.machine.step(torch.where(live, kinds, torch.full_like(kinds, PAD_CODE)), token_ids=tokens)
+        self.done |= newly
+        self.history.append(torch.where(live, tokens, torch.full_like(tokens, self.stop)))
+        self.prev = tokens
+
+    @property
+    def valid(self) -> torch.Tensor:
+        return ~self.broken & (self.depth == 1)
+
+    def tokens(self) -> torch.Tensor:
+        if not self.history:
+            return torch.empty((self.B, 0), dtype=torch.long, device=self.device)
+        return torch.stack(self.history, dim=1)
+
+
+def _check(model, targets, max_len, mode):
+    if mode not in _MODES:
+        raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
+    targets = torch.as_tensor(targets)
+    want = (64,) * model.config.dim
+    if targets.dim() == model.config.dim:
+        targets = targets[None]
+    if tuple(targets.shape[1:]) != want:
+        raise ValueError(f"targets must be (N, {', '.join(map(str, want))}), got {tuple(targets.shape)}")
+    dev = next(model.parameters()).device
+    return targets.to(dev).bool(), int(max_len or model.config.max_len)
+
+
+@torch.no_grad()
+def beam_search(model, targets, width: int = 10, max_len: int | None = None, mode: str = "improved",
+                constrained: bool = False) -> Decoded:
+    """Batched beam search: ``N`` targets × ``width`` beams decoded together.
+
+    Hypotheses are ranked by the sum of token log-probabilities (the reference multiplies
+    probabilities, the same order). Step 1 expands only the START row of each target.
+
+    Returns:
+        :class:`Decoded` with ``k = width`` hypotheses per target, most likely first.
+    """
+    targets, T = _check(model, targets, max_len, mode)
+    if width < 1:
+        raise ValueError(f"width must be >= 1, got {width}")
+    N, w = targets.shape[0], int(width)
+    rows = _Rows(model, targets, w, T)
+    V = model.config.vocab_size
+    score = torch.full((N, w), float("-inf"), device=targets.device)
+    score[:, 0] = 0.0
+    offsets = (torch.arange(N, device=targets.device) * w)[:, None]
+    finish = mode == "improved"
+    for t in range(T):
+        logits, rows.h_new = rows.logits()
+        logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+        cand = (score.reshape(-1, 1) + logp).view(N, w * V)
+        score, idx = cand.topk(w, dim=1)
+        parent = (idx // V + offsets).flatten()
+        tok = (idx % V).flatten()
+        rows.reorder(parent)
+        rows.advance(tok)
+        if finish and bool(rows.done.all()):
+            break
+    tokens = rows.tokens().view(N, w, -1)
+    return Decoded(tokens, rows.length.view(N, w), score, rows.valid.view(N, w) & torch.isfinite(score),
+                   model.config.dim)
+
+
+@torch.no_grad()
+def greedy(model, targets, max_len: int | None = None, mode: str = "improved", constrained: bool = False
+           ) -> Decoded:
+    """Arg-max decoding (what the reference validates with). ``k = 1``."""
+    targets, T = _check(model, targets, max_len, mode)
+    N = targets.shape[0]
+    rows = _Rows(model, targets, 1, T)
+    score = torch.zeros(N, device=targets.device)
+    finish = mode == "improved"
+    for t in range(T):
+        logits, rows.h = rows.logits()
+        logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+        lp, tok = logp.max(dim=1)
+        score = score + lp
+        rows.advance(tok)
+        if finish and bool(rows.done.all()):
+            break
+    return Decoded(rows.tokens()[:, None], rows.length[:, None], score[:, None], rows.valid[:, None],
+                   model.config.dim)
+
+
+@dataclass
+class Sampled:
+    """Programs sampled for policy-gradient training.
+
+    Attributes:
+        tokens: ``(N, T)`` sampled tokens (``$`` after the end).
+        lengths: ``(N,)`` program tokens before the first ``$``.
+        log_probs: ``(N, T)`` log-probability of each sampled token, differentiable; zero after the
+            counted steps.
+        counted: ``(N, T)`` bool, the steps whose log-probabilities count in the REINFORCE loss: the
+            program's tokens and its ``$`` (all ``T`` steps if no ``$`` was sampled).
+        entropy: ``(N, T)`` policy entropy at each counted step (zero elsewhere).
+        valid: ``(N,)`` bool.
+        dim: 2 or 3.
+    """
+
+    tokens: torch.Tensor
+    lengths: torch.Tensor
+    log_probs: torch.Tensor
+    counted: torch.Tensor
+    entropy: torch.Tensor
+    valid: torch.Tensor
+    dim: int
+
+    def texts(self) -> list[str]:
+        vocab = vocabulary(self.dim)
+        return [vocab.text(self.tokens[i, : int(n)].tolist()) for i, n in enumerate(self.lengths)]
+
+
+def sample(model, targets, max_len: int | None = None, generator: torch.Generator | None = None,
+           constrained: bool = False, temperature: float = 1.0) -> Sampled:
+    """Sample one program per target from the model's softmax, keeping the graph for REINFORCE.
+
+    Runs in whatever mode the model is in (the reference samples in train mode, dropout active) and
+    with gradients if they are enabled. The stack of CSGNetStack comes from executing the sampled prefix.
+    """
+    targets, T = _check(model, targets, max_len, "improved")
+    rows = _Rows(model, targets, 1, T)
+    lps, ents, counted = [], [], []
+    for t in range(T):
+        logits, rows.h = rows.logits()
+        logp = rows.mask(F.log_softmax(logits.float() / temperature, dim=-1), t, constrained, finish=False)
+        probs = logp.exp()
+        tok = torch.multinomial(probs.detach(), 1, generator=generator).squeeze(1)
+        live = ~rows.done
+        counted.append(live)
+        lps.append(torch.where(live, logp.gather(1, tok[:, None]).squeeze(1), torch.zeros((), device=logp.device)))
+        ent = -(probs * torch.where(probs > 0, logp, torch.zeros_like(logp))).sum(1)
+        ents.append(torch.where(live, ent, torch.zeros_like(ent)))
+        rows.advance(tok)
+        if bool(rows.done.all()):
+            break
+    return Sampled(rows.tokens(), rows.length, torch.stack(lps, 1), torch.stack(counted, 1),
+                   torch.stack(ents, 1), rows.valid, model.config.dim)
+
+
+def decode(model, targets, beam: int = 1, **kwargs) -> Decoded:
+    """Greedy for ``beam == 1``, else :func:`beam_search`."""
+    return greedy(model, targets, **kwargs) if beam <= 1 else beam_search(model, targets, beam, **kwargs)
+
+
+def best_of(decoded: Decoded, scores: np.ndarray, higher_is_better: bool) -> np.ndarray:
+    """Index of the best hypothesis per target by an external score ``(N, k)`` (the paper's oracle)."""
+    s = np.where(np.isnan(scores), -np.inf if higher_is_better else np.inf, scores)
+    return s.argmax(1) if higher_is_better else s.argmin(1)

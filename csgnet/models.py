@@ -1,0 +1,273 @@
+"""CSGNet and CSGNetStack as plain PyTorch modules (``../specs/csg.md`` section (d)).
+
+One class, :class:`CSGNet`, covers both models: with ``config.stack`` the encoder sees the target
+concatenated with the top-K maps of the execution stack at every step (CSGNetStack); without it the
+target is encoded once (CSGNet). The modules know nothing about training loops, data or decoding
+(:mod:`csgnet.decode`, :mod:`csgnet.training`).
+
+Sizes are configuration (:class:`ModelConfig`); :func:`preset` gives the ``paper`` sizes (parameter
+counts equal to the reference's: 31,037,840 for 2D CSGNet, 36,562,243 for 3D CSGNet) and a ``small``
+size that trains usefully on a 2-core CPU.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+
+import torch
+from torch import nn
+import torch.nn.functional as F
+
+from .vocab import vocabulary
+
+__all__ = ["ModelConfig", "preset", "PRESETS", "CSGNet", "Encoder2D", "Encoder3D", "default_stack_k"]
+
+
+def default_stack_k(max_len: int) -> int:
+    """The deepest stack a valid program of ``max_len`` tokens can reach: (max_len + 1) // 2."""
+    return max(1, (int(max_len) + 1) // 2)
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Sizes of a CSGNet / CSGNetStack.
+
+    Attributes:
+        dim: 2 or 3.
+        stack: CSGNetStack (encoder input = target + top-K stack maps at every step) or CSGNet.
+        stack_k: K, the number of stack maps (default: :func:`default_stack_k` of ``max_len``).
+        max_len: longest program the model decodes (13 in 2D, 7 in 3D).
+        hidden: GRU hidden size (paper: 2048 in 2D, 1500 in 3D).
+        embed: previous-token embedding size (128).
+        channels: encoder conv channels, one block each (2D paper: 8, 16, 32; 3D: 32, 64, 128, 256, 256).
+        enc_dropout: dropout inside the encoder (2D: after the first blocks' ReLU; 3D: every block).
+        dropout: dropout on the encoder feature, the GRU output and between the two head layers.
+        input_pool: max-pool the 64-sided input (target and stack maps) by this factor before the encoder
+            (1 = none, as the paper; 2 makes a CPU-sized CSGNetStack four times cheaper).
+    """
+
+    dim: int = 2
+    stack: bool = False
+    stack_k: int | None = None
+    max_len: int = 13
+    hidden: int = 2048
+    embed: int = 128
+    channels: tuple[int, ...] = (8, 16, 32)
+    enc_dropout: float = 0.2
+    dropout: float = 0.5
+    input_pool: int = 1
+
+    def __post_init__(self):
+        if self.dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, got {self.dim!r}")
+        object.__setattr__(self, "channels", tuple(int(c) for c in self.channels))
+        if not self.channels:
+            raise ValueError("channels must name at least one encoder block")
+        if self.stack_k is None:
+            object.__setattr__(self, "stack_k", default_stack_k(self.max_len))
+        if self.stack_k < 1 or self.max_len < 1 or self.hidden < 1 or self.input_pool < 1:
+            raise ValueError(f"stack_k, max_len, hidden and input_pool must be positive: {self}")
+        side = 64 // self.input_pool
+        for _ in self.channels:
+            side = (side + 1) // 2 if self.dim == 3 else side // 2
+        if side < 1:
+            raise ValueError(f"{len(self.channels)} encoder blocks leave no spatial extent of a 64-sided input")
+
+    @property
+    def in_channels(self) -> int:
+        return 1 + (self.stack_k if self.stack else 0)
+
+    @property
+    def feature_size(self) -> int:
+        """Length of the flattened encoder output (2048 for both paper encoders)."""
+        side = 64 // self.input_pool
+        for _ in self.channels:
+            side = (side + 1) // 2 if self.dim == 3 else side // 2
+        return self.channels[-1] * side ** self.dim
+
+    @property
+    def vocab_size(self) -> int:
+        return len(vocabulary(self.dim))
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["channels"] = list(self.channels)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ModelConfig":
+        names = {f.name for f in fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"unknown model config keys {sorted(unknown)}")
+        return cls(**d)
+
+
+PRESETS: dict[tuple[str, int], dict] = {
+    # the reference's sizes and the dropout values in effect in its scripts (spec (d))
+    ("paper", 2): dict(hidden=2048, channels=(8, 16, 32), enc_dropout=0.2, dropout=0.5, max_len=13),
+    ("paper", 3): dict(hidden=1500, channels=(32, 64, 128, 256, 256), enc_dropout=0.2, dropout=0.2, max_len=7),
+    # trains on a 2-core CPU in tens of minutes; the shipped weights use it
+    ("small", 2): dict(hidden=256, channels=(8, 16, 16), enc_dropout=0.0, dropout=0.1, max_len=13),
+    ("small", 3): dict(hidden=256, channels=(8, 16, 32, 32), enc_dropout=0.0, dropout=0.1, max_len=7, input_pool=2),
+}
+
+
+def preset(name: str, dim: int, stack: bool = False, **overrides) -> ModelConfig:
+    """A named size (``"paper"`` or ``"small"``) for ``dim``, with any field overridden."""
+    key = (name, int(dim))
+    if key not in PRESETS:
+        raise ValueError(f"unknown preset {name!r} for {dim}D; known: {sorted({k[0] for k in PRESETS})}")
+    return ModelConfig(dim=int(dim), stack=bool(stack), **{**PRESETS[key], **overrides})
+
+
+class Encoder2D(nn.Module):
+    """conv 3×3 (pad 1) → ReLU → [Dropout] → MaxPool 2, per block; no dropout in the last block."""
+
+    def __init__(self, in_channels: int, channels: tuple[int, ...], dropout: float, input_pool: int = 1):
+        super().__init__()
+        self.input_pool = int(input_pool)
+        layers: list[nn.Module] = []
+        c_in = in_channels
+        for i, c in enumerate(channels):
+            layers += [nn.Conv2d(c_in, c, 3, padding=1), nn.ReLU()]
+            if i < len(channels) - 1:
+                layers.append(nn.Dropout(dropout))
+            layers.append(nn.MaxPool2d(2))
+            c_in = c
+        self.net = nn.Sequential(*layers)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.input_pool > 1:
+            x = F.max_pool2d(x, self.input_pool)
+        return self.net(x).flatten(1)  # channel-major (C, H, W)
+
+
+class Encoder3D(nn.Module):
+    """conv3d 4 (stride 1, pad 2) → ReLU → MaxPool3d 2 → Dropout → BatchNorm3d, per block."""
+
+    def __init__(self, in_channels: int, channels: tuple[int, ...], dropout: float, input_pool: int = 1):
+        super().__init__()
+        self.input_pool = int(input_pool)
+        layers: list[nn.Module] = []
+        c_in = in_channels
+        for c in channels:
+            layers += [nn.Conv3d(c_in, c, 4, padding=2), nn.ReLU(), nn.MaxPool3d(2), nn.Dropout(dropout),
+                       nn.BatchNorm3d(c)]
+            c_in = c
+        self.net = nn.Sequential(*layers)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.input_pool > 1:
+            x = F.max_pool3d(x, self.input_pool)
+        return self.net(x).flatten(1)
+
+
+class CSGNet(nn.Module):
+    """CNN encoder + previous-token embedding + one-layer GRU + two fully connected layers.
+
+    Token convention (spec (a)): outputs are the ``V`` vocabulary entries (``$`` last); the input
+    one-hot has ``V + 1`` entries, the extra one (index ``V``) being START. The input embedding is the
+    spec's ``Linear(V + 1 → 128)`` applied to a one-hot vector, stored as an embedding table plus a bias
+    (the same parameters, without materialising one-hot vectors).
+
+    Shapes: targets are ``(B, 64, 64)`` or ``(B, 64, 64, 64)`` (bool or float); stack maps are
+    ``(B, K, 64, 64[, 64])``.
+    """
+
+    def __init__(self, config: ModelConfig):
+        super().__init__()
+        self.config = config
+        V = config.vocab_size
+        if config.dim == 2:
+            self.encoder = Encoder2D(config.in_channels, config.channels, config.enc_dropout, config.input_pool)
+        else:
+            self.encoder = Encoder3D(config.in_channels, config.channels, config.enc_dropout, config.input_pool)
+        self.token_embed = nn.Embedding(V + 1, config.embed)
+        self.token_bias = nn.Parameter(torch.empty(config.embed))
+        bound = 1.0 / math.sqrt(V + 1)  # nn.Linear's default initialisation for fan_in V + 1
+        nn.init.uniform_(self.token_embed.weight, -bound, bound)
+        nn.init.uniform_(self.token_bias, -bound, bound)
+        self.feature_drop = nn.Dropout(config.dropout)
+        self.gru = nn.GRU(config.feature_size + config.embed, config.hidden, batch_first=True)
+        self.head = nn.Sequential(
+            nn.Dropout(config.dropout), nn.Linear(config.hidden, config.hidden), nn.ReLU(),
+            nn.Dropout(config.dropout), nn.Linear(config.hidden, V))
+
+    # ------------------------------------------------------------------------------------------
+    @property
+    def start(self) -> int:
+        """Index of the START input symbol (= vocabulary size)."""
+        return self.config.vocab_size
+
+    @property
+    def stop(self) -> int:
+        return self.config.vocab_size - 1
+
+    def _check_target(self, target: torch.Tensor) -> None:
+        want = (64,) * self.config.dim
+        if target.dim() != self.config.dim + 1 or tuple(target.shape[1:]) != want:
+            raise ValueError(f"targets must be (B, {', '.join(map(str, want))}), got {tuple(target.shape)}")
+
+    def encode(self, target: torch.Tensor, stack: torch.Tensor | None = None) -> torch.Tensor:
+        """Encoder features ``(B, F)`` of targets and, for CSGNetStack, the current stack maps ``(B, K, ...)``."""
+        self._check_target(target)
+        x = target[:, None].float()
+        if self.config.stack:
+            if stack is None:
+                raise ValueError("CSGNetStack needs the stack maps")
+            if stack.shape[1] != self.config.stack_k or stack.shape[2:] != target.shape[1:]:
+                raise ValueError(f"stack must be (B, {self.config.stack_k}, {', '.join(map(str, target.shape[1:]))}),"
+                                 f" got {tuple(stack.shape)}")
+            x = torch.cat([x, stack.float()], dim=1)
+        return self.encoder(x)
+
+    def embed(self, tokens: torch.Tensor) -> torch.Tensor:
+        return F.relu(self.token_embed(tokens) + self.token_bias)
+
+    def forward(self, target: torch.Tensor, tokens_in: torch.Tensor, stack: torch.Tensor | None = None
+                ) -> torch.Tensor:
+        """Teacher-forced logits.
+
+        Args:
+            target: ``(B, 64, 64[, 64])``.
+            tokens_in: ``(B, T)`` input tokens, START first.
+            stack: CSGNetStack only, ``(T, B, K, 64, 64[, 64])``: the stack after 0..T-1 tokens (the
+                renderer's :func:`~csgnet.renderer.stack_trace`, slot 0 = top).
+
+        Returns:
+            ``(B, T, V)`` unnormalised scores (``log_softmax`` gives the spec's output).
+        """
+        self._check_target(target)
+        B, T = tokens_in.shape
+        if self.config.stack:
+            if stack is None or stack.shape[:2] != (T, B):
+                raise ValueError(f"CSGNetStack needs stack maps (T={T}, B={B}, K, ...), "
+                                 f"got {None if stack is None else tuple(stack.shape)}")
+            tgt = target[None].expand((T,) + tuple(target.shape))
+            feats = self.encode(tgt.reshape((T * B,) + tuple(target.shape[1:])),
+                                stack.reshape((T * B,) + tuple(stack.shape[2:])))
+            feats = feats.view(T, B, -1).transpose(0, 1)
+        else:
+            feats = self.encode(target)[:, None].expand(B, T, -1)
+        x = torch.cat([self.feature_drop(feats), self.embed(tokens_in)], dim=-1)
+        out, _ = self.gru(x)
+        return self.head(out)
+
+    def step(self, features: torch.Tensor, tokens: torch.Tensor, hidden: torch.Tensor | None
+             ) -> tuple[torch.Tensor, torch.Tensor]:
+        """One decoding step: encoder ``features (B, F)``, previous ``tokens (B,)`` and GRU state
+        ``hidden (B, H)`` (None at the start) → ``(logits (B, V), new hidden (B, H))``."""
+        x = torch.cat([self.feature_drop(features), self.embed(tokens)], dim=-1)[:, None]
+        out, h = self.gru(x, None if hidden is None else hidden[None].contiguous())
+        return self.head(out[:, 0]), h[0]
+
+    def num_parameters(self) -> int:
+        return sum(p.numel() for p in self.parameters())
+
+
+def build(config: ModelConfig | dict) -> CSGNet:
+    """A model from a :class:`ModelConfig` or its dict form."""
+    if isinstance(config, dict):
+        config = ModelConfig.from_dict(config)
+    return CSGNet(config)
