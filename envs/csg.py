@@ -1,0 +1,554 @@
+"""CSG program synthesis as a Gymnasium environment: write a postfix program, one token per step.
+
+``CSG2D-v0`` / ``CSG3D-v0`` (:class:`CSGEnv`) and their batched twin :class:`CSGVectorEnv` (what
+``gymnasium.make_vec("CSG2D-v0", num_envs=N)`` builds), which steps every episode of the batch through
+one :class:`csgnet.renderer.StackMachine` and scores every finished episode with one reward call.
+
+Episode
+    :meth:`reset` draws a target shape from the target source (:mod:`envs.targets`; synthetic programs by
+    default) with the environment's ``np_random``. Each step appends one token of the CSGNet vocabulary
+    (:func:`csgnet.vocabulary`) to the program and executes it on the stack. The episode ends when the
+    agent emits the stop token ``$``, when the program reaches ``max_length`` tokens (13 in 2D, 7 in 3D by
+    default; the program is then judged as it stands), or, with ``invalid_action="terminate"`` (the
+    default), at the first token after which no valid program can be completed within ``max_length``:
+    an operator with fewer than two shapes on the stack, ``$`` with other than one shape on the stack, or
+    a draw that leaves more shapes than the remaining tokens can combine. Such an episode gets the
+    invalid reward at once, since no continuation could earn more. With ``invalid_action="continue"``
+    the episode runs on to ``$`` or ``max_length`` as in the reference's REINFORCE sampling, and the
+    invalid program gets the invalid reward then. Every end is a termination (the program is finished
+    and scored), never a truncation; nothing is truncated by a time limit.
+
+Action space
+    ``Discrete(400)`` in 2D, ``Discrete(6635)`` in 3D: a vocabulary index. Primitives come first, then
+    ``+``, ``*``, ``-`` and ``$`` (index 399 / 6634). ``info["action_mask"]`` (``(V,) int8``) marks the
+    tokens that keep the program completable (all zero once the episode has ended); :meth:`action_masks`
+    returns it as bool.
+
+Observation space
+    A ``Dict``:
+
+    * ``"target"``: ``Box(0, 1, (64, 64), bool)`` (2D) or ``(64, 64, 64)`` (3D), the target shape.
+    * ``"stack"``: ``Box(0, 1, (K, 64, 64[, 64]), bool)``, the top ``K`` stack slots after the tokens so
+      far (slot 0 is the top; empty slots and every slot after a stack underflow are all False), exactly
+      :func:`csgnet.renderer.stack_trace` of the same tokens. ``K = stack_size`` defaults to
+      ``(max_length + 1) // 2``, the deepest stack a completable program can reach.
+    * ``"steps"``: ``Discrete(max_length + 1)``, tokens written so far (omitted with ``observe_steps=False``).
+
+Reward
+    0 on every step but the last. At the end:
+
+    * ``reward="chamfer"`` (2D default): :func:`csgnet.metrics.reward`, ``clip(1 - CD / (64 sqrt 2), 0, 1)
+      ** gamma`` with the reference's edge chamfer distance CD and ``gamma = 20``; a perfect program
+      scores 1.
+    * ``reward="iou"`` (3D default, also available in 2D): ``IoU ** gamma`` with
+      ``IoU = |P and T| / |P or T|`` (``gamma`` defaults to 1). The specification's chamfer reward is
+      defined on 2D images only; IoU is the 3D evaluation measure. The ``"union"`` denominator (not the
+      evaluation's ``|P or T| + 1``) is used so that a perfect program scores exactly 1, like the 2D
+      reward.
+    * An invalid program, and (chamfer, ``invalid_reward="zero"``) an empty rendering, gets 0, as the
+      paper states. ``invalid_reward="reference"`` gives the reference code's value instead: the reward
+      of chamfer distance 16, 0.0204 for gamma 20; for the IoU reward the reference value is 0 too.
+
+    The end-of-episode info holds ``"program"`` (text), ``"valid"`` and ``"iou"``.
+
+Rendering
+    ``render_mode="rgb_array"``: an RGB frame with the target (grey) beside the current shape (blue): the
+    top of the stack during the episode, the program's result once it has ended. 3D volumes are drawn
+    as depth-shaded views along their third axis. Each pixel becomes a ``render_scale`` square.
+
+Arguments (both classes)
+    dim (2 or 3), targets (see :func:`envs.targets.as_target_source`), max_length, stack_size, reward,
+    gamma, invalid_reward, invalid_action, observe_steps, render_mode, render_scale, device (torch device
+    of the stack machine; CPU by default).
+
+Versions
+    v0: first version.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import VectorEnv
+from gymnasium.vector.utils import batch_space
+from gymnasium.vector.vector_env import AutoresetMode
+
+from csgnet import metrics
+from csgnet.renderer import StackMachine, pack, popcount, primitive_cache, unpack
+from csgnet.vocab import PAD_CODE, vocabulary
+
+from .targets import Target, as_target_source
+
+__all__ = ["CSGEnv", "CSGVectorEnv", "CSGConfig"]
+
+SIZE = 64
+REWARDS = ("chamfer", "iou")
+INVALID_REWARDS = ("zero", "reference")
+INVALID_ACTIONS = ("terminate", "continue")
+
+_TARGET_GREY = np.array([70, 70, 70], dtype=np.float64)
+_SHAPE_BLUE = np.array([31, 119, 180], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class CSGConfig:
+    """The validated settings of a CSG environment (see the module docstring)."""
+
+    dim: int
+    max_length: int
+    stack_size: int
+    reward: str
+    gamma: float
+    invalid_reward: str
+    invalid_action: str
+    observe_steps: bool
+    render_scale: int
+
+    @classmethod
+    def build(cls, dim=2, max_length=None, stack_size=None, reward=None, gamma=None, invalid_reward="zero",
+              invalid_action="terminate", observe_steps=True, render_scale=4) -> "CSGConfig":
+        if dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+        if max_length is None:
+            max_length = 13 if dim == 2 else 7
+        if isinstance(max_length, bool) or not isinstance(max_length, (int, np.integer)) or max_length < 1:
+            raise ValueError(f"max_length must be a positive int, got {max_length!r}")
+        if stack_size is None:
+            stack_size = (int(max_length) + 1) // 2
+        if isinstance(stack_size, bool) or not isinstance(stack_size, (int, np.integer)) or stack_size < 1:
+            raise ValueError(f"stack_size must be a positive int, got {stack_size!r}")
+        if reward is None:
+            reward = "chamfer" if dim == 2 else "iou"
+        if reward not in REWARDS:
+            raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
+        if reward == "chamfer" and dim == 3:
+            raise ValueError("the chamfer reward is defined on 2D images only; use reward='iou' in 3D")
+        if gamma is None:
+            gamma = 20.0 if reward == "chamfer" else 1.0
+        if not (isinstance(gamma, (int, float, np.number)) and np.isfinite(gamma) and gamma > 0):
+            raise ValueError(f"gamma must be a positive number, got {gamma!r}")
+        if invalid_reward not in INVALID_REWARDS:
+            raise ValueError(f"invalid_reward must be one of {INVALID_REWARDS}, got {invalid_reward!r}")
+        if invalid_action not in INVALID_ACTIONS:
+            raise ValueError(f"invalid_action must be one of {INVALID_ACTIONS}, got {invalid_action!r}")
+        if isinstance(render_scale, bool) or not isinstance(render_scale, (int, np.integer)) or render_scale < 1:
+            raise ValueError(f"render_scale must be a positive int, got {render_scale!r}")
+        return cls(int(dim), int(max_length), int(stack_size), reward, float(gamma), invalid_reward,
+                   invalid_action, bool(observe_steps), int(render_scale))
+
+    @property
+    def canvas(self) -> tuple[int, ...]:
+        return (SIZE,) * self.dim
+
+    def observation_space(self) -> spaces.Dict:
+        obs = {
+            "target": spaces.Box(0, 1, self.canvas, dtype=np.bool_),
+            "stack": spaces.Box(0, 1, (self.stack_size,) + self.canvas, dtype=np.bool_),
+        }
+        if self.observe_steps:
+            obs["steps"] = spaces.Discrete(self.max_length + 1)
+        return spaces.Dict(obs)
+
+
+class _Episodes:
+    """A batch of ``n`` CSG episodes in lock step; the one implementation behind both environments.
+
+    The program state lives in one :class:`StackMachine` (``n`` programs); the validity automaton
+    (stack depth, tokens written) in NumPy arrays.
+    """
+
+    def __init__(self, n: int, cfg: CSGConfig, source, device=None):
+        self.n, self.cfg, self.source = n, cfg, source
+        self.device = torch.device("cpu" if device is None else device)
+        vocab = vocabulary(cfg.dim)
+        self.vocab = vocab
+        self.V = len(vocab)
+        self.stop = vocab.stop
+        self.first_op = self.V - 4  # + * - then $
+        self.kind_of = primitive_cache(cfg.dim, self.device).kinds  # (V,) int64 on the device
+        self.machine = StackMachine(n, cfg.dim, cfg.max_length, self.device)
+        self.tokens = np.full((n, cfg.max_length), self.stop, dtype=np.int64)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.depth = np.zeros(n, dtype=np.int64)
+        self.invalid = np.zeros(n, dtype=bool)  # an illegal token was written (continue mode)
+        self.done = np.zeros(n, dtype=bool)
+        self.target = np.zeros((n,) + cfg.canvas, dtype=bool)
+        self.target_words = torch.zeros((n,) + cfg.canvas[:-1], dtype=torch.int64, device=self.device)
+
+    # -------------------------------------------------------------------------------------------
+    def begin(self, rows: np.ndarray, targets: list[Target]) -> None:
+        """Start new episodes in ``rows`` (int indices) with the given targets."""
+        if len(rows) == 0:
+            return
+        shapes = np.stack([t.shape for t in targets])
+        if shapes.shape[1:] != self.cfg.canvas or shapes.dtype != np.bool_:
+            raise ValueError(f"the target source returned shapes {shapes.shape[1:]} {shapes.dtype}, "
+                             f"expected {self.cfg.canvas} bool")
+        self.target[rows] = shapes
+        idx = torch.as_tensor(rows, dtype=torch.int64, device=self.device)
+        self.target_words[idx] = pack(shapes).to(self.device)
+        self.tokens[rows] = self.stop
+        self.steps[rows] = 0
+        self.depth[rows] = 0
+        self.invalid[rows] = False
+        self.done[rows] = False
+        m = self.machine
+        m.sp[idx] = 0
+        m.broken[idx] = False
+        m.stopped[idx] = False
+
+    def masks(self) -> np.ndarray:
+        """``(n, V) bool``: tokens after which a valid program can still be completed."""
+        L = self.cfg.max_length
+        live = ~self.done & ~self.invalid
+        draw = live & (self.depth <= L - self.steps - 1)
+        op = live & (self.depth >= 2)
+        stop = live & (self.depth == 1)
+        out = np.empty((self.n, self.V), dtype=bool)
+        out[:, : self.first_op] = draw[:, None]
+        out[:, self.first_op: self.stop] = op[:, None]
+        out[:, self.stop] = stop
+        return out
+
+    def act(self, rows: np.ndarray, actions: np.ndarray):
+        """Apply ``actions[i]`` to episode ``rows[i]``.
+
+        Rows not listed get a stop code in the stack machine and must be restarted with :meth:`begin`
+        before they act again (the vector environment restarts exactly those rows).
+
+        Returns:
+            ended ``(len(rows),) bool``, rewards ``(len(rows),) float64`` and, for the ended rows (in
+            order), ``valid (m,) bool``, ``iou (m,) float64``.
+        """
+        cfg = self.cfg
+        L = cfg.max_length
+        a = np.asarray(actions, dtype=np.int64).reshape(-1)
+        if a.shape[0] != len(rows):
+            raise ValueError(f"expected {len(rows)} actions, got {a.shape[0]}")
+        bad = (a < 0) | (a >= self.V)
+        if bad.any():
+            raise ValueError(f"actions must be token indices in [0, {self.V}) of the {cfg.dim}D vocabulary, "
+                             f"got {a[bad][:5].tolist()}")
+        if self.done[rows].any():
+            raise RuntimeError("step() called on an episode that has ended; call reset() first")
+        d, t = self.depth[rows], self.steps[rows]
+        is_stop = a == self.stop
+        is_op = (a >= self.first_op) & ~is_stop
+        is_draw = a < self.first_op
+        legal = np.where(is_stop, d == 1, np.where(is_op, d >= 2, d <= L - t - 1)) & ~self.invalid[rows]
+        write = ~is_stop
+        wr = rows[write]
+        self.tokens[wr, t[write]] = a[write]
+        self.steps[wr] += 1
+        self.depth[rows] = d + is_draw - is_op
+        self.invalid[rows] |= ~legal
+
+        kinds = torch.full((self.n,), PAD_CODE, dtype=torch.int64, device=self.device)
+        ids = torch.zeros(self.n, dtype=torch.int64, device=self.device)
+        if len(wr):
+            wr_t = torch.as_tensor(wr, device=self.device)
+            ids[wr_t] = torch.as_tensor(a[write], device=self.device)
+            kinds[wr_t] = self.kind_of[ids[wr_t]]
+        self.machine.step(kinds, token_ids=ids)
+
+        ended = is_stop | (self.steps[rows] >= L)
+        if cfg.invalid_action == "terminate":
+            ended |= ~legal
+        self.done[rows] = ended
+        rewards = np.zeros(len(rows), dtype=np.float64)
+        er = rows[ended]
+        valid = ~self.invalid[er] & (self.depth[er] == 1)
+        iou = np.zeros(len(er), dtype=np.float64)
+        if len(er):
+            rewards[ended], iou = self._score(er, valid)
+        return ended, rewards, valid, iou
+
+    def _score(self, rows: np.ndarray, valid: np.ndarray):
+        """Batched end-of-episode rewards and IoU of the programs in ``rows``."""
+        cfg = self.cfg
+        idx = torch.as_tensor(rows, device=self.device)
+        pred = self.machine.result().index_select(0, idx)
+        pred = torch.where(torch.as_tensor(valid, device=self.device).view((-1,) + (1,) * (pred.dim() - 1)),
+                           pred, torch.zeros((), dtype=pred.dtype, device=pred.device))
+        tgt = self.target_words.index_select(0, idx)
+        inter = popcount(pred & tgt).astype(np.float64)
+        union = popcount(pred | tgt).astype(np.float64)
+        iou = np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
+        if cfg.reward == "iou":
+            reward = np.where(valid, iou ** cfg.gamma, 0.0)
+        else:
+            images = unpack(pred, cfg.dim).cpu().numpy()
+            reward = np.atleast_1d(metrics.reward(images, self.target[rows], gamma=cfg.gamma,
+                                                  invalid=cfg.invalid_reward, valid=valid))
+        return reward, iou
+
+    # -------------------------------------------------------------------------------------------
+    def observe(self) -> dict[str, np.ndarray]:
+        """The batched observation (fresh arrays)."""
+        stack = unpack(self.machine.top(self.cfg.stack_size), self.cfg.dim).cpu().numpy()
+        obs = {"target": self.target.copy(), "stack": stack}
+        if self.cfg.observe_steps:
+            obs["steps"] = self.steps.copy()
+        return obs
+
+    def program(self, row: int) -> str:
+        return self.vocab.text(self.tokens[row, : self.steps[row]])
+
+    def frame(self, row: int) -> np.ndarray:
+        """``(64 s, 130 s, 3) uint8``: target beside the current shape (``s = render_scale``)."""
+        if self.done[row]:
+            valid = not self.invalid[row] and self.depth[row] == 1
+            words = self.machine.result()[row] if valid else torch.zeros_like(self.target_words[row])
+        else:
+            words = self.machine.top(1)[row, 0]
+        current = unpack(words[None], self.cfg.dim)[0].cpu().numpy()
+        return _side_by_side(self.target[row], current, self.cfg.render_scale)
+
+
+def _panel(shape: np.ndarray, color: np.ndarray) -> np.ndarray:
+    """(64, 64, 3) float RGB of a bool image, or of a volume seen along its third axis (depth-shaded)."""
+    if shape.ndim == 2:
+        on, shade = shape, np.ones(shape.shape)
+    else:
+        on = shape.any(axis=2)
+        first = np.argmax(shape, axis=2)  # nearest occupied voxel along the view axis
+        shade = 1.0 - 0.6 * first / (SIZE - 1)
+    img = np.full(on.shape + (3,), 255.0)
+    img[on] = 255.0 - (255.0 - color) * shade[on][:, None]
+    return img
+
+
+def _side_by_side(target: np.ndarray, current: np.ndarray, scale: int) -> np.ndarray:
+    gap = np.full((SIZE, 2, 3), 200.0)
+    img = np.concatenate([_panel(target, _TARGET_GREY), gap, _panel(current, _SHAPE_BLUE)], axis=1)
+    img = np.repeat(np.repeat(img, scale, axis=0), scale, axis=1)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def _reset_info(target: Target, mask: np.ndarray) -> dict[str, Any]:
+    info: dict[str, Any] = {"action_mask": mask.astype(np.int8), "target_index": int(target.index)}
+    if target.program is not None:
+        info["target_program"] = target.program
+    return info
+
+
+class CSGEnv(gym.Env):
+    """One CSG program-writing episode at a time (``CSG2D-v0``, ``CSG3D-v0``); see the module docstring.
+
+    Args:
+        dim: 2 or 3.
+        targets: the target source (:func:`envs.targets.as_target_source`): None for synthetic programs,
+            a folder of PNGs, an array of shapes, or a source object.
+        max_length: most tokens per program (13 in 2D, 7 in 3D).
+        stack_size: stack slots observed (default ``(max_length + 1) // 2``).
+        reward: ``"chamfer"`` (2D default) or ``"iou"`` (3D default).
+        gamma: the reward exponent (20 for chamfer, 1 for IoU).
+        invalid_reward: ``"zero"`` or ``"reference"`` (0.0204 with the chamfer reward).
+        invalid_action: ``"terminate"`` or ``"continue"``.
+        observe_steps: include ``"steps"`` in the observation.
+        render_mode: None or ``"rgb_array"``.
+        render_scale: pixels per canvas pixel in rendered frames.
+        device: torch device of the stack machine.
+
+    Example:
+        >>> import gymnasium as gym, envs
+        >>> env = gym.make("CSG2D-v0", targets=[csgnet.render("c(32,32,16)")[0]])  # doctest: +SKIP
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, dim: int = 2, targets=None, max_length: int | None = None, stack_size: int | None = None,
+                 reward: str | None = None, gamma: float | None = None, invalid_reward: str = "zero",
+                 invalid_action: str = "terminate", observe_steps: bool = True, render_mode: str | None = None,
+                 render_scale: int = 4, device=None):
+        self.config = CSGConfig.build(dim, max_length, stack_size, reward, gamma, invalid_reward, invalid_action,
+                                      observe_steps, render_scale)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
+        self.targets = as_target_source(targets, self.config.dim, self.config.max_length)
+        self._episodes = _Episodes(1, self.config, self.targets, device)
+        self.action_space = spaces.Discrete(self._episodes.V)
+        self.observation_space = self.config.observation_space()
+        self._started = False
+
+    def _obs(self) -> dict:
+        obs = self._episodes.observe()
+        out = {"target": obs["target"][0], "stack": obs["stack"][0]}
+        if "steps" in obs:
+            out["steps"] = np.int64(obs["steps"][0])
+        return out
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        target = self.targets.sample(self.np_random)
+        self._episodes.begin(np.zeros(1, dtype=np.int64), [target])
+        self._started = True
+        return self._obs(), _reset_info(target, self._episodes.masks()[0])
+
+    def step(self, action):
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        if not self.action_space.contains(action):
+            raise ValueError(f"action must be a token index in [0, {self.action_space.n}), got {action!r}")
+        ep = self._episodes
+        ended, reward, valid, iou = ep.act(np.zeros(1, dtype=np.int64), np.array([int(action)]))
+        info: dict[str, Any] = {"action_mask": ep.masks()[0].astype(np.int8)}
+        if ended[0]:
+            info.update(program=ep.program(0), valid=bool(valid[0]), iou=float(iou[0]))
+        return self._obs(), float(reward[0]), bool(ended[0]), False, info
+
+    def action_masks(self) -> np.ndarray:
+        """``(V,) bool``: the tokens after which a valid program can still be completed."""
+        return self._episodes.masks()[0]
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            gym.logger.warn("render() needs render_mode='rgb_array' (e.g. gymnasium.make(..., render_mode='rgb_array'))")
+            return None
+        if not self._started:
+            raise RuntimeError("call reset() before render()")
+        return self._episodes.frame(0)
+
+    @property
+    def program(self) -> str:
+        """The program written so far (text)."""
+        return self._episodes.program(0)
+
+
+class CSGVectorEnv(VectorEnv):
+    """``num_envs`` CSG episodes stepped as one batch (``gymnasium.make_vec("CSG2D-v0", num_envs=N)``).
+
+    Equivalent, step for step, to ``gymnasium.vector.SyncVectorEnv`` over ``num_envs`` :class:`CSGEnv`
+    with the same arguments: the same autoreset (next step), the same seeding (sub-environment ``i``
+    of ``reset(seed=s)`` uses seed ``s + i`` and keeps its own generator across autoresets), the same
+    observations, rewards and infos. The difference is speed: one stack machine executes the tokens of
+    all episodes and one reward call scores all episodes that end at a step.
+
+    Args:
+        num_envs: the batch size.
+        **kwargs: as :class:`CSGEnv`.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4, "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, dim: int = 2, targets=None, max_length: int | None = None,
+                 stack_size: int | None = None, reward: str | None = None, gamma: float | None = None,
+                 invalid_reward: str = "zero", invalid_action: str = "terminate", observe_steps: bool = True,
+                 render_mode: str | None = None, render_scale: int = 4, device=None):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
+        self.config = CSGConfig.build(dim, max_length, stack_size, reward, gamma, invalid_reward, invalid_action,
+                                      observe_steps, render_scale)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
+        self.num_envs = int(num_envs)
+        self.targets = as_target_source(targets, self.config.dim, self.config.max_length)
+        self._episodes = _Episodes(self.num_envs, self.config, self.targets, device)
+        self.single_action_space = spaces.Discrete(self._episodes.V)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.single_observation_space = self.config.observation_space()
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
+        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+        self._started = False
+
+    def _seeds(self, seed) -> list:
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)):
+            return [int(seed) + i for i in range(self.num_envs)]
+        seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"seed must be an int or {self.num_envs} seeds, got {len(seeds)}")
+        return seeds
+
+    def _begin(self, rows: np.ndarray) -> list[Target]:
+        targets = [self.targets.sample(self._rngs[i]) for i in rows]
+        self._episodes.begin(rows, targets)
+        return targets
+
+    def reset(self, *, seed=None, options: dict | None = None):
+        seeds = self._seeds(seed)
+        super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
+        for i, s in enumerate(seeds):
+            if s is not None or self._rngs[i] is None:
+                self._rngs[i], _ = seeding.np_random(s)
+        rows = np.arange(self.num_envs)
+        targets = self._begin(rows)
+        self._prev_done[:] = False
+        self._started = True
+        infos: dict = {}
+        self._reset_infos(infos, rows, targets, self._episodes.masks())
+        return self._episodes.observe(), infos
+
+    def step(self, actions):
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        actions = np.asarray(actions)
+        if actions.shape != (self.num_envs,):
+            raise ValueError(f"actions must have shape ({self.num_envs},), got {actions.shape}")
+        ep = self._episodes
+        restart = np.flatnonzero(self._prev_done)
+        act = np.flatnonzero(~self._prev_done)
+        rewards = np.zeros(self.num_envs, dtype=np.float64)
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        ended, r, valid, iou = ep.act(act, actions[act])
+        rewards[act] = r
+        terminated[act] = ended
+        targets = self._begin(restart)
+        masks = ep.masks()
+        infos: dict = {}
+        # the infos SyncVectorEnv would assemble from the sub-environments (same keys, dtypes and masks)
+        if len(act):
+            _put(infos, "action_mask", act, masks[act].astype(np.int8), self.num_envs)
+        fin = act[ended]
+        if len(fin):
+            _put(infos, "program", fin, np.array([ep.program(i) for i in fin], dtype=object), self.num_envs)
+            _put(infos, "valid", fin, valid, self.num_envs)
+            _put(infos, "iou", fin, iou, self.num_envs)
+        self._reset_infos(infos, restart, targets, masks)
+        self._prev_done = terminated.copy()
+        return ep.observe(), rewards, terminated, np.zeros(self.num_envs, dtype=bool), infos
+
+    def _reset_infos(self, infos: dict, rows: np.ndarray, targets: list[Target], masks: np.ndarray) -> None:
+        if len(rows) == 0:
+            return
+        _put(infos, "action_mask", rows, masks[rows].astype(np.int8), self.num_envs)
+        _put(infos, "target_index", rows, np.array([t.index for t in targets], dtype=np.int64), self.num_envs)
+        have = [k for k, t in enumerate(targets) if t.program is not None]
+        if have:
+            _put(infos, "target_program", rows[have], np.array([targets[k].program for k in have], dtype=object),
+                 self.num_envs)
+
+    def action_masks(self) -> np.ndarray:
+        """``(num_envs, V) bool``: per episode, the tokens that keep its program completable."""
+        return self._episodes.masks()
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            gym.logger.warn("render() needs render_mode='rgb_array'")
+            return None
+        if not self._started:
+            raise RuntimeError("call reset() before render()")
+        return tuple(self._episodes.frame(i) for i in range(self.num_envs))
+
+
+def _put(infos: dict, key: str, rows: np.ndarray, values: np.ndarray, n: int) -> None:
+    """Set ``infos[key][rows] = values`` and the mask ``infos['_' + key]``, creating both as
+    ``VectorEnv._add_info`` does (zeros of the values' dtype, or an object array of None)."""
+    if key not in infos:
+        if values.dtype == object:
+            infos[key] = np.full(n, None, dtype=object)
+        else:
+            infos[key] = np.zeros((n,) + values.shape[1:], dtype=values.dtype)
+        infos["_" + key] = np.zeros(n, dtype=bool)
+    infos[key][rows] = values
+    infos["_" + key][rows] = True
