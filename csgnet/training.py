@@ -1,0 +1,352 @@
+"""Supervised training of CSGNet / CSGNetStack with PyTorch Lightning (spec section (e)).
+
+* :class:`CSGDataModule` streams synthetic programs, from files written by
+  :func:`csgnet.data.generate_dataset` or sampled on the fly, as batches that mix the program lengths in
+  equal counts (the reference's "equal batch"). Batches hold token indices only; targets and stack
+  traces are rendered on the training device by the batched renderer.
+* :class:`CSGNetModule` is teacher-forced supervised training: Adam, the spec's loss normalisation,
+  reduce-on-plateau ×0.2 after more than 8 epochs without improvement of the validation chamfer (2D) or
+  IoU (3D), validation by greedy decoding with IoU and chamfer per program length, and image grids of
+  targets beside predicted renders in TensorBoard.
+* :class:`AtomicCheckpointIO` writes checkpoints through a temporary file and a rename, so an
+  interrupted run never leaves a truncated checkpoint behind.
+
+``python train.py fit --config configs/csgnetstack2d_small.yaml`` runs it through LightningCLI.
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import torch
+import torch.nn.functional as F
+from lightning.pytorch.plugins.io import TorchCheckpointIO
+
+from shapeio import atomic_write
+
+from . import metrics
+from .data import ProgramDataset, jitter, load_dataset, sample_programs, split_sizes
+from .decode import greedy
+from .models import CSGNet, ModelConfig, preset
+from .renderer import render_tokens, stack_trace
+from .vocab import vocabulary
+
+__all__ = ["CSGDataModule", "CSGNetModule", "AtomicCheckpointIO", "MixedLengthBatches", "export_weights",
+           "DEFAULT_LENGTHS"]
+
+DEFAULT_LENGTHS = {2: [3, 5, 7, 9, 11, 13], 3: [3, 5, 7]}
+
+
+class AtomicCheckpointIO(TorchCheckpointIO):
+    """Lightning checkpoint IO that writes to a temporary file and renames it into place."""
+
+    def save_checkpoint(self, checkpoint, path, storage_options=None):
+        if storage_options is not None:
+            raise TypeError(f"{type(self).__name__} does not take storage_options")
+        atomic_write(path, lambda f: torch.save(checkpoint, f), mkdir=True)
+
+
+class MixedLengthBatches(torch.utils.data.IterableDataset):
+    """Endless-free stream of ``steps`` batches, each with ``batch // len(lengths)`` programs per length.
+
+    Programs come from per-length token tables (``tables[L]``: ``(N_L, max_len + 1)``), reshuffled
+    whenever a length's table is used up (short-program sets cycle more often, as in the reference), or
+    are sampled on the fly with :func:`csgnet.data.sample_programs` when ``tables`` is None. Each
+    DataLoader worker (and each distributed rank, through ``rank``) draws its own share of the steps
+    from its own seed; the stream is deterministic for a given seed, epoch, rank and worker count.
+
+    Yields:
+        ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded.
+    """
+
+    def __init__(self, dim: int, lengths: list[int], batch: int, steps: int, max_len: int,
+                 tables: dict[int, torch.Tensor] | None = None, seed: int = 0, rank: int = 0, world: int = 1):
+        self.dim, self.lengths, self.steps, self.max_len = dim, list(lengths), int(steps), int(max_len)
+        self.per_length = max(1, int(batch) // len(self.lengths))
+        self.tables, self.seed, self.rank, self.world = tables, int(seed), int(rank), int(world)
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.steps
+
+    def __iter__(self):
+        info = torch.utils.data.get_worker_info()
+        wid, nw = (info.id, info.num_workers) if info is not None else (0, 1)
+        shard = self.rank * nw + wid
+        shards = self.world * nw
+        steps = len(range(shard, self.steps, shards))
+        rng = np.random.default_rng([self.seed, self.epoch, shard])
+        vocab = vocabulary(self.dim)
+        order = {}
+        pos = {}
+        for _ in range(steps):
+            parts = []
+            for L in self.lengths:
+                if self.tables is None:
+                    rows = sample_programs(self.dim, L, self.per_length, rng)
+                    toks = torch.full((self.per_length, self.max_len + 1), vocab.stop, dtype=torch.int64)
+                    toks[:, :L] = torch.as_tensor(np.asarray(rows), dtype=torch.int64)
+                else:
+                    table = self.tables[L]
+                    take = []
+                    need = self.per_length
+                    while need:
+                        if L not in order or pos[L] >= len(order[L]):
+                            order[L], pos[L] = rng.permutation(table.shape[0]), 0
+                        k = min(need, len(order[L]) - pos[L])
+                        take.append(order[L][pos[L]: pos[L] + k])
+                        pos[L] += k
+                        need -= k
+                    toks = table[torch.as_tensor(np.concatenate(take))]
+                parts.append(toks)
+            tokens = torch.cat(parts)
+            yield tokens, torch.tensor([L for L in self.lengths for _ in range(self.per_length)])
+
+
+def _collate_first(batch):
+    return batch[0]
+
+
+class CSGDataModule(L.LightningDataModule):
+    """Synthetic CSG programs for supervised training.
+
+    Args:
+        dim: 2 or 3.
+        data_dir: a dataset written by ``python -m csgnet generate`` (``None``: sample training programs
+            on the fly and a fixed validation set from ``seed``).
+        lengths: program lengths to train on (default: 3..13 in 2D, 3..7 in 3D).
+        batch_size: programs per batch, split evenly over the lengths (2D reference: 100; 3D: 66).
+        steps_per_epoch: batches per epoch (default: the reference's train_size // batch_size).
+        val_per_length: validation programs per length.
+        num_workers: DataLoader workers (on-the-fly sampling scales with them).
+        seed: stream seed.
+    """
+
+    def __init__(self, dim: int = 2, data_dir: str | None = "data/synthetic", lengths: list[int] | None = None,
+                 batch_size: int = 100, steps_per_epoch: int | None = None, val_per_length: int = 200,
+                 num_workers: int = 0, seed: int = 0):
+        super().__init__()
+        if dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+        self.dim, self.data_dir = dim, data_dir
+        self.lengths = sorted(lengths or DEFAULT_LENGTHS[dim])
+        self.max_len = max(self.lengths)
+        self.batch_size, self.steps_per_epoch = int(batch_size), steps_per_epoch
+        self.val_per_length, self.num_workers, self.seed = int(val_per_length), int(num_workers), int(seed)
+        self.train_tables: dict[int, torch.Tensor] | None = None
+        self.val_tokens: torch.Tensor | None = None
+
+    def _tables(self, split: str) -> dict[int, torch.Tensor]:
+        progs = load_dataset(self.data_dir, self.dim, split, self.lengths)
+        out = {}
+        for L, ps in progs.items():
+            if not ps:
+                raise ValueError(f"the {split} split of {self.data_dir!r} has no {self.dim}D programs of length {L}")
+            out[L] = ProgramDataset(ps, self.dim, max_len=self.max_len).tokens
+        return out
+
+    def setup(self, stage: str | None = None) -> None:
+        if self.data_dir is not None:
+            if not (Path(self.data_dir) / f"{self.dim}d").is_dir():
+                raise FileNotFoundError(
+                    f"no {self.dim}D dataset under {self.data_dir!r}; write one with "
+                    f"`python -m csgnet generate --dim {self.dim} --scale 0.05 --out {self.data_dir}` "
+                    f"or set data.data_dir to null to sample programs on the fly")
+            if stage in (None, "fit"):
+                self.train_tables = self._tables("train")
+            val = self._tables("val")
+        else:
+            rng = np.random.default_rng([self.seed, 10**6])
+            vocab = vocabulary(self.dim)
+            val = {}
+            for L in self.lengths:
+                rows = np.asarray(sample_programs(self.dim, L, self.val_per_length, rng))
+                t = torch.full((len(rows), self.max_len + 1), vocab.stop, dtype=torch.int64)
+                t[:, :L] = torch.as_tensor(rows)
+                val[L] = t
+        self.val_tokens = torch.cat([val[L][: self.val_per_length] for L in self.lengths])
+
+    def _steps(self) -> int:
+        if self.steps_per_epoch:
+            return int(self.steps_per_epoch)
+        if self.train_tables is not None:
+            total = sum(t.shape[0] for t in self.train_tables.values())
+        else:
+            total = sum(s["train"] for s in split_sizes(self.dim, 1.0, self.lengths).values())
+        return max(1, total // self.batch_size)
+
+    def train_dataloader(self):
+        rank, world = 0, 1
+        if self.trainer is not None:
+            rank, world = self.trainer.global_rank, self.trainer.world_size
+        ds = MixedLengthBatches(self.dim, self.lengths, self.batch_size, self._steps(), self.max_len,
+                                self.train_tables, self.seed, rank, world)
+        if self.trainer is not None:
+            ds.set_epoch(self.trainer.current_epoch)
+        return torch.utils.data.DataLoader(ds, batch_size=1, collate_fn=_collate_first,
+                                           num_workers=self.num_workers, persistent_workers=False)
+
+    def val_dataloader(self):
+        lengths = (self.val_tokens != vocabulary(self.dim).stop).sum(1)
+        ds = torch.utils.data.TensorDataset(self.val_tokens, lengths)
+        return torch.utils.data.DataLoader(ds, batch_size=self.batch_size, shuffle=False)
+
+
+class CSGNetModule(L.LightningModule):
+    """Teacher-forced supervised training of a CSGNet or CSGNetStack.
+
+    Args:
+        dim: 2 or 3.
+        stack: CSGNetStack instead of CSGNet.
+        size: preset name, ``"small"`` or ``"paper"`` (:func:`csgnet.models.preset`).
+        model: overrides of :class:`~csgnet.models.ModelConfig` fields (e.g. ``{hidden: 512}``).
+        lr: Adam learning rate (1e-3).
+        loss_norm: ``"per_step"`` (2D reference: a program's summed NLL divided by its k + 1 steps) or
+            ``"sum"`` (3D reference: not divided); default by ``dim``.
+        augment: the 2D jitter of the targets (default: on in 2D, as the reference); no effect in 3D.
+        plateau_patience: epochs without improvement before the learning rate drops (8).
+        plateau_factor: the drop (0.2).
+        log_images: targets / predictions shown in the TensorBoard grid each validation.
+        seed: seed of the jitter draws.
+    """
+
+    def __init__(self, dim: int = 2, stack: bool = False, size: str = "small", model: dict | None = None,
+                 lr: float = 1e-3, loss_norm: str | None = None, augment: bool | None = None,
+                 plateau_patience: int = 8, plateau_factor: float = 0.2, log_images: int = 16, seed: int = 0):
+        super().__init__()
+        self.save_hyperparameters()
+        self.config: ModelConfig = preset(size, dim, stack, **(model or {}))
+        self.model = CSGNet(self.config)
+        self.loss_norm = loss_norm or ("per_step" if dim == 2 else "sum")
+        if self.loss_norm not in ("per_step", "sum"):
+            raise ValueError(f"loss_norm must be 'per_step' or 'sum', got {loss_norm!r}")
+        self.augment = (dim == 2) if augment is None else bool(augment and dim == 2)
+        self.monitor = "val/chamfer" if dim == 2 else "val/iou"
+        self._rng = np.random.default_rng(seed)
+        self._val: dict[str, list] = {}
+
+    # ------------------------------------------------------------------------------------------
+    def _inputs(self, tokens: torch.Tensor, lengths: torch.Tensor, augment: bool):
+        cfg = self.config
+        T = int(lengths.max()) + 1  # k + 1 targets for the longest program
+        tokens = tokens[:, :T]
+        target = render_tokens(tokens, cfg.dim, lengths)
+        if augment:
+            target = jitter(target, self._rng)
+        start = torch.full_like(tokens[:, :1], self.model.start)
+        tokens_in = torch.cat([start, tokens[:, :-1]], dim=1)
+        stack = stack_trace(tokens[:, :-1], cfg.dim, k=cfg.stack_k, lengths=lengths) if cfg.stack else None
+        return target, tokens, tokens_in, stack
+
+    def _loss(self, tokens, lengths, augment):
+        target, tokens_out, tokens_in, stack = self._inputs(tokens, lengths, augment)
+        logits = self.model(target, tokens_in, stack)
+        nll = F.cross_entropy(logits.transpose(1, 2), tokens_out, reduction="none")
+        steps = torch.arange(tokens_out.shape[1], device=tokens.device)[None] <= lengths[:, None]
+        per_prog = (nll * steps).sum(1)
+        if self.loss_norm == "per_step":
+            per_prog = per_prog / (lengths + 1)
+        acc = ((logits.argmax(-1) == tokens_out) | ~steps).all(1).float().mean()
+        return per_prog.mean(), acc, target
+
+    def training_step(self, batch, batch_idx):
+        tokens, lengths = batch
+        loss, acc, _ = self._loss(tokens, lengths, self.augment)
+        self.log("train/loss", loss, prog_bar=True, batch_size=tokens.shape[0])
+        self.log("train/exact", acc, batch_size=tokens.shape[0])
+        return loss
+
+    def on_train_epoch_start(self):
+        dl = self.trainer.train_dataloader
+        ds = getattr(dl, "dataset", None)
+        if isinstance(ds, MixedLengthBatches):
+            ds.set_epoch(self.current_epoch)
+
+    def on_validation_epoch_start(self):
+        self._val = {"length": [], "iou": [], "chamfer": [], "valid": [], "loss": []}
+        self._grid = None
+
+    def validation_step(self, batch, batch_idx):
+        tokens, lengths = batch
+        loss, _, target = self._loss(tokens, lengths, self.augment)
+        dec = greedy(self.model, target)
+        pred = render_tokens(dec.tokens[:, 0], self.config.dim, dec.lengths[:, 0])
+        if self.config.dim == 2:
+            iou = metrics.iou(pred.cpu(), target.cpu(), denominator="union")
+            cd = metrics.chamfer(pred.cpu(), target.cpu())
+        else:
+            iou = metrics.iou_3d(pred.cpu(), target.cpu())
+            cd = np.full(len(iou), np.nan)
+        v = self._val
+        v["length"].append(lengths.cpu().numpy())
+        v["iou"].append(np.asarray(iou, dtype=np.float64))
+        v["chamfer"].append(np.asarray(cd, dtype=np.float64))
+        v["valid"].append(dec.valid[:, 0].cpu().numpy())
+        v["loss"].append(float(loss) * len(lengths))
+        if self._grid is None and self.hparams.log_images:
+            n = int(self.hparams.log_images)
+            self._grid = (target[:n].cpu(), pred[:n].cpu())
+
+    def on_validation_epoch_end(self):
+        v = self._val
+        if not v.get("length"):
+            return
+        length = np.concatenate(v["length"])
+        iou = np.concatenate(v["iou"])
+        cd = np.concatenate(v["chamfer"])
+        self.log("val/loss", sum(v["loss"]) / len(length))
+        self.log("val/iou", float(np.nanmean(iou)), prog_bar=True)
+        self.log("val/valid", float(np.concatenate(v["valid"]).mean()))
+        if self.config.dim == 2:
+            self.log("val/chamfer", float(cd.mean()), prog_bar=True)
+        for L in np.unique(length):
+            sel = length == L
+            self.log(f"val_iou/len{int(L):02d}", float(np.nanmean(iou[sel])))
+            if self.config.dim == 2:
+                self.log(f"val_chamfer/len{int(L):02d}", float(cd[sel].mean()))
+        self._log_grid()
+
+    def _log_grid(self):
+        if self._grid is None or self.logger is None:
+            return
+        exp = getattr(self.logger, "experiment", None)
+        if exp is None or not hasattr(exp, "add_image"):
+            return
+        tgt, pred = self._grid
+        if tgt.dim() == 4:  # 3D: silhouettes along z
+            tgt, pred = tgt.any(-1), pred.any(-1)
+        pairs = [torch.cat([a, torch.ones(64, 2, dtype=torch.bool), b], dim=1) for a, b in zip(tgt, pred)]
+        rows = [torch.cat([p, torch.ones(2, p.shape[1], dtype=torch.bool)], 0) for p in pairs]
+        cols = 4
+        rows += [torch.ones_like(rows[0])] * (-len(rows) % cols)
+        grid = torch.cat([torch.cat(rows[i:i + cols], 1) for i in range(0, len(rows), cols)], 0)
+        exp.add_image("val/targets_vs_predictions", (~grid).float()[None], self.global_step)
+
+    def configure_optimizers(self):
+        opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
+        mode = "min" if self.config.dim == 2 else "max"
+        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode=mode, factor=self.hparams.plateau_factor,
+                                                           patience=self.hparams.plateau_patience)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": self.monitor, "interval": "epoch"}}
+
+
+def export_weights(checkpoint: str | os.PathLike, out: str | os.PathLike, half: bool = True) -> Path:
+    """Write the model of a training checkpoint as a small weights file ``{"config", "state_dict"}``.
+
+    ``half`` stores float16 tensors (loaded back as float32 by :func:`csgnet.load_pretrained`).
+    """
+    ckpt = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    hp = ckpt.get("hyper_parameters", {})
+    config = preset(hp.get("size", "small"), hp.get("dim", 2), hp.get("stack", False), **(hp.get("model") or {}))
+    state = {k[len("model."):]: v for k, v in ckpt["state_dict"].items() if k.startswith("model.")}
+    if half:
+        state = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
+    payload = {"config": config.to_dict(), "state_dict": state,
+               "meta": {"epoch": int(ckpt.get("epoch", -1)), "global_step": int(ckpt.get("global_step", -1))}}
+    return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
