@@ -32,17 +32,74 @@ def table(top_y=0.95, leg_h=0.9):
 
 # ---------------------------------------------------------------- chamfer / nearest neighbours
 
-def test_nearest_neighbors_match_brute_force_and_chunking():
+def brute_nn(a, b):
+    """The definition: squared distances of every pair in float64, first minimum."""
+    full = ((a.double()[:, None] - b.double()[None]) ** 2).sum(-1)
+    return full.min(1).values.sqrt(), full.argmin(1)
+
+
+def brute_chamfer(a, b, threshold=0.0, eps=1e-8):
+    d_ab, i_ab = brute_nn(a, b)
+    d_ba, i_ba = brute_nn(b, a)
+    s_ab = ((a.double() - b.double()[i_ab]) ** 2).sum(-1).add(eps).sqrt()
+    s_ba = ((b.double() - a.double()[i_ba]) ** 2).sum(-1).add(eps).sqrt()
+    return float((s_ab - threshold).clamp_min(0).mean() + (s_ba - threshold).clamp_min(0).mean())
+
+
+@pytest.mark.parametrize("method", ["kdtree", "brute"])
+def test_nearest_neighbors_match_brute_force_and_chunking(method):
     g = torch.Generator().manual_seed(0)
     a, b = torch.rand(700, 3, generator=g), torch.rand(500, 3, generator=g)
-    d, i = nearest_neighbors(a, b)
-    full = ((a[:, None] - b[None]) ** 2).sum(-1)
-    assert torch.equal(i, full.argmin(1))
-    torch.testing.assert_close(d, full.min(1).values.sqrt())
-    d2, i2 = nearest_neighbors(a, b, chunk_elements=1000)  # two rows per block
+    d, i = nearest_neighbors(a, b, method=method)
+    want_d, want_i = brute_nn(a, b)
+    assert torch.equal(i, want_i)
+    torch.testing.assert_close(d, want_d.float())
+    d2, i2 = nearest_neighbors(a, b, chunk_elements=1000, method=method)  # brute: two rows per block
     assert torch.equal(i2, i) and torch.equal(d2, d)
-    _, j = nearest_neighbors(a, a, exclude_self=True)
-    assert not (j == torch.arange(700)).any()
+    _, j = nearest_neighbors(a, a, exclude_self=True, method=method)
+    full = ((a.double()[:, None] - a.double()[None]) ** 2).sum(-1)
+    full.fill_diagonal_(float("inf"))
+    assert torch.equal(j, full.argmin(1))
+
+
+def test_nearest_neighbors_ties_and_duplicates():
+    # every query has two equidistant neighbours: both methods return one of them
+    ref = torch.tensor([[-1.0, 0, 0], [1.0, 0, 0], [0, 5.0, 0]])
+    q = torch.zeros(4, 3)
+    for method in ("kdtree", "brute"):
+        d, i = nearest_neighbors(q, ref, method=method)
+        assert torch.all(d == 1.0) and set(i.tolist()) <= {0, 1}
+    # exclude_self with a duplicated point: its nearest other point is its twin, at distance 0
+    pts = torch.tensor([[0.0, 0, 0], [0.0, 0, 0], [3.0, 0, 0]])
+    for method in ("kdtree", "brute"):
+        d, i = nearest_neighbors(pts, pts, exclude_self=True, method=method)
+        assert i.tolist()[:2] == [1, 0] and i.tolist()[2] in (0, 1) and d.tolist() == [0.0, 0.0, 3.0]
+    with pytest.raises(ValueError, match="method"):
+        nearest_neighbors(q, ref, method="faiss")
+
+
+@pytest.mark.parametrize("method", ["kdtree", "brute"])
+def test_chamfer_matches_brute_force_definition(method):
+    g = torch.Generator().manual_seed(3)
+    a = torch.rand(2048, 3, generator=g) * torch.tensor([1.8, 0.8, 0.7])
+    b = torch.rand(1500, 3, generator=g) * torch.tensor([1.9, 0.8, 0.7]) + 0.02
+    for thr in (0.0, 0.02):
+        assert chamfer(a, b, threshold=thr, method=method).item() == pytest.approx(brute_chamfer(a, b, thr), rel=1e-5)
+    # float64 inputs agree to float64 rounding
+    a64, b64 = a.double(), b.double()
+    assert chamfer(a64, b64, method=method).item() == pytest.approx(brute_chamfer(a64, b64), rel=1e-12)
+    # gradient: the nearest pairs only, equal to autograd through the definition
+    x = a64[:300].clone().requires_grad_(True)
+    y = b64[:200].clone().requires_grad_(True)
+    chamfer(x, y, threshold=0.01, method=method).backward()
+    x2, y2 = x.detach().clone().requires_grad_(True), y.detach().clone().requires_grad_(True)
+    _, i_xy = brute_nn(x2, y2)
+    _, i_yx = brute_nn(y2, x2)
+    ref = (((x2 - y2[i_xy]) ** 2).sum(-1).add(1e-8).sqrt() - 0.01).relu().mean() + (
+        ((y2 - x2[i_yx]) ** 2).sum(-1).add(1e-8).sqrt() - 0.01).relu().mean()
+    ref.backward()
+    torch.testing.assert_close(x.grad, x2.grad, rtol=1e-12, atol=1e-14)
+    torch.testing.assert_close(y.grad, y2.grad, rtol=1e-12, atol=1e-14)
 
 
 def test_chamfer_hand_computed():
@@ -65,7 +122,13 @@ def test_chamfer_identical_symmetric_and_grad():
     assert chamfer(a, b).item() == pytest.approx(chamfer(b, a).item(), rel=1e-12)
     a.requires_grad_(True)
     b.requires_grad_(True)
-    assert torch.autograd.gradcheck(lambda x, y: chamfer(x, y), (a, b), eps=1e-7, atol=1e-6)
+    for method in ("kdtree", "brute"):
+        assert torch.autograd.gradcheck(lambda x, y: chamfer(x, y, method=method), (a, b), eps=1e-7, atol=1e-6)
+        # with a threshold that some pairs fall below (their gradient is zero)
+        assert torch.autograd.gradcheck(lambda x, y: chamfer(x, y, threshold=0.1, method=method), (a, b),
+                                        eps=1e-7, atol=1e-6)
+    # only one cloud needs a gradient
+    assert torch.autograd.gradcheck(lambda x: chamfer(x, b.detach()), (a,), eps=1e-7, atol=1e-6)
 
 
 def test_chamfer_large_clouds_bounded_memory():
