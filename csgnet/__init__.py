@@ -6,6 +6,9 @@ Entry points:
 * :func:`vocabulary`: the 2D (400) and 3D (6635) token tables.
 * :func:`render`: programs -> bool arrays ``(N, 64, 64)`` or ``(N, 64, 64, 64)``.
 * :mod:`csgnet.metrics`: chamfer distance and IoU as the paper computes them.
+* :func:`load_pretrained` / :func:`infer`: the shipped neural parsers and program inference on
+  bool images / volumes (:mod:`csgnet.inference`); models in :mod:`csgnet.models`, decoding in
+  :mod:`csgnet.decode`, Lightning training in :mod:`csgnet.training`, tables in :mod:`csgnet.evaluate`.
 * :func:`refine` / :func:`refine_beams`: Powell refinement of a program's parameters toward a target
   image (:mod:`csgnet.refinement`).
 """
@@ -62,8 +65,11 @@ def render(programs, dim: int = 2, device=None) -> np.ndarray:
 def __getattr__(name):  # lazy submodules: csgnet.metrics etc. without work at import
     import importlib
 
-    if name in {"metrics", "export", "data", "render_np", "renderer", "primitives", "refinement"}:
+    if name in {"metrics", "export", "data", "render_np", "renderer", "primitives", "refinement", "models",
+                "decode", "training", "inference", "evaluate"}:
         return importlib.import_module(f".{name}", __name__)
+    if name in {"load_pretrained", "infer", "load_model", "load_shape"}:  # functions of csgnet.inference
+        return getattr(importlib.import_module(".inference", __name__), name)
     if name in {"refine", "refine_beams"}:  # functions of csgnet.refinement
         return getattr(importlib.import_module(".refinement", __name__), name)
     raise AttributeError(f"module 'csgnet' has no attribute {name!r}")

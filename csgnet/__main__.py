@@ -4,6 +4,9 @@
     python -m csgnet render "sp(32,32,32,20)cu(32,32,32,28)*" --dim 3 -o out.obj
     python -m csgnet generate --dim 2 --scale 0.001 --out data/synthetic --workers 2
     python -m csgnet demo --out demo_output
+    python -m csgnet parse examples/house.png examples/bracket.stl --beam 10 --out parse_output
+    python -m csgnet evaluate --dim 2 --data data/synthetic --weights csgnet/weights/csgnet2d.pt --out table.md
+    python -m csgnet export-weights runs/x/checkpoints/best-012.ckpt --out csgnet/weights/csgnet2d.pt
 """
 
 from __future__ import annotations
@@ -105,6 +108,126 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_parse(args) -> int:
+    """Infer a program for each input shape with a trained model."""
+    import numpy as np
+
+    from . import export
+    from .inference import InputError, infer, load_model, load_pretrained, load_shape
+
+    out = Path(args.out)
+    models: dict = {}
+    weights = {2: args.weights_2d, 3: args.weights_3d}
+    status = 0
+    for src in args.inputs:
+        try:
+            shape = load_shape(src)
+        except InputError as e:
+            print(f"error: {e}", file=sys.stderr)
+            status = 2
+            continue
+        dim = shape.ndim
+        if dim not in models:
+            models[dim] = load_model(weights[dim]) if weights[dim] else load_pretrained(dim)
+        model = models[dim]
+        res = infer(model, shape[None], beam=args.beam, select=args.select, constrained=not args.unconstrained)[0]
+        text = res.text
+        line = f"{src}: {text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
+        if dim == 2:
+            line += f", chamfer {res.chamfer:.3f} px"
+        if not res.valid:
+            line += " (invalid program: renders empty)"
+        print(line)
+        if args.refine:
+            if dim != 2:
+                print("  refinement is for 2D programs; skipped")
+            elif res.valid:
+                from .refinement import refine_beams
+
+                valid = [b for b in res.beams if _is_valid(b)]
+                ref = refine_beams(valid, shape, maxiter=args.refine_iters)
+                text = ref.text
+                print(f"  refined ({len(valid)} beams): {text}\n  chamfer {res.chamfer:.3f} -> {ref.score:.3f} px")
+        stem = out / Path(src).stem
+        out.mkdir(parents=True, exist_ok=True)
+        from shapeio import atomic_write
+
+        atomic_write(stem.with_suffix(".txt"), text + "\n")
+        img = _render_text(text, dim)
+        if dim == 2:
+            export.save_png(np.concatenate([shape, np.ones((64, 2), bool), img], axis=1), stem.with_suffix(".png"))
+            written = [stem.with_suffix(".png")]
+        else:
+            export.save_obj(img, stem.with_suffix(".obj"))
+            written = [stem.with_suffix(".obj")]
+        if _is_valid(text):
+            export.save_scad(text, stem.with_suffix(".scad"))
+            written.append(stem.with_suffix(".scad"))
+        print("  wrote " + ", ".join(str(w) for w in written + [stem.with_suffix(".txt")]))
+    return status
+
+
+def _is_valid(text: str) -> bool:
+    from .lang import is_valid
+
+    try:
+        return bool(text) and is_valid(parse(text))
+    except ParseError:
+        return False
+
+
+def _render_text(text: str, dim: int):
+    import numpy as np
+
+    from . import render
+
+    if not _is_valid(text):
+        return np.zeros((64,) * dim, dtype=bool)
+    return render(text, dim)[0]
+
+
+def cmd_evaluate(args) -> int:
+    from .data import load_dataset
+    from .evaluate import evaluate_model, markdown_tables, nearest_neighbour
+    from .inference import load_model, load_pretrained
+
+    tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
+    tests = {L: p[: args.per_length] for L, p in tests.items()}
+    rows = []
+    if args.nn_train != 0:
+        train = [p for L, ps in sorted(load_dataset(args.data, args.dim, "train", args.lengths).items()) for p in ps]
+        if args.nn_train > 0:
+            train = train[: args.nn_train]
+        print(f"nearest neighbour over {len(train)} training programs ...", flush=True)
+        rows.append(nearest_neighbour(train, tests, args.dim))
+    for w in args.weights or [None]:
+        model = load_model(w) if w else load_pretrained(args.dim)
+        if model.config.dim != args.dim:
+            raise SystemExit(f"error: {w} is a {model.config.dim}D model, not {args.dim}D")
+        name = ("CSGNetStack" if model.config.stack else "CSGNet") + f" ({Path(w).name if w else 'shipped'})"
+        print(f"decoding with {name} ...", flush=True)
+        rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
+                               constrained=args.constrained)
+    note = (f"`python -m csgnet {' '.join(sys.argv[2:] if args.argv is None else args.argv)}`; beam mode "
+            f"{args.mode!r}, {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
+    table = markdown_tables(rows, args.dim, note)
+    print(table)
+    if args.out:
+        from shapeio import atomic_write
+
+        atomic_write(args.out, table, mkdir=True)
+        print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_export_weights(args) -> int:
+    from .training import export_weights
+
+    path = export_weights(args.checkpoint, args.out, half=not args.float32)
+    print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
+    return 0
+
+
 def _contact_sheet(images, cols: int = 6):
     import numpy as np
 
@@ -131,7 +254,7 @@ def _save_sheet(sheet, path: Path, scale: int = 3) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m csgnet", description="CSG programs: render, generate datasets.")
+    ap = argparse.ArgumentParser(prog="python -m csgnet", description="CSG programs: render, generate datasets, parse shapes, evaluate parsers.")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
     r = sub.add_parser("render", help="render one program to .png (2D), .obj (3D), .npy or .scad")
@@ -159,8 +282,43 @@ def main(argv=None) -> int:
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_demo)
 
+    p = sub.add_parser("parse", help="infer programs for shapes (PNG/JPG images, .npy grids, meshes)")
+    p.add_argument("inputs", nargs="+", help="shape files: .png/.jpg (2D), .npy (2D or 3D), .obj/.ply/.stl (3D)")
+    p.add_argument("--beam", type=int, default=10, help="beam width (1 = greedy)")
+    p.add_argument("--select", choices=("likelihood", "match"), default="likelihood",
+                   help="report the most likely program, or the beam closest to the input")
+    p.add_argument("--unconstrained", action="store_true", help="allow invalid programs while decoding")
+    p.add_argument("--refine", action="store_true", help="2D: Powell refinement of every valid beam")
+    p.add_argument("--refine-iters", type=int, default=None, help="Powell iterations (default: to convergence)")
+    p.add_argument("--weights-2d", default=None, help="2D weights file (default: the shipped model)")
+    p.add_argument("--weights-3d", default=None, help="3D weights file (default: the shipped model)")
+    p.add_argument("--out", default="parse_output", help="folder for renders, OpenSCAD files and texts")
+    p.set_defaults(func=cmd_parse)
+
+    e = sub.add_parser("evaluate", help="Table 3 / Table 5 style evaluation on a synthetic test split")
+    e.add_argument("--dim", type=int, choices=(2, 3), default=2)
+    e.add_argument("--data", required=True, help="dataset folder written by `generate`")
+    e.add_argument("--weights", nargs="*", default=None, help="weights files (default: the shipped model)")
+    e.add_argument("--beams", type=int, nargs="+", default=[1, 5, 10])
+    e.add_argument("--lengths", type=int, nargs="*", default=None)
+    e.add_argument("--per-length", type=int, default=None, help="test programs per length (default: all)")
+    e.add_argument("--nn-train", type=int, default=-1, help="training programs for the nearest neighbour "
+                   "(-1: all, 0: skip)")
+    e.add_argument("--mode", choices=("improved", "reference"), default="improved")
+    e.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
+    e.add_argument("--out", default=None, help="write the markdown table here")
+    e.set_defaults(func=cmd_evaluate, argv=None)
+
+    x = sub.add_parser("export-weights", help="write a training checkpoint's model as a small weights file")
+    x.add_argument("checkpoint")
+    x.add_argument("--out", required=True)
+    x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
+    x.set_defaults(func=cmd_export_weights)
+
     args = ap.parse_args(argv)
-    if getattr(args, "dim", 0) is None:
+    if args.cmd == "evaluate":
+        args.argv = list(argv) if argv is not None else None
+    if args.cmd == "render" and args.dim is None:
         args.dim = 3 if any(h in args.program for h in ("sp(", "cu(", "cy(", "p(", "u(", "y(")) else 2
     return args.func(args)
 

@@ -1,0 +1,281 @@
+"""Program inference on users' shapes: loading inputs, the shipped weights, and :func:`infer`.
+
+* :func:`load_shape` reads a PNG/JPG (binarised and fitted into 64×64, aspect kept), a ``.npy`` grid
+  (2D or 3D) or a mesh (``.obj``, ``.ply``, ``.stl``, ... voxelised to 64³ with trimesh).
+* :func:`load_pretrained` returns a shipped model (``csgnet/weights/``); :func:`load_model` reads any
+  weights file written by :func:`csgnet.training.export_weights` or a Lightning checkpoint.
+* :func:`infer` decodes a batch of shapes with beam search and returns, per shape, the chosen program
+  with its log-probability and its IoU / chamfer to the input.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from . import metrics
+from .decode import beam_search, greedy
+from .lang import Program
+from .models import CSGNet, ModelConfig, preset
+from .renderer import render_tokens
+
+__all__ = ["InputError", "load_shape", "fit_to_canvas", "load_model", "load_pretrained", "infer", "Inference",
+           "WEIGHTS", "PRETRAINED"]
+
+WEIGHTS = Path(__file__).parent / "weights"
+# the shipped model per dimension (trained with the command recorded in docs/benchmarks.md)
+PRETRAINED = {2: "csgnet2d.pt", 3: "csgnet3d.pt"}
+
+IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".webp"}
+MESH_SUFFIXES = {".obj", ".ply", ".stl", ".off", ".glb", ".gltf"}
+MARGIN = 4  # background voxels/pixels kept around a fitted shape (the vocabulary reaches 8..56)
+
+
+class InputError(ValueError):
+    """A shape file that cannot be turned into a 64-sided target."""
+
+
+# ------------------------------------------------------------------------------------------------
+# inputs
+
+def fit_to_canvas(mask: np.ndarray, margin: int = MARGIN, name: str = "shape") -> np.ndarray:
+    """Crop a bool image / volume to its foreground and scale it (aspect kept, nearest) into the middle
+    of a 64-sided canvas with ``margin`` empty cells on the longest side. A mask that is already 64-sided
+    is returned unchanged."""
+    from scipy.ndimage import zoom
+
+    mask = np.asarray(mask, dtype=bool)
+    if mask.shape == (64,) * mask.ndim:
+        return mask
+    idx = np.nonzero(mask)
+    if not idx[0].size:
+        raise InputError(f"{name}: empty (no foreground)")
+    lo = [int(i.min()) for i in idx]
+    hi = [int(i.max()) + 1 for i in idx]
+    crop = mask[tuple(slice(a, b) for a, b in zip(lo, hi))]
+    side = 64 - 2 * margin
+    s = side / max(crop.shape)
+    scaled = zoom(crop.astype(np.float32), s, order=1, grid_mode=True, mode="grid-constant") >= 0.5
+    scaled = scaled[tuple(slice(0, side) for _ in scaled.shape)]
+    if not scaled.any():
+        raise InputError(f"{name}: the shape vanishes when scaled to {side} cells (too thin)")
+    out = np.zeros((64,) * mask.ndim, dtype=bool)
+    start = [(64 - n) // 2 for n in scaled.shape]
+    out[tuple(slice(a, a + n) for a, n in zip(start, scaled.shape))] = scaled
+    return out
+
+
+def _binarise(gray: np.ndarray, alpha: np.ndarray | None, name: str) -> np.ndarray:
+    from skimage.filters import threshold_otsu
+
+    if alpha is not None and alpha.min() < 255:
+        fg = alpha >= 128
+    else:
+        if gray.max() == gray.min():
+            raise InputError(f"{name}: the image is a single colour; nothing to parse")
+        fg = gray > threshold_otsu(gray)
+        border = np.concatenate([fg[0], fg[-1], fg[:, 0], fg[:, -1]])
+        if border.mean() > 0.5:  # light background: the shape is the dark part
+            fg = ~fg
+    if not fg.any() or fg.all():
+        raise InputError(f"{name}: no foreground after binarisation")
+    return fg
+
+
+def load_shape(path) -> np.ndarray:
+    """Read a shape file as a 64-sided bool target: ``(64, 64)`` image (``img[row=y, col=x]``) or
+    ``(64, 64, 64)`` volume (``vol[x, y, z]``).
+
+    * Images: grey levels thresholded with Otsu's method (the alpha channel if the image has
+      transparency); the side touching the border most is background. A 64×64 image is used as is,
+      larger or smaller ones are cropped to the shape and fitted into 64×64 with the aspect kept.
+    * ``.npy``: a 2D or 3D array, non-zero = inside; fitted the same way unless 64-sided.
+    * Meshes: loaded with trimesh, scaled so the longest side spans 56 voxels, voxelised and filled.
+
+    Raises:
+        InputError: unreadable file, unknown type, empty image, a mesh with no volume.
+    """
+    path = Path(path)
+    name = str(path)
+    if not path.is_file():
+        raise InputError(f"{name}: no such file")
+    suffix = path.suffix.lower()
+    if suffix in IMAGE_SUFFIXES:
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(path) as im:
+                im.load()
+                alpha = np.asarray(im.getchannel("A")) if "A" in im.getbands() else None
+                gray = np.asarray(im.convert("L"))
+        except (UnidentifiedImageError, OSError) as e:
+            raise InputError(f"{name}: cannot read the image ({e})") from None
+        return fit_to_canvas(_binarise(gray, alpha, name), name=name)
+    if suffix == ".npy":
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as e:
+            raise InputError(f"{name}: cannot read the array ({e})") from None
+        if arr.ndim not in (2, 3):
+            raise InputError(f"{name}: expected a 2D image or 3D voxel grid, got shape {arr.shape}")
+        mask = arr != 0
+        if not mask.any():
+            raise InputError(f"{name}: empty (no non-zero cells)")
+        return fit_to_canvas(mask, name=name)
+    if suffix in MESH_SUFFIXES:
+        return _voxelise(path)
+    raise InputError(f"{name}: unknown file type {suffix!r}; use an image "
+                     f"({', '.join(sorted(IMAGE_SUFFIXES))}), .npy, or a mesh ({', '.join(sorted(MESH_SUFFIXES))})")
+
+
+def _voxelise(path: Path) -> np.ndarray:
+    import trimesh
+    from scipy.ndimage import binary_fill_holes
+
+    name = str(path)
+    try:
+        mesh = trimesh.load(path, force="mesh")
+    except Exception as e:  # trimesh raises many types for bad files
+        raise InputError(f"{name}: cannot read the mesh ({type(e).__name__}: {e})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(f"{name}: the file holds no triangles")
+    extent = mesh.extents
+    if extent.min() <= 1e-9 * max(extent.max(), 1e-30):
+        raise InputError(f"{name}: the mesh has no volume (it is flat: extents {extent.tolist()})")
+    side = 64 - 2 * MARGIN
+    pitch = float(extent.max()) / (side - 1)
+    try:
+        grid = mesh.voxelized(pitch)
+    except Exception as e:
+        raise InputError(f"{name}: voxelisation failed ({type(e).__name__}: {e})") from None
+    vol = binary_fill_holes(np.asarray(grid.matrix, dtype=bool))
+    if not vol.any():
+        raise InputError(f"{name}: the mesh has no volume")
+    if max(vol.shape) > side:  # voxelisation can add one layer
+        return fit_to_canvas(vol, name=name)
+    out = np.zeros((64, 64, 64), dtype=bool)
+    start = [(64 - n) // 2 for n in vol.shape]
+    out[tuple(slice(a, a + n) for a, n in zip(start, vol.shape))] = vol
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# models
+
+def load_model(path, device=None) -> CSGNet:
+    """A model from a weights file (``{"config", "state_dict"}``) or a Lightning checkpoint, in eval mode.
+
+    Files are read with ``torch.load(weights_only=True)``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such weights file")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise ValueError(f"{path}: not a readable weights file ({type(e).__name__}: {e})") from None
+    if "config" in payload:
+        config = ModelConfig.from_dict(payload["config"])
+        state = payload["state_dict"]
+    elif "hyper_parameters" in payload and "state_dict" in payload:
+        hp = payload["hyper_parameters"]
+        config = preset(hp.get("size", "small"), hp.get("dim", 2), hp.get("stack", False), **(hp.get("model") or {}))
+        state = {k[len("model."):]: v for k, v in payload["state_dict"].items() if k.startswith("model.")}
+    else:
+        raise ValueError(f"{path}: neither a weights file nor a Lightning checkpoint (keys {sorted(payload)[:6]})")
+    model = CSGNet(config)
+    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+    return model.to(device or "cpu").eval()
+
+
+def load_pretrained(dim: int = 2, device=None) -> CSGNet:
+    """The model shipped with the package for ``dim`` (see ``docs/benchmarks.md`` for how it was trained)."""
+    if dim not in PRETRAINED:
+        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+    path = WEIGHTS / PRETRAINED[dim]
+    if not path.is_file():
+        raise FileNotFoundError(f"the shipped {dim}D weights {path} are missing from this installation")
+    return load_model(path, device)
+
+
+# ------------------------------------------------------------------------------------------------
+# inference
+
+@dataclass
+class Inference:
+    """The program chosen for one shape.
+
+    Attributes:
+        text: program text.
+        score: its log-probability under the model.
+        iou: IoU with the input (2D: ``|A∧B| / |A∨B|``; 3D: ``/ (|A∨B| + 1)``).
+        chamfer: the paper's 2D chamfer distance in pixels (NaN in 3D).
+        valid: the program is valid (an invalid one renders empty).
+        beams: all hypotheses' texts, most likely first.
+        dim: 2 or 3.
+    """
+
+    text: str
+    score: float
+    iou: float
+    chamfer: float
+    valid: bool
+    beams: list[str]
+    dim: int
+
+    @property
+    def program(self) -> Program:
+        from .lang import parse
+
+        return parse(self.text, self.dim)
+
+
+def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", constrained: bool = True,
+          batch: int = 64, mode: str = "improved") -> list[Inference]:
+    """Parse shapes into programs.
+
+    Args:
+        model: a :class:`~csgnet.models.CSGNet` (e.g. :func:`load_pretrained`).
+        shapes: bool ``(N, 64, 64)`` images or ``(N, 64, 64, 64)`` volumes (NumPy or torch), or one shape.
+        beam: beam width (1 = greedy).
+        select: ``"likelihood"``: the most likely hypothesis; ``"match"``: the hypothesis closest to the
+            input (highest IoU in 3D, lowest chamfer in 2D; the paper's best-of-k protocol).
+        constrained: mask tokens that would make the program invalid (:mod:`csgnet.decode`).
+        batch: shapes decoded together.
+        mode: beam-search behaviour, ``"improved"`` or ``"reference"``.
+    """
+    if select not in ("likelihood", "match"):
+        raise ValueError(f"select must be 'likelihood' or 'match', got {select!r}")
+    dim = model.config.dim
+    x = torch.as_tensor(np.asarray(shapes) if not isinstance(shapes, torch.Tensor) else shapes).bool()
+    if x.dim() == dim:
+        x = x[None]
+    if tuple(x.shape[1:]) != (64,) * dim:
+        raise ValueError(f"shapes must be (N, {', '.join(['64'] * dim)}) for this {dim}D model, got {tuple(x.shape)}")
+    model.eval()
+    out: list[Inference] = []
+    for lo in range(0, x.shape[0], batch):
+        tgt = x[lo: lo + batch]
+        dec = greedy(model, tgt, mode=mode, constrained=constrained) if beam <= 1 else \
+            beam_search(model, tgt, beam, mode=mode, constrained=constrained)
+        n, k = dec.tokens.shape[:2]
+        pred = render_tokens(dec.flat_tokens(), dim, dec.lengths.flatten()).cpu()
+        rep = tgt.cpu().repeat_interleave(k, 0)
+        if dim == 2:
+            iou = np.asarray(metrics.iou(pred, rep, denominator="union"), dtype=np.float64).reshape(n, k)
+            cd = np.asarray(metrics.chamfer(pred, rep), dtype=np.float64).reshape(n, k)
+        else:
+            iou = np.asarray(metrics.iou_3d(pred, rep), dtype=np.float64).reshape(n, k)
+            cd = np.full((n, k), np.nan)
+        iou = np.nan_to_num(iou, nan=0.0)
+        texts = dec.texts()
+        for i in range(n):
+            if select == "likelihood":
+                j = 0
+            else:
+                j = int(np.argmin(cd[i]) if dim == 2 else np.argmax(iou[i]))
+            out.append(Inference(texts[i][j], float(dec.logprob[i, j]), float(iou[i, j]), float(cd[i, j]),
+                                 bool(dec.valid[i, j]), texts[i], dim))
+    return out

@@ -1,0 +1,252 @@
+"""CSGNet / CSGNetStack modules and their decoders."""
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+import csgnet
+from csgnet.decode import beam_search, greedy, sample
+from csgnet.models import CSGNet, ModelConfig, preset
+from csgnet.renderer import stack_trace
+from csgnet.vocab import vocabulary
+
+TINY = dict(hidden=32, channels=(4, 4, 4), enc_dropout=0.0, dropout=0.0)
+
+
+def tiny(dim=2, stack=False, seed=0, **kw):
+    torch.manual_seed(seed)
+    cfg = dict(TINY)
+    if dim == 3:
+        cfg.update(channels=(2, 2, 2), input_pool=4)
+    cfg.update(kw)
+    return CSGNet(preset("small", dim, stack, **cfg)).eval()
+
+
+def targets(texts, dim=2):
+    return torch.from_numpy(csgnet.render(texts, dim))
+
+
+def test_paper_parameter_counts_match_the_reference():
+    assert CSGNet(preset("paper", 2)).num_parameters() == 31_037_840
+    assert CSGNet(preset("paper", 3)).num_parameters() == 36_562_243
+    assert preset("paper", 2).feature_size == 2048 and preset("paper", 3).feature_size == 2048
+
+
+def test_stack_preset_adds_k_input_channels():
+    cfg = preset("paper", 2, stack=True)
+    assert cfg.stack_k == 7 and cfg.in_channels == 8
+    assert preset("paper", 3, stack=True).stack_k == 4
+    conv = CSGNet(cfg).encoder.net[0]
+    assert conv.in_channels == 8
+
+
+def test_config_round_trip_and_errors():
+    cfg = preset("small", 2, stack=True, hidden=64)
+    assert ModelConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match="unknown model config"):
+        ModelConfig.from_dict({"dim": 2, "bogus": 1})
+    with pytest.raises(ValueError, match="preset"):
+        preset("huge", 2)
+    with pytest.raises(ValueError, match="dim"):
+        ModelConfig(dim=4)
+
+
+@pytest.mark.parametrize("dim,stack", [(2, False), (2, True), (3, False), (3, True)])
+def test_forward_shapes(dim, stack):
+    m = tiny(dim, stack)
+    V = len(vocabulary(dim))
+    B, T = 3, 5
+    tgt = torch.zeros((B,) + (64,) * dim, dtype=torch.bool)
+    tok = torch.randint(0, V + 1, (B, T))
+    st = torch.zeros((T, B, m.config.stack_k) + (64,) * dim, dtype=torch.bool) if stack else None
+    out = m(tgt, tok, st)
+    assert out.shape == (B, T, V)
+    with pytest.raises(ValueError, match="targets"):
+        m(torch.zeros((B, 32, 32)), tok, st)
+    if stack:
+        with pytest.raises(ValueError, match="stack"):
+            m(tgt, tok, None)
+
+
+@pytest.mark.parametrize("stack", [False, True])
+def test_logits_are_causal(stack):
+    """The output at step t depends on inputs up to t only (what masking after '$' relies on)."""
+    m = tiny(2, stack)
+    tgt = targets(["c(32,32,16)", "s(24,24,12)"])
+    tok = torch.randint(0, 401, (2, 6))
+    st = torch.rand((6, 2, m.config.stack_k, 64, 64)) > 0.5 if stack else None
+    a = m(tgt, tok, st)
+    tok2 = tok.clone()
+    tok2[:, 4:] = 7
+    st2 = None
+    if stack:
+        st2 = st.clone()
+        st2[4:] = ~st2[4:]
+    b = m(tgt, tok2, st2)
+    assert torch.equal(a[:, :4], b[:, :4])
+    assert not torch.equal(a[:, 4:], b[:, 4:])
+
+
+@pytest.mark.parametrize("stack", [False, True])
+def test_beam_width_one_equals_greedy(stack):
+    m = tiny(2, stack, seed=3)
+    tgt = targets(["c(32,32,16)", "s(24,24,12)c(32,32,16)+", "t(32,32,20)"])
+    g = greedy(m, tgt)
+    b = beam_search(m, tgt, 1)
+    assert torch.equal(g.tokens, b.tokens)
+    assert torch.allclose(g.logprob, b.logprob, atol=1e-5)
+    assert torch.equal(g.lengths, b.lengths)
+
+
+def teacher_forced_logprob(m, tgt, tokens, length):
+    """Sum of log-probabilities of tokens[:length] and the following '$' under teacher forcing."""
+    stop = m.stop
+    seq = torch.cat([tokens[:length], torch.tensor([stop])])
+    tok_in = torch.cat([torch.tensor([m.start]), seq[:-1]])[None]
+    st = None
+    if m.config.stack:
+        st = stack_trace(seq[None, :-1], 2, k=m.config.stack_k) if length else \
+            torch.zeros((1, 1, m.config.stack_k, 64, 64), dtype=torch.bool)
+    lp = F.log_softmax(m(tgt[None], tok_in, st), -1)[0]
+    return float(lp.gather(1, seq[:, None]).sum())
+
+
+@pytest.mark.parametrize("stack", [False, True])
+def test_beam_scores_are_sorted_and_equal_teacher_forced_logprobs(stack):
+    m = tiny(2, stack, seed=1)
+    tgt = targets(["c(32,32,16)", "s(24,24,12)c(32,32,16)+"])
+    d = beam_search(m, tgt, 4, max_len=5, constrained=True)
+    assert (d.logprob[:, :-1] >= d.logprob[:, 1:] - 1e-6).all()
+    assert d.valid.all()
+    for i in range(2):
+        for j in range(4):
+            assert (d.tokens[i, j, int(d.lengths[i, j]):] == m.stop).all()  # only '$' after the program
+    # unconstrained: the beam score equals the teacher-forced log-probability of program + '$'
+    d = beam_search(m, tgt, 3, max_len=5)
+    for i in range(2):
+        for j in range(3):
+            n = int(d.lengths[i, j])
+            if n < 5:
+                got = teacher_forced_logprob(m, tgt[i], d.tokens[i, j], n)
+                assert got == pytest.approx(float(d.logprob[i, j]), abs=1e-3)
+
+
+def test_finished_beams_stop_and_reference_mode_keeps_decoding():
+    m = tiny(2, False, seed=2)
+    # make '$' overwhelmingly likely at every step: every beam finishes immediately after step 1
+    with torch.no_grad():
+        m.head[-1].bias[m.stop] = 50.0
+    tgt = targets(["c(32,32,16)"])
+    d = beam_search(m, tgt, 3, max_len=6)
+    assert d.lengths[0, 0] == 0 and d.tokens.shape[2] <= 6
+    # improved: the '$'-only hypothesis is kept once, its score is its own log-probability
+    assert torch.isfinite(d.logprob[0, 0])
+    r = beam_search(m, tgt, 3, max_len=6, mode="reference")
+    assert r.tokens.shape[2] == 6  # decodes all steps
+    assert r.logprob[0, 0] <= d.logprob[0, 0] + 1e-6  # later tokens keep adding (negative) log-probabilities
+
+
+def test_constrained_decoding_only_yields_valid_programs():
+    for stack in (False, True):
+        m = tiny(2, stack, seed=5)
+        tgt = targets(["c(32,32,16)", "t(32,32,20)s(32,32,12)-"])
+        for max_len in (3, 7, 13):
+            d = beam_search(m, tgt, 3, max_len=max_len, constrained=True)
+            assert d.valid.all()
+            for i in range(2):
+                for j in range(3):
+                    p = d.program(i, j)
+                    assert csgnet.is_valid(p) and len(p) <= max_len
+
+
+def test_stack_input_equals_the_renderer_stack_trace():
+    """What CSGNetStack's encoder sees while decoding is the stack trace of the decoded prefix."""
+    m = tiny(2, True, seed=4)
+    seen = []
+    orig = m.encode
+
+    def spy(target, stack=None):
+        seen.append(stack.clone())
+        return orig(target, stack)
+
+    m.encode = spy
+    tgt = targets(["c(32,32,16)", "s(24,24,12)c(32,32,16)+", "t(32,32,20)c(32,40,8)-"])
+    d = greedy(m, tgt, max_len=7, constrained=True)
+    toks = d.tokens[:, 0]
+    trace = stack_trace(toks, 2, k=m.config.stack_k, lengths=d.lengths[:, 0])
+    for t, st in enumerate(seen):
+        assert torch.equal(st, trace[t]), t
+    assert len(seen) >= 3 and seen[0].sum() == 0  # the empty stack first
+
+
+def test_beam_stack_follows_parents():
+    """With beams, each row's stack is the trace of that row's own prefix after reordering."""
+    m = tiny(2, True, seed=6)
+    last = {}
+    orig = m.encode
+
+    def spy(target, stack=None):
+        last["stack"] = stack.clone()
+        return orig(target, stack)
+
+    m.encode = spy
+    tgt = targets(["s(24,24,12)c(32,32,16)+"])
+    d = beam_search(m, tgt, 4, max_len=3, constrained=True)
+    # the last encoder call saw the stacks after two tokens of each (pre-selection) beam; check by recomputing
+    # every final beam's 2-token prefix trace is among the recorded states
+    trace = stack_trace(d.tokens[0, :, :2], 2, k=m.config.stack_k)[2]
+    rec = last["stack"]
+    for j in range(4):
+        assert any(torch.equal(trace[j], rec[r]) for r in range(rec.shape[0]))
+
+
+def test_sample_keeps_gradients_and_counts_steps():
+    m = tiny(2, True, seed=7)
+    m.train()
+    tgt = targets(["c(32,32,16)", "s(24,24,12)"])
+    g = torch.Generator().manual_seed(0)
+    s = sample(m, tgt, max_len=5, generator=g)
+    assert s.log_probs.requires_grad
+    loss = -(s.log_probs * s.counted).sum()
+    loss.backward()
+    assert m.head[-1].weight.grad is not None
+    for i in range(2):
+        n = int(s.lengths[i])
+        c = int(s.counted[i].sum())
+        assert c == (n + 1 if n < s.tokens.shape[1] else n) or c == s.tokens.shape[1]
+
+
+def test_tiny_model_overfits_a_few_programs():
+    """A few programs learned to exact greedy match in a couple of seconds."""
+    torch.manual_seed(0)
+    m = CSGNet(preset("small", 2, False, hidden=128, channels=(8, 8, 8), enc_dropout=0.0, dropout=0.0))
+    vocab = vocabulary(2)
+    texts = ["c(32,32,16)", "s(24,24,12)c(40,40,12)+", "t(32,32,20)c(32,40,8)-", "s(32,32,28)c(32,32,16)-"]
+    L = 3
+    tok = torch.full((4, L + 1), vocab.stop)
+    lengths = torch.tensor([len(vocab.encode(t)) for t in texts])
+    for i, t in enumerate(texts):
+        e = vocab.encode(t)
+        tok[i, : len(e)] = torch.tensor(e)
+    tgt = targets(texts)
+    tok_in = torch.cat([torch.full((4, 1), m.start), tok[:, :-1]], 1)
+    steps = torch.arange(L + 1)[None] <= lengths[:, None]
+    opt = torch.optim.Adam(m.parameters(), lr=3e-3)
+    for _ in range(150):
+        nll = F.cross_entropy(m(tgt, tok_in).transpose(1, 2), tok, reduction="none")
+        loss = (nll * steps).sum() / 4
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    m.eval()
+    d = greedy(m, tgt, max_len=3)
+    assert [d.text(i) for i in range(4)] == [vocab.text(vocab.encode(t)) for t in texts]
+
+
+@pytest.mark.parametrize("stack", [False, True])
+def test_3d_decoding(stack):
+    m = tiny(3, stack, seed=0)
+    tgt = targets(["sp(32,32,32,16)", "cu(32,32,32,20)sp(32,32,32,12)-"], dim=3)
+    d = beam_search(m, tgt, 2, constrained=True)
+    assert d.tokens.shape[:2] == (2, 2) and d.valid.all()
+    assert all(csgnet.is_valid(csgnet.parse(t, 3)) for row in d.texts() for t in row)
