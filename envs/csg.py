@@ -68,6 +68,7 @@ Versions
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import gymnasium as gym
@@ -285,7 +286,7 @@ class _Episodes:
         else:
             images = unpack(pred, cfg.dim).cpu().numpy()
             reward = np.atleast_1d(metrics.reward(images, self.target[rows], gamma=cfg.gamma,
-                                                  invalid=cfg.invalid_reward, valid=valid))
+                                                  invalid=cfg.invalid_reward, valid=valid, workers=1))
         return reward, iou
 
     # -------------------------------------------------------------------------------------------
@@ -298,7 +299,9 @@ class _Episodes:
         return obs
 
     def program(self, row: int) -> str:
-        return self.vocab.text(self.tokens[row, : self.steps[row]])
+        """The text of episode ``row``'s tokens (:meth:`csgnet.Vocabulary.text`)."""
+        texts = _token_texts(self.cfg.dim)
+        return "".join(texts[i] for i in self.tokens[row, : self.steps[row]])
 
     def frame(self, row: int) -> np.ndarray:
         """``(64 s, 130 s, 3) uint8``: target beside the current shape (``s = render_scale``)."""
@@ -309,6 +312,13 @@ class _Episodes:
             words = self.machine.top(1)[row, 0]
         current = unpack(words[None], self.cfg.dim)[0].cpu().numpy()
         return _side_by_side(self.target[row], current, self.cfg.render_scale)
+
+
+@lru_cache(maxsize=None)
+def _token_texts(dim: int) -> tuple[str, ...]:
+    """Per vocabulary index, the token as :meth:`csgnet.Vocabulary.text` writes it (long 3D names)."""
+    vocab = vocabulary(dim)
+    return tuple(vocab.text([i]) for i in range(vocab.stop)) + ("",)
 
 
 def _panel(shape: np.ndarray, color: np.ndarray) -> np.ndarray:

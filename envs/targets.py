@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
+import torch
 
 __all__ = [
     "Target",
@@ -69,14 +70,24 @@ def _check_dim(dim) -> int:
 
 
 @lru_cache(maxsize=64)
-def _synthetic_pool(dim: int, length: int, size: int, seed: int, rules) -> np.ndarray:
-    """(size, length) int64 token indices, drawn once per argument set (a pure function of them)."""
+def _synthetic_pool(dim: int, length: int, size: int, seed: int, rules) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Token indices ``(size, length) int64``, their renderings packed as ``(size, ...) uint8`` (bit ``k`` of
+    byte ``j`` is pixel ``8 j + k`` of the flattened canvas) and their program texts; drawn once per
+    argument set (a pure function of the arguments)."""
+    from csgnet.vocab import vocabulary
+
     from csgnet.data import sample_programs
+    from csgnet.renderer import pack, render_tokens
 
     rng = np.random.default_rng([seed, dim, length])
     pool = sample_programs(dim, length, size, rng, rules)
     pool.setflags(write=False)
-    return pool
+    words = torch.cat([pack(render_tokens(torch.from_numpy(pool[i:i + 256].copy()), dim))
+                       for i in range(0, size, 256)])
+    packed = words.numpy().view(np.uint8).reshape(size, -1)
+    packed.setflags(write=False)
+    texts = tuple(vocabulary(dim).text(row) for row in pool)
+    return pool, packed, texts
 
 
 class SyntheticTargets:
@@ -122,24 +133,25 @@ class SyntheticTargets:
     def __len__(self) -> int:
         return self.size * len(self.lengths)
 
+    def prepare(self) -> "SyntheticTargets":
+        """Draw every length's pool now (otherwise each is drawn on its first use); returns self."""
+        for i in range(0, len(self), self.size):
+            self.tokens(i)
+        return self
+
     def tokens(self, index: int) -> np.ndarray:
         """Token indices ``(L,) int64`` of pool entry ``index`` (lengths in order, ``size`` each)."""
         if not 0 <= index < len(self):
             raise IndexError(f"target index {index} out of range [0, {len(self)})")
         li, i = divmod(int(index), self.size)
-        return _synthetic_pool(self.dim, self.lengths[li], self.size, self.seed, self.rules)[i]
+        return _synthetic_pool(self.dim, self.lengths[li], self.size, self.seed, self.rules)[0][i]
 
     def sample(self, rng: np.random.Generator) -> Target:
-        import torch
-
-        from csgnet.renderer import render_tokens
-        from csgnet.vocab import vocabulary
-
         li = int(rng.integers(len(self.lengths)))
-        index = li * self.size + int(rng.integers(self.size))
-        tokens = self.tokens(index)
-        shape = render_tokens(torch.from_numpy(tokens[None].copy()), self.dim)[0].numpy()
-        return Target(shape, index, vocabulary(self.dim).text(tokens))
+        i = int(rng.integers(self.size))
+        _, packed, texts = _synthetic_pool(self.dim, self.lengths[li], self.size, self.seed, self.rules)
+        shape = np.unpackbits(packed[i], bitorder="little").view(bool).reshape((SIZE,) * self.dim)
+        return Target(shape, li * self.size + i, texts[i])
 
     def __repr__(self) -> str:
         return f"SyntheticTargets(dim={self.dim}, lengths={self.lengths}, size={self.size}, seed={self.seed})"

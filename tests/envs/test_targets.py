@@ -11,7 +11,7 @@ from envs.targets import ArrayTargets, ImageFolderTargets, SyntheticTargets, Tar
 
 def test_synthetic_targets_are_rendered_pool_programs():
     src = SyntheticTargets(2, lengths=[3, 7], size=5, seed=3)
-    assert len(src) == 10
+    assert len(src) == 10 and src.prepare() is src
     rng = np.random.default_rng(0)
     lengths = set()
     for _ in range(20):
