@@ -39,7 +39,7 @@ import torch
 from .geometry import cuboid_corners, mesh_arrays
 from .lang import AXES, NUM_FIELDS, Attach, Cuboid, Program, Reflect, Squeeze, Translate, numbers, statement_lines
 
-__all__ = ["ExecutedShape", "execute", "execute_batch", "program_parameters", "parameter_names"]
+__all__ = ["ExecutedShape", "ExecutionPlan", "execute", "execute_batch", "program_parameters", "parameter_names"]
 
 EPS = 0.01
 SMALL_EPS = 1e-4
@@ -610,37 +610,90 @@ def _rule_general(pos, dims, ax, src, g, prev):
     return pos[None], dims[None], ax[None]
 
 
-# ----------------------------------------------------------------------------- run
+# ----------------------------------------------------------------------------- plan
 
 
-def _affine(forms, flat, dtype, device):
-    """Evaluate affine forms c0 + c1 * flat[idx] -> (n, 3)."""
-    c = torch.tensor([f[0] + f[1] for f in forms], dtype=dtype, device=device)
+@dataclass
+class _GroupPlan:
+    """The attach ops of one rule at one step, over all blocks, as index tensors and constants."""
+
+    mode: int
+    bi: torch.Tensor  # (n,) block row
+    jj: torch.Tensor  # (n,) record row of the op
+    a: torch.Tensor  # (n,) moved slot
+    b: torch.Tensor  # (n,) target slot
+    const: torch.Tensor  # (2n, 6) affine constants and scales: the n src rows, then the n tgt rows
+    ix: torch.Tensor  # (2n, 3) parameter indices (-1: the trailing zero)
+    macro: dict | None  # reflect / translate copies, see _macro_points
+    prior: tuple | None  # SECOND: (record row, role) of the one earlier record
+    general: list | None  # GENERAL: per row (block row, [(record row, role), ...])
+
+
+@dataclass
+class _StepPlan:
+    setdims: tuple | None  # (block rows, slots, parameter indices (n, 3))
+    copy: tuple | None  # (block rows, new slots, source slots)
+    groups: list  # of _GroupPlan
+
+
+@dataclass
+class _LevelPlan:
+    """Placement of the block instances at one depth of the sub-program trees."""
+
+    rows: torch.Tensor  # (m,) block row of each instance
+    parent: torch.Tensor | None  # (m,) index of the parent instance in the previous level (None: roots)
+    pslot: torch.Tensor | None  # (m,) slot of the parent that the instance fills
+    root_ix: torch.Tensor | None  # roots: (m, 3) parameter indices of the root bbox dims
+    pos_sign: torch.Tensor | None  # (m, 1, 3) reflect flip of positions (None: no flip at this level)
+    ax_sign: torch.Tensor | None  # (m, 1, 1, 3) reflect flip (180 deg turn) of the axes
+
+
+def _shift(form, off):
+    return (form[0], form[1], tuple(i + off if i >= 0 else -1 for i in form[2]))
+
+
+def _plan_group(mode, items, offsets, dtype, device) -> _GroupPlan:
+    """Index tensors and constants of one attach group; ``items``: (block row, record row, op)."""
+    ints = torch.tensor([(x[0], x[1], x[2].a, x[2].b) for x in items], device=device)
+    bi, jj, a, b = ints.unbind(1)
+    none = ((0.0,) * 3, (0.0,) * 3, (-1, -1, -1))
+    src_forms, tgt_forms, macro_rows = [], [], []
+    for r, (blk, _, o) in enumerate(items):
+        if o.macro is None:
+            src_forms.append(_shift(o.src, offsets[blk]))
+            tgt_forms.append(_shift(o.tgt, offsets[blk]))
+        else:  # computed at run time from the original record (_macro_points)
+            src_forms.append(none)
+            tgt_forms.append(none)
+            macro_rows.append(r)
+    forms = src_forms + tgt_forms
+    const = torch.tensor([f[0] + f[1] for f in forms], dtype=dtype, device=device)
     ix = torch.tensor([f[2] for f in forms], dtype=torch.int64, device=device)
-    return c[:, :3] + c[:, 3:] * flat[ix]
+    macro = None
+    if macro_rows:
+        ms = [items[r][2].macro for r in macro_rows]
+        mi = torch.tensor([(r, items[r][0], m[0], m[1], m[2], m[4],
+                            offsets[items[r][0]] + m[7] if m[7] >= 0 else -1) for r, m in zip(macro_rows, ms)],
+                          device=device)
+        r_idx, mbi, j, A, T, k, didx = mi.unbind(1)
+        is_ref = torch.tensor([m[3] == "R" for m in ms], device=device)
+        e = torch.nn.functional.one_hot(k, 3).to(dtype)
+        ii, nn_ = torch.tensor([(float(m[5]), float(m[6])) for m in ms], dtype=dtype, device=device).unbind(1)
+        macro = dict(r_idx=r_idx, bi=mbi, j=j, A=A, T=T, e=e, didx=didx, ii=ii, N=nn_, is_ref=is_ref,
+                     flip=is_ref[:, None] & (e > 0), any_ref=any(m[3] == "R" for m in ms),
+                     any_tr=any(m[3] != "R" for m in ms))
+    prior = general = None
+    if mode == SECOND:
+        prior = torch.tensor([x[2].prior[0] for x in items], device=device).unbind(1)
+    elif mode == GENERAL:
+        general = [(blk, list(o.prior)) for blk, _, o in items]
+    return _GroupPlan(mode, bi, jj, a, b, const, ix, macro, prior, general)
 
 
-def _run_blocks(codes: list[_BlockCode], offsets: list[int], flat: torch.Tensor):
-    """Execute local programs in lock step. ``flat``: (P+1,) params with a trailing 0.
-
-    Returns per block (pos (S,3), dims (S,3), axes (S,3,3)) tensors of all its slots.
-    """
-    dtype, device = flat.dtype, flat.device
-    nb = len(codes)
-    S = max(len(c.slots) for c in codes)
-    # initial state: dims from the declaring lines, origin, identity axes
-    init = []
-    for c, off in zip(codes, offsets):
-        rows = [(-1, -1, -1) if d is None else tuple(off + i for i in d) for d in c.init_dims]
-        rows += [(-1, -1, -1)] * (S - len(rows))
-        init.append(rows)
-    dims = flat[torch.tensor(init, dtype=torch.int64, device=device)]  # (nb, S, 3)
-    pos = torch.zeros(nb, S, 3, dtype=dtype, device=device)
-    ax = torch.eye(3, dtype=dtype, device=device).repeat(nb, S, 1, 1)
-    n_att = [sum(1 for o in c.ops if o[0] == "attach") for c in codes]
-    rec = torch.zeros(nb, max(n_att + [1]), 3, 3, dtype=dtype, device=device)  # [src, tgt, g]
-    T = max(len(c.steps) for c in codes)
-    for t in range(T):
+def _plan_steps(codes: list[_BlockCode], offsets: list[int], dtype, device) -> list[_StepPlan]:
+    """Lock-step schedule: step ``t`` runs the ``t``-th dependency level of every block."""
+    steps = []
+    for t in range(max(len(c.steps) for c in codes)):
         groups: dict = {}
         setd, copy = [], []
         for bi, c in enumerate(codes):
@@ -651,62 +704,253 @@ def _run_blocks(codes: list[_BlockCode], offsets: list[int], flat: torch.Tensor)
                     o = op[1]
                     groups.setdefault(o.mode, []).append((bi, o.j, o))
                 elif op[0] == "setdims":
-                    setd.append((bi, op[1], tuple(offsets[bi] + i for i in op[2])))
+                    setd.append((bi, op[1]) + tuple(offsets[bi] + i for i in op[2]))
                 else:
                     copy.append((bi, op[1], op[2]))
+        sd = cp = None
         if setd:
-            t_ = torch.tensor([(x[0], x[1]) + x[2] for x in setd], device=device)
-            bi, sl, ix = t_[:, 0], t_[:, 1], t_[:, 2:]
-            dims.index_put_((bi, sl), flat[ix])
+            t_ = torch.tensor(setd, device=device)
+            sd = (t_[:, 0], t_[:, 1], t_[:, 2:])
         if copy:
-            bi, new, src = torch.tensor(copy, device=device).unbind(1)
-            dims.index_put_((bi, new), dims[bi, src])
-            pos.index_put_((bi, new), torch.zeros(len(copy), 3, dtype=dtype, device=device))
-            ax.index_put_((bi, new), torch.eye(3, dtype=dtype, device=device).expand(len(copy), 3, 3))
-        for mode, items in groups.items():
-            pos, dims, ax, rec = _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec)
-    return pos, dims, ax
+            cp = torch.tensor(copy, device=device).unbind(1)
+        steps.append(_StepPlan(sd, cp, [_plan_group(m, it, offsets, dtype, device) for m, it in groups.items()]))
+    return steps
 
 
-def _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec):
-    dtype, device = flat.dtype, flat.device
-    n = len(items)
-    ints = torch.tensor([(x[0], x[1], x[2].a, x[2].b) for x in items], device=device)
-    bi, jj, a, b = ints.unbind(1)
+def _plan_levels(comps: list[_Compiled], block_base: list[int], param_base: list[int], dtype, device):
+    """Placement levels and the leaf gather of a batch of programs.
 
-    def shift(form, off):
-        return (form[0], form[1], tuple(i + off if i >= 0 else -1 for i in form[2]))
+    Returns the levels, the (instance, slot) index of every leaf in output order (instances
+    numbered level after level), and the leaf count, node and line tensors per program.
+    """
+    per_level: list[list] = []  # per depth: (program, local instance)
+    where: list[dict] = []  # per program: local instance -> (depth, index in level)
+    for pi, comp in enumerate(comps):
+        depth = []
+        loc = {}
+        for li, (_, parent, _, _) in enumerate(comp.instances):
+            d = 0 if parent < 0 else depth[parent] + 1
+            depth.append(d)
+            while len(per_level) <= d:
+                per_level.append([])
+            loc[li] = (d, len(per_level[d]))
+            per_level[d].append((pi, li))
+        where.append(loc)
+    level_base = [0]
+    for lv in per_level:
+        level_base.append(level_base[-1] + len(lv))
+    levels = []
+    for d, lv in enumerate(per_level):
+        rows, parent, pslot, root_ix, pos_sign, ax_sign = [], [], [], [], [], []
+        for pi, li in lv:
+            bidx, par, ps, flip = comps[pi].instances[li]
+            rows.append(block_base[pi] + bidx)
+            if d == 0:
+                root_ix.append([param_base[pi] + k for k in range(3)])
+            else:
+                parent.append(where[pi][par][1])
+                pslot.append(ps)
+            sign = [1.0, 1.0, 1.0]
+            if flip is not None:
+                sign[flip] = -1.0
+            pos_sign.append(sign)
+            # a reflected copy's axes: -(axes * sign), a 180 degree turn
+            ax_sign.append([-x for x in sign] if flip is not None else sign)
+        flips = any(comps[pi].instances[li][3] is not None for pi, li in lv)
+        lt = lambda v: torch.tensor(v, dtype=torch.int64, device=device)  # noqa: E731
+        levels.append(_LevelPlan(
+            rows=lt(rows),
+            parent=lt(parent) if d else None,
+            pslot=lt(pslot) if d else None,
+            root_ix=lt(root_ix) if d == 0 else None,
+            pos_sign=torch.tensor(pos_sign, dtype=dtype, device=device)[:, None] if flips else None,
+            ax_sign=torch.tensor(ax_sign, dtype=dtype, device=device)[:, None, None] if flips else None,
+        ))
+    leaf_inst, leaf_slot, counts, nodes, lines = [], [], [], [], []
+    for pi, comp in enumerate(comps):
+        node, line = [], []
+        for li, (bidx, _, _, _) in enumerate(comp.instances):
+            code = comp.blocks[bidx]
+            keep = comp.leaf_slots[bidx]
+            d, k = where[pi][li]
+            leaf_inst.extend([level_base[d] + k] * len(keep))
+            leaf_slot.extend(keep)
+            node.extend([int(code.name.split("_")[1]) if code.name.startswith("Program_") else bidx] * len(keep))
+            line.extend(code.slot_line[s] for s in keep)
+        counts.append(len(node))
+        nodes.append(torch.tensor(node, dtype=torch.int64, device=device))
+        lines.append(torch.tensor(line, dtype=torch.int64, device=device))
+    leaves = (torch.tensor(leaf_inst, dtype=torch.int64, device=device),
+              torch.tensor(leaf_slot, dtype=torch.int64, device=device))
+    return levels, leaves, counts, nodes, lines
 
-    src_forms, tgt_forms, macro_rows = [], [], []
-    for r, (blk, _, o) in enumerate(items):
-        off = offsets[blk]
-        if o.macro is None:
-            src_forms.append(shift(o.src, off))
-            tgt_forms.append(shift(o.tgt, off))
+
+class ExecutionPlan:
+    """Programs compiled for execution, reusable: static structure, index tensors and constants.
+
+    Building a plan does everything that does not depend on the parameter values (the rule of
+    every attach, macro expansion, the lock-step schedule, the sub-program tree, the leaf order);
+    :meth:`run` then only does tensor arithmetic. :func:`execute` and :func:`execute_batch` build
+    a plan per call; a caller that executes the same programs many times (fitting, a training
+    loop with fixed structure) builds it once.
+
+    Example:
+        >>> from shapeprog.lang import parse
+        >>> p = parse("bbox = Cuboid(1.0, 1.0, 1.0, True)\\ncube0 = Cuboid(0.5, 0.2, 0.5, True)\\n"
+        ...           "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n")
+        >>> plan = ExecutionPlan([p])
+        >>> x = program_parameters(p).requires_grad_(True)
+        >>> plan.run([x])[0].centers.tolist()
+        [[0.0, -0.4000000059604645, 0.0]]
+    """
+
+    def __init__(self, programs: list[Program], dtype: torch.dtype = torch.float32, device=None):
+        if isinstance(programs, Program):
+            raise TypeError("`programs` must be a list of programs; use ExecutionPlan([program])")
+        self.programs = list(programs)
+        self.dtype = dtype
+        self.device = torch.device("cpu") if device is None else torch.device(device)
+        comps = [_compile(p) for p in self.programs]
+        self.n_params = [c.n_params for c in comps]
+        codes, offsets, block_base, param_base = [], [], [], []
+        poff = 0
+        for c in comps:
+            block_base.append(len(codes))
+            param_base.append(poff)
+            codes.extend(c.blocks)
+            offsets.extend([poff] * len(c.blocks))
+            poff += c.n_params
+        self._param_base = param_base
+        if not codes:
+            return
+        dev = self.device
+        S = max(len(c.slots) for c in codes)
+        init = []
+        for c, off in zip(codes, offsets):
+            rows = [(-1, -1, -1) if d is None else tuple(off + i for i in d) for d in c.init_dims]
+            init.append(rows + [(-1, -1, -1)] * (S - len(rows)))
+        self._init_ix = torch.tensor(init, dtype=torch.int64, device=dev)  # (nb, S, 3)
+        self._n_rec = max([sum(1 for o in c.ops if o[0] == "attach") for c in codes] + [1])
+        self._steps = _plan_steps(codes, offsets, dtype, dev)
+        self._levels, self._leaves, self._counts, self._nodes, self._lines = _plan_levels(
+            comps, block_base, param_base, dtype, dev)
+
+    def __len__(self) -> int:
+        return len(self.programs)
+
+    def parameters(self) -> list[torch.Tensor]:
+        """The programs' own numbers, one (P_i,) tensor each (see :func:`program_parameters`)."""
+        return [program_parameters(p, self.dtype, self.device) for p in self.programs]
+
+    def run(self, params: list[torch.Tensor | None] | None = None) -> list[ExecutedShape]:
+        """Execute the programs, with their own numbers or with ``params`` (one (P_i,) tensor or
+        None per program); the result is differentiable in the given tensors."""
+        if not self.programs:
+            return []
+        if params is not None and len(params) != len(self.programs):
+            raise ValueError(f"`params` must hold {len(self.programs)} tensors, got {len(params)}")
+        flats = []
+        for i, p in enumerate(self.programs):
+            t = None if params is None else params[i]
+            if t is None:
+                t = program_parameters(p, self.dtype, self.device)
+            else:
+                if t.dim() != 1 or t.shape[0] != self.n_params[i]:
+                    raise ValueError(
+                        f"`params` for program {i} must have shape ({self.n_params[i]},), got {tuple(t.shape)}")
+                t = t.to(dtype=self.dtype, device=self.device)
+            flats.append(t)
+        flat = torch.cat(flats + [torch.zeros(1, dtype=self.dtype, device=self.device)])  # index -1 -> 0
+        pos, dims, ax = self._run_steps(flat)
+        return self._place(flat, pos, dims, ax)
+
+    def _run_steps(self, flat: torch.Tensor):
+        """Local programs of all blocks in lock step; per block row the (S, ...) state of its slots."""
+        dtype, device = self.dtype, self.device
+        dims = flat[self._init_ix]  # (nb, S, 3): dims from the declaring lines
+        nb, S = dims.shape[:2]
+        pos = torch.zeros(nb, S, 3, dtype=dtype, device=device)
+        ax = torch.eye(3, dtype=dtype, device=device).repeat(nb, S, 1, 1)
+        rec = torch.zeros(nb, self._n_rec, 3, 3, dtype=dtype, device=device)  # [src, tgt, g] per attach
+        for step in self._steps:
+            if step.setdims is not None:
+                bi, sl, ix = step.setdims
+                dims.index_put_((bi, sl), flat[ix])
+            if step.copy is not None:
+                bi, new, src = step.copy
+                n = bi.shape[0]
+                dims.index_put_((bi, new), dims[bi, src])
+                pos.index_put_((bi, new), torch.zeros(n, 3, dtype=dtype, device=device))
+                ax.index_put_((bi, new), torch.eye(3, dtype=dtype, device=device).expand(n, 3, 3))
+            for grp in step.groups:
+                pos, dims, ax, rec = _run_attach_group(grp, flat, pos, dims, ax, rec)
+        return pos, dims, ax
+
+    def _place(self, flat, pos, dims, ax) -> list[ExecutedShape]:
+        """Breadth-first placement, one batched pass per depth (apply_delta and reflect flips)."""
+        wps, wds, was = [], [], []
+        prev = None
+        for lv in self._levels:
+            lp, ld, la = pos[lv.rows], dims[lv.rows], ax[lv.rows]  # (m, S, ...)
+            if lv.pos_sign is not None:
+                lp = lp * lv.pos_sign
+                la = la * lv.ax_sign
+            rdims = ld[:, 0]
+            if prev is None:  # roots: the identity frame at the origin, dims from the root bbox line
+                wd = ld * (flat[lv.root_ix] / rdims)[:, None]
+                wp, wa = lp, la
+            else:
+                pp, pd, pa = prev
+                apos, adims, aax = pp[lv.parent, lv.pslot], pd[lv.parent, lv.pslot], pa[lv.parent, lv.pslot]
+                # apply_delta: scale dims per local axis index, rotate positions (not scaled)
+                wd = ld * (adims / rdims)[:, None]
+                wp = torch.bmm(lp, aax) + apos[:, None]
+                wa = torch.matmul(la, aax[:, None])
+            prev = (wp, wd, wa)
+            wps.append(wp)
+            wds.append(wd)
+            was.append(wa)
+        inst, slot = self._leaves
+        if len(wps) == 1:
+            wp, wd, wa = wps[0], wds[0], was[0]
         else:
-            # src: complement (or not) of the original record's src, computed from rec below
-            src_forms.append(((0.0,) * 3, (0.0,) * 3, (-1, -1, -1)))
-            tgt_forms.append(((0.0,) * 3, (0.0,) * 3, (-1, -1, -1)))
-            macro_rows.append(r)
-    src, tgt = _affine(src_forms + tgt_forms, flat, dtype, device).split(n)
-    if macro_rows:
-        src, tgt = _macro_points(items, macro_rows, offsets, flat, pos, dims, ax, rec, src, tgt, bi)
+            wp, wd, wa = torch.cat(wps), torch.cat(wds), torch.cat(was)
+        centers, dd, aa = wp[inst, slot], wd[inst, slot], wa[inst, slot]
+        corners = cuboid_corners(centers, dd, aa)
+        out = []
+        parts = [x.split(self._counts) for x in (centers, dd, aa, corners)]
+        for i, (c, d, a, k) in enumerate(zip(*parts)):
+            base = self._param_base[i]
+            out.append(ExecutedShape(centers=c, dims=d, axes=a, corners=k, node=self._nodes[i],
+                                     line=self._lines[i], root_dims=flat[base:base + 3].clone()))
+        return out
+
+
+# ----------------------------------------------------------------------------- run
+
+
+def _run_attach_group(grp: _GroupPlan, flat, pos, dims, ax, rec):
+    n = grp.bi.shape[0]
+    bi, a, b = grp.bi, grp.a, grp.b
+    vals = grp.const[:, :3] + grp.const[:, 3:] * flat[grp.ix]
+    src, tgt = vals[:n], vals[n:]
+    if grp.macro is not None:
+        src, tgt = _macro_points(grp.macro, flat, pos, dims, ax, rec, src, tgt)
     posB, dimsB, axB = pos[bi, b], dims[bi, b], ax[bi, b]
     g = _point(posB, dimsB, axB, tgt)
     posA, dimsA, axA = pos[bi, a], dims[bi, a], ax[bi, a]
+    mode = grp.mode
     if mode == FIRST:
         posA, dimsA, axA = _rule_first(posA, dimsA, axA, src, g)
     elif mode == SECOND:
-        pj, pr = torch.tensor([x[2].prior[0] for x in items], device=device).unbind(1)
-        p_ap = rec[bi, pj, pr]
-        p_g = rec[bi, pj, 2]
-        posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, p_ap, p_g)
+        pj, pr = grp.prior
+        posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, rec[bi, pj, pr], rec[bi, pj, 2])
     elif mode == ALIGNED:
         posA, dimsA, axA = _rule_aligned(posA, dimsA, axA, posB, dimsB, axB)
     else:
         outs = []
-        for r, (blk, _, o) in enumerate(items):
-            prev = [(rec[blk, j, role], rec[blk, j, 2]) for j, role in o.prior]
+        for r, (blk, prior) in enumerate(grp.general):
+            prev = [(rec[blk, j, role], rec[blk, j, 2]) for j, role in prior]
             outs.append(_rule_general(posA[r:r + 1], dimsA[r:r + 1], axA[r:r + 1], src[r:r + 1], g[r:r + 1], prev))
         posA = torch.cat([o[0] for o in outs])
         dimsA = torch.cat([o[1] for o in outs])
@@ -714,93 +958,31 @@ def _run_attach_group(mode, items, codes, offsets, flat, pos, dims, ax, rec):
     pos.index_put_((bi, a), posA)
     dims.index_put_((bi, a), dimsA)
     ax.index_put_((bi, a), axA)
-    rec.index_put_((bi, jj), torch.stack([src, tgt, g], 1))
+    rec.index_put_((bi, grp.jj), torch.stack([src, tgt, g], 1))
     return pos, dims, ax, rec
 
 
-def _macro_points(items, rows, offsets, flat, pos, dims, ax, rec, src, tgt, bi_all):
+def _macro_points(m: dict, flat, pos, dims, ax, rec, src, tgt):
     """Source/target local points of reflect/translate copies (spec: reflect, translate)."""
-    dtype, device = flat.dtype, flat.device
-    ms = [items[r][2].macro for r in rows]
-    ints = torch.tensor([(r, m[0], m[1], m[2], m[4], m[3] == "R",
-                          offsets[items[r][0]] + m[7] if m[7] >= 0 else -1) for r, m in zip(rows, ms)], device=device)
-    r_idx, j, A, T, k, is_ref, didx = ints.unbind(1)
-    is_ref = is_ref.bool()
-    bi = bi_all[r_idx]
-    ap = rec[bi, j, 0]  # the original record's source point on A
-    e = torch.nn.functional.one_hot(k, 3).to(dtype)
-    src_m = torch.where(is_ref[:, None] & (e > 0), 1 - ap, ap)
+    bi, A, T, e = m["bi"], m["A"], m["T"], m["e"]
+    ap = rec[bi, m["j"], 0]  # the original record's source point on A
+    src_m = torch.where(m["flip"], 1 - ap, ap)
     p = _point(pos[bi, A], dims[bi, A], ax[bi, A], ap)
-    # reflect through the plane through the bbox centre (origin) normal to world axis k
-    p_ref = p - 2 * e * p
-    # translate: p + i * (L * d / N) * e, L = local bbox extent along k
-    ii, NN = torch.tensor([(float(m[5]), float(m[6])) for m in ms], dtype=dtype, device=device).unbind(1)
-    L = (dims[bi, 0] * e).sum(-1)
-    step = L * flat[didx] / NN
-    p_tr = p + (ii * step)[:, None] * e
-    pg = torch.where(is_ref[:, None], p_ref, p_tr)
+    pg = None
+    if m["any_ref"]:
+        # reflect through the plane through the bbox centre (origin) normal to world axis k
+        pg = p - 2 * e * p
+    if m["any_tr"]:
+        # translate: p + i * (L * d / N) * e, L = local bbox extent along k
+        L = (dims[bi, 0] * e).sum(-1)
+        step = L * flat[m["didx"]] / m["N"]
+        p_tr = p + (m["ii"] * step)[:, None] * e
+        pg = p_tr if pg is None else torch.where(m["is_ref"][:, None], pg, p_tr)
     loc = _to_local(pos[bi, T], dims[bi, T], ax[bi, T], pg[:, None, :])[:, 0]
     tgt_m = loc.clamp(0.0, 1.0)
-    src = src.index_copy(0, r_idx, src_m)
-    tgt = tgt.index_copy(0, r_idx, tgt_m)
+    src = src.index_copy(0, m["r_idx"], src_m)
+    tgt = tgt.index_copy(0, m["r_idx"], tgt_m)
     return src, tgt
-
-
-# ----------------------------------------------------------------------------- placement
-
-
-def _place(comps: list[_Compiled], block_base: list[int], flats: list[torch.Tensor], pos, dims, ax):
-    """Breadth-first placement of every program's instances; returns ExecutedShapes."""
-    out = []
-    dtype, device = pos.dtype, pos.device
-    for comp, base, flat in zip(comps, block_base, flats):
-        root_dims = flat[:3].clone()  # the root bbox line; a copy, not a view of the caller's params
-        lines_pos, lines_dims, lines_ax, node, line = [], [], [], [], []
-        placed = []  # per instance: (pos (S,3), dims (S,3), ax (S,3,3)) in world
-        for inst, (bidx, parent, pslot, flip) in enumerate(comp.instances):
-            code = comp.blocks[bidx]
-            S = len(code.slots)
-            lp, ld, la = pos[base + bidx, :S], dims[base + bidx, :S], ax[base + bidx, :S]
-            if parent < 0:
-                apos = torch.zeros(3, dtype=dtype, device=device)
-                adims = root_dims
-                aax = torch.eye(3, dtype=dtype, device=device)
-            else:
-                pp, pd, pa = placed[parent]
-                apos, adims, aax = pp[pslot], pd[pslot], pa[pslot]
-            rdims = ld[0]
-            if flip is not None:
-                sign = torch.ones(3, dtype=dtype, device=device)
-                sign[flip] = -1.0
-                lp = lp * sign
-                la = -(la * sign)
-            # apply_delta: scale dims per local axis index, rotate positions (not scaled)
-            wd = ld * (adims / rdims)
-            wp = lp @ aax + apos
-            wa = la @ aax
-            placed.append((wp, wd, wa))
-        # leaves: BFS instance order, slots in dict order, bbox and sub-program parts excluded
-        for inst, (bidx, _, _, _) in enumerate(comp.instances):
-            code = comp.blocks[bidx]
-            keep = comp.leaf_slots[bidx]
-            if not keep:
-                continue
-            kk = torch.tensor(keep, device=device)
-            wp, wd, wa = placed[inst]
-            lines_pos.append(wp[kk])
-            lines_dims.append(wd[kk])
-            lines_ax.append(wa[kk])
-            node.extend([int(code.name.split("_")[1]) if code.name.startswith("Program_") else bidx] * len(keep))
-            line.extend(code.slot_line[s] for s in keep)
-        centers = torch.cat(lines_pos) if lines_pos else torch.zeros(0, 3, dtype=dtype, device=device)
-        dd = torch.cat(lines_dims) if lines_dims else torch.zeros(0, 3, dtype=dtype, device=device)
-        aa = torch.cat(lines_ax) if lines_ax else torch.zeros(0, 3, 3, dtype=dtype, device=device)
-        out.append(ExecutedShape(
-            centers=centers, dims=dd, axes=aa, corners=cuboid_corners(centers, dd, aa),
-            node=torch.tensor(node, dtype=torch.int64, device=device),
-            line=torch.tensor(line, dtype=torch.int64, device=device), root_dims=root_dims,
-        ))
-    return out
 
 
 # ----------------------------------------------------------------------------- public API
@@ -813,8 +995,8 @@ def execute_batch(programs: list[Program], dtype: torch.dtype = torch.float32, d
     Args:
         programs: parsed programs.
         dtype: float32 (the reference precision) or float64.
-        device: torch device (default CPU).
-        params: optional list of (P_i,) tensors, one per program (see
+        device: torch device (default: that of the first given ``params`` tensor, else CPU).
+        params: optional list of (P_i,) tensors (or None), one per program (see
             :func:`program_parameters`); gradients flow to them.
 
     Returns:
@@ -822,29 +1004,9 @@ def execute_batch(programs: list[Program], dtype: torch.dtype = torch.float32, d
     """
     if not programs:
         return []
-    comps = [_compile(p) for p in programs]
-    flats = []
-    for i, (p, c) in enumerate(zip(programs, comps)):
-        if params is None or params[i] is None:
-            t = program_parameters(p, dtype, device)
-        else:
-            t = params[i]
-            if t.dim() != 1 or t.shape[0] != c.n_params:
-                raise ValueError(f"`params` for program {i} must have shape ({c.n_params},), got {tuple(t.shape)}")
-            t = t.to(dtype=dtype, device=device)
-        flats.append(t)
-    device = flats[0].device
-    codes, offsets, block_base = [], [], []
-    poff = 0
-    for c, t in zip(comps, flats):
-        block_base.append(len(codes))
-        codes.extend(c.blocks)
-        offsets.extend([poff] * len(c.blocks))
-        poff += t.shape[0]
-    zero = torch.zeros(1, dtype=dtype, device=device)
-    flat = torch.cat(flats + [zero])  # index -1 -> the trailing 0
-    pos, dims, ax = _run_blocks(codes, offsets, flat)
-    return _place(comps, block_base, flats, pos, dims, ax)
+    if device is None and params is not None:
+        device = next((t.device for t in params if t is not None), None)
+    return ExecutionPlan(programs, dtype, device).run(params)
 
 
 def execute(program: Program, dtype: torch.dtype = torch.float32, device=None,
@@ -854,7 +1016,7 @@ def execute(program: Program, dtype: torch.dtype = torch.float32, device=None,
     Args:
         program: a parsed :class:`~shapeprog.lang.Program`.
         dtype: float32 (the reference precision, default) or float64.
-        device: torch device (default CPU).
+        device: torch device (default: that of ``params``, else CPU).
         params: optional (P,) tensor replacing the program's continuous numbers (text order,
             see :func:`program_parameters`); the result is differentiable in it.
 

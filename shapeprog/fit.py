@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .execute import execute, parameter_names, program_parameters
+from .execute import ExecutionPlan, parameter_names, program_parameters
 from .lang import Cuboid, Program, replace_numbers, to_text
 
 __all__ = ["FitResult", "fit"]
@@ -135,11 +135,12 @@ def fit(
     lo, hi = _bounds(program, dtype, device)
     lo, hi = lo[free_idx], hi[free_idx]
     opt = torch.optim.Adam([z], lr=lr)
+    plan = ExecutionPlan([program], dtype, device)  # compiled once, run every step
     res = FitResult(program, "", full0)
     t0 = time.perf_counter()
     for _ in range(steps):
         opt.zero_grad()
-        shape = execute(program, dtype=dtype, device=device, params=z[gather])
+        shape = plan.run([z[gather]])[0]
         pts, _ = sample_surface(shape.corners, samples, generator=generator)
         tgt = target
         if target_samples is not None and target.shape[0] > target_samples:
