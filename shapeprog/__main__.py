@@ -3,6 +3,7 @@
     python -m shapeprog run chair/173 -o chair.obj --png chair.png
     python -m shapeprog run my_program.txt -o shape.ply
     python -m shapeprog fit table/33075 --points cloud.obj --steps 400 -o fitted.txt
+    python -m shapeprog silhouettes --out silhouettes.npz
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or a
 file path. The mesh format follows the ``-o`` suffix: .obj (the reference layout), .ply or
@@ -110,6 +111,19 @@ def _cmd_fit(args) -> int:
     return 0
 
 
+def _cmd_silhouettes(args) -> int:
+    import time
+
+    from .silhouettes import build, write
+
+    t0 = time.perf_counter()
+    data = build(size=args.size, margin=args.margin, limit=args.limit, progress=not args.quiet)
+    write(args.out, data, margin=args.margin)
+    counts = ", ".join(f"{split} {len(s.images)}" for split, s in data.items())
+    print(f"wrote {args.out}: {counts} images in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="shapeprog", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -133,6 +147,13 @@ def main(argv=None) -> int:
     f.add_argument("-o", "--output", help="fitted program file (default: print)")
     f.add_argument("--mesh", help="also write the fitted shape (.obj, .ply, .glb)")
     f.set_defaults(func=_cmd_fit)
+    s = sub.add_parser("silhouettes", help="render front and side silhouettes of the corpus to an .npz")
+    s.add_argument("--out", required=True, help="output file (.npz)")
+    s.add_argument("--size", type=int, default=64, help="image side in pixels")
+    s.add_argument("--margin", type=int, default=4, help="free pixels on each side of the longer extent")
+    s.add_argument("--limit", type=int, help="only the first N shapes per category and split")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_silhouettes)
     args = ap.parse_args(argv)
     from .lang import ParseError
 

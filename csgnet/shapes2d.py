@@ -1,0 +1,156 @@
+"""Real 2D target shapes for CSGNet: the shipped PartNet silhouettes and the paper's ``cad.h5``.
+
+* :func:`load_silhouettes`: front and side silhouettes (64x64) of the PartNet chairs, tables and
+  storage furniture of the ShapeAssembly corpus, shipped as ``csgnet/data/silhouettes.npz``
+  (built by ``python -m shapeprog silhouettes``; see ``docs/silhouettes.md``). Splits ``train``,
+  ``val`` and ``test``; this set stands in for the paper's CAD set and is not the same data.
+* :func:`load_cad_h5`: the paper's ``cad.h5`` (datasets ``train_images``, ``val_images``,
+  ``test_images``, each N x 64 x 64), for users who have that file. Needs ``h5py``, the ``cad``
+  extra: ``pip install 'shape-programs[cad]'``.
+
+Both return ``(N, 64, 64)`` bool arrays with rows as stored (``img[row, col]``, no transposition, as
+the reference feeds the CAD images to the network). Nothing is read at import.
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["SPLITS", "SilhouetteSplit", "load_cad_h5", "load_silhouettes", "silhouettes_path"]
+
+SPLITS = ("train", "val", "test")
+SIZE = 64
+
+
+def _check_split(split: str) -> None:
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
+
+
+def silhouettes_path() -> Path:
+    """The shipped silhouette file, ``csgnet/data/silhouettes.npz`` inside the installed package."""
+    return Path(str(resources.files("csgnet").joinpath("data", "silhouettes.npz")))
+
+
+@dataclass(frozen=True)
+class SilhouetteSplit:
+    """One split of the silhouette set.
+
+    Attributes:
+        images: (N, 64, 64) bool.
+        ids: (N,) str, the corpus shape of each image (``"chair/173"``).
+        views: (N,) str, ``"front"`` or ``"side"``.
+    """
+
+    images: np.ndarray
+    ids: np.ndarray
+    views: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+
+def load_silhouettes(split: str = "train", path: str | os.PathLike | None = None,
+                     with_ids: bool = False) -> np.ndarray | SilhouetteSplit:
+    """Load one split of the PartNet silhouette set.
+
+    Args:
+        split: ``"train"``, ``"val"`` or ``"test"``.
+        path: a file written by ``python -m shapeprog silhouettes --out PATH`` (default: the
+            shipped ``csgnet/data/silhouettes.npz``).
+        with_ids: also return the shape id and view of each image.
+
+    Returns:
+        ``(N, 64, 64)`` bool images, or a :class:`SilhouetteSplit` with ``with_ids=True``.
+
+    Raises:
+        FileNotFoundError: no such file (the message names the command that builds it).
+        ValueError: an unknown split, or a file that is not a silhouette set.
+    """
+    _check_split(split)
+    p = Path(path) if path is not None else silhouettes_path()
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no silhouette file; build one with "
+                                f"'python -m shapeprog silhouettes --out {p}'")
+    try:
+        z = np.load(p, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise ValueError(f"{p}: not a readable .npz file ({e})") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ValueError(f"{p}: not a silhouette set: a single array, not an .npz archive")
+    try:
+        with z:
+            keys = set(z.files)
+            need = {f"{split}_images", f"{split}_ids", f"{split}_views"}
+            if not need <= keys:
+                raise ValueError(f"{p}: not a silhouette set: missing {', '.join(sorted(need - keys))} "
+                                 f"(found {', '.join(sorted(keys)) or 'nothing'})")
+            size = int(z["size"]) if "size" in keys else SIZE
+            raw, ids, views = z[f"{split}_images"], z[f"{split}_ids"], z[f"{split}_views"]
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise ValueError(f"{p}: corrupt .npz file ({e})") from None
+    if raw.dtype == np.uint8 and raw.ndim == 3 and raw.shape[1:] == (size, -(-size // 8)):
+        images = np.unpackbits(raw, axis=-1, count=size).astype(bool)
+    elif raw.dtype == np.bool_ and raw.ndim == 3 and raw.shape[1:] == (size, size):
+        images = raw
+    else:
+        raise ValueError(f"{p}: {split}_images has dtype {raw.dtype} and shape {raw.shape}; expected "
+                         f"(N, {size}, {-(-size // 8)}) uint8 (packed bits) or (N, {size}, {size}) bool")
+    if len(ids) != len(images) or len(views) != len(images):
+        raise ValueError(f"{p}: {split} has {len(images)} images but {len(ids)} ids and {len(views)} views")
+    return SilhouetteSplit(images, ids, views) if with_ids else images
+
+
+def _h5py():
+    try:
+        import h5py
+    except ImportError as e:
+        raise ImportError("reading cad.h5 needs h5py, which is not installed; install the 'cad' extra: "
+                          "pip install 'shape-programs[cad]' (or pip install h5py)") from e
+    return h5py
+
+
+def load_cad_h5(path: str | os.PathLike, split: str = "test") -> np.ndarray:
+    """Read one split of the paper's CAD image file (``data/cad/cad.h5`` of the reference code).
+
+    Args:
+        path: the ``.h5`` file.
+        split: ``"train"``, ``"val"`` or ``"test"`` (datasets ``train_images``, ``val_images``,
+            ``test_images``).
+
+    Returns:
+        ``(N, 64, 64)`` bool (non-zero = on, the reference's ``astype(bool)``), rows as stored.
+
+    Raises:
+        ImportError: h5py is missing (names the ``cad`` extra).
+        FileNotFoundError: no such file.
+        ValueError: not an HDF5 file, no such dataset, or a dataset that is not ``(N, 64, 64)``.
+    """
+    _check_split(split)
+    h5py = _h5py()
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    name = f"{split}_images"
+    try:
+        f = h5py.File(p, "r")
+    except OSError as e:
+        raise ValueError(f"{p}: not a readable HDF5 file ({e})") from None
+    with f:
+        if name not in f:
+            found = ", ".join(sorted(f.keys())) or "nothing"
+            raise ValueError(f"{p}: no dataset {name!r} (found: {found}); a CAD file holds "
+                             f"train_images, val_images and test_images")
+        ds = f[name]
+        if not isinstance(ds, h5py.Dataset):
+            raise ValueError(f"{p}: {name!r} is a group, not a dataset")
+        if ds.ndim != 3 or ds.shape[1:] != (SIZE, SIZE):
+            raise ValueError(f"{p}: dataset {name!r} has shape {ds.shape}; expected (N, {SIZE}, {SIZE})")
+        data = ds[()]
+    return np.asarray(data) != 0

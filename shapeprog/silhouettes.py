@@ -1,0 +1,256 @@
+"""Front and side silhouettes of the PartNet corpus: a real-shape set of 64x64 binary masks.
+
+Every corpus program (chair, table, storage) is executed and its leaf cuboids are projected
+orthographically, in the ShapeAssembly frame (+x right, +y up, +z front):
+
+* ``front``: seen from +z (in front of the shape); image column = +x, image row = -y.
+* ``side``: seen from +x (the shape's right side); image column = -z (the shape's front on the
+  left), image row = -y.
+
+Rows grow downward, as in every 2D canvas of this project (``img[row, col]``).
+
+Fit: per image, the bounding box of all projected corners is centred on the canvas and scaled
+uniformly so that its longer side spans ``size - 2 * margin`` pixels (56 of 64 with the default
+margin of 4). Pixel ``(row, col)`` is the unit square centred on the integer point ``(row, col)``;
+the fitted box spans ``[margin - 0.5, size - margin - 0.5]`` along its longer side.
+
+Rasterisation is exact point sampling: a pixel is on iff its centre lies in the projection of at
+least one cuboid. The projection of a cuboid with centre ``c`` and half-axis vectors ``g1, g2, g3``
+is the zonotope ``{c + sum t_k g_k : |t_k| <= 1}`` (the convex hull of the 8 projected corners, a
+parallelogram or hexagon), and a point ``p`` lies in it iff ``|n . (p - c)| <= sum_k |n . g_k|``
+for the normal ``n`` of every edge direction (the perpendiculars of the ``g_k``), with a
+tolerance of 1e-9 pixel so that centres exactly on an edge count as inside.
+
+One exception keeps thin parts visible: point sampling would drop a cuboid thinner than a pixel
+(a table top seen edge-on, a thin chair back from the side) whenever it falls between pixel
+centres, and a few flat shapes would vanish entirely. Where a projection is narrower than one
+pixel across a tested direction (the edge normals, the generator directions and the two image
+axes), its slab along that direction is widened to one pixel, centred; such a part draws as a
+line one pixel wide (two where its centre line falls exactly halfway between pixel centres).
+Projections at least a pixel wide in every direction are unchanged.
+
+Splits: the corpus's train and val lists. The test split is carved out of val per category: the
+shapes at odd positions (1, 3, 5, ...) of the category's val file, in file order, are test; the
+even positions stay val. Both views of a shape share its split. Sizes (shapes): train 10,536,
+val 693, test 693; two images per shape.
+
+The dataset is built by ``python -m shapeprog silhouettes --out PATH`` (deterministic: float64
+execution, no randomness) and shipped as ``csgnet/data/silhouettes.npz``, read by
+``csgnet.shapes2d.load_silhouettes``. File layout (NumPy ``.npz``, no pickles):
+
+* ``{split}_images``: ``(N, size, size // 8)`` uint8, ``np.packbits`` of the bool masks along the
+  last (column) axis (big-endian bit order, NumPy's default);
+* ``{split}_ids``: ``(N,)`` str, ``"category/id"`` (e.g. ``"chair/173"``);
+* ``{split}_views``: ``(N,)`` str, ``"front"`` or ``"side"``;
+* ``size``, ``margin``: ints; ``version``: 1.
+
+Example:
+    >>> import torch
+    >>> from shapeprog.geometry import cuboid_corners
+    >>> box = cuboid_corners(torch.zeros(1, 3), torch.tensor([[2.0, 1.0, 1.0]]), torch.eye(3)[None])
+    >>> img = silhouette(box, "front", size=16, margin=0)
+    >>> int(img.sum()), img[4:12].all()  # 16 x 8 pixels, rows 4..11
+    (128, True)
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["VIEWS", "SPLITS", "Silhouettes", "silhouette", "silhouettes", "split_ids", "build", "write"]
+
+VIEWS = ("front", "side")
+SPLITS = ("train", "val", "test")
+SIZE = 64
+MARGIN = 4
+FORMAT_VERSION = 1
+_EPS = 1e-9
+MIN_WIDTH = 1.0
+"""Projections narrower than this (pixels) across some direction are widened to it."""
+
+# per view: (screen-right axis, sign), (screen-up axis, sign) in the ShapeAssembly frame
+_VIEW_AXES = {"front": ((0, 1.0), (1, 1.0)), "side": ((2, -1.0), (1, 1.0))}
+
+
+def _as_numpy(corners) -> np.ndarray:
+    if type(corners).__module__.startswith("torch"):
+        corners = corners.detach().cpu().numpy()
+    c = np.asarray(corners, dtype=np.float64)
+    if c.ndim != 3 or c.shape[1:] != (8, 3):
+        raise ValueError(f"corners must have shape (L, 8, 3), got {c.shape}")
+    if len(c) == 0:
+        raise ValueError("a shape needs at least one cuboid, got corners of shape (0, 8, 3)")
+    if not np.isfinite(c).all():
+        raise ValueError("corners contain non-finite values")
+    return c
+
+
+def _project(c: np.ndarray, view: str) -> np.ndarray:
+    """(L, 8, 3) corners -> (L, 8, 2) screen coordinates (right, up)."""
+    if view not in _VIEW_AXES:
+        raise ValueError(f"unknown view {view!r}; expected one of {VIEWS}")
+    (a, sa), (b, sb) = _VIEW_AXES[view]
+    return np.stack([sa * c[..., a], sb * c[..., b]], axis=-1)
+
+
+def silhouette(corners, view: str, size: int = SIZE, margin: int = MARGIN) -> np.ndarray:
+    """The binary silhouette of one shape's cuboids in one view.
+
+    Args:
+        corners: (L, 8, 3) float cuboid corners in the order of :mod:`shapeprog.geometry`
+            (torch or NumPy), e.g. ``execute(program).corners``.
+        view: ``"front"`` or ``"side"``.
+        size: image side in pixels.
+        margin: free pixels kept on each side along the longer extent.
+
+    Returns:
+        (size, size) bool.
+    """
+    if size < 1 or not 0 <= 2 * margin < size:
+        raise ValueError(f"need size >= 1 and 0 <= margin < size / 2, got size={size}, margin={margin}")
+    c = _as_numpy(corners)
+    pts = _project(c, view)  # (L, 8, 2)
+    lo, hi = pts.reshape(-1, 2).min(axis=0), pts.reshape(-1, 2).max(axis=0)
+    extent = float((hi - lo).max())
+    scale = (size - 2 * margin) / extent if extent > 0 else 1.0
+    mid = (lo + hi) / 2.0
+    half = (size - 1) / 2.0
+    # screen (right, up) -> pixel (col, row)
+    col = half + scale * (pts[..., 0] - mid[0])
+    row = half - scale * (pts[..., 1] - mid[1])
+    px = np.stack([col, row], axis=-1)  # (L, 8, 2)
+    # centre and half-axis generators; corner 0 is (+,+,+), 4 flips x, 2 flips y, 1 flips z
+    centre = px.mean(axis=1)  # (L, 2)
+    gens = np.stack([(px[:, 0] - px[:, 4]) / 2, (px[:, 0] - px[:, 2]) / 2, (px[:, 0] - px[:, 1]) / 2], axis=1)
+    # test directions: the perpendiculars of the generators (the edge normals) plus the generators
+    # and the two axes, which bound degenerate (segment or point) projections
+    perp = np.stack([-gens[..., 1], gens[..., 0]], axis=-1)
+    axes = np.broadcast_to(np.eye(2), (len(c), 2, 2))
+    normals = np.concatenate([perp, gens, axes], axis=1)  # (L, 8, 2)
+    norm = np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals = np.where(norm > 1e-12, normals / np.where(norm > 0, norm, 1.0), 0.0)
+    bound = np.abs(np.einsum("lkd,ljd->lkj", normals, gens)).sum(axis=-1)  # (L, 8)
+    # thinner than a pixel across some direction: widen to one pixel, centred (stays visible)
+    bound = np.maximum(bound, MIN_WIDTH / 2)
+    # each cuboid is tested on the pixels of its own bounding box only
+    reach = bound[:, 6:8]  # (L, 2) half extents along (col, row): the bounds of the axis normals
+    first = np.clip(np.ceil(centre - reach - _EPS), 0, size).astype(int)
+    last = np.clip(np.floor(centre + reach + _EPS), -1, size - 1).astype(int)
+    out = np.zeros((size, size), bool)
+    for part in range(len(c)):
+        (c0, r0), (c1, r1) = first[part], last[part]
+        if c1 < c0 or r1 < r0:
+            continue  # entirely off the canvas
+        cols, rows = np.meshgrid(np.arange(c0, c1 + 1, dtype=np.float64), np.arange(r0, r1 + 1, dtype=np.float64))
+        d = np.stack([cols - centre[part, 0], rows - centre[part, 1]], axis=-1)  # (h, w, 2)
+        inside = (np.abs(d @ normals[part].T) <= bound[part] + _EPS).all(axis=-1)
+        out[r0:r1 + 1, c0:c1 + 1] |= inside
+    return out
+
+
+def silhouettes(corners, views=VIEWS, size: int = SIZE, margin: int = MARGIN) -> np.ndarray:
+    """Silhouettes of one shape in several views: (V, size, size) bool (see :func:`silhouette`)."""
+    return np.stack([silhouette(corners, v, size, margin) for v in views])
+
+
+def split_ids(category: str) -> dict[str, list[int]]:
+    """The shape ids of ``category`` per split: train, val and test (odd positions of val)."""
+    from . import corpus
+
+    val = corpus.ids(category, "val")
+    return {"train": corpus.ids(category, "train"), "val": val[0::2], "test": val[1::2]}
+
+
+@dataclass
+class Silhouettes:
+    """One split of the silhouette set.
+
+    Attributes:
+        images: (N, size, size) bool.
+        ids: (N,) str, ``"category/id"``.
+        views: (N,) str, ``"front"`` / ``"side"``.
+    """
+
+    images: np.ndarray
+    ids: np.ndarray
+    views: np.ndarray
+
+
+def build(categories=("chair", "table", "storage"), size: int = SIZE, margin: int = MARGIN,
+          limit: int | None = None, batch: int = 200, progress: bool = True) -> dict[str, Silhouettes]:
+    """Execute the corpus programs and render their front and side silhouettes.
+
+    Args:
+        categories: corpus categories, in output order.
+        size, margin: see :func:`silhouette`.
+        limit: keep only the first ``limit`` shapes of each category and split (for quick checks).
+        batch: programs per :func:`shapeprog.execute_batch` call.
+        progress: show a progress bar (tqdm) on stderr.
+
+    Returns:
+        ``{"train": Silhouettes, "val": ..., "test": ...}``; within a split, shapes follow the
+        category order and then the split file order, each shape's views in :data:`VIEWS` order.
+        Programs that fail to parse or execute (none in the shipped corpus) are skipped with a
+        warning naming them.
+    """
+    import torch
+    from tqdm import tqdm
+
+    from . import corpus
+    from .execute import execute_batch
+    from .lang import ParseError, parse
+
+    jobs: list[tuple[str, str, int]] = []  # (split, category, id)
+    for cat in categories:
+        for split, ids in split_ids(cat).items():
+            jobs += [(split, cat, i) for i in (ids if limit is None else ids[:limit])]
+    out: dict[str, tuple[list, list, list]] = {s: ([], [], []) for s in SPLITS}
+    skipped: list[str] = []
+    bar = tqdm(total=len(jobs), desc="silhouettes", unit="shape", disable=not progress)
+    for k in range(0, len(jobs), batch):
+        chunk = jobs[k:k + batch]
+        progs, kept = [], []
+        for split, cat, i in chunk:
+            name = f"{cat}/{i}"
+            try:
+                progs.append(parse(corpus.read(cat, i), file=f"{name}.txt"))
+                kept.append((split, name))
+            except (ParseError, KeyError) as e:
+                skipped.append(f"{name}: {e}")
+        with torch.no_grad():
+            shapes = execute_batch(progs, dtype=torch.float64)
+        for (split, name), shape in zip(kept, shapes):
+            try:
+                imgs = silhouettes(shape.corners, VIEWS, size, margin)
+            except ValueError as e:
+                skipped.append(f"{name}: {e}")
+                continue
+            images, names, views = out[split]
+            images.extend(imgs)
+            names.extend([name] * len(VIEWS))
+            views.extend(VIEWS)
+        bar.update(len(chunk))
+    bar.close()
+    if skipped:
+        warnings.warn(f"{len(skipped)} shape(s) skipped: " + "; ".join(skipped), UserWarning, stacklevel=2)
+    result = {}
+    for split, (images, names, views) in out.items():
+        arr = np.stack(images) if images else np.zeros((0, size, size), bool)
+        result[split] = Silhouettes(arr, np.array(names, dtype="U32"), np.array(views, dtype="U8"))
+    return result
+
+
+def write(path, data: dict[str, Silhouettes], margin: int = MARGIN) -> None:
+    """Write a built set (see :func:`build`) as a compressed ``.npz`` (layout in the module docstring),
+    atomically."""
+    from shapeio import atomic_write
+
+    size = next(iter(data.values())).images.shape[-1]
+    arrays = {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(FORMAT_VERSION)}
+    for split, s in data.items():
+        arrays[f"{split}_images"] = np.packbits(s.images, axis=-1)
+        arrays[f"{split}_ids"] = s.ids
+        arrays[f"{split}_views"] = s.views
+    atomic_write(path, lambda f: np.savez_compressed(f, **arrays))
