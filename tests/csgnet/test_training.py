@@ -1,0 +1,168 @@
+"""Supervised training: data stream, loss, Lightning loop, checkpoints, configs."""
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from csgnet.training import AtomicCheckpointIO, CSGDataModule, CSGNetModule, MixedLengthBatches, export_weights
+from csgnet.vocab import vocabulary
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = {"hidden": 16, "channels": [2, 2, 2], "embed": 8, "dropout": 0.0, "enc_dropout": 0.0}
+
+
+def tables(n=10):
+    stop = vocabulary(2).stop
+    out = {}
+    for L_ in (3, 5):
+        t = torch.full((n, 6), stop)
+        t[:, :L_] = torch.arange(n * L_).view(n, L_) % 300
+        out[L_] = t
+    return out
+
+
+def test_mixed_batches_hold_equal_counts_per_length_and_are_deterministic():
+    ds = MixedLengthBatches(2, [3, 5], batch=8, steps=5, max_len=5, tables=tables())
+    batches = list(ds)
+    assert len(batches) == 5
+    for tok, lengths in batches:
+        assert tok.shape == (8, 6)
+        assert (lengths == 3).sum() == 4 and (lengths == 5).sum() == 4
+        stop = vocabulary(2).stop
+        assert ((tok != stop).sum(1) == lengths).all()
+    again = list(MixedLengthBatches(2, [3, 5], batch=8, steps=5, max_len=5, tables=tables()))
+    assert all(torch.equal(a[0], b[0]) for a, b in zip(batches, again))
+    # every program of a length is used once before any repeats
+    seen = torch.cat([tok[lengths == 3] for tok, lengths in batches[:2]])
+    assert len({tuple(r.tolist()) for r in seen[:8]}) == 8
+
+
+def test_ranks_draw_different_shards():
+    a = list(MixedLengthBatches(2, [3, 5], 8, 4, 5, tables(), seed=0, rank=0, world=2))
+    b = list(MixedLengthBatches(2, [3, 5], 8, 4, 5, tables(), seed=0, rank=1, world=2))
+    assert len(a) == len(b) == 2
+    assert not torch.equal(a[0][0], b[0][0])
+
+
+def test_on_the_fly_batches_are_valid_programs():
+    import csgnet
+
+    ds = MixedLengthBatches(2, [3, 5], batch=4, steps=1, max_len=5, tables=None, seed=3)
+    tok, lengths = next(iter(ds))
+    vocab = vocabulary(2)
+    for row, n in zip(tok, lengths):
+        assert csgnet.is_valid(vocab.decode(row[: int(n)].tolist()))
+
+
+def test_loss_is_the_spec_normalisation():
+    torch.manual_seed(0)
+    m = CSGNetModule(dim=2, stack=False, model=TINY, augment=False)
+    tok = torch.cat([b[0] for b in MixedLengthBatches(2, [3, 5], 4, 1, 5, None, seed=1)])
+    lengths = (tok != vocabulary(2).stop).sum(1)
+    loss, _, target = m._loss(tok, lengths, augment=False)
+    T = int(lengths.max()) + 1
+    tok_in = torch.cat([torch.full((4, 1), m.model.start), tok[:, : T - 1]], 1)
+    lp = F.log_softmax(m.model(target, tok_in), -1)
+    manual = []
+    for i in range(4):
+        k = int(lengths[i])
+        nll = -lp[i, torch.arange(k + 1), tok[i, : k + 1]].sum()
+        manual.append(nll / (k + 1))
+    assert float(loss) == pytest.approx(float(torch.stack(manual).mean()), rel=1e-5)
+    m3 = CSGNetModule(dim=2, stack=False, model=TINY, augment=False, loss_norm="sum")
+    m3.model.load_state_dict(m.model.state_dict())
+    loss3, _, _ = m3._loss(tok, lengths, augment=False)
+    assert float(loss3) == pytest.approx(float(torch.stack([x * (int(n) + 1) for x, n in zip(manual, lengths)]).mean()),
+                                          rel=1e-5)
+
+
+def test_stack_model_trains_on_the_stack_trace():
+    from csgnet.renderer import stack_trace
+
+    m = CSGNetModule(dim=2, stack=True, model=TINY, augment=False)
+    tok, lengths = next(iter(MixedLengthBatches(2, [3, 5], 4, 1, 5, None, seed=2)))
+    target, out, tok_in, stack = m._inputs(tok, lengths, augment=False)
+    assert stack.shape[:3] == (tok_in.shape[1], 4, m.config.stack_k)
+    full = stack_trace(tok[:, : int(lengths.max())], 2, k=m.config.stack_k, lengths=lengths)
+    assert torch.equal(stack, full)
+    assert (tok_in[:, 0] == m.model.start).all() and torch.equal(tok_in[:, 1:], out[:, :-1])
+
+
+class _StepAtStart(L.Callback):
+    def on_train_start(self, trainer, pl_module):
+        self.step = trainer.global_step
+
+
+def _trainer(tmp_path, steps, cb=None):
+    from lightning.pytorch.callbacks import ModelCheckpoint
+
+    return L.Trainer(max_steps=steps, accelerator="cpu", devices=1, logger=False, enable_progress_bar=False,
+                     enable_model_summary=False, default_root_dir=tmp_path, plugins=[AtomicCheckpointIO()],
+                     callbacks=[ModelCheckpoint(dirpath=tmp_path / "ckpt", save_last=True, every_n_train_steps=1)]
+                     + ([cb] if cb else []), limit_val_batches=1, val_check_interval=2, num_sanity_val_steps=0)
+
+
+def test_fit_validates_checkpoints_and_resumes(tmp_path):
+    torch.manual_seed(0)
+    dm = CSGDataModule(dim=2, data_dir=None, lengths=[3, 5], batch_size=4, steps_per_epoch=2, val_per_length=2)
+    m = CSGNetModule(dim=2, stack=True, model=TINY)
+    t = _trainer(tmp_path, 2)
+    t.fit(m, dm)
+    assert (tmp_path / "ckpt" / "last.ckpt").is_file()
+    assert "val/chamfer" in t.callback_metrics and "val_iou/len03" in t.callback_metrics
+    assert not list((tmp_path / "ckpt").glob("*.tmp"))
+    cb = _StepAtStart()
+    t2 = _trainer(tmp_path, 4, cb)
+    t2.fit(CSGNetModule(dim=2, stack=True, model=TINY), dm, ckpt_path=str(tmp_path / "ckpt" / "last.ckpt"))
+    assert cb.step == 2 and t2.global_step == 4
+
+
+def test_atomic_checkpoint_io_leaves_nothing_on_failure(tmp_path):
+    io = AtomicCheckpointIO()
+    io.save_checkpoint({"a": torch.zeros(2)}, tmp_path / "x.ckpt")
+    assert torch.load(tmp_path / "x.ckpt", weights_only=True)["a"].shape == (2,)
+
+    class Bad:
+        def __reduce__(self):
+            raise RuntimeError("cannot pickle")
+
+    with pytest.raises(RuntimeError):
+        io.save_checkpoint({"a": Bad()}, tmp_path / "y.ckpt")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.ckpt"]
+
+
+def test_export_weights_round_trip(tmp_path):
+    from csgnet.inference import load_model
+
+    m = CSGNetModule(dim=2, stack=True, model=TINY)
+    ckpt = {"hyper_parameters": dict(m.hparams), "state_dict": m.state_dict(), "epoch": 3, "global_step": 7}
+    torch.save(ckpt, tmp_path / "m.ckpt")
+    out = export_weights(tmp_path / "m.ckpt", tmp_path / "w.pt")
+    loaded = load_model(out)
+    assert loaded.config == m.config
+    for k, v in m.model.state_dict().items():
+        assert torch.equal(loaded.state_dict()[k], v.half().float() if v.is_floating_point() else v)
+    direct = load_model(tmp_path / "m.ckpt")  # a Lightning checkpoint loads too
+    assert all(torch.equal(direct.state_dict()[k], v) for k, v in m.model.state_dict().items())
+
+
+def test_missing_dataset_names_the_generate_command(tmp_path):
+    dm = CSGDataModule(dim=2, data_dir=str(tmp_path / "nothing"))
+    with pytest.raises(FileNotFoundError, match="csgnet generate"):
+        dm.setup("fit")
+
+
+@pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs").glob("*.yaml")))
+def test_configs_parse_and_build(config, monkeypatch):
+    from lightning.pytorch.cli import LightningCLI
+
+    monkeypatch.chdir(ROOT)
+    cli = LightningCLI(CSGNetModule, CSGDataModule, run=False,
+                       args=["--config", f"configs/{config}", "--trainer.logger", "false"])
+    assert cli.model.config.dim == cli.datamodule.dim
+    name = config[:-5]
+    assert cli.model.config.stack == ("stack" in name)
+    assert cli.model.hparams.size == name.split("_")[1]
