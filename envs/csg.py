@@ -367,8 +367,15 @@ class CSGEnv(gym.Env):
         device: torch device of the stack machine.
 
     Example:
-        >>> import gymnasium as gym, envs
-        >>> env = gym.make("CSG2D-v0", targets=[csgnet.render("c(32,32,16)")[0]])  # doctest: +SKIP
+        >>> import csgnet
+        >>> env = CSGEnv(targets=csgnet.render(["c(32,32,16)"]))
+        >>> obs, info = env.reset(seed=0)
+        >>> obs["stack"].shape
+        (7, 64, 64)
+        >>> for token in csgnet.vocabulary(2).encode("c(32,32,16)") + [399]:
+        ...     obs, reward, terminated, truncated, info = env.step(token)
+        >>> reward, terminated, info["program"]
+        (1.0, True, 'c(32,32,16)')
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
