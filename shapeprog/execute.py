@@ -364,8 +364,11 @@ def _rodrigues(axis, angle):
     return eye + s * K + (1 - c) * torch.bmm(K, K)
 
 
-def _safe_unit(v, ok):
-    """v / |v| where ``ok``; a fixed unit vector elsewhere (keeps gradients finite)."""
+def _safe_unit(v, ok, all_ok=False):
+    """v / |v| where ``ok``; a fixed unit vector elsewhere (keeps gradients finite).
+    ``all_ok``: the caller knows that every row is ok."""
+    if all_ok or bool(ok.all()):
+        return v / _norm(v)[:, None]
     e = torch.zeros_like(v)
     e[:, 0] = 1.0
     vs = torch.where(ok[:, None], v, e)
@@ -380,9 +383,9 @@ def _min_rotation(nb, nc, act):
     nb has a non-zero component.
     """
     n = nb.shape[0]
-    eye = torch.eye(3, dtype=nb.dtype, device=nb.device).expand(n, 3, 3)
-    nbh = _safe_unit(nb, act)
-    nch = _safe_unit(nc, act)
+    all_act = bool(act.all())
+    nbh = _safe_unit(nb, act, all_act)
+    nch = _safe_unit(nc, act, all_act)
     cr = torch.linalg.cross(nbh, nch)
     crn = _norm(cr)
     dot = (nbh * nch).sum(-1)
@@ -390,10 +393,15 @@ def _min_rotation(nb, nc, act):
         degenerate = act & (crn == 0)
         # acos of a dot product above 1 is NaN in the reference, which gives the identity
         turn = act & ~degenerate & (dot.abs() <= 1) & (torch.acos(dot.clamp(-1, 1)) != 0)
-    axis = _safe_unit(cr, turn)
-    angle = torch.acos(torch.where(turn, dot, torch.zeros_like(dot)))
-    R = torch.where(turn[:, None, None], _rodrigues(axis, angle), eye)
-    if bool(degenerate.any()):
+        all_turn = bool(turn.all())
+    if all_turn:
+        R = _rodrigues(_safe_unit(cr, turn, True), torch.acos(dot))
+    else:
+        eye = torch.eye(3, dtype=nb.dtype, device=nb.device).expand(n, 3, 3)
+        axis = _safe_unit(cr, turn)
+        angle = torch.acos(torch.where(turn, dot, torch.zeros_like(dot)))
+        R = torch.where(turn[:, None, None], _rodrigues(axis, angle), eye)
+    if not all_turn and bool(degenerate.any()):
         for i in degenerate.nonzero().flatten().tolist():
             v = nbh[i]
             k = int((v != 0).nonzero()[0])
@@ -419,11 +427,17 @@ def _rule_first(pos, dims, ax, src, g):
 
 
 def _rule_second(pos, dims, ax, src, g, p_ap, a):
-    """Non-aligned cuboid with exactly one earlier record (p_ap, a)."""
+    """Non-aligned cuboid with exactly one earlier record (p_ap, a).
+
+    Value-dependent branches are masks; a branch that no row takes is skipped (same values and
+    gradients, fewer operations)."""
     b = _point(pos, dims, ax, src)
     c = g
     with torch.no_grad():
         act = _norm(b - c) >= SMALL_EPS
+        all_act = bool(act.all())
+        if not all_act and not bool(act.any()):
+            return pos, dims, ax  # every target point is already reached
     dist2 = ((c - a) ** 2).sum(-1)
     nv = (src - 0.5)[:, :, None] * ax  # (n, 3 dims, 3)
     qv = (p_ap - 0.5)[:, :, None] * ax
@@ -444,29 +458,33 @@ def _rule_second(pos, dims, ax, src, g, p_ap, a):
         found = valid.any(-1)
     onehot = torch.nn.functional.one_hot(best, 3).to(dims.dtype)
     s_best = s.gather(1, best[:, None])
-    # fallback: all three change vectors at once
-    mf = nv.sum(1) - qv.sum(1)
-    wf = b - a
-    Af = (mf * mf).sum(-1)
-    Bf = 2 * (wf * mf).sum(-1)
-    Cf = (wf * wf).sum(-1) - dist2
-    discf = Bf * Bf - 4 * Af * Cf
-    with torch.no_grad():
-        fvalid = ~found & (discf > 0)
-    sf = (-Bf + torch.sqrt(torch.where(fvalid, discf, torch.ones_like(discf)))) / (2 * Af + 1e-8)
     zero = torch.zeros_like(dims)
-    delta = torch.where(found[:, None], onehot * s_best, torch.where(fvalid[:, None], sf[:, None].expand(-1, 3), zero))
-    dims1 = dims + torch.where(act[:, None], delta, zero)
+    if bool(found.all()):
+        delta = onehot * s_best
+    else:
+        # fallback: all three change vectors at once
+        mf = nv.sum(1) - qv.sum(1)
+        wf = b - a
+        Af = (mf * mf).sum(-1)
+        Bf = 2 * (wf * mf).sum(-1)
+        Cf = (wf * wf).sum(-1) - dist2
+        discf = Bf * Bf - 4 * Af * Cf
+        with torch.no_grad():
+            fvalid = ~found & (discf > 0)
+        sf = (-Bf + torch.sqrt(torch.where(fvalid, discf, torch.ones_like(discf)))) / (2 * Af + 1e-8)
+        delta = torch.where(found[:, None], onehot * s_best,
+                            torch.where(fvalid[:, None], sf[:, None].expand(-1, 3), zero))
+    dims1 = dims + (delta if all_act else torch.where(act[:, None], delta, zero))
     pos1 = pos + (a - _point(pos, dims1, ax, p_ap))
     nb = _point(pos1, dims1, ax, src) - a
     nc = c - a
     with torch.no_grad():
         rot = act & (_norm(nb) > 0) & (_norm(nc) > 0) & (_norm(nb - nc) >= SMALL_EPS)
-    R = _min_rotation(nb, nc, rot)
-    ax2 = _rotate(ax, R)
+    ax2 = _rotate(ax, _min_rotation(nb, nc, rot)) if bool(rot.any()) else ax
     pos2 = pos1 + (a - _point(pos1, dims1, ax2, p_ap))
-    pos_out = torch.where(act[:, None], pos2, pos)
-    return pos_out, dims1, torch.where(act[:, None, None], ax2, ax)
+    if all_act:
+        return pos2, dims1, ax2
+    return torch.where(act[:, None], pos2, pos), dims1, torch.where(act[:, None, None], ax2, ax)
 
 
 def _grid(dtype, device):
