@@ -50,6 +50,23 @@ def test_load_parses_programs():
     assert len(progs) == 116 and all(isinstance(p, Program) for _, p in progs)
 
 
+def test_licence_notice_ships_with_the_data():
+    """The vendored archives sit next to a notice carrying the licence text verbatim."""
+    from importlib.resources import files
+
+    data = files("shapeprog") / "data"
+    assert (data / "shapeassembly_partnet.tar.xz").is_file() and (data / "examples.tar.xz").is_file()
+    notice = (data / "NOTICE.md").read_text(encoding="utf-8")
+    for line in (
+        "Copyright 2020, Brown University, Providence, RI.",
+        "its documentation for any purpose other than its incorporation into a",
+        "commercial product or service is hereby granted without fee, provided",
+        "BROWN UNIVERSITY DISCLAIMS ALL WARRANTIES WITH REGARD TO THIS SOFTWARE,",
+        "OR IN CONNECTION WITH THE USE OR PERFORMANCE OF THIS SOFTWARE.",
+    ):
+        assert "\n" + line + "\n" in notice, line
+
+
 def test_example_points():
     pts = corpus.example_points()
     assert pts.shape == (10000, 3) and abs(float(pts.max())) < 2
