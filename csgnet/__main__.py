@@ -155,23 +155,25 @@ def cmd_parse(args) -> int:
         atomic_write(stem.with_suffix(".txt"), text + "\n")
         img = _render_text(text, dim)
         if dim == 2:
-            export.save_png(np.concatenate([shape, np.ones((64, 2), bool), img], axis=1), stem.with_suffix(".png"))
-            written = [stem.with_suffix(".png")]
+            export.save_png(img, stem.with_suffix(".png"))
+            compare = stem.with_name(stem.name + "_compare.png")
+            _save_sheet(_contact_sheet([shape, img], cols=2), compare)
+            written = [stem.with_suffix(".png"), compare]
         else:
             export.save_obj(img, stem.with_suffix(".obj"))
             written = [stem.with_suffix(".obj")]
-        if _is_valid(text):
-            export.save_scad(text, stem.with_suffix(".scad"))
+        if _is_valid(text, dim):
+            export.save_scad(parse(text, dim), stem.with_suffix(".scad"))
             written.append(stem.with_suffix(".scad"))
         print("  wrote " + ", ".join(str(w) for w in written + [stem.with_suffix(".txt")]))
     return status
 
 
-def _is_valid(text: str) -> bool:
+def _is_valid(text: str, dim: int = 2) -> bool:
     from .lang import is_valid
 
     try:
-        return bool(text) and is_valid(parse(text))
+        return bool(text) and is_valid(parse(text, dim))
     except ParseError:
         return False
 
@@ -181,7 +183,7 @@ def _render_text(text: str, dim: int):
 
     from . import render
 
-    if not _is_valid(text):
+    if not _is_valid(text, dim):
         return np.zeros((64,) * dim, dtype=bool)
     return render(text, dim)[0]
 

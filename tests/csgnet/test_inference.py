@@ -1,0 +1,163 @@
+"""Inference on users' shapes: input loading, weights, infer, the parse and evaluate commands."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+import csgnet
+from csgnet.inference import InputError, fit_to_canvas, infer, load_model, load_pretrained, load_shape
+from csgnet.models import CSGNet, preset
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples"
+
+
+def tiny(dim=2, stack=False):
+    torch.manual_seed(0)
+    extra = dict(channels=(2, 2, 2), input_pool=4) if dim == 3 else dict(channels=(2, 2, 2))
+    return CSGNet(preset("small", dim, stack, hidden=16, embed=8, dropout=0.0, enc_dropout=0.0, **extra)).eval()
+
+
+def test_fit_to_canvas_keeps_aspect_and_centres():
+    m = np.zeros((100, 300), bool)
+    m[40:60, 50:250] = True  # 20 x 200
+    out = fit_to_canvas(m)
+    rows, cols = np.nonzero(out)
+    assert cols.max() - cols.min() + 1 == 56  # the longest side spans 64 - 2 * 4
+    assert rows.max() - rows.min() + 1 in (5, 6)  # 20 * 56 / 200 = 5.6
+    assert abs((cols.min() + cols.max()) / 2 - 31.5) <= 0.5 and abs((rows.min() + rows.max()) / 2 - 31.5) <= 1
+    same = np.zeros((64, 64), bool)
+    same[3:9, 50:60] = True
+    assert np.array_equal(fit_to_canvas(same), same)
+
+
+def test_a_64_pixel_png_round_trips_exactly(tmp_path):
+    img = csgnet.render("c(32,32,16)s(24,40,12)+")[0]
+    Image.fromarray(np.where(img, 0, 255).astype(np.uint8)).save(tmp_path / "a.png")  # dark on light
+    assert np.array_equal(load_shape(tmp_path / "a.png"), img)
+    Image.fromarray(np.where(img, 255, 0).astype(np.uint8)).save(tmp_path / "b.png")  # light on dark
+    assert np.array_equal(load_shape(tmp_path / "b.png"), img)
+    rgba = np.zeros((64, 64, 4), np.uint8)
+    rgba[..., 3] = np.where(img, 255, 0)
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "c.png")  # transparency marks the shape
+    assert np.array_equal(load_shape(tmp_path / "c.png"), img)
+
+
+def test_bad_inputs_get_clear_errors(tmp_path):
+    Image.new("L", (80, 80), 200).save(tmp_path / "blank.png")
+    with pytest.raises(InputError, match="blank.png.*single colour"):
+        load_shape(tmp_path / "blank.png")
+    (tmp_path / "broken.png").write_bytes(b"not a png")
+    with pytest.raises(InputError, match="broken.png.*cannot read"):
+        load_shape(tmp_path / "broken.png")
+    with pytest.raises(InputError, match="no such file"):
+        load_shape(tmp_path / "missing.png")
+    (tmp_path / "x.txt").write_text("hi")
+    with pytest.raises(InputError, match="unknown file type"):
+        load_shape(tmp_path / "x.txt")
+    np.save(tmp_path / "z.npy", np.zeros((64, 64, 64)))
+    with pytest.raises(InputError, match="empty"):
+        load_shape(tmp_path / "z.npy")
+    np.save(tmp_path / "w.npy", np.ones((2, 2, 2, 2)))
+    with pytest.raises(InputError, match="shape"):
+        load_shape(tmp_path / "w.npy")
+
+
+def test_meshes_are_voxelised_and_flat_ones_refused(tmp_path):
+    import trimesh
+
+    trimesh.creation.box([2.0, 1.0, 1.0]).export(tmp_path / "box.stl")
+    vol = load_shape(tmp_path / "box.stl")
+    assert vol.shape == (64, 64, 64)
+    xs, ys, zs = (np.nonzero(vol.any(axis=a)) for a in ((1, 2), (0, 2), (0, 1)))
+    ext = [len(xs[0]), len(ys[0]), len(zs[0])]
+    assert ext[0] in (56, 57) and abs(ext[1] - ext[0] / 2) <= 2 and abs(ext[2] - ext[0] / 2) <= 2
+    assert vol.sum() >= 0.9 * ext[0] * ext[1] * ext[2]  # filled, not a shell
+    flat = trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]])
+    flat.export(tmp_path / "flat.obj")
+    with pytest.raises(InputError, match="no (volume|triangles)"):
+        load_shape(tmp_path / "flat.obj")
+    (tmp_path / "bad.stl").write_text("solid nonsense\nfacet garbage\n")
+    with pytest.raises(InputError, match="bad.stl"):
+        load_shape(tmp_path / "bad.stl")
+
+
+def test_npy_volume_passes_through():
+    vol = csgnet.render("cu(32,32,32,20)", 3)[0]
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        np.save(Path(d) / "v.npy", vol)
+        assert np.array_equal(load_shape(Path(d) / "v.npy"), vol)
+
+
+@pytest.mark.parametrize("stack", [False, True])
+def test_infer_returns_scored_programs(stack):
+    m = tiny(2, stack)
+    shapes = csgnet.render(["c(32,32,16)", "s(32,32,20)"])
+    res = infer(m, shapes, beam=3)
+    assert len(res) == 2
+    for r, s in zip(res, shapes):
+        assert r.valid and csgnet.is_valid(r.program) and r.beams[0] == r.text
+        pred = csgnet.render(r.text)[0]
+        assert r.iou == pytest.approx(csgnet.metrics.iou(pred, s))
+        assert r.chamfer == pytest.approx(csgnet.metrics.chamfer(pred, s))
+    match = infer(m, shapes, beam=3, select="match")
+    for r, s in zip(match, shapes):
+        cds = [csgnet.metrics.chamfer(csgnet.render(b)[0], s) for b in r.beams]
+        assert r.chamfer == pytest.approx(min(cds))
+    with pytest.raises(ValueError, match="shapes"):
+        infer(m, np.zeros((1, 32, 32), bool))
+
+
+def test_infer_3d():
+    m = tiny(3)
+    res = infer(m, csgnet.render(["sp(32,32,32,16)"], 3)[0], beam=2)
+    assert len(res) == 1 and np.isnan(res[0].chamfer) and 0 <= res[0].iou <= 1
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_shipped_weights_load(dim):
+    m = load_pretrained(dim)
+    assert m.config.dim == dim and not m.training
+    path = csgnet.inference.WEIGHTS / csgnet.inference.PRETRAINED[dim]
+    assert path.stat().st_size < 8 * 2**20
+
+
+def test_parse_cli_on_shipped_examples(tmp_path, capsys):
+    from csgnet.__main__ import main
+
+    rc = main(["parse", str(EXAMPLES / "house.png"), str(EXAMPLES / "table.obj"), "--beam", "3",
+               "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "house.png:" in out and "IoU" in out and "chamfer" in out
+    for name in ("house.png", "house.txt", "table.obj", "table.txt"):
+        assert (tmp_path / name).is_file(), name
+    text = (tmp_path / "house.txt").read_text().strip()
+    assert csgnet.is_valid(csgnet.parse(text))
+
+
+def test_parse_cli_reports_bad_input(tmp_path, capsys):
+    from csgnet.__main__ import main
+
+    (tmp_path / "bad.png").write_bytes(b"xx")
+    assert main(["parse", str(tmp_path / "bad.png"), "--out", str(tmp_path)]) == 2
+    assert "bad.png" in capsys.readouterr().err
+
+
+def test_evaluate_rows_and_nearest_neighbour():
+    from csgnet.evaluate import evaluate_model, markdown_tables, nearest_neighbour
+
+    tests = {3: [csgnet.parse(t) for t in ["c(32,32,16)s(24,40,12)+", "t(32,32,20)c(32,32,8)-"]]}
+    rows = evaluate_model(tiny(2), tests, beams=(1, 3), name="tiny", batch=2)
+    names = [r.method for r in rows]
+    assert names == ["tiny k=1 top-1", "tiny k=3 top-1", "tiny k=3 best-of-k (oracle)"]
+    assert rows[2].iou[3] >= rows[1].iou[3] and rows[2].chamfer[3] <= rows[1].chamfer[3] + 1e-12
+    train = [csgnet.parse("c(40,40,8)")] + tests[3]
+    nn = nearest_neighbour(train, tests, 2)
+    assert nn.iou[3] == pytest.approx(1.0) and nn.chamfer[3] == pytest.approx(0.0)
+    md = markdown_tables([nn] + rows, 2, note="note")
+    assert "| nearest neighbour | 100.00 | 100.00 | 0.000 |" in md and "Table 3" in md
