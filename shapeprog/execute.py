@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .geometry import cuboid_corners, mesh_arrays
+from .geometry import CORNER_SIGNS, cuboid_corners, mesh_arrays
 from .lang import AXES, NUM_FIELDS, Attach, Cuboid, Program, Reflect, Squeeze, Translate, numbers, statement_lines
 
 __all__ = ["ExecutedShape", "ExecutionPlan", "execute", "execute_batch", "program_parameters", "parameter_names"]
@@ -339,7 +339,18 @@ def parameter_names(program: Program) -> list[str]:
 
 def _point(pos, dims, ax, coords):
     """Global point of local ``coords`` (n, 3) on cuboids (n, 3), (n, 3), (n, 3, 3)."""
-    return pos + torch.bmm(((coords - 0.5) * dims).unsqueeze(1), ax).squeeze(1)
+    return _point_c(pos, dims, ax, coords - 0.5)
+
+
+def _point_c(pos, dims, ax, centred):
+    """:func:`_point` of ``centred = coords - 0.5`` (computed once where a point is used often)."""
+    return pos + torch.bmm((centred * dims).unsqueeze(1), ax).squeeze(1)
+
+
+def _corners(pos, dims, ax):
+    """Corners (n, 8, 3) of cuboids, as :func:`cuboid_corners` without its argument checks."""
+    signs = CORNER_SIGNS.to(device=dims.device, dtype=dims.dtype)
+    return pos[:, None, :] + (signs[None] * (0.5 * dims)[:, None, :]) @ ax
 
 
 def _to_local(pos, dims, ax, pts):
@@ -431,7 +442,8 @@ def _rule_second(pos, dims, ax, src, g, p_ap, a):
 
     Value-dependent branches are masks; a branch that no row takes is skipped (same values and
     gradients, fewer operations)."""
-    b = _point(pos, dims, ax, src)
+    src_c, ap_c = src - 0.5, p_ap - 0.5
+    b = _point_c(pos, dims, ax, src_c)
     c = g
     with torch.no_grad():
         act = _norm(b - c) >= SMALL_EPS
@@ -439,8 +451,8 @@ def _rule_second(pos, dims, ax, src, g, p_ap, a):
         if not all_act and not bool(act.any()):
             return pos, dims, ax  # every target point is already reached
     dist2 = ((c - a) ** 2).sum(-1)
-    nv = (src - 0.5)[:, :, None] * ax  # (n, 3 dims, 3)
-    qv = (p_ap - 0.5)[:, :, None] * ax
+    nv = src_c[:, :, None] * ax  # (n, 3 dims, 3)
+    qv = ap_c[:, :, None] * ax
     m = nv - qv
     w = (b - a)[:, None, :]
     A = (m * m).sum(-1)  # (n, 3)
@@ -475,13 +487,13 @@ def _rule_second(pos, dims, ax, src, g, p_ap, a):
         delta = torch.where(found[:, None], onehot * s_best,
                             torch.where(fvalid[:, None], sf[:, None].expand(-1, 3), zero))
     dims1 = dims + (delta if all_act else torch.where(act[:, None], delta, zero))
-    pos1 = pos + (a - _point(pos, dims1, ax, p_ap))
-    nb = _point(pos1, dims1, ax, src) - a
+    pos1 = pos + (a - _point_c(pos, dims1, ax, ap_c))
+    nb = _point_c(pos1, dims1, ax, src_c) - a
     nc = c - a
     with torch.no_grad():
         rot = act & (_norm(nb) > 0) & (_norm(nc) > 0) & (_norm(nb - nc) >= SMALL_EPS)
     ax2 = _rotate(ax, _min_rotation(nb, nc, rot)) if bool(rot.any()) else ax
-    pos2 = pos1 + (a - _point(pos1, dims1, ax2, p_ap))
+    pos2 = pos1 + (a - _point_c(pos1, dims1, ax2, ap_c))
     if all_act:
         return pos2, dims1, ax2
     return torch.where(act[:, None], pos2, pos), dims1, torch.where(act[:, None, None], ax2, ax)
@@ -539,8 +551,8 @@ def _nearest_grid_points(p, d, a, pB, dB, aB, G):
 def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
     """Aligned cuboid with earlier records: grow towards B (the target point is ignored)."""
     with torch.no_grad():
-        cA = cuboid_corners(pos, dims, ax)
-        cB = cuboid_corners(posB, dimsB, axB)
+        cA = _corners(pos, dims, ax)
+        cB = _corners(posB, dimsB, axB)
         uA = _to_local(posB, dimsB, axB, cA)
         uB = _to_local(pos, dims, ax, cB)
         touch = ((uA >= 0) & (uA <= 1)).all(-1).any(-1) | ((uB >= 0) & (uB <= 1)).all(-1).any(-1)
@@ -557,7 +569,8 @@ def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
     with torch.no_grad():
         big = torch.cat([d, dB], -1).max(-1).values
         grow = _norm(b - c) >= 0.05 * big
-    o = _point(p, d, a, 1 - r)
+    rr_c = (1 - r) - 0.5
+    o = _point_c(p, d, a, rr_c)
     cv = (r - 0.5) * torch.diagonal(a, dim1=1, dim2=2)
     with torch.no_grad():
         nz = cv != 0
@@ -565,7 +578,7 @@ def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
     with torch.no_grad():
         use = nz & (D > 0) & grow[:, None]
     d1 = d + torch.where(use, D, torch.zeros_like(D))
-    p1 = p + (o - _point(p, d1, a, 1 - r))
+    p1 = p + (o - _point_c(p, d1, a, rr_c))
     p1 = torch.where(grow[:, None], p1, p)
     pos = pos.index_copy(0, idx, p1)
     dims = dims.index_copy(0, idx, d1)
@@ -640,7 +653,8 @@ class _GroupPlan:
     jj: torch.Tensor  # (n,) record row of the op
     a: torch.Tensor  # (n,) moved slot
     b: torch.Tensor  # (n,) target slot
-    const: torch.Tensor  # (2n, 6) affine constants and scales: the n src rows, then the n tgt rows
+    c0: torch.Tensor  # (2n, 3) affine constants: the n src rows, then the n tgt rows
+    c1: torch.Tensor  # (2n, 3) affine scales
     ix: torch.Tensor  # (2n, 3) parameter indices (-1: the trailing zero)
     macro: dict | None  # reflect / translate copies, see _macro_points
     prior: tuple | None  # SECOND: (record row, role) of the one earlier record
@@ -685,7 +699,8 @@ def _plan_group(mode, items, offsets, dtype, device) -> _GroupPlan:
             tgt_forms.append(none)
             macro_rows.append(r)
     forms = src_forms + tgt_forms
-    const = torch.tensor([f[0] + f[1] for f in forms], dtype=dtype, device=device)
+    c0 = torch.tensor([f[0] for f in forms], dtype=dtype, device=device)
+    c1 = torch.tensor([f[1] for f in forms], dtype=dtype, device=device)
     ix = torch.tensor([f[2] for f in forms], dtype=torch.int64, device=device)
     macro = None
     if macro_rows:
@@ -705,7 +720,7 @@ def _plan_group(mode, items, offsets, dtype, device) -> _GroupPlan:
         prior = torch.tensor([x[2].prior[0] for x in items], device=device).unbind(1)
     elif mode == GENERAL:
         general = [(blk, list(o.prior)) for blk, _, o in items]
-    return _GroupPlan(mode, bi, jj, a, b, const, ix, macro, prior, general)
+    return _GroupPlan(mode, bi, jj, a, b, c0, c1, ix, macro, prior, general)
 
 
 def _plan_steps(codes: list[_BlockCode], offsets: list[int], dtype, device) -> list[_StepPlan]:
@@ -950,7 +965,7 @@ class ExecutionPlan:
 def _run_attach_group(grp: _GroupPlan, flat, pos, dims, ax, rec):
     n = grp.bi.shape[0]
     bi, a, b = grp.bi, grp.a, grp.b
-    vals = grp.const[:, :3] + grp.const[:, 3:] * flat[grp.ix]
+    vals = grp.c0 + grp.c1 * flat[grp.ix]
     src, tgt = vals[:n], vals[n:]
     if grp.macro is not None:
         src, tgt = _macro_points(grp.macro, flat, pos, dims, ax, rec, src, tgt)

@@ -63,13 +63,17 @@ def _resolve_method(method: str, device: torch.device) -> str:
     return method
 
 
-def _kdtree_indices(query: torch.Tensor, ref: torch.Tensor, exclude_self: bool) -> torch.Tensor:
-    """Exact nearest-neighbour indices with a k-d tree (scipy, float64 coordinates, one thread)."""
+def _kdtree(points: np.ndarray):
     from scipy.spatial import cKDTree
 
+    return cKDTree(points, leafsize=16, balanced_tree=False, compact_nodes=False)
+
+
+def _kdtree_indices(query: torch.Tensor, ref: torch.Tensor, exclude_self: bool) -> torch.Tensor:
+    """Exact nearest-neighbour indices with a k-d tree (scipy, float64 coordinates, one thread)."""
     q = query.detach().cpu().double().numpy()
     r = q if ref is query else ref.detach().cpu().double().numpy()
-    tree = cKDTree(r, leafsize=16, balanced_tree=False, compact_nodes=False)
+    tree = _kdtree(r)
     if not exclude_self:
         _, idx = tree.query(q, k=1)
     else:
@@ -77,6 +81,24 @@ def _kdtree_indices(query: torch.Tensor, ref: torch.Tensor, exclude_self: bool) 
         own = both[:, 0] == np.arange(q.shape[0])
         idx = np.where(own, both[:, 1], both[:, 0])
     return torch.from_numpy(np.ascontiguousarray(idx, dtype=np.int64)).to(query.device)
+
+
+def _kdtree_pairs(a: torch.Tensor, b: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Nearest neighbour in ``b`` of every point of ``a`` and in ``a`` of every point of ``b``.
+
+    One k-d tree per cloud; each cloud is queried in the leaf order of its own tree (spatially
+    coherent queries traverse the other tree faster), and the answers are put back in place.
+    """
+    an = a.detach().cpu().double().numpy()
+    bn = b.detach().cpu().double().numpy()
+    ta, tb = _kdtree(an), _kdtree(bn)
+    out = []
+    for pts, own, other in ((an, ta, tb), (bn, tb, ta)):
+        order = own.indices
+        idx = np.empty(pts.shape[0], dtype=np.int64)
+        idx[order] = other.query(pts[order], k=1)[1]
+        out.append(torch.from_numpy(idx).to(a.device))
+    return out[0], out[1]
 
 
 def _brute_indices(query: torch.Tensor, ref: torch.Tensor, exclude_self: bool, chunk_elements: int) -> torch.Tensor:
@@ -197,8 +219,7 @@ def chamfer(
     _check_points(target, "target")
     target = target.to(pred.dtype)
     if _resolve_method(method, pred.device) == "kdtree":
-        i_pt = _kdtree_indices(pred, target, False)
-        i_tp = _kdtree_indices(target, pred, False)
+        i_pt, i_tp = _kdtree_pairs(pred, target)
     else:
         i_pt = _brute_indices(pred, target, False, CHUNK_ELEMENTS)
         i_tp = _brute_indices(target, pred, False, CHUNK_ELEMENTS)
