@@ -94,11 +94,14 @@ class _Rows:
         self.B = B
         if cfg.stack:
             self.machine = StackMachine(B, cfg.dim, max(max_len, cfg.stack_k), self.device)
-            self.features = None
+            self.projected = None
         else:
+            # the features are fixed per target: their share of the GRU gates is computed once, and a
+            # beam's parent always belongs to the same target, so reordering never touches it
             self.machine = None
-            f = model.encode(targets)
-            self.features = f.repeat_interleave(repeat, 0) if repeat > 1 else f
+            f = model.project_features(model.encode(targets))
+            self.projected = f.repeat_interleave(repeat, 0) if repeat > 1 else f
+            self.w_tok = (model.token_input_weight(),)
         self.h = None
         self.prev = torch.full((B,), model.start, dtype=torch.long, device=self.device)
         self.depth = torch.zeros(B, dtype=torch.long, device=self.device)
@@ -106,14 +109,14 @@ class _Rows:
         self.done = torch.zeros(B, dtype=torch.bool, device=self.device)
         self.length = torch.zeros(B, dtype=torch.long, device=self.device)
         self.history: list[torch.Tensor] = []
+        self.parents: list[torch.Tensor | None] = []  # parents[t]: rows after step t -> rows before it
+        self._parent: torch.Tensor | None = None
 
     def logits(self) -> tuple[torch.Tensor, torch.Tensor]:
         if self.machine is not None:
             stack = unpack(self.machine.top(self.model.config.stack_k), self.dim)
-            feats = self.model.encode(self.targets, stack)
-        else:
-            feats = self.features
-        return self.model.step(feats, self.prev, self.h)
+            return self.model.step(self.model.encode(self.targets, stack), self.prev, self.h)
+        return self.model.step_projected(self.projected, self.prev, self.h, self.w_tok)
 
     def mask(self, logp: torch.Tensor, t: int, constrained: bool, finish: bool) -> torch.Tensor:
         """Apply the validity constraint and the finished-row rule to log-probabilities ``(B, V)``."""
@@ -131,14 +134,13 @@ class _Rows:
         return logp
 
     def reorder(self, parent: torch.Tensor) -> None:
+        """Row ``i`` continues row ``parent[i]`` (always a row of the same target)."""
         self.h = self.h_new.index_select(0, parent)
-        for name in ("prev", "depth", "broken", "done", "length", "targets"):
+        for name in ("prev", "depth", "broken", "done", "length"):
             setattr(self, name, getattr(self, name).index_select(0, parent))
-        if self.features is not None:
-            self.features = self.features.index_select(0, parent)
         if self.machine is not None:
             self.machine.reorder(parent)
-        self.history = [h.index_select(0, parent) for h in self.history]
+        self._parent = parent
 
     def advance(self, tokens: torch.Tensor) -> None:
         """Append one token per row (rows already finished ignore it)."""
@@ -154,6 +156,8 @@ class _Rows:
             self.machine.step(torch.where(live, kinds, torch.full_like(kinds, PAD_CODE)), token_ids=tokens)
         self.done |= newly
         self.history.append(torch.where(live, tokens, torch.full_like(tokens, self.stop)))
+        self.parents.append(self._parent)
+        self._parent = None
         self.prev = tokens
 
     @property
@@ -161,9 +165,16 @@ class _Rows:
         return ~self.broken & (self.depth == 1)
 
     def tokens(self) -> torch.Tensor:
+        """``(B, T)`` the token sequence of every current row, followed back through the parents."""
         if not self.history:
             return torch.empty((self.B, 0), dtype=torch.long, device=self.device)
-        return torch.stack(self.history, dim=1)
+        out = []
+        row = torch.arange(self.B, device=self.device)
+        for t in range(len(self.history) - 1, -1, -1):
+            out.append(self.history[t].index_select(0, row))
+            if self.parents[t] is not None:
+                row = self.parents[t].index_select(0, row)
+        return torch.stack(out[::-1], dim=1)
 
 
 def _check(model, targets, max_len, mode):

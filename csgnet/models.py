@@ -262,6 +262,40 @@ class CSGNet(nn.Module):
         out, h = self.gru(x, None if hidden is None else hidden[None].contiguous())
         return self.head(out[:, 0]), h[0]
 
+    def project_features(self, features: torch.Tensor) -> torch.Tensor:
+        """The encoder features' share of the GRU input gates, ``(B, 3H)``.
+
+        CSGNet's features are the same at every step, so decoders compute this product once per target
+        instead of once per step and beam (:meth:`step_projected`); the dropout on the features is applied
+        here, so this is exact in eval mode and samples one dropout mask per sequence in train mode.
+        """
+        w = self.gru.weight_ih_l0[:, : self.config.feature_size]
+        return F.linear(self.feature_drop(features), w)
+
+    def step_projected(self, projected: torch.Tensor, tokens: torch.Tensor, hidden: torch.Tensor | None,
+                       weights: tuple[torch.Tensor, ...] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`step` with the features given as :meth:`project_features` (the same GRU equations:
+        ``r = σ(x_r + h_r)``, ``z = σ(x_z + h_z)``, ``n = tanh(x_n + r·h_n)``, ``h' = (1 - z)·n + z·h``).
+
+        ``weights``: the token part of the input weights, made contiguous once by the caller
+        (:meth:`token_input_weight`), to avoid a copy per step.
+        """
+        w_tok = self.token_input_weight() if weights is None else weights[0]
+        gi = projected + F.linear(self.embed(tokens), w_tok, self.gru.bias_ih_l0)
+        if hidden is None:
+            hidden = projected.new_zeros(projected.shape[0], self.config.hidden)
+        gh = F.linear(hidden, self.gru.weight_hh_l0, self.gru.bias_hh_l0)
+        ir, iz, inn = gi.chunk(3, 1)
+        hr, hz, hn = gh.chunk(3, 1)
+        r = torch.sigmoid(ir + hr)
+        z = torch.sigmoid(iz + hz)
+        n = torch.tanh(inn + r * hn)
+        h = n + z * (hidden - n)
+        return self.head(h), h
+
+    def token_input_weight(self) -> torch.Tensor:
+        return self.gru.weight_ih_l0[:, self.config.feature_size:].contiguous()
+
     def num_parameters(self) -> int:
         return sum(p.numel() for p in self.parameters())
 
