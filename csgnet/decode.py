@@ -127,10 +127,11 @@ class _Rows:
             ok = torch.where(self.is_draw[None], d <= remaining - 1,
                              torch.where(self.is_op[None], d >= 2, d == 1))
             logp = torch.where(ok, logp, neg)
-        if finish:
-            only_stop = torch.full_like(logp, float("-inf"))
+        if finish and bool(self.done.any()):
+            rows = torch.nonzero(self.done).flatten()
+            only_stop = torch.full((rows.numel(), logp.shape[1]), float("-inf"), dtype=logp.dtype, device=logp.device)
             only_stop[:, self.stop] = 0.0
-            logp = torch.where(self.done[:, None], only_stop, logp)
+            logp = logp.index_copy(0, rows, only_stop)
         return logp
 
     def reorder(self, parent: torch.Tensor) -> None:
