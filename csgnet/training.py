@@ -300,16 +300,17 @@ class CSGNetModule(L.LightningModule):
         length = np.concatenate(v["length"])
         iou = np.concatenate(v["iou"])
         cd = np.concatenate(v["chamfer"])
-        self.log("val/loss", sum(v["loss"]) / len(length))
-        self.log("val/iou", float(np.nanmean(iou)), prog_bar=True)
-        self.log("val/valid", float(np.concatenate(v["valid"]).mean()))
+        # under DDP each rank holds a shard of the validation set: sync_dist averages the ranks' means
+        self.log("val/loss", sum(v["loss"]) / len(length), sync_dist=True)
+        self.log("val/iou", float(np.nanmean(iou)), prog_bar=True, sync_dist=True)
+        self.log("val/valid", float(np.concatenate(v["valid"]).mean()), sync_dist=True)
         if self.config.dim == 2:
-            self.log("val/chamfer", float(cd.mean()), prog_bar=True)
+            self.log("val/chamfer", float(cd.mean()), prog_bar=True, sync_dist=True)
         for L in np.unique(length):
             sel = length == L
-            self.log(f"val_iou/len{int(L):02d}", float(np.nanmean(iou[sel])))
+            self.log(f"val_iou/len{int(L):02d}", float(np.nanmean(iou[sel])), sync_dist=True)
             if self.config.dim == 2:
-                self.log(f"val_chamfer/len{int(L):02d}", float(cd[sel].mean()))
+                self.log(f"val_chamfer/len{int(L):02d}", float(cd[sel].mean()), sync_dist=True)
         self._log_grid()
 
     def _log_grid(self):

@@ -1,0 +1,52 @@
+"""Print a training run's validation curve (per epoch) from its TensorBoard event files, as markdown.
+
+    python bench/training_curve.py runs/csgnet2d_small/version_0
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def curve(run: Path) -> str:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    ea = EventAccumulator(str(run), size_guidance={"scalars": 0})
+    ea.Reload()
+    tags = ea.Tags()["scalars"]
+    epochs = {e.step: int(e.value) for e in ea.Scalars("epoch")} if "epoch" in tags else {}
+    cols = [t for t in ("val/loss", "val/iou", "val/chamfer", "val/valid") if t in tags]
+    train = ea.Scalars("train/loss") if "train/loss" in tags else []
+    rows = {}
+    for t in cols:
+        for e in ea.Scalars(t):
+            rows.setdefault(e.step, {})[t] = e.value
+            rows[e.step]["wall"] = e.wall_time
+    if not rows:
+        raise SystemExit(f"{run}: no validation scalars")
+    t0 = min(e.wall_time for e in (train or [])) if train else min(r["wall"] for r in rows.values())
+    head = "| epoch | step | minutes | train loss | " + " | ".join(cols) + " |"
+    lines = [head, "|" + "---|" * (4 + len(cols))]
+    for step in sorted(rows):
+        r = rows[step]
+        tl = [e.value for e in train if e.step <= step]
+        lines.append(f"| {epochs.get(step, '')} | {step + 1} | {(r['wall'] - t0) / 60:.1f} | "
+                     f"{tl[-1] if tl else float('nan'):.3f} | " + " | ".join(f"{r.get(t, float('nan')):.4f}" for t in cols) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("runs", nargs="+")
+    args = ap.parse_args(argv)
+    for run in args.runs:
+        print(f"#### {run}\n")
+        print(curve(Path(run)))
+        print()
+    print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
