@@ -21,10 +21,10 @@ stack trace, a program is all zeros from the token where it underflows, and froz
 
 from __future__ import annotations
 
+import sys
+import threading
 from dataclasses import dataclass
 from typing import Sequence
-
-import threading
 
 import numpy as np
 import torch
@@ -226,18 +226,95 @@ def draw_packed(kinds: torch.Tensor, params: torch.Tensor, dim: int) -> torch.Te
 
 
 # ------------------------------------------------------------------------------------------------
+# recycled CPU output buffers
+
+class _BufferPool:
+    """Large CPU output tensors backed by recycled memory.
+
+    A fresh multi-megabyte allocation is a fresh ``mmap``: every page is faulted in (and zeroed by the
+    kernel) on first touch, which for a 64 MiB batch of 3D volumes costs more than computing it. Small
+    arrays do not pay this, because ``malloc`` recycles freed heap memory; this pool does the same for
+    the renderer's large results. Each result is an ordinary tensor over a NumPy buffer held by the
+    pool; a buffer is handed out again only once nothing refers to it any more (its reference count
+    says that the pool is its only holder: the returned tensor, its views, and arrays made from it all
+    keep it alive). At most ``max_bytes`` of buffers are remembered; older ones are forgotten (and freed
+    by their last user). Disabled where reference counts cannot be relied on (free-threaded Python).
+    """
+
+    def __init__(self, min_bytes: int = 1 << 20, max_bytes: int = 256 << 20):
+        self.min_bytes, self.max_bytes = min_bytes, max_bytes
+        self._lock = threading.Lock()
+        self._bufs: list[np.ndarray] = []
+        probe = [np.empty(1, np.uint8)]
+        self._idle_refs = self._refs(probe, 0)
+        gil = getattr(sys, "_is_gil_enabled", None)
+        self.enabled = gil is None or gil()
+
+    @staticmethod
+    def _refs(bufs: list, i: int) -> int:
+        return sys.getrefcount(bufs[i])
+
+    def empty(self, shape: tuple, dtype) -> torch.Tensor:
+        """An uninitialised CPU tensor of ``shape`` and NumPy ``dtype``."""
+        dtype = np.dtype(dtype)
+        nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        if not self.enabled or nbytes < self.min_bytes or nbytes > self.max_bytes:
+            return torch.from_numpy(np.empty(shape, dtype))
+        with self._lock:
+            bufs = self._bufs
+            for i in range(len(bufs) - 1, -1, -1):
+                if bufs[i].nbytes == nbytes and self._refs(bufs, i) == self._idle_refs:
+                    buf = bufs.pop(i)
+                    break
+            else:
+                buf = np.empty(nbytes, np.uint8)
+                total = nbytes + sum(b.nbytes for b in bufs)
+                while bufs and total > self.max_bytes:
+                    total -= bufs.pop(0).nbytes
+            bufs.append(buf)
+            return torch.from_numpy(buf.view(dtype).reshape(shape))
+
+
+_POOL = _BufferPool()
+
+
+# ------------------------------------------------------------------------------------------------
 # packing
 
 def unpack(words: torch.Tensor, dim: int) -> torch.Tensor:
     """Packed words ``(..., 64)`` (2D) or ``(..., 64, 64)`` (3D) -> bool ``(..., 64, 64[, 64])``."""
     words = words.contiguous()
-    if words.device.type == "cpu":
-        arr = np.unpackbits(words.numpy().view(np.uint8), axis=-1, bitorder="little")
-        return torch.from_numpy(arr.view(bool)).reshape(words.shape + (SIZE,))
-    by = words.view(torch.uint8)
-    shifts = torch.arange(8, dtype=torch.uint8, device=words.device)
-    bits = (by.unsqueeze(-1) >> shifts) & 1
-    return bits.reshape(words.shape + (SIZE,)).bool()
+    shape = words.shape + (SIZE,)
+    if words.device.type != "cpu":
+        by = words.view(torch.uint8)
+        shifts = torch.arange(8, dtype=torch.uint8, device=words.device)
+        bits = (by.unsqueeze(-1) >> shifts) & 1
+        return bits.reshape(shape).bool()
+    out = _POOL.empty(shape, np.bool_)
+    if words.numel():
+        _unpack_rows(words.numpy().reshape(-1, SIZE), out.numpy().reshape(-1, SIZE * SIZE).view(np.uint8))
+    return out
+
+
+def _unpack_rows(w: np.ndarray, out: np.ndarray, chunk: int = 256) -> None:
+    """Unpack rows of 64 words (a 2D image, or one x-slab of a 3D volume) into ``out`` ``(R, 4096)``.
+
+    All-zero rows (most of a typical 3D volume) are cleared with ``memset``-speed writes; only the
+    other rows go through ``np.unpackbits`` (in chunks, so its temporary stays in cache).
+    """
+    nz = w.view(np.uint64).max(axis=1) != 0
+    rows = np.flatnonzero(nz)
+    if len(rows) * 4 < len(nz) * 3:
+        # Clear the zero rows run by run (contiguous slices), then fill in the others.
+        edges = np.flatnonzero(np.diff(nz.view(np.int8), prepend=1, append=1))
+        for a, b in zip(edges[0::2].tolist(), edges[1::2].tolist()):
+            out[a:b] = 0
+        for i in range(0, len(rows), chunk):
+            r = rows[i:i + chunk]
+            out[r] = np.unpackbits(w[r].view(np.uint8), axis=-1, bitorder="little")
+    else:
+        for i in range(0, len(w), chunk):
+            out[i:i + chunk] = np.unpackbits(w[i:i + chunk].view(np.uint8), axis=-1, bitorder="little")
 
 
 def popcount(words: torch.Tensor) -> np.ndarray:
@@ -345,16 +422,27 @@ class PrimitiveCache:
         self.params = torch.from_numpy(p).to(device)
         self.words = torch.empty((len(vocab),) + _canvas_words(dim), dtype=torch.int64, device=device)
         self.have = torch.zeros(len(vocab), dtype=torch.bool, device=device)
+        # first and last non-empty slab (3D: x-slab; 2D: the image) of each cached entry, on the CPU
+        self.lo = np.full(len(vocab), _blocks(dim)[0], np.int64)
+        self.hi = np.full(len(vocab), -1, np.int64)
+
+    def _ensure(self, ids) -> None:
+        """Draw the entries of ``ids`` (token indices, NumPy or torch) that are not cached yet."""
+        ids = torch.unique(torch.as_tensor(ids, device=self.have.device))
+        missing = ids[~self.have[ids]]
+        if missing.numel():
+            words = draw_packed(self.kinds[missing], self.params[missing], self.dim)
+            self.words[missing] = words
+            self.have[missing] = True
+            m = missing.cpu().numpy()
+            n_sl, bw = _blocks(self.dim)
+            self.lo[m], self.hi[m] = _slab_range((words.view(len(m), n_sl, bw) != 0).any(-1).cpu().numpy())
 
     def get(self, ids: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
         """(N,) token indices of primitives -> (N, *C) packed canvases (``out``: a (N, words) buffer)."""
         if ids.numel() == 0:
             return self.words[ids]
-        missing = torch.unique(ids)
-        missing = missing[~self.have[missing]]
-        if missing.numel():
-            self.words[missing] = draw_packed(self.kinds[missing], self.params[missing], self.dim)
-            self.have[missing] = True
+        self._ensure(ids)
         flat = self.words.view(self.words.shape[0], -1)
         if out is not None:
             return torch.index_select(flat, 0, ids, out=out)
@@ -519,13 +607,284 @@ def execute(kinds: torch.Tensor, params: torch.Tensor, dim: int, trace_k: int | 
     if kinds.dim() != 2 or params.shape[:2] != kinds.shape or params.shape[-1] != 5:
         raise ValueError(f"expected kinds (B, T) and params (B, T, 5), got {tuple(kinds.shape)} and {tuple(params.shape)}")
     B, T = kinds.shape
+    if not trace_k:
+        return _execute_plan(kinds, params, dim, token_ids)
     machine = StackMachine(B, dim, _max_depth(kinds), kinds.device, workspace=True)
-    trace = [machine.top(trace_k)] if trace_k else None
+    trace = [machine.top(trace_k)]
     for t in range(T):
         machine.step(kinds[:, t], params[:, t], None if token_ids is None else token_ids[:, t])
-        if trace is not None:
-            trace.append(machine.top(trace_k))
-    return Execution(machine.result(), machine.valid, torch.stack(trace) if trace is not None else None)
+        trace.append(machine.top(trace_k))
+    return Execution(machine.result(), machine.valid, torch.stack(trace))
+
+
+# ------------------------------------------------------------------------------------------------
+# planned execution (no stack, no trace)
+
+@dataclass
+class _Plan:
+    """A batch of postfix programs as a table of operations (see :func:`_plan`).
+
+    Row ``i`` of the table is ``A op B``; an operand is an earlier row (``*_op`` True) or a draw, an
+    index into ``draws``. Rows are ordered by (tree height, operator, operand sources), so each
+    ``group`` ``(r0, r1, code, subs)`` is filled by contiguous gathers (one pair per sub-range
+    ``(s0, s1, a_op, b_op)`` of uniform sources) and one word-wise operation, reading only rows < r0.
+    """
+
+    valid: np.ndarray  # (B,) bool
+    final: np.ndarray  # (B,) row of the result of each valid program, or -1
+    final_draw: np.ndarray  # (B,) index into draws of a valid program that is one draw, or -1
+    draws: np.ndarray  # (D,) flat token positions b * T + t of the draws the results use
+    code: np.ndarray  # (R,) operator codes
+    height: np.ndarray  # (R,) tree heights (1: both operands are draws), non-decreasing
+    a_op: np.ndarray  # (R,) bool
+    a_idx: np.ndarray  # (R,) int64
+    b_op: np.ndarray
+    b_idx: np.ndarray
+    groups: list
+
+
+def _plan(kinds: np.ndarray) -> _Plan:
+    """Simulate the stack of every program on references (no canvases) and list the operations that
+    contribute to the result of a valid program. Same semantics as :class:`StackMachine`."""
+    B, T = kinds.shape
+    ref = np.zeros((B, T + 1), np.int64)  # stack slots: operation id >= 0, or -(draw position + 1)
+    height = np.zeros((B, T + 1), np.int64)
+    sp = np.zeros(B, np.int64)
+    broken = np.zeros(B, bool)
+    stopped = np.zeros(B, bool)
+    ops = []
+    n_op = 0
+    for t in range(T):
+        k = kinds[:, t]
+        stopped |= k == PAD_CODE
+        live = ~stopped & ~broken
+        is_draw = live & (k < 6)
+        is_op = live & (k >= 6) & (k <= 8)
+        bad = is_op & (sp < 2)
+        broken |= bad
+        is_op &= ~bad
+        d = np.flatnonzero(is_draw)
+        if len(d):
+            ref[d, sp[d]] = -(d * T + t) - 1
+            height[d, sp[d]] = 0
+        o = np.flatnonzero(is_op)
+        if len(o):
+            s = sp[o]
+            h = np.maximum(height[o, s - 2], height[o, s - 1]) + 1
+            ops.append((k[o], ref[o, s - 2], ref[o, s - 1], h))
+            ref[o, s - 2] = np.arange(n_op, n_op + len(o))
+            height[o, s - 2] = h
+            n_op += len(o)
+        sp += is_draw
+        sp -= is_op
+        sp[broken] = 0
+    valid = ~broken & (sp == 1)
+    res = np.where(valid, ref[:, 0], 0)
+    final = np.where(valid & (res >= 0), res, -1)
+    fdraw = np.where(valid & (res < 0), -res - 1, -1)
+
+    if ops:
+        code, oa, ob, oh = (np.concatenate(c) for c in zip(*ops))
+    else:
+        code = oa = ob = oh = np.zeros(0, np.int64)
+    # operations some valid result depends on, from the top of the trees down
+    need = np.zeros(n_op, bool)
+    need[final[final >= 0]] = True
+    for level in range(int(oh.max()) if n_op else 0, 1, -1):
+        sel = np.flatnonzero(need & (oh == level))
+        for x in (oa[sel], ob[sel]):
+            need[x[x >= 0]] = True
+    keep = np.flatnonzero(need)
+    a_op, b_op = oa[keep] >= 0, ob[keep] >= 0
+    order = np.lexsort((b_op, a_op, code[keep], oh[keep]))
+    keep, a_op, b_op = keep[order], a_op[order], b_op[order]
+    row = np.full(n_op + 1, -1, np.int64)  # one spare entry: index 0 is safe without operations
+    row[keep] = np.arange(len(keep))
+    oa, ob, code, oh = oa[keep], ob[keep], code[keep], oh[keep]
+    draws = np.unique(np.concatenate([-oa[~a_op] - 1, -ob[~b_op] - 1, fdraw[fdraw >= 0]]))
+    a_idx = np.where(a_op, row[np.maximum(oa, 0)], np.searchsorted(draws, -oa - 1))
+    b_idx = np.where(b_op, row[np.maximum(ob, 0)], np.searchsorted(draws, -ob - 1))
+    final = np.where(final >= 0, row[np.maximum(final, 0)], -1)
+    fdraw = np.where(fdraw >= 0, np.searchsorted(draws, fdraw), -1)
+
+    groups = []
+    R = len(keep)
+    if R:
+        gkey = oh * 16 + code
+        skey = gkey * 4 + a_op * 2 + b_op
+        g_starts = np.flatnonzero(np.diff(gkey, prepend=-1)).tolist() + [R]
+        s_starts = np.flatnonzero(np.diff(skey, prepend=-1)).tolist() + [R]
+        si = 0
+        for r0, r1 in zip(g_starts[:-1], g_starts[1:]):
+            subs = []
+            while s_starts[si] < r1:
+                s0, s1 = s_starts[si], s_starts[si + 1]
+                subs.append((s0, s1, bool(a_op[s0]), bool(b_op[s0])))
+                si += 1
+            groups.append((r0, r1, int(code[r0]), subs))
+    return _Plan(valid, final, fdraw, draws, code, oh, a_op, a_idx, b_op, b_idx, groups)
+
+
+_BLOCK_SLABS = 8
+
+
+def _blocks(dim: int) -> tuple[int, int]:
+    """(blocks per canvas, words per block) of the planned executor: a 2D image is one block, a 3D
+    volume 64 / _BLOCK_SLABS blocks of _BLOCK_SLABS x-slabs."""
+    return (1, SIZE) if dim == 2 else (SIZE // _BLOCK_SLABS, _BLOCK_SLABS * SIZE)
+
+
+def _slab_range(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, S) bool "slab is not all zero" -> first and last such slab per row (S and -1 if none)."""
+    S = mask.shape[1]
+    some = mask.any(axis=1)
+    lo = np.where(some, mask.argmax(axis=1), S)
+    hi = np.where(some, S - 1 - mask[:, ::-1].argmax(axis=1), -1)
+    return lo.astype(np.int64), hi.astype(np.int64)
+
+
+def _pick(is_op: np.ndarray, idx: np.ndarray, op_vals: np.ndarray, draw_vals: np.ndarray) -> np.ndarray:
+    """``op_vals[idx]`` where ``is_op``, else ``draw_vals[idx]``."""
+    out = np.empty(len(idx), np.int64)
+    out[is_op] = op_vals[idx[is_op]]
+    out[~is_op] = draw_vals[idx[~is_op]]
+    return out
+
+
+def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids: torch.Tensor | None,
+                  as_bool: bool = False):
+    """:func:`execute` without a trace.
+
+    A canvas is a column of slabs of 64 words (3D: the 64 x-slabs of a volume; 2D: one slab, the
+    image). Every value (a primitive or an operation's result) is known to be zero outside a range of
+    slabs: a primitive's first to last non-empty slab, the hull of the operands' ranges for a union,
+    their intersection for an intersection, the first operand's range for a difference. Each
+    operation is computed on its range only, into a table of slabs whose row 0 is all zeros (what an
+    operand reads outside its own range); operations with an empty range cost nothing. A 3D result
+    then takes about a third of the dense work.
+
+    Returns an :class:`Execution`, or with ``as_bool`` the bool canvases (unpacking only the result
+    slabs that hold something).
+    """
+    device = kinds.device
+    B, T = kinds.shape
+    C = _canvas_words(dim)
+    n_sl, bw = _blocks(dim)
+    plan = _plan(kinds.cpu().numpy())
+    # primitive canvases: rows of the primitive cache, or drawn now; and their slab ranges
+    if token_ids is not None:
+        prow = token_ids.reshape(-1).cpu().numpy()[plan.draws]
+        cache = primitive_cache(dim, device)
+        cache._ensure(prow)
+        prims = cache.words
+        d_lo, d_hi = cache.lo[prow], cache.hi[prow]
+    else:
+        prow = np.arange(len(plan.draws))
+        sel = torch.from_numpy(plan.draws).to(device)
+        prims = draw_packed(kinds.reshape(-1)[sel], params.reshape(-1, 5)[sel], dim)
+        d_lo, d_hi = _slab_range((prims.view(len(prow), n_sl, bw) != 0).any(-1).cpu().numpy())
+    prim_slabs = prims.view(-1, bw)
+
+    # slab ranges of the operations, one tree height at a time
+    R = len(plan.code)
+    lo = np.empty(R, np.int64)
+    hi = np.empty(R, np.int64)
+    bounds = np.flatnonzero(np.diff(plan.height, prepend=-1)).tolist() + [R]
+    for l0, l1 in zip(bounds[:-1], bounds[1:]):
+        sl = slice(l0, l1)
+        alo = _pick(plan.a_op[sl], plan.a_idx[sl], lo, d_lo)
+        ahi = _pick(plan.a_op[sl], plan.a_idx[sl], hi, d_hi)
+        blo = _pick(plan.b_op[sl], plan.b_idx[sl], lo, d_lo)
+        bhi = _pick(plan.b_op[sl], plan.b_idx[sl], hi, d_hi)
+        code = plan.code[sl]
+        u, i = code == _UNION, code == _INTER
+        rlo = np.where(u, np.minimum(alo, blo), np.where(i, np.maximum(alo, blo), alo))
+        rhi = np.where(u, np.maximum(ahi, bhi), np.where(i, np.minimum(ahi, bhi), ahi))
+        empty = rlo > rhi
+        lo[sl] = np.where(empty, n_sl, rlo)
+        hi[sl] = np.where(empty, -1, rhi)
+    n = np.maximum(hi - lo + 1, 0)
+    fstart = np.concatenate([[0], np.cumsum(n)])  # table slabs of row r: 1 + fstart[r] ... 1 + fstart[r+1]
+    total = int(fstart[-1])
+
+    # operand slab of every table slab: a table slab (0 outside the operand's range) or a primitive slab
+    owner = np.repeat(np.arange(R), n)
+    x = lo[owner] + np.arange(total) - fstart[owner]
+
+    def sources(is_op, idx):
+        is_op, idx = is_op[owner], idx[owner]
+        out = np.empty(total, np.int64)
+        r, xo = idx[is_op], x[is_op]
+        out[is_op] = np.where((xo >= lo[r]) & (xo <= hi[r]), 1 + fstart[r] + xo - lo[r], 0)
+        out[~is_op] = prow[idx[~is_op]] * n_sl + x[~is_op]
+        return torch.from_numpy(out).to(device)
+
+    a_src, b_src = sources(plan.a_op, plan.a_idx), sources(plan.b_op, plan.b_idx)
+    table = _WORKSPACE.get("ops", (1 + total) * bw, device).view(1 + total, bw)
+    table[0].zero_()
+    widest = max([int(fstart[r1] - fstart[r0]) for r0, r1, _, _ in plan.groups] + [0])
+    tmp = _WORKSPACE.get("b", widest * bw, device).view(widest, bw)
+    for r0, r1, code, subs in plan.groups:
+        g0, g1 = int(fstart[r0]), int(fstart[r1])
+        if g0 == g1:
+            continue
+        done = table[:1 + g0]
+        for s0, s1, a_op, b_op in subs:
+            f0, f1 = int(fstart[s0]), int(fstart[s1])
+            if f0 < f1:
+                torch.index_select(done if a_op else prim_slabs, 0, a_src[f0:f1], out=table[1 + f0:1 + f1])
+                torch.index_select(done if b_op else prim_slabs, 0, b_src[f0:f1], out=tmp[f0 - g0:f1 - g0])
+        dst, src = table[1 + g0:1 + g1], tmp[:g1 - g0]
+        if code == _UNION:
+            dst |= src
+        elif code == _INTER:
+            dst &= src
+        else:
+            dst &= src.bitwise_not_()
+
+    # results: the slabs of each program's range (the rest of a canvas is zero)
+    has = np.flatnonzero(plan.final >= 0)
+    single = np.flatnonzero(plan.final_draw >= 0)
+    parts = [(table, *_range_rows(has, plan.final[has], lo, hi, 1 + fstart[:-1], n_sl)),
+             (prim_slabs, *_range_rows(single, plan.final_draw[single], d_lo, d_hi, prow * n_sl + d_lo, n_sl))]
+    cpu = device.type == "cpu"
+    if as_bool and cpu:
+        out = _POOL.empty((B,) + C + (SIZE,), np.bool_)
+        rows = out.numpy().reshape(B * n_sl, bw * SIZE).view(np.uint8)
+        rows.fill(0)
+        for src, s_idx, d_idx in parts:
+            src = src.numpy()
+            for i in range(0, len(s_idx), 512):
+                g = src[s_idx[i:i + 512]]
+                nz = g.view(np.uint64).max(axis=1) != 0
+                rows[d_idx[i:i + 512][nz]] = np.unpackbits(g[nz].view(np.uint8), axis=-1, bitorder="little")
+        return out
+    if cpu:
+        out = _POOL.empty((B * n_sl, bw), np.int64)
+        o = out.numpy()
+        o.fill(0)
+        for src, s_idx, d_idx in parts:
+            o[d_idx] = src.numpy()[s_idx]
+    else:
+        out = torch.zeros((B * n_sl, bw), dtype=torch.int64, device=device)
+        for src, s_idx, d_idx in parts:
+            out.index_copy_(0, torch.from_numpy(d_idx).to(device),
+                            src.index_select(0, torch.from_numpy(s_idx).to(device)))
+    out = out.view((B,) + C)
+    if as_bool:
+        return unpack(out, dim)
+    return Execution(out, torch.from_numpy(plan.valid).to(device), None)
+
+
+def _range_rows(progs: np.ndarray, vals: np.ndarray, lo: np.ndarray, hi: np.ndarray, first: np.ndarray,
+                n_sl: int) -> tuple[np.ndarray, np.ndarray]:
+    """Source and output slab rows of the ranges of values ``vals`` (whose slab ``lo[v]`` is source row
+    ``first[v]``) that are the results of programs ``progs``."""
+    lo, n = lo[vals], np.maximum(hi[vals] - lo[vals] + 1, 0)
+    step = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    src = np.repeat(first[vals], n) + step
+    dst = np.repeat(progs * n_sl + lo, n) + step
+    return src, dst
 
 
 def render_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None = None) -> torch.Tensor:
@@ -533,13 +892,13 @@ def render_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None =
     on the tokens' device."""
     tokens = torch.as_tensor(tokens)
     kinds, params = encode_tokens(tokens, dim, lengths)
-    return unpack(execute(kinds, params, dim, token_ids=tokens.long()).canvas, dim)
+    return _execute_plan(kinds, params, dim, tokens.long(), as_bool=True)
 
 
 def render_programs(programs: Sequence[Program | str], dim: int, device=None) -> torch.Tensor:
     """Render programs (objects or text, any integer parameters) to bool ``(B, 64, 64[, 64])``."""
     kinds, params = encode_programs(programs, dim, device)
-    return unpack(execute(kinds, params, dim).canvas, dim)
+    return _execute_plan(kinds, params, dim, None, as_bool=True)
 
 
 def stack_trace(programs, dim: int, k: int | None = None, lengths=None, packed: bool = False) -> torch.Tensor:
