@@ -32,15 +32,16 @@ Invalid programs (stack underflow, shapes left over, empty) render empty and are
 with the score of an empty canvas: chamfer 16 (the reference's fixed value), IoU 0.
 
 How it is fast: the objective is piecewise constant, so Powell's line searches revisit the same
-integer programs over and over (about nine calls in ten on length-13 programs). Every distinct program
-is scored once and cached. Primitives are drawn by the batched renderer
-(:func:`csgnet.renderer.draw_packed`) as 64-word bit-packed canvases, and when a primitive is missing
-all its axis neighbours in the search box (the same primitive with one parameter changed) are drawn in
-the same batch, which serves Powell's axis-aligned line searches; a program is then composed from the
-cached canvases with word-wise boolean operations, following the renderer's stack semantics (checked
-pixel for pixel against :func:`csgnet.renderer.render_programs` in the tests). The chamfer distance
-against the fixed target reuses the target's edges and distance map; it equals
-:func:`csgnet.metrics.chamfer` bit for bit.
+integer programs over and over (about nine calls in ten on length-13 programs). Every distinct
+program is scored once and cached. Primitives are drawn by the batched renderer
+(:func:`csgnet.renderer.draw_packed`) as 64-word bit-packed canvases; when a primitive is missing,
+its axis neighbours in the search box (the same primitive with one parameter changed by up to
+:data:`PREFETCH` pixels) are drawn in the same batch, since Powell's line searches probe them next.
+A program is then composed from the cached canvases with word-wise boolean operations, following
+the renderer's stack semantics (checked pixel for pixel against
+:func:`csgnet.renderer.render_programs` in the tests). The chamfer distance against the fixed target
+reuses the target's edges and distance map and equals :func:`csgnet.metrics.chamfer` bit for bit.
+Figures: ``docs/refinement.md`` and ``bench/bench_refine.py``.
 
 Example:
     >>> import csgnet
@@ -72,6 +73,8 @@ RADIUS_RANGE = (8, 32)
 TOL = 1e-4
 """Powell's ``tol`` (the reference's value)."""
 EMPTY_CHAMFER = 16.0
+PREFETCH = 8
+"""A missing primitive is drawn together with its axis neighbours up to this many pixels away."""
 
 
 @dataclass(frozen=True)
@@ -234,10 +237,11 @@ class _Problem:
         key = (self.kinds[i], int(v[0]), int(v[1]), int(v[2]))
         w = self.scorer.leaves.get(key)
         if w is None:
-            # draw this primitive's axis neighbours in the box with it (Powell's axis line searches)
+            # draw this primitive's axis neighbours in the box with it (Powell's line searches probe them)
             keys = [key]
             for j in range(3):
                 lo, hi = int(self.lo[3 * i + j]), int(self.hi[3 * i + j])
+                lo, hi = max(lo, key[1 + j] - PREFETCH), min(hi, key[1 + j] + PREFETCH)
                 for u in range(lo, hi + 1):
                     k = list(key)
                     k[1 + j] = u

@@ -1,0 +1,202 @@
+"""Seconds per image of Powell refinement (``csgnet.refine``) against a plain Powell loop.
+
+Targets and start programs:
+
+* ``--targets synthetic`` (default): the renderings of random synthetic programs
+  (``csgnet.data.sample_programs``, length ``--length``); each start program is the same program
+  with every parameter moved by a uniform integer in ``[-shift, shift]`` (a parser's near miss).
+* ``--targets silhouettes``: images of the shipped silhouette test split; each start program is the
+  nearest neighbour (lowest chamfer) among ``--pool`` random synthetic programs.
+
+For ``maxiter`` in 1, 2, 4, 10 and unlimited and both modes, the script prints the mean chamfer
+before and after (the true score of the returned program; for the reference mode also the mean
+score it reports), the wall-clock and CPU (process) seconds per image, and the objective calls and
+distinct renders per image. CPU seconds are the steadier figure on a shared, loaded machine. It then
+compares drawing a missing primitive together with its axis neighbours (the default) against
+drawing one primitive per miss.
+
+Baseline (same run, same images, the first ``--baseline`` of them): the published procedure as a
+plain loop, every objective call rendering its program with ``csgnet.renderer.render_programs`` and
+scoring it with ``csgnet.metrics.chamfer`` (no cache), under scipy's Powell with the reference's
+truncation and clipping. ``csgnet.refine(mode="reference")`` runs the same search, so the two must
+return the same programs (checked) and the ratio of their times is the speed-up of the cached,
+batched objective.
+
+Usage::
+
+    python bench/bench_refine.py --threads 1 [--images 40] [--baseline 3] [--targets synthetic]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+import torch
+
+
+def _synthetic(n: int, length: int, shift: int, seed: int):
+    from csgnet.data import sample_programs
+    from csgnet.lang import Draw, Program
+    from csgnet.renderer import render_programs
+    from csgnet.vocab import vocabulary
+
+    rng = np.random.default_rng(seed)
+    vocab = vocabulary(2)
+    progs = [vocab.decode(t) for t in sample_programs(2, length, n, rng)]
+    targets = render_programs(progs, 2).numpy()
+    starts = [Program(tuple(Draw(t.kind, tuple(int(v + rng.integers(-shift, shift + 1)) for v in t.params))
+                            if isinstance(t, Draw) else t for t in p.tokens), 2) for p in progs]
+    return starts, targets
+
+
+def _silhouettes(n: int, length: int, pool: int, seed: int):
+    from csgnet import metrics
+    from csgnet.data import sample_programs
+    from csgnet.renderer import render_programs
+    from csgnet.shapes2d import load_silhouettes
+    from csgnet.vocab import vocabulary
+
+    rng = np.random.default_rng(seed)
+    images = load_silhouettes("test")
+    targets = images[np.sort(rng.choice(len(images), n, replace=False))]
+    vocab = vocabulary(2)
+    cand = [vocab.decode(t) for t in sample_programs(2, length, pool, rng)]
+    rendered = render_programs(cand, 2).numpy()
+    starts = []
+    for t in targets:
+        cd = metrics.chamfer(rendered, t)
+        starts.append(cand[int(np.argmin(cd))])
+    return starts, targets
+
+
+def _plain_powell(program, target, maxiter):
+    """The published procedure, one render and one chamfer per objective call (the baseline)."""
+    from scipy.optimize import minimize
+
+    from csgnet import metrics
+    from csgnet.lang import Draw, Program
+    from csgnet.renderer import render_programs
+
+    def build(v):
+        toks, i = [], 0
+        for t in program.tokens:
+            if isinstance(t, Draw):
+                toks.append(Draw(t.kind, tuple(int(a) for a in v[3 * i:3 * i + 3])))
+                i += 1
+            else:
+                toks.append(t)
+        return Program(tuple(toks), 2)
+
+    def objective(x):
+        v = np.clip(x.astype(int), 8, 56)
+        return metrics.chamfer(render_programs([build(v)], 2)[0].numpy(), target)
+
+    x0 = np.array([v for d in program.draws for v in d.params], dtype=np.float64)
+    res = minimize(objective, x0, method="Powell", tol=1e-4, options={"maxiter": maxiter})
+    v = np.trunc(res.x).astype(int)
+    v[2::3] = np.clip(v[2::3], 8, 32)
+    return build(np.clip(v, 8, 56)), float(res.fun)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--images", type=int, default=40)
+    ap.add_argument("--baseline", type=int, default=3, help="images for the plain-loop baseline (0: none)")
+    ap.add_argument("--targets", choices=("synthetic", "silhouettes"), default="synthetic")
+    ap.add_argument("--length", type=int, default=13, help="synthetic program length")
+    ap.add_argument("--shift", type=int, default=3, help="synthetic: parameter perturbation of the start")
+    ap.add_argument("--pool", type=int, default=2000, help="silhouettes: random programs to pick starts from")
+    ap.add_argument("--maxiter", default="1,2,4,10,none", help="comma-separated; 'none' = unlimited")
+    ap.add_argument("--threads", type=int, default=1, help="torch and OpenCV threads")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+
+    import cv2
+
+    import csgnet
+    from csgnet import metrics
+    from csgnet.renderer import render_programs
+
+    torch.set_num_threads(args.threads)
+    cv2.setNumThreads(args.threads)
+    print(f"# command: python {' '.join(sys.argv)}")
+    print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
+          f"torch {torch.__version__}, OpenCV {cv2.__version__}, threads {args.threads}, "
+          f"load average {os.getloadavg()[0]:.1f}")
+    if args.targets == "synthetic":
+        starts, targets = _synthetic(args.images, args.length, args.shift, args.seed)
+        print(f"# targets: {len(targets)} synthetic length-{args.length} programs, starts shifted by "
+              f"up to {args.shift} px per parameter")
+    else:
+        starts, targets = _silhouettes(args.images, args.length, args.pool, args.seed)
+        print(f"# targets: {len(targets)} silhouette test images, starts = nearest of {args.pool} random "
+              f"length-{args.length} programs")
+    csgnet.refine(starts[0], targets[0], maxiter=1)  # warm-up (imports, first allocations)
+
+    def true_score(prog, target):
+        return metrics.chamfer(render_programs([prog], 2)[0].numpy(), target)
+
+    iters = [None if s.strip().lower() == "none" else int(s) for s in args.maxiter.split(",")]
+    def timed(fn):
+        w0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        return out, (time.perf_counter() - w0) / len(targets), (time.process_time() - c0) / len(targets)
+
+    print("| maxiter | mode | chamfer before | chamfer after (program) | reported | wall s/image | "
+          "CPU s/image | evaluations/image | renders/image |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for it in iters:
+        for mode in ("improved", "reference"):
+            results, wall, cpu = timed(lambda: [csgnet.refine(s, t, maxiter=it, mode=mode)
+                                                for s, t in zip(starts, targets)])
+            before = np.mean([r.initial_score for r in results])
+            after = np.mean([true_score(r.program, t) for r, t in zip(results, targets)])
+            reported = np.mean([r.score for r in results])
+            print(f"| {it if it is not None else 'unlimited'} | {mode} | {before:.3f} | {after:.3f} | "
+                  f"{reported:.3f} | {wall:.3f} | {cpu:.3f} | {np.mean([r.evaluations for r in results]):.0f} | "
+                  f"{np.mean([r.rendered for r in results]):.0f} |", flush=True)
+
+    # batched drawing of a missing primitive's neighbours against drawing one primitive per miss
+    from csgnet import refinement
+
+    default = refinement.PREFETCH
+    print(f"\nPrimitive drawing, improved mode, unlimited iterations, all {len(targets)} images")
+    print("| objective | wall s/image | CPU s/image | ratio (CPU) |")
+    print("|---|---|---|---|")
+    rows = []
+    for label, prefetch in (("cached, one primitive drawn per miss", 0),
+                            (f"cached, axis neighbours within {default} px drawn with a miss (default)", default)):
+        refinement.PREFETCH = prefetch
+        try:
+            _, wall, cpu = timed(lambda: [csgnet.refine(s, t) for s, t in zip(starts, targets)])
+        finally:
+            refinement.PREFETCH = default
+        rows.append((label, wall, cpu))
+    for label, wall, cpu in rows:
+        print(f"| {label} | {wall:.3f} | {cpu:.3f} | {rows[0][2] / cpu:.2f}x |", flush=True)
+
+    if args.baseline:
+        n = min(args.baseline, len(targets))
+        print(f"\nBaseline: plain Powell loop (render_programs + metrics.chamfer per call), first {n} images")
+        print("| maxiter | plain loop wall / CPU s/image | csgnet.refine(mode='reference') wall / CPU s/image | "
+              "ratio (CPU) | same programs and scores |")
+        print("|---|---|---|---|---|")
+        for it in (1, None):
+            w0, c0 = time.perf_counter(), time.process_time()
+            base = [_plain_powell(s, t, it) for s, t in zip(starts[:n], targets[:n])]
+            wb, cb = (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
+            w0, c0 = time.perf_counter(), time.process_time()
+            ours = [csgnet.refine(s, t, maxiter=it, mode="reference") for s, t in zip(starts[:n], targets[:n])]
+            wo, co = (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
+            same = all(b[0] == o.program and b[1] == o.score for b, o in zip(base, ours))
+            print(f"| {it if it is not None else 'unlimited'} | {wb:.3f} / {cb:.3f} | {wo:.3f} / {co:.3f} | "
+                  f"{cb / co:.0f}x | {same} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
