@@ -646,25 +646,30 @@ def _rule_general(pos, dims, ax, src, g, prev):
 
 @dataclass
 class _GroupPlan:
-    """The attach ops of one rule at one step, over all blocks, as index tensors and constants."""
+    """The attach ops of one rule at one step, over all blocks, as index tensors and constants.
+
+    The state is kept in flat rows: cuboid slot ``s`` of block row ``k`` is row ``k * S + s`` of
+    the pos / dims / axes tensors; attachment record ``j`` of block row ``k`` holds its src, tgt
+    and global points in rows ``(k * J + j) * 3 + (0, 1, 2)`` of the record tensor."""
 
     mode: int
-    bi: torch.Tensor  # (n,) block row
-    jj: torch.Tensor  # (n,) record row of the op
-    a: torch.Tensor  # (n,) moved slot
-    b: torch.Tensor  # (n,) target slot
+    n: int
+    row_a: torch.Tensor  # (n,) state row of the moved cuboid
+    row_b: torch.Tensor  # (n,) state row of the target cuboid
     c0: torch.Tensor  # (2n, 3) affine constants: the n src rows, then the n tgt rows
     c1: torch.Tensor  # (2n, 3) affine scales
     ix: torch.Tensor  # (2n, 3) parameter indices (-1: the trailing zero)
     macro: dict | None  # reflect / translate copies, see _macro_points
-    prior: tuple | None  # SECOND: (record row, role) of the one earlier record
-    general: list | None  # GENERAL: per row (block row, [(record row, role), ...])
+    prior: tuple | None  # SECOND: record rows of the earlier record's point on A and of its global point
+    general: list | None  # GENERAL: per row, [(record row of the point on A, record row of the global point)]
+    keep: torch.Tensor | None  # group rows whose record a later op reads (None: every row)
+    rec_rows: torch.Tensor | None  # record rows written (None: no record of the group is read later)
 
 
 @dataclass
 class _StepPlan:
-    setdims: tuple | None  # (block rows, slots, parameter indices (n, 3))
-    copy: tuple | None  # (block rows, new slots, source slots)
+    setdims: tuple | None  # (state rows, parameter indices (n, 3))
+    copy: tuple | None  # (new state rows, source state rows)
     groups: list  # of _GroupPlan
 
 
@@ -673,8 +678,7 @@ class _LevelPlan:
     """Placement of the block instances at one depth of the sub-program trees."""
 
     rows: torch.Tensor  # (m,) block row of each instance
-    parent: torch.Tensor | None  # (m,) index of the parent instance in the previous level (None: roots)
-    pslot: torch.Tensor | None  # (m,) slot of the parent that the instance fills
+    parent: torch.Tensor | None  # (m,) row parent instance * S + parent slot in the previous level (None: roots)
     root_ix: torch.Tensor | None  # roots: (m, 3) parameter indices of the root bbox dims
     pos_sign: torch.Tensor | None  # (m, 1, 3) reflect flip of positions (None: no flip at this level)
     ax_sign: torch.Tensor | None  # (m, 1, 1, 3) reflect flip (180 deg turn) of the axes
@@ -684,10 +688,13 @@ def _shift(form, off):
     return (form[0], form[1], tuple(i + off if i >= 0 else -1 for i in form[2]))
 
 
-def _plan_group(mode, items, offsets, dtype, device) -> _GroupPlan:
-    """Index tensors and constants of one attach group; ``items``: (block row, record row, op)."""
-    ints = torch.tensor([(x[0], x[1], x[2].a, x[2].b) for x in items], device=device)
-    bi, jj, a, b = ints.unbind(1)
+def _plan_group(mode, items, offsets, S, J, dtype, device, read: set) -> _GroupPlan:
+    """Index tensors and constants of one attach group; ``items``: (block row, record index, op);
+    ``read``: the (block row, record index) pairs that later ops read."""
+    lt = lambda v: torch.tensor(v, dtype=torch.int64, device=device)  # noqa: E731
+    rec_row = lambda blk, j, role: (blk * J + j) * 3 + role  # noqa: E731
+    row_a = lt([blk * S + o.a for blk, _, o in items])
+    row_b = lt([blk * S + o.b for blk, _, o in items])
     none = ((0.0,) * 3, (0.0,) * 3, (-1, -1, -1))
     src_forms, tgt_forms, macro_rows = [], [], []
     for r, (blk, _, o) in enumerate(items):
@@ -701,30 +708,48 @@ def _plan_group(mode, items, offsets, dtype, device) -> _GroupPlan:
     forms = src_forms + tgt_forms
     c0 = torch.tensor([f[0] for f in forms], dtype=dtype, device=device)
     c1 = torch.tensor([f[1] for f in forms], dtype=dtype, device=device)
-    ix = torch.tensor([f[2] for f in forms], dtype=torch.int64, device=device)
+    ix = lt([f[2] for f in forms])
     macro = None
     if macro_rows:
-        ms = [items[r][2].macro for r in macro_rows]
-        mi = torch.tensor([(r, items[r][0], m[0], m[1], m[2], m[4],
-                            offsets[items[r][0]] + m[7] if m[7] >= 0 else -1) for r, m in zip(macro_rows, ms)],
-                          device=device)
-        r_idx, mbi, j, A, T, k, didx = mi.unbind(1)
-        is_ref = torch.tensor([m[3] == "R" for m in ms], device=device)
-        e = torch.nn.functional.one_hot(k, 3).to(dtype)
-        ii, nn_ = torch.tensor([(float(m[5]), float(m[6])) for m in ms], dtype=dtype, device=device).unbind(1)
-        macro = dict(r_idx=r_idx, bi=mbi, j=j, A=A, T=T, e=e, didx=didx, ii=ii, N=nn_, is_ref=is_ref,
-                     flip=is_ref[:, None] & (e > 0), any_ref=any(m[3] == "R" for m in ms),
-                     any_tr=any(m[3] != "R" for m in ms))
+        ms = [(items[r][0], items[r][2].macro) for r in macro_rows]
+        is_ref = torch.tensor([m[3] == "R" for _, m in ms], device=device)
+        e = torch.nn.functional.one_hot(lt([m[4] for _, m in ms]), 3).to(dtype)
+        macro = dict(
+            r_idx=lt(macro_rows),
+            ap=lt([rec_row(blk, m[0], 0) for blk, m in ms]),  # the original record's point on A
+            A=lt([blk * S + m[1] for blk, m in ms]),
+            T=lt([blk * S + m[2] for blk, m in ms]),
+            box=lt([blk * S for blk, _ in ms]),
+            didx=lt([offsets[blk] + m[7] if m[7] >= 0 else -1 for blk, m in ms]),
+            ii=torch.tensor([float(m[5]) for _, m in ms], dtype=dtype, device=device),
+            N=torch.tensor([float(m[6]) for _, m in ms], dtype=dtype, device=device),
+            e=e, is_ref=is_ref, flip=is_ref[:, None] & (e > 0),
+            any_ref=any(m[3] == "R" for _, m in ms), any_tr=any(m[3] != "R" for _, m in ms))
     prior = general = None
     if mode == SECOND:
-        prior = torch.tensor([x[2].prior[0] for x in items], device=device).unbind(1)
+        prior = (lt([rec_row(blk, *o.prior[0]) for blk, _, o in items]),
+                 lt([rec_row(blk, o.prior[0][0], 2) for blk, _, o in items]))
     elif mode == GENERAL:
-        general = [(blk, list(o.prior)) for blk, _, o in items]
-    return _GroupPlan(mode, bi, jj, a, b, c0, c1, ix, macro, prior, general)
+        general = [[(rec_row(blk, j, role), rec_row(blk, j, 2)) for j, role in o.prior] for blk, _, o in items]
+    rows = [r for r, (blk, j, _) in enumerate(items) if (blk, j) in read]
+    keep = None if len(rows) == len(items) else lt(rows)
+    rec_rows = None
+    if rows:
+        rec_rows = lt([rec_row(items[r][0], items[r][1], role) for r in rows for role in range(3)])
+    return _GroupPlan(mode, len(items), row_a, row_b, c0, c1, ix, macro, prior, general, keep, rec_rows)
 
 
-def _plan_steps(codes: list[_BlockCode], offsets: list[int], dtype, device) -> list[_StepPlan]:
+def _plan_steps(codes: list[_BlockCode], offsets: list[int], S: int, J: int, dtype, device) -> list[_StepPlan]:
     """Lock-step schedule: step ``t`` runs the ``t``-th dependency level of every block."""
+    read = set()  # attachment records that some op reads: second / general priors, macro sources
+    for bi, c in enumerate(codes):
+        for op in c.ops:
+            if op[0] == "attach":
+                o = op[1]
+                if o.mode in (SECOND, GENERAL):
+                    read.update((bi, j) for j, _ in o.prior)
+                if o.macro is not None:
+                    read.add((bi, o.macro[0]))
     steps = []
     for t in range(max(len(c.steps) for c in codes)):
         groups: dict = {}
@@ -737,23 +762,24 @@ def _plan_steps(codes: list[_BlockCode], offsets: list[int], dtype, device) -> l
                     o = op[1]
                     groups.setdefault(o.mode, []).append((bi, o.j, o))
                 elif op[0] == "setdims":
-                    setd.append((bi, op[1]) + tuple(offsets[bi] + i for i in op[2]))
+                    setd.append((bi * S + op[1],) + tuple(offsets[bi] + i for i in op[2]))
                 else:
-                    copy.append((bi, op[1], op[2]))
+                    copy.append((bi * S + op[1], bi * S + op[2]))
         sd = cp = None
         if setd:
             t_ = torch.tensor(setd, device=device)
-            sd = (t_[:, 0], t_[:, 1], t_[:, 2:])
+            sd = (t_[:, 0], t_[:, 1:])
         if copy:
             cp = torch.tensor(copy, device=device).unbind(1)
-        steps.append(_StepPlan(sd, cp, [_plan_group(m, it, offsets, dtype, device) for m, it in groups.items()]))
+        plans = [_plan_group(m, it, offsets, S, J, dtype, device, read) for m, it in groups.items()]
+        steps.append(_StepPlan(sd, cp, plans))
     return steps
 
 
-def _plan_levels(comps: list[_Compiled], block_base: list[int], param_base: list[int], dtype, device):
+def _plan_levels(comps: list[_Compiled], block_base: list[int], param_base: list[int], S: int, dtype, device):
     """Placement levels and the leaf gather of a batch of programs.
 
-    Returns the levels, the (instance, slot) index of every leaf in output order (instances
+    Returns the levels, the row (instance * S + slot) of every leaf in output order (instances
     numbered level after level), and the leaf count, node and line tensors per program.
     """
     per_level: list[list] = []  # per depth: (program, local instance)
@@ -772,17 +798,17 @@ def _plan_levels(comps: list[_Compiled], block_base: list[int], param_base: list
     level_base = [0]
     for lv in per_level:
         level_base.append(level_base[-1] + len(lv))
+    lt = lambda v: torch.tensor(v, dtype=torch.int64, device=device)  # noqa: E731
     levels = []
     for d, lv in enumerate(per_level):
-        rows, parent, pslot, root_ix, pos_sign, ax_sign = [], [], [], [], [], []
+        rows, parent, root_ix, pos_sign, ax_sign = [], [], [], [], []
         for pi, li in lv:
             bidx, par, ps, flip = comps[pi].instances[li]
             rows.append(block_base[pi] + bidx)
             if d == 0:
                 root_ix.append([param_base[pi] + k for k in range(3)])
             else:
-                parent.append(where[pi][par][1])
-                pslot.append(ps)
+                parent.append(where[pi][par][1] * S + ps)
             sign = [1.0, 1.0, 1.0]
             if flip is not None:
                 sign[flip] = -1.0
@@ -790,32 +816,27 @@ def _plan_levels(comps: list[_Compiled], block_base: list[int], param_base: list
             # a reflected copy's axes: -(axes * sign), a 180 degree turn
             ax_sign.append([-x for x in sign] if flip is not None else sign)
         flips = any(comps[pi].instances[li][3] is not None for pi, li in lv)
-        lt = lambda v: torch.tensor(v, dtype=torch.int64, device=device)  # noqa: E731
         levels.append(_LevelPlan(
             rows=lt(rows),
             parent=lt(parent) if d else None,
-            pslot=lt(pslot) if d else None,
             root_ix=lt(root_ix) if d == 0 else None,
             pos_sign=torch.tensor(pos_sign, dtype=dtype, device=device)[:, None] if flips else None,
             ax_sign=torch.tensor(ax_sign, dtype=dtype, device=device)[:, None, None] if flips else None,
         ))
-    leaf_inst, leaf_slot, counts, nodes, lines = [], [], [], [], []
+    leaf_rows, counts, nodes, lines = [], [], [], []
     for pi, comp in enumerate(comps):
         node, line = [], []
         for li, (bidx, _, _, _) in enumerate(comp.instances):
             code = comp.blocks[bidx]
             keep = comp.leaf_slots[bidx]
             d, k = where[pi][li]
-            leaf_inst.extend([level_base[d] + k] * len(keep))
-            leaf_slot.extend(keep)
+            leaf_rows.extend((level_base[d] + k) * S + s for s in keep)
             node.extend([int(code.name.split("_")[1]) if code.name.startswith("Program_") else bidx] * len(keep))
             line.extend(code.slot_line[s] for s in keep)
         counts.append(len(node))
-        nodes.append(torch.tensor(node, dtype=torch.int64, device=device))
-        lines.append(torch.tensor(line, dtype=torch.int64, device=device))
-    leaves = (torch.tensor(leaf_inst, dtype=torch.int64, device=device),
-              torch.tensor(leaf_slot, dtype=torch.int64, device=device))
-    return levels, leaves, counts, nodes, lines
+        nodes.append(lt(node))
+        lines.append(lt(line))
+    return levels, lt(leaf_rows), counts, nodes, lines
 
 
 class ExecutionPlan:
@@ -862,11 +883,12 @@ class ExecutionPlan:
         for c, off in zip(codes, offsets):
             rows = [(-1, -1, -1) if d is None else tuple(off + i for i in d) for d in c.init_dims]
             init.append(rows + [(-1, -1, -1)] * (S - len(rows)))
-        self._init_ix = torch.tensor(init, dtype=torch.int64, device=dev)  # (nb, S, 3)
+        self._nb, self._S = len(codes), S
+        self._init_ix = torch.tensor(init, dtype=torch.int64, device=dev).reshape(-1, 3)  # (nb * S, 3)
         self._n_rec = max([sum(1 for o in c.ops if o[0] == "attach") for c in codes] + [1])
-        self._steps = _plan_steps(codes, offsets, dtype, dev)
+        self._steps = _plan_steps(codes, offsets, S, self._n_rec, dtype, dev)
         self._levels, self._leaves, self._counts, self._nodes, self._lines = _plan_levels(
-            comps, block_base, param_base, dtype, dev)
+            comps, block_base, param_base, S, dtype, dev)
 
     def __len__(self) -> int:
         return len(self.programs)
@@ -898,33 +920,36 @@ class ExecutionPlan:
         return self._place(flat, pos, dims, ax)
 
     def _run_steps(self, flat: torch.Tensor):
-        """Local programs of all blocks in lock step; per block row the (S, ...) state of its slots."""
+        """Local programs of all blocks in lock step. State in flat rows (block row * S + slot):
+        pos (R, 3), dims (R, 3), axes (R, 3, 3)."""
         dtype, device = self.dtype, self.device
-        dims = flat[self._init_ix]  # (nb, S, 3): dims from the declaring lines
-        nb, S = dims.shape[:2]
-        pos = torch.zeros(nb, S, 3, dtype=dtype, device=device)
-        ax = torch.eye(3, dtype=dtype, device=device).repeat(nb, S, 1, 1)
-        rec = torch.zeros(nb, self._n_rec, 3, 3, dtype=dtype, device=device)  # [src, tgt, g] per attach
+        dims = flat[self._init_ix]  # dims from the declaring lines
+        R = dims.shape[0]
+        pos = torch.zeros(R, 3, dtype=dtype, device=device)
+        ax = torch.eye(3, dtype=dtype, device=device).repeat(R, 1, 1)
+        rec = torch.zeros(self._nb * self._n_rec * 3, 3, dtype=dtype, device=device)  # src, tgt, g per attach
         for step in self._steps:
             if step.setdims is not None:
-                bi, sl, ix = step.setdims
-                dims.index_put_((bi, sl), flat[ix])
+                rows, ix = step.setdims
+                dims.index_copy_(0, rows, flat[ix])
             if step.copy is not None:
-                bi, new, src = step.copy
-                n = bi.shape[0]
-                dims.index_put_((bi, new), dims[bi, src])
-                pos.index_put_((bi, new), torch.zeros(n, 3, dtype=dtype, device=device))
-                ax.index_put_((bi, new), torch.eye(3, dtype=dtype, device=device).expand(n, 3, 3))
+                new, src = step.copy
+                n = new.shape[0]
+                dims.index_copy_(0, new, dims.index_select(0, src))
+                pos.index_fill_(0, new, 0.0)
+                ax.index_copy_(0, new, torch.eye(3, dtype=dtype, device=device).expand(n, 3, 3))
             for grp in step.groups:
-                pos, dims, ax, rec = _run_attach_group(grp, flat, pos, dims, ax, rec)
+                _run_attach_group(grp, flat, pos, dims, ax, rec)
         return pos, dims, ax
 
     def _place(self, flat, pos, dims, ax) -> list[ExecutedShape]:
         """Breadth-first placement, one batched pass per depth (apply_delta and reflect flips)."""
+        S = self._S
+        pos, dims, ax = pos.view(-1, S, 3), dims.view(-1, S, 3), ax.view(-1, S, 3, 3)
         wps, wds, was = [], [], []
         prev = None
         for lv in self._levels:
-            lp, ld, la = pos[lv.rows], dims[lv.rows], ax[lv.rows]  # (m, S, ...)
+            lp, ld, la = pos.index_select(0, lv.rows), dims.index_select(0, lv.rows), ax.index_select(0, lv.rows)
             if lv.pos_sign is not None:
                 lp = lp * lv.pos_sign
                 la = la * lv.ax_sign
@@ -934,7 +959,9 @@ class ExecutionPlan:
                 wp, wa = lp, la
             else:
                 pp, pd, pa = prev
-                apos, adims, aax = pp[lv.parent, lv.pslot], pd[lv.parent, lv.pslot], pa[lv.parent, lv.pslot]
+                apos = pp.reshape(-1, 3).index_select(0, lv.parent)
+                adims = pd.reshape(-1, 3).index_select(0, lv.parent)
+                aax = pa.reshape(-1, 3, 3).index_select(0, lv.parent)
                 # apply_delta: scale dims per local axis index, rotate positions (not scaled)
                 wd = ld * (adims / rdims)[:, None]
                 wp = torch.bmm(lp, aax) + apos[:, None]
@@ -943,12 +970,14 @@ class ExecutionPlan:
             wps.append(wp)
             wds.append(wd)
             was.append(wa)
-        inst, slot = self._leaves
         if len(wps) == 1:
             wp, wd, wa = wps[0], wds[0], was[0]
         else:
             wp, wd, wa = torch.cat(wps), torch.cat(wds), torch.cat(was)
-        centers, dd, aa = wp[inst, slot], wd[inst, slot], wa[inst, slot]
+        rows = self._leaves
+        centers = wp.reshape(-1, 3).index_select(0, rows)
+        dd = wd.reshape(-1, 3).index_select(0, rows)
+        aa = wa.reshape(-1, 3, 3).index_select(0, rows)
         corners = cuboid_corners(centers, dd, aa)
         out = []
         parts = [x.split(self._counts) for x in (centers, dd, aa, corners)]
@@ -962,56 +991,62 @@ class ExecutionPlan:
 # ----------------------------------------------------------------------------- run
 
 
-def _run_attach_group(grp: _GroupPlan, flat, pos, dims, ax, rec):
-    n = grp.bi.shape[0]
-    bi, a, b = grp.bi, grp.a, grp.b
+def _run_attach_group(grp: _GroupPlan, flat, pos, dims, ax, rec) -> None:
+    """One attach group: move the subjects (state updated in place) and keep the records."""
+    n = grp.n
     vals = grp.c0 + grp.c1 * flat[grp.ix]
     src, tgt = vals[:n], vals[n:]
     if grp.macro is not None:
         src, tgt = _macro_points(grp.macro, flat, pos, dims, ax, rec, src, tgt)
-    posB, dimsB, axB = pos[bi, b], dims[bi, b], ax[bi, b]
+    rb, ra = grp.row_b, grp.row_a
+    posB, dimsB, axB = pos.index_select(0, rb), dims.index_select(0, rb), ax.index_select(0, rb)
     g = _point(posB, dimsB, axB, tgt)
-    posA, dimsA, axA = pos[bi, a], dims[bi, a], ax[bi, a]
+    posA, dimsA, axA = pos.index_select(0, ra), dims.index_select(0, ra), ax.index_select(0, ra)
     mode = grp.mode
     if mode == FIRST:
         posA, dimsA, axA = _rule_first(posA, dimsA, axA, src, g)
     elif mode == SECOND:
-        pj, pr = grp.prior
-        posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, rec[bi, pj, pr], rec[bi, pj, 2])
+        r_ap, r_g = grp.prior
+        posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, rec.index_select(0, r_ap), rec.index_select(0, r_g))
     elif mode == ALIGNED:
         posA, dimsA, axA = _rule_aligned(posA, dimsA, axA, posB, dimsB, axB)
     else:
         outs = []
-        for r, (blk, prior) in enumerate(grp.general):
-            prev = [(rec[blk, j, role], rec[blk, j, 2]) for j, role in prior]
+        for r, prior in enumerate(grp.general):
+            prev = [(rec[r_ap], rec[r_g]) for r_ap, r_g in prior]
             outs.append(_rule_general(posA[r:r + 1], dimsA[r:r + 1], axA[r:r + 1], src[r:r + 1], g[r:r + 1], prev))
         posA = torch.cat([o[0] for o in outs])
         dimsA = torch.cat([o[1] for o in outs])
         axA = torch.cat([o[2] for o in outs])
-    pos.index_put_((bi, a), posA)
-    dims.index_put_((bi, a), dimsA)
-    ax.index_put_((bi, a), axA)
-    rec.index_put_((bi, grp.jj), torch.stack([src, tgt, g], 1))
-    return pos, dims, ax, rec
+    pos.index_copy_(0, ra, posA)
+    if mode != FIRST:  # the first rule only translates
+        dims.index_copy_(0, ra, dimsA)
+        if mode != ALIGNED:  # the aligned rule never turns a cuboid
+            ax.index_copy_(0, ra, axA)
+    if grp.rec_rows is not None:  # only records that a later op reads
+        recs = torch.stack([src, tgt, g], 1)
+        if grp.keep is not None:
+            recs = recs.index_select(0, grp.keep)
+        rec.index_copy_(0, grp.rec_rows, recs.reshape(-1, 3))
 
 
 def _macro_points(m: dict, flat, pos, dims, ax, rec, src, tgt):
     """Source/target local points of reflect/translate copies (spec: reflect, translate)."""
-    bi, A, T, e = m["bi"], m["A"], m["T"], m["e"]
-    ap = rec[bi, m["j"], 0]  # the original record's source point on A
+    A, T, e = m["A"], m["T"], m["e"]
+    ap = rec.index_select(0, m["ap"])  # the original record's source point on A
     src_m = torch.where(m["flip"], 1 - ap, ap)
-    p = _point(pos[bi, A], dims[bi, A], ax[bi, A], ap)
+    p = _point(pos.index_select(0, A), dims.index_select(0, A), ax.index_select(0, A), ap)
     pg = None
     if m["any_ref"]:
         # reflect through the plane through the bbox centre (origin) normal to world axis k
         pg = p - 2 * e * p
     if m["any_tr"]:
         # translate: p + i * (L * d / N) * e, L = local bbox extent along k
-        L = (dims[bi, 0] * e).sum(-1)
+        L = (dims.index_select(0, m["box"]) * e).sum(-1)
         step = L * flat[m["didx"]] / m["N"]
         p_tr = p + (m["ii"] * step)[:, None] * e
         pg = p_tr if pg is None else torch.where(m["is_ref"][:, None], pg, p_tr)
-    loc = _to_local(pos[bi, T], dims[bi, T], ax[bi, T], pg[:, None, :])[:, 0]
+    loc = _to_local(pos.index_select(0, T), dims.index_select(0, T), ax.index_select(0, T), pg[:, None, :])[:, 0]
     tgt_m = loc.clamp(0.0, 1.0)
     src = src.index_copy(0, m["r_idx"], src_m)
     tgt = tgt.index_copy(0, m["r_idx"], tgt_m)
