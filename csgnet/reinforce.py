@@ -1,0 +1,565 @@
+"""REINFORCE fine-tuning of a supervised CSGNet / CSGNetStack on target images without programs.
+
+The procedure of ``../specs/csg.md`` section (f), the paper's fine-tuning on 2D CAD shapes:
+
+* programs are **sampled** from the policy (:func:`csgnet.decode.sample`) with the network in train
+  mode, so dropout is active while sampling as in the reference; for CSGNetStack the stack maps the
+  encoder sees are those of the sampled prefix;
+* each program is cut at its first ``$`` and rendered; the **reward** is
+  ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma`` (``gamma = 20``) with the reference chamfer distance
+  ``CD`` in pixels, computed for the whole batch at once; invalid programs get 0 (the paper), or the
+  reference's 0.0204 (``CD = 16``) with ``invalid_reward="reference"``;
+* the **baseline** is a running average ``b <- 0.7 b + 0.3 mean(R)`` (``b0 = 0``), updated *before* the
+  advantage ``R - b`` is formed, and never differentiated;
+* the **loss** is ``-mean_i (R_i - b) * sum_{t < n_i} log pi(a_t)`` where the ``n_i`` counted steps are
+  the program's tokens and its ``$`` (all steps when no ``$`` was sampled); no entropy bonus;
+* SGD with momentum 0.9 (not Nesterov), lr 0.01; gradient-norm clipping at 10 and the accumulation of
+  10 batches of 300 images per update come from the Trainer (``gradient_clip_val``,
+  ``accumulate_grad_batches``, see ``configs/rl_*.yaml``); the learning rate drops x0.2 after more than
+  8 epochs without a better validation reward; the best validation reward is checkpointed;
+* training targets are jittered (:func:`csgnet.data.jitter`), validation targets are not; validation
+  decodes greedily (arg-max) and reports the mean chamfer distance, reward and IoU.
+
+:class:`TargetDataModule` serves the target images: the shipped PartNet silhouettes, the paper's
+``cad.h5``, a folder of images, a ``.npz`` file, the renders of a synthetic dataset, or arrays given in
+code (:meth:`TargetDataModule.from_arrays`).
+
+``python train_rl.py fit --config configs/rl_csgnet2d_small.yaml`` runs it through LightningCLI (see
+``docs/reinforce.md``); ``--ckpt_path last`` resumes.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import torch
+
+from . import metrics
+from .decode import Sampled, greedy, sample
+from .models import CSGNet, ModelConfig, preset
+from .renderer import render_tokens
+
+__all__ = ["ReinforceModule", "TargetDataModule", "ShuffledBatches", "load_targets", "load_initial",
+           "episode_rewards", "update_baseline", "policy_loss", "image_grid", "SOURCES"]
+
+SOURCES = ("silhouettes", "cad", "folder", "npz", "synthetic")
+DIAGONAL = 64 * math.sqrt(2.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# the pieces of the objective (plain functions, tested on their own)
+
+def episode_rewards(pred, target, valid=None, gamma: float = 20.0, invalid: str = "zero",
+                    workers: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Rewards and chamfer distances of a batch of rendered programs, one chamfer pass for both.
+
+    The values equal :func:`csgnet.metrics.reward` (same arguments) exactly; the chamfer distance is
+    the reference's, 16 for an empty prediction.
+
+    Args:
+        pred: ``(N, 64, 64)`` bool renders (invalid programs render empty).
+        target: ``(N, 64, 64)`` bool targets.
+        valid: ``(N,)`` bool, programs marked False count as invalid whatever they render.
+        gamma: the shaping exponent (20).
+        invalid: ``"zero"`` (invalid or empty programs get 0) or ``"reference"`` (they get the
+            reference's ``(1 - 16 / (64 sqrt 2)) ** gamma``, 0.0204 for ``gamma = 20``).
+
+    Returns:
+        ``(reward (N,) float64, chamfer (N,) float64)``.
+    """
+    if invalid not in ("zero", "reference"):
+        raise ValueError(f"invalid must be 'zero' or 'reference', got {invalid!r}")
+    pred = pred.cpu() if isinstance(pred, torch.Tensor) else pred
+    target = target.cpu() if isinstance(target, torch.Tensor) else target
+    cd = np.atleast_1d(np.asarray(metrics.chamfer(pred, target, workers=workers), dtype=np.float64))
+    r = np.clip(1.0 - cd / DIAGONAL, 0.0, 1.0) ** gamma
+    p = np.asarray(pred, dtype=bool).reshape(len(cd), -1)
+    bad = ~p.any(axis=1)
+    if valid is not None:
+        v = np.asarray(valid.cpu() if isinstance(valid, torch.Tensor) else valid, dtype=bool).reshape(-1)
+        if v.shape[0] != len(cd):
+            raise ValueError(f"valid must be ({len(cd)},), got {tuple(v.shape)}")
+        bad |= ~v
+    penalty = 0.0 if invalid == "zero" else (1.0 - metrics.CHAMFER_PENALTY / DIAGONAL) ** gamma
+    return np.where(bad, penalty, r), cd
+
+
+def update_baseline(baseline: torch.Tensor, rewards: torch.Tensor, decay: float = 0.7) -> torch.Tensor:
+    """The running-average baseline after one batch: ``decay * b + (1 - decay) * mean(R)`` (detached)."""
+    return (decay * baseline + (1.0 - decay) * rewards.detach().mean()).detach()
+
+
+def policy_loss(log_probs: torch.Tensor, counted: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
+    """REINFORCE loss ``-mean_i(advantage_i * sum_t counted[i, t] * log_probs[i, t])``.
+
+    Args:
+        log_probs: ``(N, T)`` log-probabilities of the sampled tokens (differentiable).
+        counted: ``(N, T)`` bool, the steps that count (program tokens and the ``$``).
+        advantage: ``(N,)`` reward minus baseline (not differentiated).
+    """
+    if log_probs.shape != counted.shape or advantage.shape != log_probs.shape[:1]:
+        raise ValueError(f"log_probs {tuple(log_probs.shape)}, counted {tuple(counted.shape)} and advantage "
+                         f"{tuple(advantage.shape)} must be (N, T), (N, T) and (N,)")
+    per_program = torch.where(counted, log_probs, torch.zeros_like(log_probs)).sum(1)
+    return -(advantage.detach().to(per_program.dtype) * per_program).mean()
+
+
+def image_grid(targets: torch.Tensor, preds: torch.Tensor, cols: int = 4) -> torch.Tensor:
+    """A ``(1, H, W)`` float image: pairs target | prediction (black shapes on white), ``cols`` per row."""
+    targets, preds = targets.bool().cpu(), preds.bool().cpu()
+    gap = torch.ones(64, 2, dtype=torch.bool)
+    pairs = [torch.cat([a, gap, b], 1) for a, b in zip(targets, preds)]
+    rows = [torch.cat([p, torch.ones(2, p.shape[1], dtype=torch.bool)], 0) for p in pairs]
+    rows += [torch.ones_like(rows[0])] * (-len(rows) % cols)
+    grid = torch.cat([torch.cat(rows[i:i + cols], 1) for i in range(0, len(rows), cols)], 0)
+    return (~grid).float()[None]
+
+
+# ---------------------------------------------------------------------------------------------
+# initial weights
+
+def load_initial(path, overrides: dict | None = None) -> tuple[CSGNet, dict]:
+    """A model initialised from supervised weights, loading the tensors whose names and shapes match.
+
+    Args:
+        path: a weights file (:func:`csgnet.training.export_weights`) or a Lightning checkpoint of
+            :class:`csgnet.training.CSGNetModule` (or of :class:`ReinforceModule`).
+        overrides: :class:`~csgnet.models.ModelConfig` fields to change (e.g. ``{"dropout": 0.2}``);
+            tensors whose shape changes as a result are left at their initial values.
+
+    Returns:
+        ``(model, report)`` where ``report`` lists the ``loaded``, ``skipped`` (shape mismatch) and
+        ``missing`` tensor names.
+    """
+    from .inference import load_model
+
+    src = load_model(path)
+    config = src.config
+    if overrides:
+        config = ModelConfig.from_dict({**config.to_dict(), **dict(overrides)})
+    model = CSGNet(config) if config != src.config else src
+    own = model.state_dict()
+    loaded, skipped = [], []
+    update = {}
+    for k, v in src.state_dict().items():
+        if k in own and own[k].shape == v.shape:
+            update[k] = v
+            loaded.append(k)
+        elif k in own:
+            skipped.append(k)
+    own.update(update)
+    model.load_state_dict(own)
+    missing = [k for k in own if k not in update]
+    return model.train(), {"loaded": loaded, "skipped": skipped, "missing": missing}
+
+
+# ---------------------------------------------------------------------------------------------
+# module
+
+class ReinforceModule(L.LightningModule):
+    """REINFORCE fine-tuning of a 2D CSGNet / CSGNetStack (spec section (f)).
+
+    Args:
+        init: supervised weights to start from (a weights file or a Lightning checkpoint; tensors with
+            matching names and shapes are loaded). ``None`` starts from random weights of the
+            ``size`` preset, which the paper reports does not work for real shapes (useful for tests).
+        dim: 2 (the reward is the 2D chamfer distance). ``None``: from ``init``.
+        stack: CSGNetStack; ``None``: from ``init`` (else False). Must agree with ``init`` when given.
+        size: preset when ``init`` is None (``"small"`` / ``"paper"``).
+        model: :class:`~csgnet.models.ModelConfig` fields to override (e.g. ``{dropout: 0.2}``).
+        lr: SGD learning rate (0.01).
+        momentum: SGD momentum (0.9).
+        gamma: reward shaping exponent (20).
+        invalid_reward: ``"zero"`` (the paper) or ``"reference"`` (0.0204, the published code).
+        baseline_decay: the running-average weight of the old baseline (0.7).
+        max_len: sampling horizon in tokens (13 as the paper; 15 is the reference's training horizon).
+        constrained: mask tokens that cannot lead to a valid program while sampling (off, as the paper).
+        augment: jitter the training targets (on, as the reference; validation is never jittered).
+        plateau_patience: epochs without a better validation reward before the lr drops (8).
+        plateau_factor: the drop (0.2).
+        log_images: pairs shown in the TensorBoard image grids (0: none).
+        image_every_n_steps: optimizer steps between training image grids (targets vs sampled programs).
+        seed: seed of the sampling and jitter streams (re-derived from the global step on resume).
+        reward_workers: threads for the chamfer distance transforms (default: metrics' default).
+    """
+
+    def __init__(self, init: str | None = None, dim: int | None = None, stack: bool | None = None,
+                 size: str | None = None, model: dict | None = None, lr: float = 0.01, momentum: float = 0.9,
+                 gamma: float = 20.0, invalid_reward: str = "zero", baseline_decay: float = 0.7, max_len: int = 13,
+                 constrained: bool = False, augment: bool = True, plateau_patience: int = 8,
+                 plateau_factor: float = 0.2, log_images: int = 16, image_every_n_steps: int = 100, seed: int = 0,
+                 reward_workers: int | None = None):
+        super().__init__()
+        self.save_hyperparameters()
+        if invalid_reward not in ("zero", "reference"):
+            raise ValueError(f"invalid_reward must be 'zero' or 'reference', got {invalid_reward!r}")
+        if max_len < 1:
+            raise ValueError(f"max_len must be positive, got {max_len}")
+        if not 0.0 <= baseline_decay <= 1.0:
+            raise ValueError(f"baseline_decay must lie in [0, 1], got {baseline_decay}")
+        if init is not None:
+            path = Path(init)
+            if not path.is_file():
+                raise FileNotFoundError(
+                    f"{path}: no such weights file to start REINFORCE from; train a supervised model first "
+                    f"(python train.py fit --config configs/csgnet2d_small.yaml) or pass its weights with "
+                    f"--model.init")
+            self.model, report = load_initial(path, model)
+            if report["skipped"] or report["missing"]:
+                warnings.warn(f"{path}: {len(report['loaded'])} tensors loaded; left at initial values: "
+                              f"{', '.join(report['skipped'] + report['missing'])}", UserWarning, stacklevel=2)
+            cfg = self.model.config
+            for name, want in (("dim", dim), ("stack", stack)):
+                if want is not None and getattr(cfg, name) != want:
+                    raise ValueError(f"{path} holds a model with {name}={getattr(cfg, name)!r}, but {name}={want!r} "
+                                     f"was asked for")
+        else:
+            warnings.warn("REINFORCE from random weights: the paper reports that fine-tuning needs a supervised "
+                          "start (pass init=...)", UserWarning, stacklevel=2)
+            self.model = CSGNet(preset(size or "small", 2 if dim is None else dim, bool(stack), **(model or {})))
+        self.config: ModelConfig = self.model.config
+        if self.config.dim != 2:
+            raise ValueError(f"REINFORCE fine-tuning is for 2D models (the reward is the 2D chamfer distance); "
+                             f"got a {self.config.dim}D model")
+        # the full configuration, in the form csgnet.inference.load_model / training.export_weights read
+        full = self.config.to_dict()
+        self.hparams.update(dim=full.pop("dim"), stack=full.pop("stack"), size=size or "small", model=full)
+        self.register_buffer("baseline", torch.zeros((), dtype=torch.float64))
+        self._gen: torch.Generator | None = None
+        self._rng = np.random.default_rng([int(seed), 0])
+        self._val: dict[str, list] = {}
+        self._grid = None
+        self._last_image_step = -1
+
+    # ------------------------------------------------------------------------------------------
+    def forward(self, targets: torch.Tensor) -> Sampled:
+        """Sample one program per target (``(B, 64, 64)`` bool)."""
+        return sample(self.model, targets, self.hparams.max_len, generator=self._generator(targets.device),
+                      constrained=self.hparams.constrained)
+
+    def _generator(self, device) -> torch.Generator:
+        device = torch.device(device)
+        if self._gen is None or self._gen.device != device:
+            self._gen = torch.Generator(device=device)
+            self._gen.manual_seed(self._stream_seed())
+        return self._gen
+
+    def _stream_seed(self) -> int:
+        step = self.trainer.global_step if self._trainer is not None else 0
+        return int(np.random.SeedSequence([int(self.hparams.seed), int(step)]).generate_state(1)[0])
+
+    def on_train_start(self):
+        # a resumed run continues with streams of its own instead of replaying the first steps
+        self._gen = None
+        self._rng = np.random.default_rng([int(self.hparams.seed), 1, int(self.trainer.global_step)])
+
+    def on_train_epoch_start(self):
+        ds = getattr(self.trainer.train_dataloader, "dataset", None)
+        if isinstance(ds, ShuffledBatches):
+            ds.set_epoch(self.current_epoch)
+
+    def advantage(self, rewards: torch.Tensor) -> torch.Tensor:
+        """Update the running baseline with this batch's rewards ``(N,)``, then return ``R - b``."""
+        mean = rewards.detach().double().mean()
+        if self._trainer is not None and self.trainer.world_size > 1:
+            mean = self.trainer.strategy.reduce(mean, reduce_op="mean")
+        new = self.hparams.baseline_decay * self.baseline + (1.0 - self.hparams.baseline_decay) * mean
+        self.baseline.copy_(new.detach())
+        return (rewards.double() - self.baseline).float()
+
+    def rollout(self, targets: torch.Tensor):
+        """Sample programs for ``targets``, render them and score them.
+
+        Returns:
+            ``(sampled, renders (B, 64, 64) bool, rewards (B,) float32 tensor, chamfer (B,) float64)``.
+        """
+        s = self(targets)
+        pred = render_tokens(s.tokens, 2, s.lengths)
+        r, cd = episode_rewards(pred, targets, s.valid, self.hparams.gamma, self.hparams.invalid_reward,
+                                self.hparams.reward_workers)
+        return s, pred, torch.as_tensor(r, dtype=torch.float32, device=targets.device), cd
+
+    def training_step(self, batch, batch_idx):
+        targets = _images(batch)
+        if self.hparams.augment:
+            from .data import jitter
+
+            targets = jitter(targets, self._rng)
+        s, pred, rewards, cd = self.rollout(targets)
+        adv = self.advantage(rewards)
+        loss = policy_loss(s.log_probs, s.counted, adv)
+        n = targets.shape[0]
+        steps = s.counted.sum()
+        log = dict(on_step=True, on_epoch=False, batch_size=n)
+        self.log("train/reward", rewards.mean(), prog_bar=True, **log)
+        self.log("train/reward_std", rewards.std() if n > 1 else torch.zeros(()), **log)
+        self.log("train/chamfer", float(cd.mean()), **log)
+        self.log("train/valid", s.valid.float().mean(), **log)
+        self.log("train/length", s.lengths.float().mean(), **log)
+        self.log("train/entropy", (s.entropy.sum() / steps.clamp(min=1)).detach(), **log)
+        self.log("train/baseline", self.baseline.float(), **log)
+        self.log("train/loss", loss.detach(), **log)
+        self._maybe_log_training_grid(targets, pred)
+        return loss
+
+    def _experiment(self):
+        if self.logger is None:
+            return None
+        exp = getattr(self.logger, "experiment", None)
+        return exp if hasattr(exp, "add_image") else None
+
+    def _maybe_log_training_grid(self, targets, pred):
+        n, every = int(self.hparams.log_images), int(self.hparams.image_every_n_steps)
+        step = self.global_step
+        if not n or every <= 0 or step % every or step == self._last_image_step:
+            return
+        exp = self._experiment()
+        if exp is None:
+            return
+        self._last_image_step = step
+        exp.add_image("train/targets_vs_samples", image_grid(targets[:n], pred[:n]), step)
+
+    # ------------------------------------------------------------------------------------------
+    def on_validation_epoch_start(self):
+        self._val = {"reward": [], "chamfer": [], "iou": [], "valid": [], "length": []}
+        self._grid = None
+
+    def validation_step(self, batch, batch_idx):
+        targets = _images(batch)
+        dec = greedy(self.model, targets, max_len=self.hparams.max_len, constrained=self.hparams.constrained)
+        pred = render_tokens(dec.tokens[:, 0], 2, dec.lengths[:, 0])
+        r, cd = episode_rewards(pred, targets, dec.valid[:, 0], self.hparams.gamma, self.hparams.invalid_reward,
+                                self.hparams.reward_workers)
+        iou = np.nan_to_num(np.asarray(metrics.iou(pred.cpu(), targets.cpu(), denominator="union"), np.float64))
+        v = self._val
+        v["reward"].append(r)
+        v["chamfer"].append(cd)
+        v["iou"].append(iou)
+        v["valid"].append(dec.valid[:, 0].cpu().numpy())
+        v["length"].append(dec.lengths[:, 0].cpu().numpy())
+        if self._grid is None and self.hparams.log_images:
+            k = int(self.hparams.log_images)
+            self._grid = (targets[:k].cpu(), pred[:k].cpu())
+
+    def on_validation_epoch_end(self):
+        v = self._val
+        if not v.get("reward"):
+            return
+        cat = {k: np.concatenate(x) for k, x in v.items()}
+        self.log("val/reward", float(cat["reward"].mean()), prog_bar=True)
+        self.log("val/chamfer", float(cat["chamfer"].mean()), prog_bar=True)
+        self.log("val/iou", float(cat["iou"].mean()))
+        self.log("val/valid", float(cat["valid"].mean()))
+        self.log("val/length", float(cat["length"].mean()))
+        exp = self._experiment()
+        if exp is not None and self._grid is not None:
+            exp.add_image("val/targets_vs_greedy", image_grid(*self._grid), self.global_step)
+
+    def configure_optimizers(self):
+        opt = torch.optim.SGD(self.model.parameters(), lr=self.hparams.lr, momentum=self.hparams.momentum)
+        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode="max", factor=self.hparams.plateau_factor,
+                                                           patience=self.hparams.plateau_patience)
+        return {"optimizer": opt,
+                "lr_scheduler": {"scheduler": sched, "monitor": "val/reward", "interval": "epoch", "strict": False}}
+
+
+def _images(batch) -> torch.Tensor:
+    x = batch[0] if isinstance(batch, (list, tuple)) else batch
+    if x.dim() != 3 or tuple(x.shape[1:]) != (64, 64):
+        raise ValueError(f"target batches must be (B, 64, 64), got {tuple(x.shape)}")
+    return x.bool()
+
+
+# ---------------------------------------------------------------------------------------------
+# target images
+
+def _check_images(images, name: str) -> np.ndarray:
+    a = np.asarray(images)
+    if a.ndim != 3 or a.shape[1:] != (64, 64):
+        raise ValueError(f"{name}: target images must be (N, 64, 64), got shape {a.shape}")
+    a = a != 0
+    if len(a) == 0:
+        raise ValueError(f"{name}: no images")
+    empty = np.flatnonzero(~a.reshape(len(a), -1).any(1))
+    if len(empty):
+        raise ValueError(f"{name}: {len(empty)} empty target image(s), e.g. index {int(empty[0])}; "
+                         f"the chamfer reward is undefined for an empty target")
+    return a
+
+
+def load_targets(source: str, split: str, path=None) -> np.ndarray:
+    """One split of a set of 2D target images as ``(N, 64, 64)`` bool.
+
+    Sources:
+        * ``"silhouettes"``: the shipped PartNet silhouettes (or a file written by
+          ``python -m shapeprog silhouettes`` at ``path``);
+        * ``"cad"``: the paper's ``cad.h5`` at ``path`` (needs h5py, the ``cad`` extra);
+        * ``"folder"``: image files under ``path/<split>/`` (PNG, JPG, ...; each binarised and fitted into
+          64x64 as :func:`csgnet.inference.load_shape` does), in sorted name order;
+        * ``"npz"``: a NumPy ``.npz`` at ``path`` holding ``<split>`` or ``<split>_images`` arrays
+          ``(N, 64, 64)``;
+        * ``"synthetic"``: the renders of the programs of a dataset written by ``python -m csgnet generate``
+          at ``path`` (all lengths).
+    """
+    if source not in SOURCES:
+        raise ValueError(f"unknown target source {source!r}; expected one of {', '.join(SOURCES)}")
+    if split not in ("train", "val", "test"):
+        raise ValueError(f"unknown split {split!r}; expected train, val or test")
+    if source == "silhouettes":
+        from .shapes2d import load_silhouettes
+
+        return _check_images(load_silhouettes(split, path), f"silhouettes {split}")
+    if path is None:
+        raise ValueError(f"the {source!r} target source needs a path")
+    p = Path(path)
+    if source == "cad":
+        from .shapes2d import load_cad_h5
+
+        return _check_images(load_cad_h5(p, split), f"{p}:{split}_images")
+    if source == "folder":
+        from .inference import IMAGE_SUFFIXES, load_shape
+
+        d = p / split
+        if not d.is_dir():
+            raise FileNotFoundError(f"{d}: no such folder; the 'folder' source reads images from "
+                                    f"{p}/train/, {p}/val/ and {p}/test/")
+        files = sorted(f for f in d.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise FileNotFoundError(f"{d}: no image files ({', '.join(sorted(IMAGE_SUFFIXES))})")
+        shapes = [load_shape(f) for f in files]
+        bad = [str(f) for f, s in zip(files, shapes) if s.ndim != 2]
+        if bad:
+            raise ValueError(f"not 2D images: {', '.join(bad[:5])}")
+        return _check_images(np.stack(shapes), str(d))
+    if source == "npz":
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: no such file")
+        with np.load(p, allow_pickle=False) as f:
+            for key in (split, f"{split}_images"):
+                if key in f.files:
+                    return _check_images(f[key], f"{p}:{key}")
+            raise ValueError(f"{p}: no array {split!r} or {split + '_images'!r} (found: {', '.join(f.files) or 'none'})")
+    from .data import load_dataset
+    from .renderer import render_programs
+
+    progs = [q for _, ps in sorted(load_dataset(p, 2, split).items()) for q in ps]
+    if not progs:
+        raise ValueError(f"{p}: the 2D {split} split holds no programs")
+    return _check_images(render_programs(progs, 2).numpy(), f"{p} 2D {split}")
+
+
+class ShuffledBatches(torch.utils.data.IterableDataset):
+    """``steps`` batches of ``batch`` images, reshuffled after each pass over the set (the reference's
+    CAD generator). Deterministic for a seed, epoch and rank; DataLoader workers split the steps.
+
+    Yields:
+        ``(batch, 64, 64)`` bool tensors.
+    """
+
+    def __init__(self, images: torch.Tensor, batch: int, steps: int, seed: int = 0, rank: int = 0, world: int = 1):
+        if batch < 1 or steps < 1:
+            raise ValueError(f"batch and steps must be positive, got {batch} and {steps}")
+        self.images, self.batch, self.steps = images, int(batch), int(steps)
+        self.seed, self.rank, self.world, self.epoch = int(seed), int(rank), int(world), 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.steps
+
+    def __iter__(self):
+        info = torch.utils.data.get_worker_info()
+        wid, nw = (info.id, info.num_workers) if info is not None else (0, 1)
+        shard, shards = self.rank * nw + wid, self.world * nw
+        rng = np.random.default_rng([self.seed, self.epoch, shard])
+        n = len(self.images)
+        order, pos = rng.permutation(n), 0
+        for _ in range(len(range(shard, self.steps, shards))):
+            take = []
+            need = self.batch
+            while need:
+                if pos >= n:
+                    order, pos = rng.permutation(n), 0
+                k = min(need, n - pos)
+                take.append(order[pos: pos + k])
+                pos += k
+                need -= k
+            yield self.images[torch.as_tensor(np.concatenate(take))]
+
+
+def _first(batch):
+    return batch[0]
+
+
+class TargetDataModule(L.LightningDataModule):
+    """Target images for REINFORCE (training with shuffled batches; validation in order).
+
+    Args:
+        source: ``"silhouettes"`` (default), ``"cad"``, ``"folder"``, ``"npz"`` or ``"synthetic"``
+            (:func:`load_targets`).
+        path: the file or folder of the source (optional for the shipped silhouettes).
+        batch_size: images per batch (the paper: 300).
+        steps_per_epoch: training batches per epoch (default: one pass, ``N // batch_size``); with the
+            paper's accumulation of 10 batches, 330 batches make the reference's 33 updates per epoch.
+        val_size: validation images (the first ones of the split; default: all).
+        train_size: training images (the first ones; default: all).
+        val_split: the split validated on (``"val"``; ``"test"`` for a final check).
+        num_workers: DataLoader workers.
+        seed: shuffling seed.
+    """
+
+    def __init__(self, source: str = "silhouettes", path: str | None = None, batch_size: int = 300,
+                 steps_per_epoch: int | None = None, val_size: int | None = None, train_size: int | None = None,
+                 val_split: str = "val", num_workers: int = 0, seed: int = 0):
+        super().__init__()
+        if source not in SOURCES:
+            raise ValueError(f"unknown target source {source!r}; expected one of {', '.join(SOURCES)}")
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be positive, got {batch_size}")
+        self.source, self.path = source, path
+        self.batch_size, self.steps_per_epoch = int(batch_size), steps_per_epoch
+        self.val_size, self.train_size, self.val_split = val_size, train_size, val_split
+        self.num_workers, self.seed = int(num_workers), int(seed)
+        self._arrays: dict[str, np.ndarray] | None = None
+        self.train_images: torch.Tensor | None = None
+        self.val_images: torch.Tensor | None = None
+
+    @classmethod
+    def from_arrays(cls, train, val=None, **kwargs) -> "TargetDataModule":
+        """Targets given in code: ``train`` (and ``val``, default: ``train``) as ``(N, 64, 64)`` arrays."""
+        dm = cls(**kwargs)
+        dm._arrays = {"train": _check_images(train, "train"),
+                      "val": _check_images(train if val is None else val, "val")}
+        return dm
+
+    def _load(self, split: str) -> torch.Tensor:
+        if self._arrays is not None:
+            a = self._arrays["val" if split != "train" else "train"]
+        else:
+            a = load_targets(self.source, split, self.path)
+        size = self.train_size if split == "train" else self.val_size
+        return torch.from_numpy(np.ascontiguousarray(a[:size] if size else a))
+
+    def setup(self, stage: str | None = None) -> None:
+        if stage in (None, "fit") and self.train_images is None:
+            self.train_images = self._load("train")
+        if self.val_images is None:
+            self.val_images = self._load(self.val_split)
+
+    def train_dataloader(self):
+        rank, world = 0, 1
+        if self.trainer is not None:
+            rank, world = self.trainer.global_rank, self.trainer.world_size
+        steps = self.steps_per_epoch or max(1, len(self.train_images) // self.batch_size)
+        ds = ShuffledBatches(self.train_images, self.batch_size, steps, self.seed, rank, world)
+        if self.trainer is not None:
+            ds.set_epoch(self.trainer.current_epoch)
+        return torch.utils.data.DataLoader(ds, batch_size=1, collate_fn=_first, num_workers=self.num_workers)
+
+    def val_dataloader(self):
+        return torch.utils.data.DataLoader(torch.utils.data.TensorDataset(self.val_images), batch_size=self.batch_size,
+                                           shuffle=False)
