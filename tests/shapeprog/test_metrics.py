@@ -13,6 +13,7 @@ from shapeprog.metrics import (
     chamfer,
     fscore,
     nearest_neighbors,
+    param_distance,
     rooted_parts,
     rootedness,
     stability,
@@ -189,6 +190,63 @@ def test_voxel_iou():
     assert voxel_iou(torch.cat([left, right]), full, root) == 100.0
     # invariant to the order and the split of the parts
     assert voxel_iou(torch.cat([right, left]), torch.cat([left, right]), root) == 100.0
+
+
+# ---------------------------------------------------------------- param distance
+
+def leaves(centers, dims, node, axes=None, root=(2.0, 1.0, 1.0)):
+    from types import SimpleNamespace
+
+    c = torch.tensor(centers, dtype=torch.float64).reshape(-1, 3)
+    a = torch.eye(3, dtype=torch.float64).repeat(c.shape[0], 1, 1) if axes is None else torch.as_tensor(axes)
+    return SimpleNamespace(centers=c, dims=torch.tensor(dims, dtype=torch.float64).reshape(-1, 3), axes=a,
+                           node=torch.tensor(node), root_dims=torch.tensor(root, dtype=torch.float64))
+
+
+def test_param_distance_hand_computed():
+    gt = leaves([[0, 0, 0], [1, 0, 0]], [[1.0, 1.0, 1.0], [1.0, 2.0, 1.0]], [0, 0])
+    assert param_distance(gt, gt).item() == 0.0
+    # leaf 0 moved by 0.5 along x (0.5 / max root dim 2 = 0.25) and 10% wider (0.1); volumes 1 and 2
+    pred = leaves([[0.5, 0, 0], [1, 0, 0]], [[1.1, 1.0, 1.0], [1.0, 2.0, 1.0]], [0, 0])
+    assert param_distance(pred, gt).item() == pytest.approx((0.25 + 0.1) * 1 / 3)
+    # leaf 1 turned 90 degrees about y: right.right' = 0, up.up' = 1, front.front' = 0 -> 1/2 + 0 + 1/2
+    rot = torch.stack([torch.eye(3, dtype=torch.float64), rot_y(math.pi / 2)])
+    pred = leaves([[0, 0, 0], [1, 0, 0]], [[1.0, 1.0, 1.0], [1.0, 2.0, 1.0]], [0, 0], axes=rot)
+    assert param_distance(pred, gt).item() == pytest.approx(1.0 * 2 / 3)
+    # a missing leaf is compared with a zero cuboid: |c| / 2 + 3 + 3/2, weight 2/3
+    pred = leaves([[0, 0, 0]], [[1.0, 1.0, 1.0]], [0])
+    assert param_distance(pred, gt).item() == pytest.approx((0.5 + 3 + 1.5) * 2 / 3)
+    # an extra predicted leaf costs nothing
+    pred = leaves([[0, 0, 0], [1, 0, 0], [5, 5, 5]], [[1.0, 1.0, 1.0], [1.0, 2.0, 1.0], [1, 1, 1]], [0, 0, 0])
+    assert param_distance(pred, gt).item() == 0.0
+
+
+def test_param_distance_pairs_by_node_group_and_index():
+    gt = leaves([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[1.0, 1.0, 1.0]] * 3, [0, 1, 1])
+    # same leaves, listed in another node order: the pairing follows (node, rank in node)
+    pred = leaves([[1, 0, 0], [2, 0, 0], [0, 0, 0]], [[1.0, 1.0, 1.0]] * 3, [1, 1, 0])
+    assert param_distance(pred, gt).item() == 0.0
+    # node 0 loses its leaf: only that leaf is compared with a zero cuboid
+    pred = leaves([[1, 0, 0], [2, 0, 0]], [[1.0, 1.0, 1.0]] * 2, [1, 1])
+    assert param_distance(pred, gt).item() == pytest.approx((0 + 3 + 1.5) / 3)
+
+
+def test_param_distance_on_executed_programs_and_gradient():
+    from shapeprog import corpus, execute
+    from shapeprog.execute import program_parameters
+    from shapeprog.lang import parse
+
+    p = parse(corpus.read("table", 33075))
+    gt = execute(p, dtype=torch.float64)
+    assert param_distance(execute(p, dtype=torch.float64), gt).item() == 0.0
+    x = program_parameters(p, torch.float64)
+    x[1] += 0.05  # root bbox height
+    assert param_distance(execute(p, dtype=torch.float64, params=x), gt).item() > 0.0
+    x = (x + 0.01).requires_grad_(True)
+    f = lambda t: param_distance(execute(p, dtype=torch.float64, params=t), gt)  # noqa: E731
+    assert torch.autograd.gradcheck(f, (x,), eps=1e-7, atol=1e-5)
+    with pytest.raises(TypeError, match="centers"):
+        param_distance(gt.corners, gt)
 
 
 # ---------------------------------------------------------------- box distances and rootedness
