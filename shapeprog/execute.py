@@ -589,6 +589,11 @@ def _cv(ap, ax, k):
     return (ap[k] - 0.5) * ax[k]
 
 
+def _val(x: torch.Tensor) -> float:
+    """A decision value (no gradient)."""
+    return float(x.detach())
+
+
 def _rule_general(pos, dims, ax, src, g, prev):
     """Non-aligned cuboid with two or more earlier records ``prev``: list of (ap (3,), g (3,)).
 
@@ -600,7 +605,7 @@ def _rule_general(pos, dims, ax, src, g, prev):
     else:
         o = prev[0][1]
         l = prev[1][1] - o
-        colinear = all(float(_norm(torch.linalg.cross(pg - o, l))) <= EPS for _, pg in prev)
+        colinear = all(_val(_norm(torch.linalg.cross(pg - o, l))) <= EPS for _, pg in prev)
     if colinear:
         a0, a1 = prev[0][1], prev[1][1]
         axis = (a0 - a1) / (_norm(a0 - a1) + 1e-8)
@@ -611,26 +616,26 @@ def _rule_general(pos, dims, ax, src, g, prev):
         fn = b - a_p
         noc = c_p - a_p
         s = _norm(noc) / _norm(fn) - 1
-        if not bool(torch.isnan(s)):
+        if not bool(torch.isnan(s.detach())):
             nob = fn * (1 + s)
-            if float(_norm(nob)) != 0 and float(_norm(noc)) != 0 and float(_norm(nob - noc)) >= EPS:
+            if _val(_norm(nob)) != 0 and _val(_norm(noc)) != 0 and _val(_norm(nob - noc)) >= EPS:
                 nobh, noch = nob / _norm(nob), noc / _norm(noc)
                 angle = torch.acos((nobh @ noch).clamp(-1, 1))
                 R = _rodrigues(axis[None], angle[None])[0]
-                if float(_norm(R @ nobh - noch)) > EPS:
+                if _val(_norm(R @ nobh - noch)) > EPS:
                     R = _rodrigues(-axis[None], angle[None])[0]
                 ax = ax @ R.T
                 pos = pos + (a0 - P(pos, dims, ax, prev[0][0]))
     b = P(pos, dims, ax, src)
     t = g - b
-    if float(_norm(t)) >= EPS:
+    if _val(_norm(t)) >= EPS:
         pick = None
         for k in _DIM_ORDER:
             c0 = _cv(prev[0][0], ax, k)
-            if all(float(_norm(_cv(pa, ax, k) - c0)) < EPS for pa, _ in prev):
+            if all(_val(_norm(_cv(pa, ax, k) - c0)) < EPS for pa, _ in prev):
                 cvk = _cv(src, ax, k)
                 nrm = _norm(cvk)
-                if float(nrm) > 0 and float((cvk / nrm) @ (t / _norm(t))) > COS_DIST_THRESH:
+                if _val(nrm) > 0 and _val((cvk / nrm) @ (t / _norm(t))) > COS_DIST_THRESH:
                     pick = k  # the reference keeps the *last* qualifying dim (trap 4)
         if pick is not None:
             cvk = _cv(src, ax, pick)

@@ -97,6 +97,46 @@ def test_general_rule_scales_the_best_matching_free_dimension():
     assert close(local_point(s, 0, [1.0, 0.5, 0.5]), [0.2, 0.0, 0.0])
 
 
+def _general_rotation_program(cx, cz):
+    """A vertical post (bottom and top attached) whose front-face centre is then attached to the
+    bbox point (cx, 0, cz): a third attach of a non-aligned cuboid, i.e. the general rule."""
+    return flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.1, 0.5, 0.1, False)",
+                "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
+                "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)",
+                f"attach(cube0, bbox, 0.5, 0.5, 1.0, {0.5 + cx}, 0.5, {0.5 + cz})")
+
+
+def test_general_rule_orients_about_the_colinear_axis():
+    # After two attaches the post is 1 high, centred at the origin; records at (0,-.5,0), (0,.5,0)
+    # are colinear along y. Front-face centre b = (0, 0, .05), target c = (.03, 0, .04):
+    # projected on the plane through b normal to y, a_p = (0,0,0), fn = b, noc = c, s = |c|/|b| - 1 = 0,
+    # angle = acos(fn.noc / .05^2) = acos(.8). The turn about -y does not map fn onto noc, so the
+    # rule turns about +y: front (0,0,1) -> (.6,0,.8), right (1,0,0) -> (.8,0,-.6), up unchanged,
+    # about the centre (the records' axis). Then b = c: maybeScale stops.
+    s = execute(_general_rotation_program(0.03, 0.04), dtype=torch.float64)
+    assert close(s.axes[0], [[0.8, 0.0, -0.6], [0.0, 1.0, 0.0], [0.6, 0.0, 0.8]], 1e-7)
+    assert close(s.dims[0], [0.1, 1.0, 0.1]) and close(s.centers[0], [0.0, 0.0, 0.0])
+    assert close(local_point(s, 0, [0.5, 0.5, 1.0]), [0.03, 0.0, 0.04], 1e-7)
+    assert close(local_point(s, 0, [0.5, 0.0, 0.5]), [0.0, -0.5, 0.0])  # earlier records kept
+
+
+def test_general_rule_orients_then_scales():
+    # Same post, target twice as far: c = (.06, 0, .08). Orient turns by acos(.8) as above
+    # (nob = fn (1 + s) with s = 1 only sets the angle; no scaling there). Then b = (.03, 0, .04),
+    # t = c - b, |t| = .05. Eligible dims: width and length (both records have cv = 0 there), not
+    # height. cv_width(src) = .5 front is parallel to t (cos 1 > .9), cv_length(src) = 0: width wins.
+    # d = 1 / |.5 front - 0| = 2, s = |t . front| = .05, width += .1. The bottom record does not
+    # move, so the centre stays.
+    s = execute(_general_rotation_program(0.06, 0.08), dtype=torch.float64)
+    assert close(s.axes[0], [[0.8, 0.0, -0.6], [0.0, 1.0, 0.0], [0.6, 0.0, 0.8]], 1e-7)
+    assert close(s.dims[0], [0.1, 1.0, 0.2], 1e-7) and close(s.centers[0], [0.0, 0.0, 0.0])
+    assert close(local_point(s, 0, [0.5, 0.5, 1.0]), [0.06, 0.0, 0.08], 1e-7)
+    # the target on the other side: the turn about -y is the one that maps fn onto noc
+    s = execute(_general_rotation_program(-0.03, 0.04), dtype=torch.float64)
+    assert close(s.axes[0], [[0.8, 0.0, 0.6], [0.0, 1.0, 0.0], [-0.6, 0.0, 0.8]], 1e-7)
+    assert close(local_point(s, 0, [0.5, 0.5, 1.0]), [-0.03, 0.0, 0.04], 1e-7)
+
+
 # ----------------------------------------------------------------------------- aligned
 
 
@@ -302,6 +342,10 @@ GRAD_PROGRAMS = {
         "attach(cube2, cube0, 0.4, 1.0, 0.6, 0.3, 0.02, 0.2)",
         "translate(cube2, X, 3, 0.45)", "reflect(cube1, Z)"]) + "\n",
     "aligned_growth": _aligned_grad_program(),
+    "general_orient_scale": "bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.1, 0.5, 0.1, False)\n"
+                            "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n"
+                            "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)\n"
+                            "attach(cube0, bbox, 0.5, 0.5, 1.0, 0.56, 0.5, 0.58)\n",
 }
 
 
