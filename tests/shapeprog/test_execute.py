@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from shapeprog.execute import execute, execute_batch, parameter_names, program_parameters
+from shapeprog.execute import ExecutionPlan, execute, execute_batch, parameter_names, program_parameters
 from shapeprog.lang import parse
 
 FACES = {"right": (0, 1.0), "left": (0, 0.0), "top": (1, 1.0), "bot": (1, 0.0), "front": (2, 1.0), "back": (2, 0.0)}
@@ -310,6 +310,27 @@ def test_batch_equals_single_calls():
     for p, b in zip(progs, batch):
         one = execute(p)
         assert torch.equal(one.corners, b.corners) and torch.equal(one.line, b.line)
+
+
+def test_plan_runs_repeatedly_like_execute():
+    progs = [parse(HIER), parse(GRAD_PROGRAMS["squeeze_translate_reflect"])]
+    plan = ExecutionPlan(progs, dtype=torch.float64)
+    assert len(plan) == 2 and plan.n_params == [program_parameters(p).numel() for p in progs]
+    for shift in (0.0, 0.013, -0.02):  # the same plan with other numbers
+        xs = [(program_parameters(p, torch.float64) + shift).requires_grad_(True) for p in progs]
+        got = plan.run(xs)
+        for p, x, s in zip(progs, xs, got):
+            one = execute(p, dtype=torch.float64, params=x.detach())
+            assert torch.equal(s.corners, one.corners) and torch.equal(s.node, one.node)
+        # gradients reach every program's parameters through the shared plan
+        sum(s.corners.square().sum() for s in got).backward()
+        assert all(x.grad is not None and x.grad.abs().sum() > 0 for x in xs)
+    # None: the program's own numbers
+    assert torch.equal(plan.run([None, None])[1].corners, execute(progs[1], dtype=torch.float64).corners)
+    with pytest.raises(ValueError, match="2 tensors"):
+        plan.run([None])
+    with pytest.raises(TypeError, match="list of programs"):
+        ExecutionPlan(progs[0])
 
 
 def test_redeclared_cuboid_keeps_position():
