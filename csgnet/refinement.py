@@ -58,7 +58,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .lang import Draw, Op, Program, is_valid, parse
+from .lang import Draw, Program, is_valid, parse
 
 __all__ = ["METRICS", "MODES", "RefineResult", "refine", "refine_beams"]
 
