@@ -7,6 +7,8 @@
     python -m csgnet parse examples/house.png examples/bracket.stl --beam 10 --out parse_output
     python -m csgnet evaluate --dim 2 --data data/synthetic --weights csgnet/weights/csgnet2d.pt --out table.md
     python -m csgnet export-weights runs/x/checkpoints/best-012.ckpt --out csgnet/weights/csgnet2d.pt
+    python -m csgnet table4 --weights "CSGNet RL=runs/rl.pt" csgnet/weights/csgnet2d.pt --images 50 --out table4.md
+    python -m csgnet table6 --data data/synthetic --weights csgnet/weights/csgnet2d.pt --out table6.md
 """
 
 from __future__ import annotations
@@ -230,6 +232,75 @@ def cmd_export_weights(args) -> int:
     return 0
 
 
+def _labelled_models(specs):
+    from .inference import load_model, load_pretrained
+
+    if not specs:
+        model = load_pretrained(2)
+        return [(("CSGNetStack" if model.config.stack else "CSGNet") + " (shipped)", model)]
+    out = []
+    for spec in specs:
+        label, sep, path = spec.rpartition("=")
+        model = load_model(path)
+        out.append((label if sep else ("CSGNetStack" if model.config.stack else "CSGNet") + f" ({Path(path).name})",
+                    model))
+    return out
+
+
+def _write_table(text: str, out) -> None:
+    print(text)
+    if out:
+        from shapeio import atomic_write
+
+        atomic_write(out, text, mkdir=True)
+        print(f"wrote {out}")
+
+
+def cmd_table4(args) -> int:
+    from .protocols import subset, table4, table4_markdown
+    from .shapes2d import load_silhouettes
+
+    test = load_silhouettes("test", args.silhouettes)
+    idx = subset(len(test), None if args.images <= 0 else args.images, args.seed)
+    train = None if args.no_nn else load_silhouettes("train", args.silhouettes)
+    iters = [None if i in ("inf", "none") else int(i) for i in args.iterations]
+    rows = table4(_labelled_models(args.weights), test[idx], train, tuple(args.beams), iters,
+                  constrained=args.constrained, progress=lambda s: print(s, flush=True))
+    note = (f"`python -m csgnet table4 {' '.join(args.argv)}`; {len(idx)} of {len(test)} test silhouettes "
+            f"(seed {args.seed}); {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
+    _write_table(table4_markdown(rows, note, iters), args.out)
+    return 0
+
+
+def cmd_table6(args) -> int:
+    import numpy as np
+
+    from .protocols import table6, table6_markdown
+
+    lengths = args.lengths or [3, 5, 7, 9, 11, 13]
+    if args.data:
+        from .data import load_dataset
+
+        tests = load_dataset(args.data, 2, "test", lengths, errors="raise")
+        programs = [p for L in sorted(tests) for p in tests[L][: args.per_length]]
+        source = f"{args.data} (test split, {args.per_length} per length)"
+    else:
+        from .data import sample_programs
+        from .vocab import vocabulary
+
+        rng = np.random.default_rng(args.seed)
+        vocab = vocabulary(2)
+        programs = [vocab.decode(r) for L in lengths for r in sample_programs(2, L, args.per_length, rng)]
+        source = f"sampled with seed {args.seed}, {args.per_length} per length"
+    (label, model), = _labelled_models([args.weights] if args.weights else [])
+    rows = table6(model, programs, tuple(args.beams), constrained=args.constrained,
+                  progress=lambda s: print(s, flush=True))
+    note = (f"`python -m csgnet table6 {' '.join(args.argv)}`; {label}; targets: {source}, lengths "
+            f"{', '.join(map(str, lengths))}; {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
+    _write_table(table6_markdown(rows, note), args.out)
+    return 0
+
+
 def _contact_sheet(images, cols: int = 6):
     import numpy as np
 
@@ -317,7 +388,35 @@ def main(argv=None) -> int:
     x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
     x.set_defaults(func=cmd_export_weights)
 
+    t4 = sub.add_parser("table4", help="Table 4 protocol: parsing the test silhouettes, with refinement")
+    t4.add_argument("--weights", nargs="*", default=None,
+                    help="2D weights files or checkpoints, optionally LABEL=PATH (default: the shipped model)")
+    t4.add_argument("--images", type=int, default=50, help="test silhouettes evaluated (0: all 1,386)")
+    t4.add_argument("--seed", type=int, default=0, help="seed of the subset")
+    t4.add_argument("--beams", type=int, nargs="+", default=[1, 10])
+    t4.add_argument("--iterations", nargs="+", default=["0", "1", "2", "4", "10", "inf"],
+                    help="refinement iteration limits ('inf': to convergence)")
+    t4.add_argument("--silhouettes", default=None, help="a silhouette file (default: the shipped set)")
+    t4.add_argument("--no-nn", action="store_true", help="skip the nearest-neighbour row")
+    t4.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
+    t4.add_argument("--out", default=None, help="write the markdown table here")
+    t4.set_defaults(func=cmd_table4)
+
+    t6 = sub.add_parser("table6", help="Table 6 protocol: primitive detection AP on synthetic 2D programs")
+    t6.add_argument("--weights", default=None, help="2D weights file or checkpoint, optionally LABEL=PATH "
+                    "(default: the shipped model)")
+    t6.add_argument("--data", default=None, help="dataset folder written by `generate` (default: sample programs)")
+    t6.add_argument("--per-length", type=int, default=100, help="test programs per length")
+    t6.add_argument("--lengths", type=int, nargs="*", default=None, help="program lengths (default 3..13)")
+    t6.add_argument("--seed", type=int, default=0, help="seed for sampled programs")
+    t6.add_argument("--beams", type=int, nargs="+", default=[10, 40])
+    t6.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
+    t6.add_argument("--out", default=None, help="write the markdown table here")
+    t6.set_defaults(func=cmd_table6)
+
     args = ap.parse_args(argv)
+    if args.cmd in ("table4", "table6"):
+        args.argv = list(argv)[1:] if argv is not None else sys.argv[2:]
     if args.cmd == "evaluate":
         args.argv = list(argv) if argv is not None else None
     if args.cmd == "render" and args.dim is None:
