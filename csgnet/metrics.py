@@ -12,19 +12,24 @@
 
 How :func:`chamfer` is fast and still exact
 -------------------------------------------
-The reference loops over pairs and calls ``cv2.Canny`` and ``cv2.distanceTransform`` twice per pair.
-Here every distinct image is processed once (targets are usually shared by many beams or samples):
+The reference loops over pairs and calls ``cv2.Canny`` and ``cv2.distanceTransform`` twice per pair,
+then forms four float64 copies of 64x64 arrays per pair. Here:
 
-1. **Edges.** All distinct images are tiled into one mosaic, each tile framed by a one-pixel copy of
-   its own border, and ``cv2.Canny(dx, dy, 1, 3)`` runs once on the mosaic's Sobel derivatives with
-   the frame's derivatives set to zero (see :func:`edges`): bit-identical to one ``cv2.Canny`` call
-   per image, without the per-call overhead.
-2. **Distances.** ``cv2.distanceTransform(255 - edges, DIST_L2, 3)`` per distinct image (the 3x3
-   chamfer mask cannot be tiled: distances would leak between tiles), optionally on several threads
-   (OpenCV releases the GIL).
-3. **Combination.** ``sum(D1 * E2)`` is ``255 * (D1 . [E2 > 0])`` with the float32 distances summed in
-   float64. That sum is exact (values < 2^7 with 24-bit mantissas, 4096 terms fit in 53 bits), so the
-   result does not depend on summation order and equals the reference's float64 sums bit for bit.
+1. **Distinct images only.** Every distinct image (over predictions and targets) is processed once
+   (targets are usually shared by many beams or samples), and only images in a pair that can still
+   avoid the penalty get edges; only images in a pair whose two edge maps are non-empty get a
+   distance map (the reference skips the rest too).
+2. **Edges and distances** are the reference's own calls, ``cv2.Canny(img, 1, 3)`` and
+   ``cv2.distanceTransform(255 - E, DIST_L2, 3)``, one per image, written straight into preallocated
+   arrays, optionally on several threads (OpenCV releases the GIL). Both cost about 2.5 ns per
+   pixel whatever the image size, so tiling images into one large call saves nothing; the 3x3
+   transform cannot be tiled anyway (its float sums depend on the path order, and distances would
+   leak between tiles).
+3. **Combination.** ``sum(D1 * E2)`` is ``255 * (D1 . [E2 > 0])``: each pair gathers the distances
+   of one image at the other's edge pixels (a few hundred values, not 4096) and sums the float32
+   distances in float64. That sum is exact (values < 2^7 with 24-bit mantissas, 4096 terms fit in
+   53 bits), so the result does not depend on summation order and equals the reference's float64
+   sums bit for bit.
 
 ``tests/csgnet/test_metrics.py`` checks bit equality against the per-pair computation on random
 rendered programs, border-touching shapes included; ``bench/bench_csg_chamfer.py`` measures the speed.
@@ -53,6 +58,8 @@ CHAMFER_PENALTY = 16.0
 """The reference's fixed chamfer distance for an empty/full image or an empty edge map."""
 
 IOU_DENOMINATORS = ("union", "union+1")
+
+_IMAGE_BLOCK = 256  # images per block of OpenCV calls in chamfer (scratch arrays stay small)
 
 
 
@@ -87,23 +94,13 @@ def _check_2d(a: np.ndarray, name: str) -> None:
 def edges(images, chunk: int = 1024) -> np.ndarray:
     """Canny edges of binary images, identical to ``cv2.Canny(img * 255, 1, 3) > 0`` per image.
 
-    The images are tiled into one mosaic per ``chunk``, each tile framed by a one-pixel copy of its
-    own border (the ``BORDER_REPLICATE`` that ``cv2.Canny`` uses for its Sobel filter). ``cv2.Sobel``
-    of the mosaic then equals each image's own derivatives on every tile pixel; the frame pixels'
-    derivatives are set to zero, which is the zero gradient magnitude a single-image call assumes
-    outside the image, and ``cv2.Canny(dx, dy, 1, 3)`` runs once on the mosaic. On a 0/255 image
-    every non-zero L1 magnitude is >= 255, above both thresholds, so hysteresis cannot link across a
-    frame and each tile's edges equal the single-image result bit for bit.
-
     Args:
         images: (N, 64, 64) or (64, 64) bool (NumPy or torch).
-        chunk: images per mosaic.
+        chunk: images converted to uint8 at a time (bounds the temporary memory).
 
     Returns:
         (N, 64, 64) bool (or (64, 64)).
     """
-    import cv2
-
     a = _as_bool_numpy(images, "images")
     _check_2d(a, "images")
     single = a.ndim == 2
@@ -111,64 +108,103 @@ def edges(images, chunk: int = 1024) -> np.ndarray:
         a = a[None]
     n = a.shape[0]
     out = np.empty((n, SIZE, SIZE), bool)
-    t = SIZE + 2
     for s in range(0, n, chunk):
-        img = a[s:s + chunk].astype(np.uint8) * np.uint8(255)
-        k = img.shape[0]
-        cols = max(1, int(math.ceil(math.sqrt(k))))
-        rows = -(-k // cols)
-        tiles = np.zeros((rows * cols, t, t), np.uint8)
-        tiles[:k] = np.pad(img, ((0, 0), (1, 1), (1, 1)), mode="edge")
-        mosaic = np.ascontiguousarray(tiles.reshape(rows, cols, t, t).transpose(0, 2, 1, 3)
-                                      .reshape(rows * t, cols * t))
-        dx = cv2.Sobel(mosaic, cv2.CV_16S, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
-        dy = cv2.Sobel(mosaic, cv2.CV_16S, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-        for d in (dx, dy):  # zero gradient on every frame pixel
-            v = d.reshape(rows, t, cols, t)
-            v[:, 0] = 0
-            v[:, -1] = 0
-            v[:, :, :, 0] = 0
-            v[:, :, :, -1] = 0
-        e = cv2.Canny(dx, dy, 1, 3)
-        out[s:s + k] = e.reshape(rows, t, cols, t).transpose(0, 2, 1, 3).reshape(rows * cols, t, t)[:k, 1:-1, 1:-1] > 0
+        e = _canny(a[s:s + chunk], 1)
+        np.not_equal(e, 0, out=out[s:s + len(e)])
     return out[0] if single else out
+
+
+def _canny(images: np.ndarray, workers: int) -> np.ndarray:
+    """(K, 64, 64) bool -> (K, 64, 64) uint8 0/255: ``cv2.Canny(img * 255, 1, 3)`` of each image."""
+    import cv2
+
+    img = np.ascontiguousarray(images).view(np.uint8) * np.uint8(255)
+    out = np.empty_like(img)
+
+    def run(lo: int, hi: int) -> None:
+        for i in range(lo, hi):
+            cv2.Canny(img[i], 1, 3, edges=out[i])
+
+    _spread(run, len(img), workers)
+    return out
+
+
+def _spread(run, n: int, workers: int) -> None:
+    """``run(lo, hi)`` over ``range(n)``, split into one block per worker thread."""
+    if workers <= 1 or n < 64:
+        run(0, n)
+        return
+    bounds = np.linspace(0, n, workers + 1).astype(int).tolist()
+    list(_thread_pool(workers).map(run, bounds[:-1], bounds[1:]))
+
+
+_THREAD_POOLS: dict = {}
+
+
+def _thread_pool(workers: int) -> ThreadPoolExecutor:
+    if workers not in _THREAD_POOLS:
+        _THREAD_POOLS[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="csgnet-metrics")
+    return _THREAD_POOLS[workers]
 
 
 # ---------------------------------------------------------------------------------------------
 # chamfer distance
 
-def _unique_images(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct images of ``stack`` (M, 64, 64) bool: (indices of one copy each, inverse (M,))."""
-    packed = np.packbits(stack.reshape(stack.shape[0], -1), axis=1)  # (M, 512) uint8
-    keys = np.ascontiguousarray(packed).view(np.dtype((np.void, packed.shape[1]))).ravel()
-    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    return first, inverse.ravel()
+_HASH_MULT = np.random.default_rng(0x5EED).integers(1, 2**63, size=SIZE * SIZE // 64, dtype=np.uint64) | np.uint64(1)
 
 
-def _distance_maps(edge_maps: np.ndarray, out: np.ndarray, workers: int) -> None:
-    """``cv2.distanceTransform(255 - E, DIST_L2, 3)`` of each edge map, written into ``out``.
+def _unique_images(*stacks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distinct images over ``stacks`` (each (M_i, 64, 64) bool), numbered in concatenation order.
+
+    Returns:
+        (index of one copy of each distinct image, inverse (sum M_i,), ON pixels of each distinct
+        image).
+    """
+    packed = np.concatenate([np.packbits(s.reshape(len(s), -1), axis=1, bitorder="little") for s in stacks])
+    words = packed.view(np.uint64)  # (M, 64)
+    # group by a 64-bit hash, then check that every image equals its group's first image
+    with np.errstate(over="ignore"):
+        h = (words * _HASH_MULT).sum(axis=1, dtype=np.uint64)
+    _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    if not (words[first[inverse]] == words).all():  # a hash collision: exact grouping instead
+        keys = np.ascontiguousarray(packed).view(np.dtype((np.void, packed.shape[1]))).ravel()
+        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        inverse = inverse.ravel()
+    counts = np.bitwise_count(words[first]).sum(axis=1, dtype=np.int64)
+    return first, inverse, counts
+
+
+def _take(stacks: tuple, rows: np.ndarray) -> np.ndarray:
+    """Images ``rows`` (indices over the concatenation of ``stacks``)."""
+    if len(stacks) == 1:
+        return stacks[0][rows]
+    n0 = len(stacks[0])
+    out = np.empty((len(rows),) + stacks[0].shape[1:], stacks[0].dtype)
+    lo = rows < n0
+    out[lo] = stacks[0][rows[lo]]
+    out[~lo] = stacks[1][rows[~lo] - n0]
+    return out
+
+
+def _distance_maps(inv: np.ndarray, out: np.ndarray, workers: int) -> None:
+    """``cv2.distanceTransform(inv, DIST_L2, 3)`` of each map, written into ``out``.
 
     Args:
-        edge_maps: (U, 64, 64) bool.
+        inv: (U, 64, 64) uint8, ``255 - E`` of the Canny edges ``E`` (0 on edges, 255 elsewhere).
         out: (U, 4097) float32; columns 0..4095 receive the flattened distance maps.
         workers: threads (OpenCV releases the GIL).
     """
     import cv2
 
-    u = edge_maps.shape[0]
-    inv = np.where(edge_maps, np.uint8(0), np.uint8(255))
+    u = inv.shape[0]
     maps = out[:, :SIZE * SIZE].reshape(u, SIZE, SIZE)  # a view: cv2 writes in place
 
     def run(lo: int, hi: int) -> None:
         for i in range(lo, hi):
             cv2.distanceTransform(inv[i], cv2.DIST_L2, 3, dst=maps[i])
 
-    if workers <= 1 or u < 64:
-        run(0, u)
-    else:
-        bounds = np.linspace(0, u, workers + 1).astype(int)
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            list(pool.map(run, bounds[:-1], bounds[1:]))
+    _spread(run, u, workers)
 
 
 def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
@@ -184,8 +220,8 @@ def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
     Args:
         pred: (N, 64, 64) or (64, 64) bool, NumPy or torch (moved to the CPU).
         target: the same shape as ``pred``, or (64, 64) to compare every prediction with one target.
-        workers: threads for the distance transforms (default: ``min(4, os.cpu_count())``).
-        chunk: pairs per block of the final vectorised combination (bounds the memory).
+        workers: threads for the per-image OpenCV calls (default: ``min(4, os.cpu_count())``).
+        chunk: pairs per block of the vectorised combination (bounds the memory).
 
     Returns:
         A Python float for one pair of (64, 64) images, else (N,) float64.
@@ -216,25 +252,30 @@ def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
         workers = min(4, os.cpu_count() or 1)
 
     # distinct images over predictions and targets
-    stack = np.concatenate([p, t], axis=0)
-    first, inverse = _unique_images(stack)
-    uniq = stack[first]
+    first, inverse, counts = _unique_images(p, t)
     ip = inverse[:n]
     it = inverse[n:][t_index]
 
     # Only images in a pair that can still avoid the penalty need edges, and only images in a pair
     # whose both edge maps are non-empty need a distance map (the reference skips the rest too).
-    u = len(uniq)
-    counts = uniq.reshape(u, -1).sum(axis=1)
+    u = len(first)
     bad = (counts == 0) | (counts == SIZE * SIZE)
     live = ~bad[ip] & ~bad[it]
     need = np.zeros(u, bool)
     need[ip[live]] = True
     need[it[live]] = True
     todo = np.flatnonzero(need)
-    e = edges(uniq[todo]) if len(todo) else np.zeros((0, SIZE, SIZE), bool)
+    # Canny edges of those images, block by block, kept as lists of edge pixels (flat indices)
     ecount = np.zeros(u, np.int64)
-    ecount[todo] = e.reshape(len(todo), SIZE * SIZE).sum(axis=1)
+    pix = []
+    for s in range(0, len(todo), _IMAGE_BLOCK):
+        blk = todo[s:s + _IMAGE_BLOCK]
+        e = _canny(_take((p, t), first[blk]), workers)
+        e >>= 7  # 0/255 -> 0/1, a valid bool array
+        flat = np.flatnonzero(e.view(bool))
+        pix.append(flat + (s << 12))  # flat index over todo's images: image * 4096 + pixel
+        ecount[blk] = np.bincount(flat >> 12, minlength=len(blk))
+    pix = np.concatenate(pix) if pix else np.zeros(0, np.int64)
     bad[todo] |= ecount[todo] == 0
     live = ~bad[ip] & ~bad[it]
     out = np.full(n, CHAMFER_PENALTY, np.float64)
@@ -245,30 +286,41 @@ def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
     need[ip[ok]] = True
     need[it[ok]] = True
     keep = need[todo]  # among the images with edges, those that take part in a scored pair
-    todo, e = todo[keep], e[keep]
-    k = len(todo)
+    # edge pixel lists of the kept images, padded with index 4096 (a zero distance)
+    k = int(keep.sum())
     pos = np.full(u, -1, np.int64)
-    pos[todo] = np.arange(k)
-    # distance maps, flattened, plus a zero column 4096 that padded edge-pixel lists point at
-    flat_d = np.zeros((k, SIZE * SIZE + 1), np.float32)
-    _distance_maps(e, flat_d, workers)
-    # Each sum(D1 * E2) is 255 * (sum of D1 over E2's edge pixels). Edge pixels are listed per image
-    # (padded with index 4096, whose distance is 0) so each pair gathers a few hundred values, not 4096.
-    cnt = ecount[todo]
-    rows, cols = np.nonzero(e.reshape(k, SIZE * SIZE))
+    pos[todo[keep]] = np.arange(k)
+    owner = pos[todo[pix >> 12]]
+    pix, owner = pix[owner >= 0] & (SIZE * SIZE - 1), owner[owner >= 0]
+    cnt = ecount[todo[keep]]
     starts = np.cumsum(cnt) - cnt
     idx = np.full((k, int(cnt.max())), SIZE * SIZE, np.int32)
-    idx[rows, np.arange(len(rows)) - starts[rows]] = cols
+    idx[owner, np.arange(len(owner)) - starts[owner]] = pix
     esum = cnt.astype(np.float64) * 255.0  # sum of the 0/255 edge array
-    for s in range(0, len(ok), chunk):
-        sel = ok[s:s + chunk]
-        a, b = pos[ip[sel]], pos[it[sel]]
-        ka = int(cnt[a].max())
-        kb = int(cnt[b].max())
-        # float32 distances summed in float64: exact, hence equal to the reference's float64 sums
-        s_ab = flat_d[a[:, None], idx[b, :kb]].sum(axis=1, dtype=np.float64) * 255.0  # sum(D1 * E2)
-        s_ba = flat_d[b[:, None], idx[a, :ka]].sum(axis=1, dtype=np.float64) * 255.0  # sum(D2 * E1)
-        out[sel] = (s_ab / (esum[b] + 1) + s_ba / (esum[a] + 1)) / 2.0
+
+    # Distance maps block by block; each block serves every pair whose first (second) image is in
+    # it: sum(D1 * E2) = 255 * (sum of D1 over E2's edge pixels), float32 values summed in float64
+    # (exact, hence equal to the reference's float64 sums).
+    pa, pb = pos[ip[ok]], pos[it[ok]]
+    by_a, by_b = np.argsort(pa, kind="stable"), np.argsort(pb, kind="stable")
+    s_ab = np.empty(len(ok), np.float64)
+    s_ba = np.empty(len(ok), np.float64)
+    blk_n = min(_IMAGE_BLOCK, k)
+    maps = np.empty((blk_n, SIZE * SIZE + 1), np.float32)  # column 4096 stays 0
+    maps[:, -1] = 0
+    inv = np.empty((blk_n, SIZE * SIZE), np.uint8)
+    for s in range(0, k, blk_n):
+        m = min(blk_n, k - s)
+        inv[:m] = 255
+        inv[owner[starts[s]:starts[s] + cnt[s:s + m].sum()] - s, pix[starts[s]:starts[s] + cnt[s:s + m].sum()]] = 0
+        _distance_maps(inv[:m].reshape(m, SIZE, SIZE), maps[:m], workers)
+        for order, mine, other, dst in ((by_a, pa, pb, s_ab), (by_b, pb, pa, s_ba)):
+            lo, hi = np.searchsorted(mine, [s, s + m], sorter=order)
+            for c in range(lo, hi, chunk):
+                sel = order[c:min(hi, c + chunk)]
+                q = idx[other[sel], :int(cnt[other[sel]].max())]
+                dst[sel] = maps[mine[sel, None] - s, q].sum(axis=1, dtype=np.float64) * 255.0
+    out[ok] = (s_ab / (esum[pb] + 1) + s_ba / (esum[pa] + 1)) / 2.0
     return float(out[0]) if single else out
 
 
