@@ -204,3 +204,24 @@ def test_reward():
     assert r.tolist() == [1.0, 0.0]
     r = metrics.reward(np.stack([img, img]), img, valid=np.array([True, False]), invalid="reference")
     assert r[1] == pytest.approx(ref)
+
+
+def test_batched_blocks_duplicates_and_hash_collisions(shapes, monkeypatch):
+    """Many images over several blocks of OpenCV calls, targets shared by many pairs, the same image
+    on both sides, and the exact grouping taken when image hashes collide."""
+    rng = np.random.default_rng(11)
+    i = rng.integers(len(shapes), size=300)
+    j = rng.integers(40, size=300)  # 40 targets shared by about 7 pairs each
+    pred, target = shapes[i], shapes[j]
+    pred[:20] = target[:20]  # identical pairs: distance 0 (or 16 for penalty images)
+    want = np.array([reference_chamfer(a, b) for a, b in zip(pred, target)])
+    monkeypatch.setattr(metrics, "_IMAGE_BLOCK", 16)  # many blocks, pairs served across blocks
+    assert np.array_equal(metrics.chamfer(pred, target, workers=1), want)
+    assert np.array_equal(metrics.chamfer(pred, target, workers=3, chunk=7), want)
+    monkeypatch.setattr(metrics, "_HASH_MULT", np.zeros_like(metrics._HASH_MULT))  # every hash equal
+    first, inverse, counts = metrics._unique_images(pred, target)
+    stack = np.concatenate([pred, target])
+    assert np.array_equal(stack[first][inverse], stack)
+    assert len(first) == len(np.unique(stack.reshape(len(stack), -1), axis=0))
+    assert np.array_equal(counts, stack[first].reshape(len(first), -1).sum(axis=1))
+    assert np.array_equal(metrics.chamfer(pred, target, workers=1), want)

@@ -11,7 +11,8 @@ import csgnet
 from csg_testutil import random_program
 from csgnet.lang import Draw, Program, parse
 from csgnet.render_np import bresenham, draw_np, render_np
-from csgnet.renderer import encode_programs, execute, pack, render_programs, render_tokens, stack_trace, unpack, StackMachine
+from csgnet.renderer import (StackMachine, encode_programs, encode_tokens, execute, pack, render_programs, render_tokens,
+                              stack_trace, unpack)
 from csgnet.vocab import KIND_CODES, PAD_CODE, vocabulary
 
 skdraw = pytest.importorskip("skimage.draw")
@@ -238,3 +239,92 @@ def test_gpu_equals_cpu():
     rng = random.Random(1)
     progs = [random_program(rng, 3, rng.randint(1, 4)) for _ in range(20)]
     assert (csgnet.render(progs, 3, device="cuda") == csgnet.render(progs, 3)).all()
+
+
+# ------------------------------------------------------------------- planned execution
+
+def _machine_run(kinds, params, dim, token_ids=None):
+    """The stack machine stepped token by token (the reference for the planned executor)."""
+    m = StackMachine(kinds.shape[0], dim, kinds.shape[1] + 1)
+    for t in range(kinds.shape[1]):
+        m.step(kinds[:, t], params[:, t], None if token_ids is None else token_ids[:, t])
+    return m.result(), m.valid
+
+
+@pytest.mark.parametrize("dim,T", [(2, 9), (3, 7)])
+def test_planned_execute_equals_stack_machine(dim, T):
+    """Random token strings (mostly invalid: underflows, leftovers, stops in the middle) and valid
+    programs, through both the primitive-cache and the drawn-parameter paths."""
+    rng = np.random.default_rng(dim)
+    v = vocabulary(dim)
+    noise = rng.integers(0, len(v), size=(120, T))
+    noise[rng.random(noise.shape) < 0.1] = v.stop  # stops in the middle
+    weighted = np.where(rng.random((120, T)) < 0.4, rng.integers(v.num_primitives, len(v) - 1, size=(120, T)),
+                        rng.integers(0, v.num_primitives, size=(120, T)))  # ops often enough to be valid
+    valid_progs = [random_program(random.Random(i), dim, 1 + i % ((T + 1) // 2), vocab_only=True) for i in range(60)]
+    ids = np.full((60, T), v.stop)
+    for i, p in enumerate(valid_progs):
+        ids[i, :len(p)] = v.encode(p)
+    tokens = torch.from_numpy(np.concatenate([noise, weighted, ids]))
+    kinds, params = encode_tokens(tokens, dim)
+    want, want_valid = _machine_run(kinds, params, dim, tokens)
+    assert want_valid.sum() > 60  # the comparison covers many valid programs
+    for got in (execute(kinds, params, dim, token_ids=tokens), execute(kinds, params, dim)):
+        assert torch.equal(got.valid, want_valid)
+        assert torch.equal(got.canvas, want)
+    assert torch.equal(render_tokens(tokens, dim), unpack(want, dim))
+
+
+def test_planned_execute_off_grid_3d_matches_numpy_path():
+    """Single primitives, disjoint intersections (empty results feeding later operations), shapes
+    clipped at every side, and empty programs."""
+    progs = [parse(t, 3) for t in (
+        "sp(-4,30,30,12)",
+        "cu(70,70,70,20)",
+        "sp(10,10,10,8)cu(50,50,50,8)*",  # empty intersection
+        "sp(10,10,10,8)cu(50,50,50,8)*cy(30,30,30,12,20)+",  # empty result unioned with a shape
+        "cy(30,30,30,12,20)sp(10,10,10,8)cu(50,50,50,8)*-",  # minus an empty result
+        "sp(10,10,10,8)cu(50,50,50,8)*cy(30,30,30,12,20)-",  # an empty result minus a shape
+        "sp(2,60,33,20)cu(60,2,31,24)+sp(32,32,32,16)-",
+        "cy(0,0,0,40,60)cu(63,63,63,40)*",
+    )]
+    out = csgnet.render(progs, 3)
+    for p, o in zip(progs, out):
+        assert (o == render_np(p)).all(), p.text()
+    assert not out[2].any() and (out[3] == render_np(parse("cy(30,30,30,12,20)", 3))).all()
+
+
+def test_results_stay_valid_while_referenced():
+    """Large CPU results reuse released memory, never memory still referenced (views included)."""
+    v = vocabulary(3)
+    rng = np.random.default_rng(1)
+    a = torch.from_numpy(rng.integers(0, v.num_primitives, size=(40, 1)))
+    b = torch.from_numpy(rng.integers(0, v.num_primitives, size=(40, 1)))
+    first = render_tokens(a, 3)
+    kept = first[3].clone()
+    view = first[3]
+    del first
+    second = render_tokens(b, 3)  # must not overwrite the memory `view` still uses
+    assert torch.equal(view, kept)
+    assert not np.shares_memory(view.numpy(), second.numpy())
+    want = np.stack([render_np(v.decode(list(r))) for r in b.numpy()])
+    assert (second.numpy() == want).all()
+    del view, second
+    third = render_tokens(a, 3)  # memory released above may be reused, and is fully rewritten
+    assert torch.equal(third[3], kept)
+    assert (third.numpy() == np.stack([render_np(v.decode(list(r))) for r in a.numpy()])).all()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_unpack_matches_numpy_unpackbits(dim):
+    rng = np.random.default_rng(dim)
+    shape = (300, 64) if dim == 2 else (20, 64, 64)
+    words = rng.integers(-2**63, 2**63 - 1, size=shape, dtype=np.int64, endpoint=True)
+    words[rng.random(shape[:-1]) < 0.8] = 0  # mostly empty rows: the sparse path
+    for w in (words, np.where(rng.random(shape) < 0.5, 0, words)):
+        got = unpack(torch.from_numpy(w), dim).numpy()
+        want = np.unpackbits(w.view(np.uint8), axis=-1, bitorder="little").reshape(shape + (64,)).astype(bool)
+        assert np.array_equal(got, want)
+    dense = rng.integers(-2**63, 2**63 - 1, size=shape, dtype=np.int64, endpoint=True)
+    assert np.array_equal(unpack(torch.from_numpy(dense), dim).numpy(),
+                          np.unpackbits(dense.view(np.uint8), axis=-1, bitorder="little").reshape(shape + (64,)))
