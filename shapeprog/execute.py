@@ -551,12 +551,13 @@ def _nearest_grid_points(p, d, a, pB, dB, aB, G):
 def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
     """Aligned cuboid with earlier records: grow towards B (the target point is ignored)."""
     with torch.no_grad():
-        cA = _corners(pos, dims, ax)
-        cB = _corners(posB, dimsB, axB)
-        uA = _to_local(posB, dimsB, axB, cA)
-        uB = _to_local(pos, dims, ax, cB)
-        touch = ((uA >= 0) & (uA <= 1)).all(-1).any(-1) | ((uB >= 0) & (uB <= 1)).all(-1).any(-1)
-        idx = (~touch).nonzero().flatten()
+        # corners of A in B's frame and of B in A's frame, both directions in one pass
+        n = pos.shape[0]
+        both = torch.cat([pos, posB]), torch.cat([dims, dimsB]), torch.cat([ax, axB])
+        other = torch.cat([posB, pos]), torch.cat([dimsB, dims]), torch.cat([axB, ax])
+        u = _to_local(*other, _corners(*both))
+        inside = ((u >= 0) & (u <= 1)).all(-1).any(-1)
+        idx = (~(inside[:n] | inside[n:])).nonzero().flatten()
     if idx.numel() == 0:
         return pos, dims, ax
     p, d, a = pos[idx], dims[idx], ax[idx]
@@ -695,11 +696,17 @@ def _shift(form, off):
 
 def _plan_group(mode, items, offsets, S, J, dtype, device, read: set) -> _GroupPlan:
     """Index tensors and constants of one attach group; ``items``: (block row, record index, op);
-    ``read``: the (block row, record index) pairs that later ops read."""
-    lt = lambda v: torch.tensor(v, dtype=torch.int64, device=device)  # noqa: E731
+    ``read``: the (block row, record index) pairs that later ops read.
+
+    The integers, the floats and the flags each go into one tensor, split into views (building
+    the plan is part of every :func:`execute` call)."""
     rec_row = lambda blk, j, role: (blk * J + j) * 3 + role  # noqa: E731
-    row_a = lt([blk * S + o.a for blk, _, o in items])
-    row_b = lt([blk * S + o.b for blk, _, o in items])
+    n = len(items)
+    ints: list = []  # (name, values, shape)
+    floats: list = []
+    flags: list = []
+    ints.append(("row_a", [blk * S + o.a for blk, _, o in items], (n,)))
+    ints.append(("row_b", [blk * S + o.b for blk, _, o in items], (n,)))
     none = ((0.0,) * 3, (0.0,) * 3, (-1, -1, -1))
     src_forms, tgt_forms, macro_rows = [], [], []
     for r, (blk, _, o) in enumerate(items):
@@ -711,37 +718,55 @@ def _plan_group(mode, items, offsets, S, J, dtype, device, read: set) -> _GroupP
             tgt_forms.append(none)
             macro_rows.append(r)
     forms = src_forms + tgt_forms
-    c0 = torch.tensor([f[0] for f in forms], dtype=dtype, device=device)
-    c1 = torch.tensor([f[1] for f in forms], dtype=dtype, device=device)
-    ix = lt([f[2] for f in forms])
-    macro = None
+    floats.append(("c0", [x for f in forms for x in f[0]], (2 * n, 3)))
+    floats.append(("c1", [x for f in forms for x in f[1]], (2 * n, 3)))
+    ints.append(("ix", [x for f in forms for x in f[2]], (2 * n, 3)))
     if macro_rows:
         ms = [(items[r][0], items[r][2].macro) for r in macro_rows]
-        is_ref = torch.tensor([m[3] == "R" for _, m in ms], device=device)
-        e = torch.nn.functional.one_hot(lt([m[4] for _, m in ms]), 3).to(dtype)
-        macro = dict(
-            r_idx=lt(macro_rows),
-            ap=lt([rec_row(blk, m[0], 0) for blk, m in ms]),  # the original record's point on A
-            A=lt([blk * S + m[1] for blk, m in ms]),
-            T=lt([blk * S + m[2] for blk, m in ms]),
-            box=lt([blk * S for blk, _ in ms]),
-            didx=lt([offsets[blk] + m[7] if m[7] >= 0 else -1 for blk, m in ms]),
-            ii=torch.tensor([float(m[5]) for _, m in ms], dtype=dtype, device=device),
-            N=torch.tensor([float(m[6]) for _, m in ms], dtype=dtype, device=device),
-            e=e, is_ref=is_ref, flip=is_ref[:, None] & (e > 0),
-            any_ref=any(m[3] == "R" for _, m in ms), any_tr=any(m[3] != "R" for _, m in ms))
-    prior = general = None
+        m = len(ms)
+        ints.append(("r_idx", macro_rows, (m,)))
+        ints.append(("ap", [rec_row(blk, mc[0], 0) for blk, mc in ms], (m,)))  # the original record's point on A
+        ints.append(("A", [blk * S + mc[1] for blk, mc in ms], (m,)))
+        ints.append(("T", [blk * S + mc[2] for blk, mc in ms], (m,)))
+        ints.append(("box", [blk * S for blk, _ in ms], (m,)))
+        ints.append(("didx", [offsets[blk] + mc[7] if mc[7] >= 0 else -1 for blk, mc in ms], (m,)))
+        e = [[1.0 if k == mc[4] else 0.0 for k in range(3)] for _, mc in ms]
+        floats.append(("e", [x for row in e for x in row], (m, 3)))
+        floats.append(("ii", [float(mc[5]) for _, mc in ms], (m,)))
+        floats.append(("N", [float(mc[6]) for _, mc in ms], (m,)))
+        is_ref = [mc[3] == "R" for _, mc in ms]
+        flags.append(("is_ref", is_ref, (m,)))
+        flags.append(("flip", [r and k == mc[4] for r, (_, mc) in zip(is_ref, ms) for k in range(3)], (m, 3)))
     if mode == SECOND:
-        prior = (lt([rec_row(blk, *o.prior[0]) for blk, _, o in items]),
-                 lt([rec_row(blk, o.prior[0][0], 2) for blk, _, o in items]))
-    elif mode == GENERAL:
-        general = [[(rec_row(blk, j, role), rec_row(blk, j, 2)) for j, role in o.prior] for blk, _, o in items]
+        ints.append(("prior_ap", [rec_row(blk, *o.prior[0]) for blk, _, o in items], (n,)))
+        ints.append(("prior_g", [rec_row(blk, o.prior[0][0], 2) for blk, _, o in items], (n,)))
     rows = [r for r, (blk, j, _) in enumerate(items) if (blk, j) in read]
-    keep = None if len(rows) == len(items) else lt(rows)
-    rec_rows = None
+    if rows and len(rows) < n:
+        ints.append(("keep", rows, (len(rows),)))
     if rows:
-        rec_rows = lt([rec_row(items[r][0], items[r][1], role) for r in rows for role in range(3)])
-    return _GroupPlan(mode, len(items), row_a, row_b, c0, c1, ix, macro, prior, general, keep, rec_rows)
+        ints.append(("rec_rows", [rec_row(items[r][0], items[r][1], role) for r in rows for role in range(3)],
+                     (3 * len(rows),)))
+
+    def pack(entries, **kw):
+        flat_vals = [x for _, vals, _ in entries for x in vals]
+        t = torch.tensor(flat_vals, **kw)
+        parts = t.split([len(vals) for _, vals, _ in entries])
+        return {name: part.view(shape) for (name, _, shape), part in zip(entries, parts)}
+
+    iv = pack(ints, dtype=torch.int64, device=device)
+    fv = pack(floats, dtype=dtype, device=device)
+    bv = pack(flags, dtype=torch.bool, device=device) if flags else {}
+    macro = None
+    if macro_rows:
+        macro = dict(r_idx=iv["r_idx"], ap=iv["ap"], A=iv["A"], T=iv["T"], box=iv["box"], didx=iv["didx"],
+                     ii=fv["ii"], N=fv["N"], e=fv["e"], is_ref=bv["is_ref"], flip=bv["flip"],
+                     any_ref=any(is_ref), any_tr=not all(is_ref))
+    prior = (iv["prior_ap"], iv["prior_g"]) if mode == SECOND else None
+    general = None
+    if mode == GENERAL:
+        general = [[(rec_row(blk, j, role), rec_row(blk, j, 2)) for j, role in o.prior] for blk, _, o in items]
+    return _GroupPlan(mode, n, iv["row_a"], iv["row_b"], fv["c0"], fv["c1"], iv["ix"], macro, prior, general,
+                      iv.get("keep"), iv.get("rec_rows"))
 
 
 def _plan_steps(codes: list[_BlockCode], offsets: list[int], S: int, J: int, dtype, device) -> list[_StepPlan]:
