@@ -212,7 +212,7 @@ def cmd_evaluate(args) -> int:
         print(f"decoding with {name} ...", flush=True)
         rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
                                constrained=args.constrained)
-    note = (f"`python -m csgnet {' '.join(sys.argv[2:] if args.argv is None else args.argv)}`; beam mode "
+    note = (f"`python -m csgnet {' '.join(sys.argv[1:] if args.argv is None else args.argv)}`; beam mode "
             f"{args.mode!r}, {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
     table = markdown_tables(rows, args.dim, note)
     print(table)
