@@ -319,7 +319,7 @@ def _unpack_rows(w: np.ndarray, out: np.ndarray, chunk: int = 256) -> None:
 
 def popcount(words: torch.Tensor) -> np.ndarray:
     """ON pixels (voxels) of packed canvases ``(N, *C)`` int64 -> ``(N,)`` int64 (NumPy, on the CPU)."""
-    w = words.detach().cpu().numpy()
+    w = words.detach().cpu().numpy().view(np.uint64)  # bitwise_count of a signed word counts |w|'s bits
     return np.bitwise_count(w).reshape(w.shape[0], -1).sum(axis=1, dtype=np.int64)
 
 

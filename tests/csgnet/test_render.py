@@ -328,3 +328,12 @@ def test_unpack_matches_numpy_unpackbits(dim):
     dense = rng.integers(-2**63, 2**63 - 1, size=shape, dtype=np.int64, endpoint=True)
     assert np.array_equal(unpack(torch.from_numpy(dense), dim).numpy(),
                           np.unpackbits(dense.view(np.uint8), axis=-1, bitorder="little").reshape(shape + (64,)))
+
+
+def test_popcount_counts_every_bit_including_the_sign_bit():
+    from csgnet.renderer import popcount
+
+    img = np.zeros((2, 64, 64), dtype=bool)
+    img[0, :, 63] = True          # the last column: the sign bit of every row word
+    img[1] = True
+    assert popcount(pack(torch.from_numpy(img))).tolist() == [64, 4096]
