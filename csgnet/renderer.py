@@ -727,6 +727,7 @@ def _plan(kinds: np.ndarray) -> _Plan:
 
 _BLOCK_SLABS = 8
 _UNPACK_BYTES = 1 << 19
+_DRAW_BYTES = 8 << 20
 
 
 def _blocks(dim: int) -> tuple[int, int]:
@@ -780,10 +781,15 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
         prims = cache.words
         d_lo, d_hi = cache.lo[prow], cache.hi[prow]
     else:
-        prow = np.arange(len(plan.draws))
+        D = len(plan.draws)
+        prow = np.arange(D)
         sel = torch.from_numpy(plan.draws).to(device)
-        prims = draw_packed(kinds.reshape(-1)[sel], params.reshape(-1, 5)[sel], dim)
-        d_lo, d_hi = _slab_range((prims.view(len(prow), n_sl, bw) != 0).any(-1).cpu().numpy())
+        k_flat, p_flat = kinds.reshape(-1), params.reshape(-1, 5)
+        prims = _WORKSPACE.get("prims", D * n_sl * bw, device).view((D,) + C)
+        step = max(1, _DRAW_BYTES // (n_sl * bw * 8))  # draws per call: the temporaries stay moderate
+        for c in range(0, D, step):
+            prims[c:c + step] = draw_packed(k_flat[sel[c:c + step]], p_flat[sel[c:c + step]], dim)
+        d_lo, d_hi = _slab_range((prims.view(D, n_sl, bw) != 0).any(-1).cpu().numpy())
     prim_slabs = prims.view(-1, bw)
 
     # slab ranges of the operations, one tree height at a time
