@@ -428,15 +428,23 @@ class PrimitiveCache:
 
     def _ensure(self, ids) -> None:
         """Draw the entries of ``ids`` (token indices, NumPy or torch) that are not cached yet."""
-        ids = torch.unique(torch.as_tensor(ids, device=self.have.device))
-        missing = ids[~self.have[ids]]
-        if missing.numel():
-            words = draw_packed(self.kinds[missing], self.params[missing], self.dim)
-            self.words[missing] = words
-            self.have[missing] = True
-            m = missing.cpu().numpy()
-            n_sl, bw = _blocks(self.dim)
-            self.lo[m], self.hi[m] = _slab_range((words.view(len(m), n_sl, bw) != 0).any(-1).cpu().numpy())
+        if self.have.device.type == "cpu":
+            ids = np.unique(ids.numpy() if isinstance(ids, torch.Tensor) else ids)
+            missing = ids[~self.have.numpy()[ids]]
+            if not len(missing):
+                return
+            missing = torch.from_numpy(missing)
+        else:
+            ids = torch.unique(torch.as_tensor(ids, device=self.have.device))
+            missing = ids[~self.have[ids]]
+            if not missing.numel():
+                return
+        words = draw_packed(self.kinds[missing], self.params[missing], self.dim)
+        self.words[missing] = words
+        self.have[missing] = True
+        m = missing.cpu().numpy()
+        n_sl, bw = _blocks(self.dim)
+        self.lo[m], self.hi[m] = _slab_range((words.view(len(m), n_sl, bw) != 0).any(-1).cpu().numpy())
 
     def get(self, ids: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
         """(N,) token indices of primitives -> (N, *C) packed canvases (``out``: a (N, words) buffer)."""
