@@ -965,7 +965,7 @@ class ExecutionPlan:
             if step.copy is not None:
                 new, src = step.copy
                 n = new.shape[0]
-                dims.index_copy_(0, new, dims.index_select(0, src))
+                dims.index_copy_(0, new, dims[src])
                 pos.index_fill_(0, new, 0.0)
                 ax.index_copy_(0, new, torch.eye(3, dtype=dtype, device=device).expand(n, 3, 3))
             for grp in step.groups:
@@ -979,7 +979,7 @@ class ExecutionPlan:
         wps, wds, was = [], [], []
         prev = None
         for lv in self._levels:
-            lp, ld, la = pos.index_select(0, lv.rows), dims.index_select(0, lv.rows), ax.index_select(0, lv.rows)
+            lp, ld, la = pos[lv.rows], dims[lv.rows], ax[lv.rows]
             if lv.pos_sign is not None:
                 lp = lp * lv.pos_sign
                 la = la * lv.ax_sign
@@ -989,9 +989,9 @@ class ExecutionPlan:
                 wp, wa = lp, la
             else:
                 pp, pd, pa = prev
-                apos = pp.reshape(-1, 3).index_select(0, lv.parent)
-                adims = pd.reshape(-1, 3).index_select(0, lv.parent)
-                aax = pa.reshape(-1, 3, 3).index_select(0, lv.parent)
+                apos = pp.reshape(-1, 3)[lv.parent]
+                adims = pd.reshape(-1, 3)[lv.parent]
+                aax = pa.reshape(-1, 3, 3)[lv.parent]
                 # apply_delta: scale dims per local axis index, rotate positions (not scaled)
                 wd = ld * (adims / rdims)[:, None]
                 wp = torch.bmm(lp, aax) + apos[:, None]
@@ -1005,9 +1005,9 @@ class ExecutionPlan:
         else:
             wp, wd, wa = torch.cat(wps), torch.cat(wds), torch.cat(was)
         rows = self._leaves
-        centers = wp.reshape(-1, 3).index_select(0, rows)
-        dd = wd.reshape(-1, 3).index_select(0, rows)
-        aa = wa.reshape(-1, 3, 3).index_select(0, rows)
+        centers = wp.reshape(-1, 3)[rows]
+        dd = wd.reshape(-1, 3)[rows]
+        aa = wa.reshape(-1, 3, 3)[rows]
         corners = cuboid_corners(centers, dd, aa)
         out = []
         parts = [x.split(self._counts) for x in (centers, dd, aa, corners)]
@@ -1029,15 +1029,15 @@ def _run_attach_group(grp: _GroupPlan, flat, pos, dims, ax, rec) -> None:
     if grp.macro is not None:
         src, tgt = _macro_points(grp.macro, flat, pos, dims, ax, rec, src, tgt)
     rb, ra = grp.row_b, grp.row_a
-    posB, dimsB, axB = pos.index_select(0, rb), dims.index_select(0, rb), ax.index_select(0, rb)
+    posB, dimsB, axB = pos[rb], dims[rb], ax[rb]
     g = _point(posB, dimsB, axB, tgt)
-    posA, dimsA, axA = pos.index_select(0, ra), dims.index_select(0, ra), ax.index_select(0, ra)
+    posA, dimsA, axA = pos[ra], dims[ra], ax[ra]
     mode = grp.mode
     if mode == FIRST:
         posA, dimsA, axA = _rule_first(posA, dimsA, axA, src, g)
     elif mode == SECOND:
         r_ap, r_g = grp.prior
-        posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, rec.index_select(0, r_ap), rec.index_select(0, r_g))
+        posA, dimsA, axA = _rule_second(posA, dimsA, axA, src, g, rec[r_ap], rec[r_g])
     elif mode == ALIGNED:
         posA, dimsA, axA = _rule_aligned(posA, dimsA, axA, posB, dimsB, axB)
     else:
@@ -1056,27 +1056,27 @@ def _run_attach_group(grp: _GroupPlan, flat, pos, dims, ax, rec) -> None:
     if grp.rec_rows is not None:  # only records that a later op reads
         recs = torch.stack([src, tgt, g], 1)
         if grp.keep is not None:
-            recs = recs.index_select(0, grp.keep)
+            recs = recs[grp.keep]
         rec.index_copy_(0, grp.rec_rows, recs.reshape(-1, 3))
 
 
 def _macro_points(m: dict, flat, pos, dims, ax, rec, src, tgt):
     """Source/target local points of reflect/translate copies (spec: reflect, translate)."""
     A, T, e = m["A"], m["T"], m["e"]
-    ap = rec.index_select(0, m["ap"])  # the original record's source point on A
+    ap = rec[m["ap"]]  # the original record's source point on A
     src_m = torch.where(m["flip"], 1 - ap, ap)
-    p = _point(pos.index_select(0, A), dims.index_select(0, A), ax.index_select(0, A), ap)
+    p = _point(pos[A], dims[A], ax[A], ap)
     pg = None
     if m["any_ref"]:
         # reflect through the plane through the bbox centre (origin) normal to world axis k
         pg = p - 2 * e * p
     if m["any_tr"]:
         # translate: p + i * (L * d / N) * e, L = local bbox extent along k
-        L = (dims.index_select(0, m["box"]) * e).sum(-1)
+        L = (dims[m["box"]] * e).sum(-1)
         step = L * flat[m["didx"]] / m["N"]
         p_tr = p + (m["ii"] * step)[:, None] * e
         pg = p_tr if pg is None else torch.where(m["is_ref"][:, None], pg, p_tr)
-    loc = _to_local(pos.index_select(0, T), dims.index_select(0, T), ax.index_select(0, T), pg[:, None, :])[:, 0]
+    loc = _to_local(pos[T], dims[T], ax[T], pg[:, None, :])[:, 0]
     tgt_m = loc.clamp(0.0, 1.0)
     src = src.index_copy(0, m["r_idx"], src_m)
     tgt = tgt.index_copy(0, m["r_idx"], tgt_m)

@@ -182,11 +182,13 @@ class _Chamfer(torch.autograd.Function):
         # d relu(d - thr) / d x = [d > thr] (x - y) / d, averaged over each cloud
         gp = diff_p * torch.where(act_p, grad / (d_p * d_p.shape[0]), 0.0)[:, None]
         gt = diff_t * torch.where(act_t, grad / (d_t * d_t.shape[0]), 0.0)[:, None]
+        # index_put_ with accumulate runs serially on the CPU; index_add would start a parallel
+        # region even for a few thousand rows, which costs a scheduler wait on a busy machine
         grad_pred = grad_target = None
         if ctx.needs_input_grad[0]:
-            grad_pred = gp.index_add(0, i_tp, gt, alpha=-1)
+            grad_pred = gp.index_put((i_tp,), -gt, accumulate=True)
         if ctx.needs_input_grad[1]:
-            grad_target = gt.index_add(0, i_pt, gp, alpha=-1)
+            grad_target = gt.index_put((i_pt,), -gp, accumulate=True)
         return grad_pred, grad_target, None, None, None, None
 
 
