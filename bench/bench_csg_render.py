@@ -9,11 +9,15 @@ Baselines (written here, as the original code works):
 Both sides render the same random valid programs (2D length 13, 3D length 7) from vocabulary tokens, in
 one run on the same machine. The batched renderer is timed to bool output (what ``csgnet.render`` returns)
 and, separately, to its packed output (what the training path consumes before one unpack per batch).
+For context it also times programs with every primitive moved off the 8-pixel grid (drawn, not looked up)
+and the packed stack trace of the top 4 slots that CSGNetStack trains on (the baseline builds neither).
 
 Timing is the same for both sides: one untimed warm-up pass, then the best of ``--repeat`` passes. Each
 result is dropped when the next one is made (per program for the baseline, per batch for the batched
 renderer), as in a training loop, so both sides allocate their outputs in a steady state. Outputs are
-checked identical outside the timed passes.
+checked identical outside the timed passes. Rates are given by wall time and by process CPU time: with
+one thread (``--threads 1``) CPU time counts only this process's work, the steadier figure on a machine
+shared with other jobs.
 
 Usage::
 
@@ -32,7 +36,7 @@ import numpy as np
 import torch
 
 from csgnet.lang import Draw, Program
-from csgnet.renderer import encode_programs, encode_tokens, execute, render_tokens, unpack
+from csgnet.renderer import encode_programs, encode_tokens, execute, render_tokens, stack_trace, unpack
 from csgnet.vocab import vocabulary
 
 
@@ -172,8 +176,13 @@ def main(argv=None):
                 kinds, params = encode_tokens(tt[i:i + batch], dim)
                 execute(kinds, params, dim, token_ids=tt[i:i + batch])
 
+        def batched_trace():
+            for i in range(0, n, batch):
+                stack_trace(tt[i:i + batch], dim, k=4, packed=True)
+
         t_ours = timed(batched, args.repeat, sync)
         t_packed = timed(batched_packed, args.repeat, sync)
+        t_trace = timed(batched_trace, args.repeat, sync)
         # exactness on the baseline's programs, both outputs
         check = render_tokens(tt[:batch], dim).cpu().numpy()[: min(bn, batch)]
         same = all((check[i] == run_one(progs[i])).all() for i in range(len(check)))
@@ -196,6 +205,7 @@ def main(argv=None):
         row("batched renderer -> bool (render_tokens)", n, t_ours)
         row("batched renderer -> packed bits (execute)", n, t_packed)
         row("batched, off-grid params -> bool", batch, t_off)
+        row("batched stack trace (top 4 slots) -> packed", n, t_trace)
         print(f"  identical to the baseline on {len(check)} programs: {same}")
     print(f"# load average after the run: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
