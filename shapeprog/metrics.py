@@ -67,7 +67,7 @@ def _resolve_method(method: str, device: torch.device) -> str:
 def _kdtree(points: np.ndarray):
     from scipy.spatial import cKDTree
 
-    return cKDTree(points, leafsize=16, balanced_tree=False, compact_nodes=False)
+    return cKDTree(points, leafsize=32, balanced_tree=False, compact_nodes=False)
 
 
 def _kdtree_indices(query: torch.Tensor, ref: torch.Tensor, exclude_self: bool) -> torch.Tensor:
