@@ -374,7 +374,9 @@ def encode_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None =
                          f"got range [{int(tokens.min())}, {int(tokens.max())}]")
     cache = primitive_cache(dim, tokens.device)
     tokens = tokens.long()
-    kinds, params = cache.kinds[tokens], cache.params[tokens]
+    flat = tokens.reshape(-1)
+    kinds = cache.kinds.index_select(0, flat).view(tokens.shape)
+    params = cache.params.index_select(0, flat).view(tokens.shape + (5,))
     if lengths is not None:
         pos = torch.arange(tokens.shape[1], device=tokens.device)[None, :]
         kinds = torch.where(pos < torch.as_tensor(lengths, device=tokens.device)[:, None], kinds, PAD_CODE)
@@ -728,11 +730,14 @@ def _plan(kinds: np.ndarray) -> _Plan:
     row = np.full(n_op + 1, -1, np.int64)  # one spare entry: index 0 is safe without operations
     row[keep] = np.arange(len(keep))
     oa, ob, code, oh = oa[keep], ob[keep], code[keep], oh[keep]
-    draws = np.unique(np.concatenate([-oa[~a_op] - 1, -ob[~b_op] - 1, fdraw[fdraw >= 0]]))
-    a_idx = np.where(a_op, row[np.maximum(oa, 0)], np.searchsorted(draws, -oa - 1))
-    b_idx = np.where(b_op, row[np.maximum(ob, 0)], np.searchsorted(draws, -ob - 1))
+    # every draw feeds exactly one operation or result, so these positions are distinct
+    draws = np.sort(np.concatenate([-oa[~a_op] - 1, -ob[~b_op] - 1, fdraw[fdraw >= 0]]))
+    dmap = np.zeros(B * T + 1, np.int64)  # draw position -> index into draws
+    dmap[draws] = np.arange(len(draws))
+    a_idx = np.where(a_op, row[np.maximum(oa, 0)], dmap[np.maximum(-oa - 1, 0)])
+    b_idx = np.where(b_op, row[np.maximum(ob, 0)], dmap[np.maximum(-ob - 1, 0)])
     final = np.where(final >= 0, row[np.maximum(final, 0)], -1)
-    fdraw = np.where(fdraw >= 0, np.searchsorted(draws, fdraw), -1)
+    fdraw = np.where(fdraw >= 0, dmap[np.maximum(fdraw, 0)], -1)
 
     groups = []
     R = len(keep)
