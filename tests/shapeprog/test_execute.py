@@ -316,6 +316,7 @@ def test_plan_runs_repeatedly_like_execute():
     progs = [parse(HIER), parse(GRAD_PROGRAMS["squeeze_translate_reflect"])]
     plan = ExecutionPlan(progs, dtype=torch.float64)
     assert len(plan) == 2 and plan.n_params == [program_parameters(p).numel() for p in progs]
+    assert all(torch.equal(x, program_parameters(p, torch.float64)) for x, p in zip(plan.parameters(), progs))
     for shift in (0.0, 0.013, -0.02):  # the same plan with other numbers
         xs = [(program_parameters(p, torch.float64) + shift).requires_grad_(True) for p in progs]
         got = plan.run(xs)
