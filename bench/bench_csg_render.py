@@ -207,6 +207,9 @@ def main(argv=None):
         row("batched, off-grid params -> bool", batch, t_off)
         row("batched stack trace (top 4 slots) -> packed", n, t_trace)
         print(f"  identical to the baseline on {len(check)} programs: {same}")
+        if dim == 3:
+            print(f"  (the baseline's dictionary: {len(table)} pre-rendered volumes, "
+                  f"{sum(v.nbytes for v in table.values()) / 2**20:.0f} MiB)")
     print(f"# load average after the run: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
