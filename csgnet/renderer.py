@@ -760,6 +760,7 @@ def _plan(kinds: np.ndarray) -> _Plan:
 _BLOCK_SLABS = 8
 _UNPACK_BYTES = 1 << 19
 _DRAW_BYTES = 8 << 20
+_DRAW_MAX = 2048
 
 
 def _blocks(dim: int) -> tuple[int, int]:
@@ -818,7 +819,7 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
         sel = torch.from_numpy(plan.draws).to(device)
         k_flat, p_flat = kinds.reshape(-1), params.reshape(-1, 5)
         prims = _WORKSPACE.get("prims", D * n_sl * bw, device).view((D,) + C)
-        step = max(1, _DRAW_BYTES // (n_sl * bw * 8))  # draws per call: the temporaries stay moderate
+        step = max(1, min(_DRAW_MAX, _DRAW_BYTES // (n_sl * bw * 8)))  # draws per call: moderate temporaries
         for c in range(0, D, step):
             prims[c:c + step] = draw_packed(k_flat[sel[c:c + step]], p_flat[sel[c:c + step]], dim)
         d_lo, d_hi = _slab_range((prims.view(D, n_sl, bw) != 0).any(-1).cpu().numpy())
