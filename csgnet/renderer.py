@@ -9,8 +9,21 @@ How it is fast: canvases are bit-packed. A 2D image is 64 int64 words (one per r
 volume is 64x64 int64 words (one per (x, y) column, bit = z). Every primitive is, per row (2D) or per
 column (3D), a union of at most four integer intervals computed in closed form (circle half-widths,
 square bounds, the triangle's scan-line fill and its Bresenham outline; sphere, cube and cylinder z
-extents), and the boolean operators are word-wise ``| & ~``. A whole batch steps through the postfix
-program together, one token position at a time. Unpacking to bool happens once, at the end.
+extents), and the boolean operators are word-wise ``| & ~``.
+
+Two ways through a batch:
+
+* :func:`execute` without a trace (and :func:`render_tokens`, :func:`render_programs`) plans first:
+  it simulates every program's stack on references, on the CPU, and turns the operations that a
+  valid result depends on into a table ordered by tree height; each group of table rows is a few
+  batched row gathers and one word-wise operation (see :func:`_execute_plan`). Values are only
+  computed on the range of x-slab blocks where they can be non-zero, and bool output unpacks only
+  the non-empty blocks of each result.
+* :class:`StackMachine` steps the whole batch through the programs one token position at a time; it
+  gives the stack traces and serves decoders that execute predicted prefixes incrementally.
+
+Large CPU results come from recycled memory (:class:`_BufferPool`): fresh multi-megabyte arrays cost
+more in page faults than the rendering itself.
 
 Clipping: everything outside the 64-pixel (or voxel) canvas is dropped; 3D shapes are clipped too,
 never wrapped around (the reference had no clipping).
