@@ -437,7 +437,7 @@ class PrimitiveCache:
         self.params = torch.from_numpy(p).to(device)
         self.words = torch.empty((len(vocab),) + _canvas_words(dim), dtype=torch.int64, device=device)
         self.have = torch.zeros(len(vocab), dtype=torch.bool, device=device)
-        # first and last non-empty slab (3D: x-slab; 2D: the image) of each cached entry, on the CPU
+        # first and last non-empty block (see _blocks) of each cached entry, on the CPU
         self.lo = np.full(len(vocab), _blocks(dim)[0], np.int64)
         self.hi = np.full(len(vocab), -1, np.int64)
 
