@@ -311,8 +311,10 @@ def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
     inv = np.empty((blk_n, SIZE * SIZE), np.uint8)
     for s in range(0, k, blk_n):
         m = min(blk_n, k - s)
-        inv[:m] = 255
-        inv[owner[starts[s]:starts[s] + cnt[s:s + m].sum()] - s, pix[starts[s]:starts[s] + cnt[s:s + m].sum()]] = 0
+        e0 = starts[s]
+        e1 = e0 + int(cnt[s:s + m].sum())
+        inv[:m] = 255  # 255 - E: 0 on the edge pixels of image s + i
+        inv[owner[e0:e1] - s, pix[e0:e1]] = 0
         _distance_maps(inv[:m].reshape(m, SIZE, SIZE), maps[:m], workers)
         for order, mine, other, dst in ((by_a, pa, pb, s_ab), (by_b, pb, pa, s_ba)):
             lo, hi = np.searchsorted(mine, [s, s + m], sorter=order)
