@@ -906,12 +906,15 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
         rows = out.numpy().reshape(B * n_sl, bw * SIZE).view(np.uint8)
         rows.fill(0)  # one large memset: faster than clearing only the blocks left empty
         step = max(1, _UNPACK_BYTES // (bw * SIZE))  # blocks per unpack: its temporary stays in cache
+        spb = bw // SIZE  # x-slabs per block
+        slab_rows = rows.reshape(-1, SIZE * SIZE)
         for src, s_idx, d_idx in parts:
             src = src.numpy()
             for i in range(0, len(s_idx), step):
-                g = src[s_idx[i:i + step]]
-                nz = g.view(np.uint64).max(axis=1) != 0
-                rows[d_idx[i:i + step][nz]] = np.unpackbits(g[nz].view(np.uint8), axis=-1, bitorder="little")
+                g = src[s_idx[i:i + step]].reshape(-1, SIZE)  # x-slabs
+                nz = np.flatnonzero(g.view(np.uint64).max(axis=1))
+                dst = (d_idx[i:i + step, None] * spb + np.arange(spb)).reshape(-1)[nz]
+                slab_rows[dst] = np.unpackbits(g[nz].view(np.uint8), axis=-1, bitorder="little")
         return out
     if cpu:
         out = _POOL.empty((B * n_sl, bw), np.int64)
