@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -266,7 +267,7 @@ def cmd_table4(args) -> int:
     iters = [None if i in ("inf", "none") else int(i) for i in args.iterations]
     rows = table4(_labelled_models(args.weights), test[idx], train, tuple(args.beams), iters,
                   constrained=args.constrained, progress=lambda s: print(s, flush=True))
-    note = (f"`python -m csgnet table4 {' '.join(args.argv)}`; {len(idx)} of {len(test)} test silhouettes "
+    note = (f"`python -m csgnet table4 {shlex.join(args.argv)}`; {len(idx)} of {len(test)} test silhouettes "
             f"(seed {args.seed}); {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
     _write_table(table4_markdown(rows, note, iters), args.out)
     return 0
@@ -295,7 +296,7 @@ def cmd_table6(args) -> int:
     (label, model), = _labelled_models([args.weights] if args.weights else [])
     rows = table6(model, programs, tuple(args.beams), constrained=args.constrained,
                   progress=lambda s: print(s, flush=True))
-    note = (f"`python -m csgnet table6 {' '.join(args.argv)}`; {label}; targets: {source}, lengths "
+    note = (f"`python -m csgnet table6 {shlex.join(args.argv)}`; {label}; targets: {source}, lengths "
             f"{', '.join(map(str, lengths))}; {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
     _write_table(table6_markdown(rows, note), args.out)
     return 0
