@@ -21,7 +21,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -29,7 +28,7 @@ from .lang import Program
 from .renderer import PAD_CODE, StackMachine, primitive_cache, unpack
 from .vocab import vocabulary
 
-__all__ = ["Decoded", "greedy", "beam_search", "sample", "Sampled"]
+__all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled"]
 
 _MODES = ("improved", "reference")
 
@@ -309,8 +308,3 @@ def decode(model, targets, beam: int = 1, **kwargs) -> Decoded:
     """Greedy for ``beam == 1``, else :func:`beam_search`."""
     return greedy(model, targets, **kwargs) if beam <= 1 else beam_search(model, targets, beam, **kwargs)
 
-
-def best_of(decoded: Decoded, scores: np.ndarray, higher_is_better: bool) -> np.ndarray:
-    """Index of the best hypothesis per target by an external score ``(N, k)`` (the paper's oracle)."""
-    s = np.where(np.isnan(scores), -np.inf if higher_is_better else np.inf, scores)
-    return s.argmax(1) if higher_is_better else s.argmin(1)

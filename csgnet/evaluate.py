@@ -15,16 +15,18 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Iterable
 
 import numpy as np
 import torch
 
 from . import metrics
-from .decode import beam_search, greedy
+from .decode import Decoded, decode
 from .lang import Program
 from .renderer import render_programs, render_tokens
 
-__all__ = ["Row", "evaluate_model", "nearest_neighbour", "markdown_tables"]
+__all__ = ["Row", "evaluate_model", "nearest_neighbour", "markdown_tables", "score_renders", "score_beams",
+           "best_iou_matches"]
 
 
 @dataclass
@@ -43,7 +45,9 @@ class Row:
         return float(sum(vals[L] * self.count[L] for L in vals) / n) if n else float("nan")
 
 
-def _score(pred: torch.Tensor, target: torch.Tensor, dim: int) -> tuple[np.ndarray, np.ndarray]:
+def score_renders(pred: torch.Tensor, target: torch.Tensor, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """IoU and chamfer of rendered pairs ``(N, 64, 64[, 64])``: 2D IoU ``|A∧B| / |A∨B|`` (NaN, both empty,
+    read as 0) and the edge chamfer in pixels; 3D IoU ``/ (|A∨B| + 1)`` and chamfer NaN."""
     pred, target = pred.cpu(), target.cpu()
     if dim == 2:
         iou = np.asarray(metrics.iou(pred, target, denominator="union"), dtype=np.float64)
@@ -52,6 +56,18 @@ def _score(pred: torch.Tensor, target: torch.Tensor, dim: int) -> tuple[np.ndarr
         iou = np.asarray(metrics.iou_3d(pred, target), dtype=np.float64)
         cd = np.full(len(iou), np.nan)
     return np.nan_to_num(iou, nan=0.0), cd
+
+
+def score_beams(decoded: Decoded, targets: torch.Tensor) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
+    """Render every hypothesis of ``decoded`` and score it against its target.
+
+    Returns:
+        ``(renders (N * k, ...) bool, iou (N, k), chamfer (N, k))``.
+    """
+    n, k = decoded.tokens.shape[:2]
+    pred = render_tokens(decoded.flat_tokens(), decoded.dim, decoded.lengths.flatten())
+    iou, cd = score_renders(pred, targets.repeat_interleave(k, 0), decoded.dim)
+    return pred, iou.reshape(n, k), cd.reshape(n, k)
 
 
 def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), name: str = "model",
@@ -74,13 +90,10 @@ def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), nam
             for lo in range(0, len(progs), batch):
                 tgt = render_programs(progs[lo: lo + batch], dim)
                 t0 = time.perf_counter()
-                dec = greedy(model, tgt, mode=mode, constrained=constrained) if k == 1 else \
-                    beam_search(model, tgt, k, mode=mode, constrained=constrained)
-                pred = render_tokens(dec.flat_tokens(), dim, dec.lengths.flatten())
+                dec = decode(model, tgt, k, mode=mode, constrained=constrained)
+                _, iou, cd = score_beams(dec, tgt)
                 seconds += time.perf_counter() - t0
                 images += tgt.shape[0]
-                iou, cd = _score(pred, tgt.repeat_interleave(dec.k, 0), dim)
-                iou, cd = iou.reshape(-1, dec.k), cd.reshape(-1, dec.k)
                 ious.append(iou[:, 0])
                 cds.append(cd[:, 0])
                 if best is not None:
@@ -97,32 +110,49 @@ def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), nam
     return list(rows.values())
 
 
-def nearest_neighbour(train: list[Program], tests: dict[int, list[Program]], dim: int, chunk: int = 2048
-                      ) -> Row:
-    """The nearest-neighbour baseline: for each test target, the training render with the highest IoU."""
-    t0 = time.perf_counter()
-    targets = {L: render_programs(p, dim).reshape(len(p), -1).float() for L, p in tests.items()}
-    all_t = torch.cat(list(targets.values()))
-    t_area = all_t.sum(1)
-    best = torch.full((all_t.shape[0],), -1.0)
-    best_idx = torch.zeros(all_t.shape[0], dtype=torch.long)
-    plus = 1.0 if dim == 3 else 0.0
-    for lo in range(0, len(train), chunk):
-        tr = render_programs(train[lo: lo + chunk], dim).reshape(-1, all_t.shape[1]).float()
-        inter = all_t @ tr.T
-        union = t_area[:, None] + tr.sum(1)[None] - inter + plus
+def best_iou_matches(queries: torch.Tensor, chunks: Iterable[tuple[int, torch.Tensor]], plus: float = 0.0
+                     ) -> torch.Tensor:
+    """For each query, the index of the candidate with the highest IoU ``|A∧B| / (|A∨B| + plus)``.
+
+    Args:
+        queries: ``(N, ...)`` bool images or volumes.
+        chunks: ``(offset, candidates (M, ...) bool)`` blocks of the candidate set, in index order (one
+            matrix product per block, so the candidates never need to be in memory at once).
+        plus: 0 for the 2D IoU, 1 for the 3D one.
+
+    Returns:
+        ``(N,)`` int64 candidate indices (ties: the lowest index).
+    """
+    q = queries.reshape(len(queries), -1).float()
+    area = q.sum(1)
+    best = torch.full((len(q),), -1.0)
+    best_idx = torch.zeros(len(q), dtype=torch.long)
+    for lo, cand in chunks:
+        c = cand.reshape(len(cand), -1).float()
+        inter = q @ c.T
+        union = area[:, None] + c.sum(1)[None] - inter + plus
         iou = torch.where(union > 0, inter / union.clamp(min=1e-9), torch.zeros_like(inter))
         val, idx = iou.max(1)
         better = val > best
         best = torch.where(better, val, best)
         best_idx = torch.where(better, idx + lo, best_idx)
+    return best_idx
+
+
+def nearest_neighbour(train: list[Program], tests: dict[int, list[Program]], dim: int, chunk: int = 2048
+                      ) -> Row:
+    """The nearest-neighbour baseline: for each test target, the training render with the highest IoU."""
+    t0 = time.perf_counter()
+    order = sorted(tests)
+    targets = {L: render_programs(tests[L], dim) for L in order}
+    chunks = ((lo, render_programs(train[lo: lo + chunk], dim)) for lo in range(0, len(train), chunk))
+    best_idx = best_iou_matches(torch.cat([targets[L] for L in order]), chunks, plus=1.0 if dim == 3 else 0.0)
     row = Row("nearest neighbour")
     off = 0
-    for L, p in sorted(tests.items()):
-        n = len(p)
+    for L in order:
+        n = len(tests[L])
         nn = render_programs([train[int(i)] for i in best_idx[off: off + n]], dim)
-        tgt = render_programs(p, dim)
-        iou, cd = _score(nn, tgt, dim)
+        iou, cd = score_renders(nn, targets[L], dim)
         row.iou[L], row.chamfer[L], row.count[L] = float(iou.mean()), float(cd.mean()), n
         off += n
     row.seconds = (time.perf_counter() - t0) / max(off, 1)

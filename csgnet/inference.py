@@ -15,11 +15,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import metrics
-from .decode import beam_search, greedy
+from .decode import decode
+from .evaluate import score_beams
 from .lang import Program
 from .models import CSGNet, ModelConfig, preset
-from .renderer import render_tokens
 
 __all__ = ["InputError", "load_shape", "fit_to_canvas", "load_model", "load_pretrained", "infer", "Inference",
            "WEIGHTS", "PRETRAINED"]
@@ -258,18 +257,9 @@ def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", con
     out: list[Inference] = []
     for lo in range(0, x.shape[0], batch):
         tgt = x[lo: lo + batch]
-        dec = greedy(model, tgt, mode=mode, constrained=constrained) if beam <= 1 else \
-            beam_search(model, tgt, beam, mode=mode, constrained=constrained)
-        n, k = dec.tokens.shape[:2]
-        pred = render_tokens(dec.flat_tokens(), dim, dec.lengths.flatten()).cpu()
-        rep = tgt.cpu().repeat_interleave(k, 0)
-        if dim == 2:
-            iou = np.asarray(metrics.iou(pred, rep, denominator="union"), dtype=np.float64).reshape(n, k)
-            cd = np.asarray(metrics.chamfer(pred, rep), dtype=np.float64).reshape(n, k)
-        else:
-            iou = np.asarray(metrics.iou_3d(pred, rep), dtype=np.float64).reshape(n, k)
-            cd = np.full((n, k), np.nan)
-        iou = np.nan_to_num(iou, nan=0.0)
+        dec = decode(model, tgt, beam, mode=mode, constrained=constrained)
+        _, iou, cd = score_beams(dec, tgt)
+        n = dec.tokens.shape[0]
         texts = dec.texts()
         for i in range(n):
             if select == "likelihood":

@@ -41,10 +41,10 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
-from . import metrics
-from .decode import Decoded, beam_search, greedy
+from .decode import Decoded, beam_search, decode, greedy
+from .evaluate import best_iou_matches, score_beams, score_renders
 from .lang import Draw, Program
-from .renderer import render_programs, render_tokens
+from .renderer import render_programs
 
 __all__ = ["Table4Row", "table4", "table4_markdown", "nearest_silhouettes", "subset", "ITERATIONS",
            "Table6Row", "table6", "table6_markdown", "beam_detections", "primitive_boxes", "box_iou",
@@ -112,26 +112,13 @@ def _check_targets(targets, name: str) -> torch.Tensor:
 def nearest_silhouettes(train, targets, chunk: int = 4096) -> np.ndarray:
     """For each target ``(N, 64, 64)``, the index of the training image ``(M, 64, 64)`` with the highest
     IoU ``|A∧B| / |A∨B|`` (ties: the lowest index)."""
-    t = _check_targets(targets, "targets").reshape(-1, 4096).float()
-    tr_all = torch.as_tensor(np.asarray(train)).bool()
-    area = t.sum(1)
-    best = torch.full((len(t),), -1.0)
-    idx = torch.zeros(len(t), dtype=torch.long)
-    for lo in range(0, len(tr_all), chunk):
-        tr = tr_all[lo: lo + chunk].reshape(-1, 4096).float()
-        inter = t @ tr.T
-        union = area[:, None] + tr.sum(1)[None] - inter
-        iou = torch.where(union > 0, inter / union.clamp(min=1), torch.zeros_like(inter))
-        val, arg = iou.max(1)
-        better = val > best
-        best = torch.where(better, val, best)
-        idx = torch.where(better, arg + lo, idx)
-    return idx.numpy()
+    tr = torch.as_tensor(np.asarray(train)).bool()
+    chunks = ((lo, tr[lo: lo + chunk]) for lo in range(0, len(tr), chunk))
+    return best_iou_matches(_check_targets(targets, "targets"), chunks).numpy()
 
 
 def _scores(pred: torch.Tensor, target: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-    cd = np.asarray(metrics.chamfer(pred.cpu(), target.cpu()), dtype=np.float64)
-    iou = np.nan_to_num(np.asarray(metrics.iou(pred.cpu(), target.cpu(), denominator="union"), np.float64))
+    iou, cd = score_renders(pred, target, 2)
     return cd, iou
 
 
@@ -185,11 +172,8 @@ def table4(models: Sequence[tuple[str, torch.nn.Module]], targets, train=None, b
             t0 = time.perf_counter()
             for lo in range(0, n, batch):
                 x = tgt[lo: lo + batch]
-                dec = greedy(model, x, constrained=constrained, mode=mode) if k == 1 else \
-                    beam_search(model, x, k, constrained=constrained, mode=mode)
-                pred = render_tokens(dec.flat_tokens(), 2, dec.lengths.flatten())
-                cd, iou = _scores(pred, x.repeat_interleave(dec.k, 0))
-                cd, iou = cd.reshape(-1, dec.k), iou.reshape(-1, dec.k)
+                dec = decode(model, x, k, constrained=constrained, mode=mode)
+                _, iou, cd = score_beams(dec, x)
                 best = cd.argmin(1)  # best of k by chamfer (k = 1: the greedy program)
                 cds.append(cd[np.arange(len(cd)), best])
                 ious.append(iou[np.arange(len(cd)), best])
