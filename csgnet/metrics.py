@@ -418,7 +418,8 @@ def iou_3d(pred, target):
 # ---------------------------------------------------------------------------------------------
 # reward
 
-def reward(pred, target, gamma: float = 20.0, invalid: str = "zero", valid=None, workers: int | None = None):
+def reward(pred, target, gamma: float = 20.0, invalid: str = "zero", valid=None, workers: int | None = None,
+           return_chamfer: bool = False):
     """The RL reward ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma`` from the chamfer distance.
 
     Args:
@@ -429,9 +430,10 @@ def reward(pred, target, gamma: float = 20.0, invalid: str = "zero", valid=None,
             0. ``"reference"``: they get the reference's CD = 16, i.e. ``(1 - 16/(64 sqrt 2))**20``
             = 0.0204...
         valid: optional (N,) bool: programs marked False count as invalid whatever they render.
+        return_chamfer: also return the chamfer distances the rewards come from (one pass for both).
 
     Returns:
-        A float for one pair, else (N,) float64.
+        A float for one pair, else (N,) float64; with ``return_chamfer``, ``(reward, chamfer)``.
     """
     if invalid not in ("zero", "reference"):
         raise ValueError(f"invalid must be 'zero' or 'reference', got {invalid!r}")
@@ -450,4 +452,6 @@ def reward(pred, target, gamma: float = 20.0, invalid: str = "zero", valid=None,
             raise _shape_error("valid", f"({r.shape[0]},)", v.shape)
         penalty = 0.0 if invalid == "zero" else (1.0 - CHAMFER_PENALTY / (SIZE * math.sqrt(2.0))) ** gamma
         r = np.where(v, r, penalty)
+    if return_chamfer:
+        return (float(r[0]), float(cd[0])) if single else (r, cd)
     return float(r[0]) if single else r

@@ -29,7 +29,6 @@ code (:meth:`TargetDataModule.from_arrays`).
 """
 from __future__ import annotations
 
-import math
 import warnings
 from pathlib import Path
 
@@ -41,12 +40,12 @@ from . import metrics
 from .decode import Sampled, greedy, sample
 from .models import CSGNet, ModelConfig, preset
 from .renderer import render_tokens
+from .training import Cycle, ShardedBatches, distributed, image_grid, image_logger, set_stream_epoch
 
 __all__ = ["ReinforceModule", "TargetDataModule", "ShuffledBatches", "load_targets", "load_initial",
            "episode_rewards", "update_baseline", "policy_loss", "image_grid", "SOURCES"]
 
 SOURCES = ("silhouettes", "cad", "folder", "npz", "synthetic")
-DIAGONAL = 64 * math.sqrt(2.0)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -54,10 +53,8 @@ DIAGONAL = 64 * math.sqrt(2.0)
 
 def episode_rewards(pred, target, valid=None, gamma: float = 20.0, invalid: str = "zero",
                     workers: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Rewards and chamfer distances of a batch of rendered programs, one chamfer pass for both.
-
-    The values equal :func:`csgnet.metrics.reward` (same arguments) exactly; the chamfer distance is
-    the reference's, 16 for an empty prediction.
+    """Rewards and chamfer distances of a batch of rendered programs, one chamfer pass for both
+    (:func:`csgnet.metrics.reward` with ``return_chamfer=True``, always as arrays).
 
     Args:
         pred: ``(N, 64, 64)`` bool renders (invalid programs render empty).
@@ -70,21 +67,8 @@ def episode_rewards(pred, target, valid=None, gamma: float = 20.0, invalid: str 
     Returns:
         ``(reward (N,) float64, chamfer (N,) float64)``.
     """
-    if invalid not in ("zero", "reference"):
-        raise ValueError(f"invalid must be 'zero' or 'reference', got {invalid!r}")
-    pred = pred.cpu() if isinstance(pred, torch.Tensor) else pred
-    target = target.cpu() if isinstance(target, torch.Tensor) else target
-    cd = np.atleast_1d(np.asarray(metrics.chamfer(pred, target, workers=workers), dtype=np.float64))
-    r = np.clip(1.0 - cd / DIAGONAL, 0.0, 1.0) ** gamma
-    p = np.asarray(pred, dtype=bool).reshape(len(cd), -1)
-    bad = ~p.any(axis=1)
-    if valid is not None:
-        v = np.asarray(valid.cpu() if isinstance(valid, torch.Tensor) else valid, dtype=bool).reshape(-1)
-        if v.shape[0] != len(cd):
-            raise ValueError(f"valid must be ({len(cd)},), got {tuple(v.shape)}")
-        bad |= ~v
-    penalty = 0.0 if invalid == "zero" else (1.0 - metrics.CHAMFER_PENALTY / DIAGONAL) ** gamma
-    return np.where(bad, penalty, r), cd
+    r, cd = metrics.reward(pred, target, gamma, invalid, valid, workers, return_chamfer=True)
+    return np.atleast_1d(np.asarray(r, np.float64)), np.atleast_1d(np.asarray(cd, np.float64))
 
 
 def update_baseline(baseline: torch.Tensor, rewards: torch.Tensor, decay: float = 0.7) -> torch.Tensor:
@@ -105,17 +89,6 @@ def policy_loss(log_probs: torch.Tensor, counted: torch.Tensor, advantage: torch
                          f"{tuple(advantage.shape)} must be (N, T), (N, T) and (N,)")
     per_program = torch.where(counted, log_probs, torch.zeros_like(log_probs)).sum(1)
     return -(advantage.detach().to(per_program.dtype) * per_program).mean()
-
-
-def image_grid(targets: torch.Tensor, preds: torch.Tensor, cols: int = 4) -> torch.Tensor:
-    """A ``(1, H, W)`` float image: pairs target | prediction (black shapes on white), ``cols`` per row."""
-    targets, preds = targets.bool().cpu(), preds.bool().cpu()
-    gap = torch.ones(64, 2, dtype=torch.bool)
-    pairs = [torch.cat([a, gap, b], 1) for a, b in zip(targets, preds)]
-    rows = [torch.cat([p, torch.ones(2, p.shape[1], dtype=torch.bool)], 0) for p in pairs]
-    rows += [torch.ones_like(rows[0])] * (-len(rows) % cols)
-    grid = torch.cat([torch.cat(rows[i:i + cols], 1) for i in range(0, len(rows), cols)], 0)
-    return (~grid).float()[None]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -257,17 +230,14 @@ class ReinforceModule(L.LightningModule):
         self._rng = np.random.default_rng([int(self.hparams.seed), 1, int(self.trainer.global_step)])
 
     def on_train_epoch_start(self):
-        ds = getattr(self.trainer.train_dataloader, "dataset", None)
-        if isinstance(ds, ShuffledBatches):
-            ds.set_epoch(self.current_epoch)
+        set_stream_epoch(self.trainer, self.current_epoch)
 
     def advantage(self, rewards: torch.Tensor) -> torch.Tensor:
         """Update the running baseline with this batch's rewards ``(N,)``, then return ``R - b``."""
         mean = rewards.detach().double().mean()
         if self._trainer is not None and self.trainer.world_size > 1:
             mean = self.trainer.strategy.reduce(mean, reduce_op="mean")
-        new = self.hparams.baseline_decay * self.baseline + (1.0 - self.hparams.baseline_decay) * mean
-        self.baseline.copy_(new.detach())
+        self.baseline.copy_(update_baseline(self.baseline, mean, self.hparams.baseline_decay))
         return (rewards.double() - self.baseline).float()
 
     def rollout(self, targets: torch.Tensor):
@@ -305,18 +275,12 @@ class ReinforceModule(L.LightningModule):
         self._maybe_log_training_grid(targets, pred)
         return loss
 
-    def _experiment(self):
-        if self.logger is None:
-            return None
-        exp = getattr(self.logger, "experiment", None)
-        return exp if hasattr(exp, "add_image") else None
-
     def _maybe_log_training_grid(self, targets, pred):
         n, every = int(self.hparams.log_images), int(self.hparams.image_every_n_steps)
         step = self.global_step
         if not n or every <= 0 or step % every or step == self._last_image_step:
             return
-        exp = self._experiment()
+        exp = image_logger(self)
         if exp is None:
             return
         self._last_image_step = step
@@ -354,7 +318,7 @@ class ReinforceModule(L.LightningModule):
         self.log("val/iou", float(cat["iou"].mean()))
         self.log("val/valid", float(cat["valid"].mean()))
         self.log("val/length", float(cat["length"].mean()))
-        exp = self._experiment()
+        exp = image_logger(self)
         if exp is not None and self._grid is not None:
             exp.add_image("val/targets_vs_greedy", image_grid(*self._grid), self.global_step)
 
@@ -451,7 +415,7 @@ def load_targets(source: str, split: str, path=None) -> np.ndarray:
     return _check_images(render_programs(progs, 2).numpy(), f"{p} 2D {split}")
 
 
-class ShuffledBatches(torch.utils.data.IterableDataset):
+class ShuffledBatches(ShardedBatches):
     """``steps`` batches of ``batch`` images, reshuffled after each pass over the set (the reference's
     CAD generator). Deterministic for a seed, epoch and rank; DataLoader workers split the steps.
 
@@ -462,33 +426,13 @@ class ShuffledBatches(torch.utils.data.IterableDataset):
     def __init__(self, images: torch.Tensor, batch: int, steps: int, seed: int = 0, rank: int = 0, world: int = 1):
         if batch < 1 or steps < 1:
             raise ValueError(f"batch and steps must be positive, got {batch} and {steps}")
-        self.images, self.batch, self.steps = images, int(batch), int(steps)
-        self.seed, self.rank, self.world, self.epoch = int(seed), int(rank), int(world), 0
+        super().__init__(steps, seed, rank, world)
+        self.images, self.batch = images, int(batch)
 
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-    def __len__(self) -> int:
-        return self.steps
-
-    def __iter__(self):
-        info = torch.utils.data.get_worker_info()
-        wid, nw = (info.id, info.num_workers) if info is not None else (0, 1)
-        shard, shards = self.rank * nw + wid, self.world * nw
-        rng = np.random.default_rng([self.seed, self.epoch, shard])
-        n = len(self.images)
-        order, pos = rng.permutation(n), 0
-        for _ in range(len(range(shard, self.steps, shards))):
-            take = []
-            need = self.batch
-            while need:
-                if pos >= n:
-                    order, pos = rng.permutation(n), 0
-                k = min(need, n - pos)
-                take.append(order[pos: pos + k])
-                pos += k
-                need -= k
-            yield self.images[torch.as_tensor(np.concatenate(take))]
+    def _batches(self, steps: int, rng: np.random.Generator):
+        cycle = Cycle(len(self.images), rng)
+        for _ in range(steps):
+            yield self.images[torch.as_tensor(cycle.take(self.batch))]
 
 
 def _first(batch):
@@ -551,9 +495,7 @@ class TargetDataModule(L.LightningDataModule):
             self.val_images = self._load(self.val_split)
 
     def train_dataloader(self):
-        rank, world = 0, 1
-        if self.trainer is not None:
-            rank, world = self.trainer.global_rank, self.trainer.world_size
+        rank, world = distributed(self.trainer)
         steps = self.steps_per_epoch or max(1, len(self.train_images) // self.batch_size)
         ds = ShuffledBatches(self.train_images, self.batch_size, steps, self.seed, rank, world)
         if self.trainer is not None:

@@ -15,7 +15,6 @@
 """
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 
@@ -34,8 +33,8 @@ from .models import CSGNet, ModelConfig, preset
 from .renderer import render_tokens, stack_trace
 from .vocab import vocabulary
 
-__all__ = ["CSGDataModule", "CSGNetModule", "AtomicCheckpointIO", "MixedLengthBatches", "export_weights",
-           "DEFAULT_LENGTHS"]
+__all__ = ["CSGDataModule", "CSGNetModule", "AtomicCheckpointIO", "ShardedBatches", "MixedLengthBatches", "Cycle",
+           "export_weights", "image_grid", "DEFAULT_LENGTHS"]
 
 DEFAULT_LENGTHS = {2: [3, 5, 7, 9, 11, 13], 3: [3, 5, 7]}
 
@@ -49,24 +48,15 @@ class AtomicCheckpointIO(TorchCheckpointIO):
         atomic_write(path, lambda f: torch.save(checkpoint, f), mkdir=True)
 
 
-class MixedLengthBatches(torch.utils.data.IterableDataset):
-    """Endless-free stream of ``steps`` batches, each with ``batch // len(lengths)`` programs per length.
-
-    Programs come from per-length token tables (``tables[L]``: ``(N_L, max_len + 1)``), reshuffled
-    whenever a length's table is used up (short-program sets cycle more often, as in the reference), or
-    are sampled on the fly with :func:`csgnet.data.sample_programs` when ``tables`` is None. Each
-    DataLoader worker (and each distributed rank, through ``rank``) draws its own share of the steps
-    from its own seed; the stream is deterministic for a given seed, epoch, rank and worker count.
-
-    Yields:
-        ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded.
+class ShardedBatches(torch.utils.data.IterableDataset):
+    """Base of the batch streams: ``steps`` batches per epoch, split over distributed ranks and DataLoader
+    workers; each shard draws from its own generator seeded by ``(seed, epoch, shard)``, so the stream
+    is deterministic for a given seed, epoch, rank and worker count. Subclasses implement
+    :meth:`_batches`.
     """
 
-    def __init__(self, dim: int, lengths: list[int], batch: int, steps: int, max_len: int,
-                 tables: dict[int, torch.Tensor] | None = None, seed: int = 0, rank: int = 0, world: int = 1):
-        self.dim, self.lengths, self.steps, self.max_len = dim, list(lengths), int(steps), int(max_len)
-        self.per_length = max(1, int(batch) // len(self.lengths))
-        self.tables, self.seed, self.rank, self.world = tables, int(seed), int(rank), int(world)
+    def __init__(self, steps: int, seed: int = 0, rank: int = 0, world: int = 1):
+        self.steps, self.seed, self.rank, self.world = int(steps), int(seed), int(rank), int(world)
         self.epoch = 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -79,34 +69,76 @@ class MixedLengthBatches(torch.utils.data.IterableDataset):
         info = torch.utils.data.get_worker_info()
         wid, nw = (info.id, info.num_workers) if info is not None else (0, 1)
         shard = self.rank * nw + wid
-        shards = self.world * nw
-        steps = len(range(shard, self.steps, shards))
         rng = np.random.default_rng([self.seed, self.epoch, shard])
-        vocab = vocabulary(self.dim)
-        order = {}
-        pos = {}
+        return self._batches(len(range(shard, self.steps, self.world * nw)), rng)
+
+    def _batches(self, steps: int, rng: np.random.Generator):
+        raise NotImplementedError
+
+
+class Cycle:
+    """Indices ``0 .. n - 1`` in a random order, drawn ``k`` at a time and reshuffled whenever used up."""
+
+    def __init__(self, n: int, rng: np.random.Generator):
+        self.n, self.rng = int(n), rng
+        self.order, self.pos = rng.permutation(self.n), 0
+
+    def take(self, k: int) -> np.ndarray:
+        parts = []
+        while k:
+            if self.pos >= self.n:
+                self.order, self.pos = self.rng.permutation(self.n), 0
+            m = min(k, self.n - self.pos)
+            parts.append(self.order[self.pos: self.pos + m])
+            self.pos += m
+            k -= m
+        return np.concatenate(parts)
+
+
+def distributed(trainer) -> tuple[int, int]:
+    """``(rank, world size)`` of a trainer (``(0, 1)`` without one)."""
+    return (trainer.global_rank, trainer.world_size) if trainer is not None else (0, 1)
+
+
+def set_stream_epoch(trainer, epoch: int) -> None:
+    """Tell the training stream (a :class:`ShardedBatches`) which epoch starts, so it reseeds."""
+    ds = getattr(trainer.train_dataloader, "dataset", None)
+    if isinstance(ds, ShardedBatches):
+        ds.set_epoch(epoch)
+
+
+class MixedLengthBatches(ShardedBatches):
+    """A stream of ``steps`` batches, each with ``batch // len(lengths)`` programs per length.
+
+    Programs come from per-length token tables (``tables[L]``: ``(N_L, max_len + 1)``), reshuffled
+    whenever a length's table is used up (short-program sets cycle more often, as in the reference), or
+    are sampled on the fly with :func:`csgnet.data.sample_programs` when ``tables`` is None.
+
+    Yields:
+        ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded.
+    """
+
+    def __init__(self, dim: int, lengths: list[int], batch: int, steps: int, max_len: int,
+                 tables: dict[int, torch.Tensor] | None = None, seed: int = 0, rank: int = 0, world: int = 1):
+        super().__init__(steps, seed, rank, world)
+        self.dim, self.lengths, self.max_len = dim, list(lengths), int(max_len)
+        self.per_length = max(1, int(batch) // len(self.lengths))
+        self.tables = tables
+
+    def _batches(self, steps: int, rng: np.random.Generator):
+        stop = vocabulary(self.dim).stop
+        lengths = torch.tensor([n for n in self.lengths for _ in range(self.per_length)])
+        cycles = None if self.tables is None else {n: Cycle(self.tables[n].shape[0], rng) for n in self.lengths}
         for _ in range(steps):
             parts = []
-            for L in self.lengths:
-                if self.tables is None:
-                    rows = sample_programs(self.dim, L, self.per_length, rng)
-                    toks = torch.full((self.per_length, self.max_len + 1), vocab.stop, dtype=torch.int64)
-                    toks[:, :L] = torch.as_tensor(np.asarray(rows), dtype=torch.int64)
+            for n in self.lengths:
+                if cycles is None:
+                    toks = torch.full((self.per_length, self.max_len + 1), stop, dtype=torch.int64)
+                    toks[:, :n] = torch.as_tensor(sample_programs(self.dim, n, self.per_length, rng))
                 else:
-                    table = self.tables[L]
-                    take = []
-                    need = self.per_length
-                    while need:
-                        if L not in order or pos[L] >= len(order[L]):
-                            order[L], pos[L] = rng.permutation(table.shape[0]), 0
-                        k = min(need, len(order[L]) - pos[L])
-                        take.append(order[L][pos[L]: pos[L] + k])
-                        pos[L] += k
-                        need -= k
-                    toks = table[torch.as_tensor(np.concatenate(take))]
+                    toks = self.tables[n][torch.as_tensor(cycles[n].take(self.per_length))]
                 parts.append(toks)
-            tokens = torch.cat(parts)
-            yield tokens, torch.tensor([L for L in self.lengths for _ in range(self.per_length)])
+            yield torch.cat(parts), lengths.clone()
 
 
 def _collate_first(batch):
@@ -145,10 +177,10 @@ class CSGDataModule(L.LightningDataModule):
     def _tables(self, split: str) -> dict[int, torch.Tensor]:
         progs = load_dataset(self.data_dir, self.dim, split, self.lengths)
         out = {}
-        for L, ps in progs.items():
+        for n, ps in progs.items():
             if not ps:
-                raise ValueError(f"the {split} split of {self.data_dir!r} has no {self.dim}D programs of length {L}")
-            out[L] = ProgramDataset(ps, self.dim, max_len=self.max_len).tokens
+                raise ValueError(f"the {split} split of {self.data_dir!r} has no {self.dim}D programs of length {n}")
+            out[n] = ProgramDataset(ps, self.dim, max_len=self.max_len).tokens
         return out
 
     def setup(self, stage: str | None = None) -> None:
@@ -165,12 +197,12 @@ class CSGDataModule(L.LightningDataModule):
             rng = np.random.default_rng([self.seed, 10**6])
             vocab = vocabulary(self.dim)
             val = {}
-            for L in self.lengths:
-                rows = np.asarray(sample_programs(self.dim, L, self.val_per_length, rng))
+            for n in self.lengths:
+                rows = np.asarray(sample_programs(self.dim, n, self.val_per_length, rng))
                 t = torch.full((len(rows), self.max_len + 1), vocab.stop, dtype=torch.int64)
-                t[:, :L] = torch.as_tensor(rows)
-                val[L] = t
-        self.val_tokens = torch.cat([val[L][: self.val_per_length] for L in self.lengths])
+                t[:, :n] = torch.as_tensor(rows)
+                val[n] = t
+        self.val_tokens = torch.cat([val[n][: self.val_per_length] for n in self.lengths])
 
     def _steps(self) -> int:
         if self.steps_per_epoch:
@@ -182,9 +214,7 @@ class CSGDataModule(L.LightningDataModule):
         return max(1, total // self.batch_size)
 
     def train_dataloader(self):
-        rank, world = 0, 1
-        if self.trainer is not None:
-            rank, world = self.trainer.global_rank, self.trainer.world_size
+        rank, world = distributed(self.trainer)
         ds = MixedLengthBatches(self.dim, self.lengths, self.batch_size, self._steps(), self.max_len,
                                 self.train_tables, self.seed, rank, world)
         if self.trainer is not None:
@@ -263,10 +293,7 @@ class CSGNetModule(L.LightningModule):
         return loss
 
     def on_train_epoch_start(self):
-        dl = self.trainer.train_dataloader
-        ds = getattr(dl, "dataset", None)
-        if isinstance(ds, MixedLengthBatches):
-            ds.set_epoch(self.current_epoch)
+        set_stream_epoch(self.trainer, self.current_epoch)
 
     def on_validation_epoch_start(self):
         self._val = {"length": [], "iou": [], "chamfer": [], "valid": [], "loss": []}
@@ -306,28 +333,21 @@ class CSGNetModule(L.LightningModule):
         self.log("val/valid", float(np.concatenate(v["valid"]).mean()), sync_dist=True)
         if self.config.dim == 2:
             self.log("val/chamfer", float(cd.mean()), prog_bar=True, sync_dist=True)
-        for L in np.unique(length):
-            sel = length == L
-            self.log(f"val_iou/len{int(L):02d}", float(np.nanmean(iou[sel])), sync_dist=True)
+        for n in np.unique(length):
+            sel = length == n
+            self.log(f"val_iou/len{int(n):02d}", float(np.nanmean(iou[sel])), sync_dist=True)
             if self.config.dim == 2:
-                self.log(f"val_chamfer/len{int(L):02d}", float(cd[sel].mean()), sync_dist=True)
+                self.log(f"val_chamfer/len{int(n):02d}", float(cd[sel].mean()), sync_dist=True)
         self._log_grid()
 
     def _log_grid(self):
-        if self._grid is None or self.logger is None:
-            return
-        exp = getattr(self.logger, "experiment", None)
-        if exp is None or not hasattr(exp, "add_image"):
+        exp = image_logger(self)
+        if self._grid is None or exp is None:
             return
         tgt, pred = self._grid
         if tgt.dim() == 4:  # 3D: silhouettes along z
             tgt, pred = tgt.any(-1), pred.any(-1)
-        pairs = [torch.cat([a, torch.ones(64, 2, dtype=torch.bool), b], dim=1) for a, b in zip(tgt, pred)]
-        rows = [torch.cat([p, torch.ones(2, p.shape[1], dtype=torch.bool)], 0) for p in pairs]
-        cols = 4
-        rows += [torch.ones_like(rows[0])] * (-len(rows) % cols)
-        grid = torch.cat([torch.cat(rows[i:i + cols], 1) for i in range(0, len(rows), cols)], 0)
-        exp.add_image("val/targets_vs_predictions", (~grid).float()[None], self.global_step)
+        exp.add_image("val/targets_vs_predictions", image_grid(tgt, pred), self.global_step)
 
     def configure_optimizers(self):
         opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
@@ -335,6 +355,23 @@ class CSGNetModule(L.LightningModule):
         sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode=mode, factor=self.hparams.plateau_factor,
                                                            patience=self.hparams.plateau_patience)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": self.monitor, "interval": "epoch"}}
+
+
+def image_grid(targets: torch.Tensor, preds: torch.Tensor, cols: int = 4) -> torch.Tensor:
+    """A ``(1, H, W)`` float image: pairs target | prediction (black shapes on white), ``cols`` per row."""
+    targets, preds = targets.bool().cpu(), preds.bool().cpu()
+    gap = torch.ones(targets.shape[1], 2, dtype=torch.bool)
+    pairs = [torch.cat([a, gap, b], 1) for a, b in zip(targets, preds)]
+    rows = [torch.cat([p, torch.ones(2, p.shape[1], dtype=torch.bool)], 0) for p in pairs]
+    rows += [torch.ones_like(rows[0])] * (-len(rows) % cols)
+    grid = torch.cat([torch.cat(rows[i:i + cols], 1) for i in range(0, len(rows), cols)], 0)
+    return (~grid).float()[None]
+
+
+def image_logger(module: L.LightningModule):
+    """The module's logger experiment if it takes images (TensorBoard), else None."""
+    exp = getattr(module.logger, "experiment", None) if module.logger is not None else None
+    return exp if hasattr(exp, "add_image") else None
 
 
 def export_weights(checkpoint: str | os.PathLike, out: str | os.PathLike, half: bool = True) -> Path:
