@@ -68,7 +68,6 @@ Versions
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any
 
 import gymnasium as gym
@@ -171,7 +170,7 @@ class _Episodes:
         self.vocab = vocab
         self.V = len(vocab)
         self.stop = vocab.stop
-        self.first_op = self.V - 4  # + * - then $
+        self.first_op = vocab.num_primitives  # + * - then $
         self.kind_of = primitive_cache(cfg.dim, self.device).kinds  # (V,) int64 on the device
         self.machine = StackMachine(n, cfg.dim, cfg.max_length, self.device)
         self.tokens = np.full((n, cfg.max_length), self.stop, dtype=np.int64)
@@ -204,13 +203,17 @@ class _Episodes:
         m.broken[idx] = False
         m.stopped[idx] = False
 
+    def _allowed(self, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per episode in ``rows``: may it write a draw, an operator, the stop token (each bool) and
+        still complete a valid program within ``max_length`` tokens? All False once it has ended or
+        written an illegal token."""
+        d, t = self.depth[rows], self.steps[rows]
+        live = ~self.done[rows] & ~self.invalid[rows]
+        return live & (d <= self.cfg.max_length - t - 1), live & (d >= 2), live & (d == 1)
+
     def masks(self) -> np.ndarray:
         """``(n, V) bool``: tokens after which a valid program can still be completed."""
-        L = self.cfg.max_length
-        live = ~self.done & ~self.invalid
-        draw = live & (self.depth <= L - self.steps - 1)
-        op = live & (self.depth >= 2)
-        stop = live & (self.depth == 1)
+        draw, op, stop = self._allowed(slice(None))
         out = np.empty((self.n, self.V), dtype=bool)
         out[:, : self.first_op] = draw[:, None]
         out[:, self.first_op: self.stop] = op[:, None]
@@ -238,16 +241,16 @@ class _Episodes:
                              f"got {a[bad][:5].tolist()}")
         if self.done[rows].any():
             raise RuntimeError("step() called on an episode that has ended; call reset() first")
-        d, t = self.depth[rows], self.steps[rows]
         is_stop = a == self.stop
         is_op = (a >= self.first_op) & ~is_stop
         is_draw = a < self.first_op
-        legal = np.where(is_stop, d == 1, np.where(is_op, d >= 2, d <= L - t - 1)) & ~self.invalid[rows]
+        draw_ok, op_ok, stop_ok = self._allowed(rows)
+        legal = np.where(is_stop, stop_ok, np.where(is_op, op_ok, draw_ok))
         write = ~is_stop
         wr = rows[write]
-        self.tokens[wr, t[write]] = a[write]
+        self.tokens[wr, self.steps[wr]] = a[write]
         self.steps[wr] += 1
-        self.depth[rows] = d + is_draw - is_op
+        self.depth[rows] += is_draw.astype(np.int64) - is_op
         self.invalid[rows] |= ~legal
 
         kinds = torch.full((self.n,), PAD_CODE, dtype=torch.int64, device=self.device)
@@ -274,9 +277,7 @@ class _Episodes:
         """Batched end-of-episode rewards and IoU of the programs in ``rows``."""
         cfg = self.cfg
         idx = torch.as_tensor(rows, device=self.device)
-        pred = self.machine.result().index_select(0, idx)
-        pred = torch.where(torch.as_tensor(valid, device=self.device).view((-1,) + (1,) * (pred.dim() - 1)),
-                           pred, torch.zeros((), dtype=pred.dtype, device=pred.device))
+        pred = self.machine.result().index_select(0, idx)  # empty for an invalid program
         tgt = self.target_words.index_select(0, idx)
         inter = popcount(pred & tgt).astype(np.float64)
         union = popcount(pred | tgt).astype(np.float64)
@@ -300,25 +301,16 @@ class _Episodes:
 
     def program(self, row: int) -> str:
         """The text of episode ``row``'s tokens (:meth:`csgnet.Vocabulary.text`)."""
-        texts = _token_texts(self.cfg.dim)
-        return "".join(texts[i] for i in self.tokens[row, : self.steps[row]])
+        return self.vocab.text(self.tokens[row, : self.steps[row]])
 
     def frame(self, row: int) -> np.ndarray:
         """``(64 s, 130 s, 3) uint8``: target beside the current shape (``s = render_scale``)."""
         if self.done[row]:
-            valid = not self.invalid[row] and self.depth[row] == 1
-            words = self.machine.result()[row] if valid else torch.zeros_like(self.target_words[row])
+            words = self.machine.result()[row]  # empty for an invalid program
         else:
             words = self.machine.top(1)[row, 0]
         current = unpack(words[None], self.cfg.dim)[0].cpu().numpy()
         return _side_by_side(self.target[row], current, self.cfg.render_scale)
-
-
-@lru_cache(maxsize=None)
-def _token_texts(dim: int) -> tuple[str, ...]:
-    """Per vocabulary index, the token as :meth:`csgnet.Vocabulary.text` writes it (long 3D names)."""
-    vocab = vocabulary(dim)
-    return tuple(vocab.text([i]) for i in range(vocab.stop)) + ("",)
 
 
 def _panel(shape: np.ndarray, color: np.ndarray) -> np.ndarray:

@@ -240,11 +240,17 @@ def test_stack_observation_equals_stack_trace(invalid_action):
             trace = stack_trace(torch.tensor([toks]), 2, k=K).numpy()[:, 0]  # (T+1, K, 64, 64)
             np.testing.assert_array_equal(obs["stack"], trace[0])
             for t, a in enumerate(toks, start=1):
-                obs, _, terminated, _, _ = env.step(a)
+                obs, _, terminated, _, info = env.step(a)
                 np.testing.assert_array_equal(obs["stack"], trace[t])
                 assert obs["steps"] == t
                 if terminated:
                     break
+            # the verdict is the language's (an early end is an illegal token)
+            valid = t == len(toks) and csgnet.is_valid(V2.decode(toks))
+            assert terminated and info["valid"] == valid
+            result = csgnet.render(V2.decode(toks[:t]))[0]  # empty unless valid
+            want_iou = (result & obs["target"]).sum() / (result | obs["target"]).sum()
+            assert info["iou"] == pytest.approx(want_iou, abs=0) and (valid or info["iou"] == 0.0)
 
 
 def test_stack_observation_3d():
