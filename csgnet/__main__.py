@@ -134,29 +134,31 @@ def cmd_parse(args) -> int:
             models[dim] = load_model(weights[dim]) if weights[dim] else load_pretrained(dim)
         model = models[dim]
         res = infer(model, shape[None], beam=args.beam, select=args.select, constrained=not args.unconstrained)[0]
-        text = res.text
-        line = f"{src}: {text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
+        line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
         if dim == 2:
             line += f", chamfer {res.chamfer:.3f} px"
         if not res.valid:
             line += " (invalid program: renders empty)"
         print(line)
+        program = res.program if res.valid else None
         if args.refine:
             if dim != 2:
                 print("  refinement is for 2D programs; skipped")
-            elif res.valid:
+            elif program is not None:
                 from .refinement import refine_beams
 
                 valid = [b for b in res.beams if _is_valid(b)]
                 ref = refine_beams(valid, shape, maxiter=args.refine_iters)
-                text = ref.text
-                print(f"  refined ({len(valid)} beams): {text}\n  chamfer {res.chamfer:.3f} -> {ref.score:.3f} px")
+                program = ref.program
+                print(f"  refined ({len(valid)} beams): {ref.text}\n  chamfer {res.chamfer:.3f} -> {ref.score:.3f} px")
         stem = out / Path(src).stem
         out.mkdir(parents=True, exist_ok=True)
         from shapeio import atomic_write
 
-        atomic_write(stem.with_suffix(".txt"), text + "\n")
-        img = _render_text(text, dim)
+        from . import render
+
+        atomic_write(stem.with_suffix(".txt"), (res.text if program is None else program.text()) + "\n")
+        img = np.zeros((64,) * dim, dtype=bool) if program is None else render(program, dim)[0]
         if dim == 2:
             export.save_png(img, stem.with_suffix(".png"))
             compare = stem.with_name(stem.name + "_compare.png")
@@ -165,8 +167,8 @@ def cmd_parse(args) -> int:
         else:
             export.save_obj(img, stem.with_suffix(".obj"))
             written = [stem.with_suffix(".obj")]
-        if _is_valid(text, dim):
-            export.save_scad(parse(text, dim), stem.with_suffix(".scad"))
+        if program is not None:
+            export.save_scad(program, stem.with_suffix(".scad"))
             written.append(stem.with_suffix(".scad"))
         print("  wrote " + ", ".join(str(w) for w in written + [stem.with_suffix(".txt")]))
     return status
@@ -179,16 +181,6 @@ def _is_valid(text: str, dim: int = 2) -> bool:
         return bool(text) and is_valid(parse(text, dim))
     except ParseError:
         return False
-
-
-def _render_text(text: str, dim: int):
-    import numpy as np
-
-    from . import render
-
-    if not _is_valid(text, dim):
-        return np.zeros((64,) * dim, dtype=bool)
-    return render(text, dim)[0]
 
 
 def cmd_evaluate(args) -> int:

@@ -12,7 +12,7 @@ size that trains usefully on a 2-core CPU.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 
 import torch
 from torch import nn

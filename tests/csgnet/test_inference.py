@@ -7,7 +7,7 @@ import torch
 from PIL import Image
 
 import csgnet
-from csgnet.inference import InputError, fit_to_canvas, infer, load_model, load_pretrained, load_shape
+from csgnet.inference import InputError, fit_to_canvas, infer, load_pretrained, load_shape
 from csgnet.models import CSGNet, preset
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,5 +1,4 @@
 """CSGNet / CSGNetStack modules and their decoders."""
-import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
