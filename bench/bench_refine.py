@@ -79,18 +79,9 @@ def _plain_powell(program, target, maxiter):
     from scipy.optimize import minimize
 
     from csgnet import metrics
-    from csgnet.lang import Draw, Program
     from csgnet.renderer import render_programs
 
-    def build(v):
-        toks, i = [], 0
-        for t in program.tokens:
-            if isinstance(t, Draw):
-                toks.append(Draw(t.kind, tuple(int(a) for a in v[3 * i:3 * i + 3])))
-                i += 1
-            else:
-                toks.append(t)
-        return Program(tuple(toks), 2)
+    build = program.with_params
 
     def objective(x):
         v = np.clip(x.astype(int), 8, 56)

@@ -189,6 +189,22 @@ class Program:
     def draws(self) -> tuple[Draw, ...]:
         return tuple(t for t in self.tokens if isinstance(t, Draw))
 
+    def with_params(self, values) -> "Program":
+        """The same structure with the draws' parameters replaced, in program order, by the integers of
+        the flat sequence ``values`` (each draw takes as many as it has)."""
+        values = [int(v) for v in values]
+        need = sum(len(d.params) for d in self.draws)
+        if len(values) != need:
+            raise ValueError(f"{need} parameter values needed, got {len(values)}")
+        toks, i = [], 0
+        for t in self.tokens:
+            if isinstance(t, Draw):
+                toks.append(Draw(t.kind, tuple(values[i:i + len(t.params)])))
+                i += len(t.params)
+            else:
+                toks.append(t)
+        return Program(tuple(toks), self.dim)
+
     @property
     def is_valid(self) -> bool:
         """Every prefix has more draws than operators and the stack ends with one shape."""

@@ -279,14 +279,7 @@ class _Problem:
         return s if self.scorer.metric == "chamfer" else -s
 
     def program_of(self, v: np.ndarray) -> Program:
-        toks, i = [], 0
-        for t in self.program.tokens:
-            if isinstance(t, Draw):
-                toks.append(Draw(t.kind, tuple(int(a) for a in v[3 * i:3 * i + 3])))
-                i += 1
-            else:
-                toks.append(t)
-        return Program(tuple(toks), 2)
+        return self.program.with_params(v)
 
 
 # ---------------------------------------------------------------------------------------------

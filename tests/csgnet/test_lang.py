@@ -105,3 +105,14 @@ def test_dataset_lines_report_file_and_line():
 def test_program_rejects_mixed_dimensions():
     with pytest.raises(ValueError, match="3D primitive in a 2D program"):
         Program((Draw("p", (1, 2, 3, 4)),), 2)
+
+
+def test_with_params_replaces_draw_parameters_in_order():
+    p = parse("c(32,32,16)s(24,40,12)+t(8,8,8)-")
+    q = p.with_params([1, 2, 3, 4, 5, 6, 7, 8, 9])
+    assert q.text() == "c(1,2,3)s(4,5,6)+t(7,8,9)-"
+    assert p.with_params([v for d in p.draws for v in d.params]) == p
+    p3 = parse("cy(32,32,32,8,16)sp(32,32,32,8)+", 3)
+    assert p3.with_params(range(9)).text() == "cy(0,1,2,3,4)sp(5,6,7,8)+"
+    with pytest.raises(ValueError, match="9 parameter values needed"):
+        p.with_params([1, 2])
