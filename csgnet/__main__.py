@@ -186,7 +186,6 @@ def _is_valid(text: str, dim: int = 2) -> bool:
 def cmd_evaluate(args) -> int:
     from .data import load_dataset
     from .evaluate import evaluate_model, markdown_tables, nearest_neighbour
-    from .inference import load_model, load_pretrained
 
     tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
     tests = {L: p[: args.per_length] for L, p in tests.items()}
@@ -197,23 +196,15 @@ def cmd_evaluate(args) -> int:
             train = train[: args.nn_train]
         print(f"nearest neighbour over {len(train)} training programs ...", flush=True)
         rows.append(nearest_neighbour(train, tests, args.dim))
-    for w in args.weights or [None]:
-        model = load_model(w) if w else load_pretrained(args.dim)
+    for name, model in _labelled_models(args.weights, args.dim):
         if model.config.dim != args.dim:
-            raise SystemExit(f"error: {w} is a {model.config.dim}D model, not {args.dim}D")
-        name = ("CSGNetStack" if model.config.stack else "CSGNet") + f" ({Path(w).name if w else 'shipped'})"
+            raise SystemExit(f"error: {name} is a {model.config.dim}D model, not {args.dim}D")
         print(f"decoding with {name} ...", flush=True)
         rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
                                constrained=args.constrained)
-    note = (f"`python -m csgnet {' '.join(sys.argv[1:] if args.argv is None else args.argv)}`; beam mode "
-            f"{args.mode!r}, {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
-    table = markdown_tables(rows, args.dim, note)
-    print(table)
-    if args.out:
-        from shapeio import atomic_write
-
-        atomic_write(args.out, table, mkdir=True)
-        print(f"wrote {args.out}")
+    note = (f"`{_command(args)}`; beam mode {args.mode!r}, "
+            f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
+    _write_table(markdown_tables(rows, args.dim, note), args.out)
     return 0
 
 
@@ -225,19 +216,27 @@ def cmd_export_weights(args) -> int:
     return 0
 
 
-def _labelled_models(specs):
+def _labelled_models(specs, dim: int = 2):
+    """``(label, model)`` per ``[LABEL=]PATH`` spec; the shipped ``dim``-D model when there is none."""
     from .inference import load_model, load_pretrained
 
+    def kind(model) -> str:
+        return "CSGNetStack" if model.config.stack else "CSGNet"
+
     if not specs:
-        model = load_pretrained(2)
-        return [(("CSGNetStack" if model.config.stack else "CSGNet") + " (shipped)", model)]
+        model = load_pretrained(dim)
+        return [(f"{kind(model)} (shipped)", model)]
     out = []
     for spec in specs:
         label, sep, path = spec.rpartition("=")
         model = load_model(path)
-        out.append((label if sep else ("CSGNetStack" if model.config.stack else "CSGNet") + f" ({Path(path).name})",
-                    model))
+        out.append((label if sep else f"{kind(model)} ({Path(path).name})", model))
     return out
+
+
+def _command(args) -> str:
+    """The command line that ran, for the notes under written tables."""
+    return "python -m csgnet " + shlex.join(args.argv)
 
 
 def _write_table(text: str, out) -> None:
@@ -259,7 +258,7 @@ def cmd_table4(args) -> int:
     iters = [None if i in ("inf", "none") else int(i) for i in args.iterations]
     rows = table4(_labelled_models(args.weights), test[idx], train, tuple(args.beams), iters,
                   constrained=args.constrained, progress=lambda s: print(s, flush=True))
-    note = (f"`python -m csgnet table4 {shlex.join(args.argv)}`; {len(idx)} of {len(test)} test silhouettes "
+    note = (f"`{_command(args)}`; {len(idx)} of {len(test)} test silhouettes "
             f"(seed {args.seed}); {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
     _write_table(table4_markdown(rows, note, iters), args.out)
     return 0
@@ -288,7 +287,7 @@ def cmd_table6(args) -> int:
     (label, model), = _labelled_models([args.weights] if args.weights else [])
     rows = table6(model, programs, tuple(args.beams), constrained=args.constrained,
                   progress=lambda s: print(s, flush=True))
-    note = (f"`python -m csgnet table6 {shlex.join(args.argv)}`; {label}; targets: {source}, lengths "
+    note = (f"`{_command(args)}`; {label}; targets: {source}, lengths "
             f"{', '.join(map(str, lengths))}; {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
     _write_table(table6_markdown(rows, note), args.out)
     return 0
@@ -373,7 +372,7 @@ def main(argv=None) -> int:
     e.add_argument("--mode", choices=("improved", "reference"), default="improved")
     e.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
     e.add_argument("--out", default=None, help="write the markdown table here")
-    e.set_defaults(func=cmd_evaluate, argv=None)
+    e.set_defaults(func=cmd_evaluate)
 
     x = sub.add_parser("export-weights", help="write a training checkpoint's model as a small weights file")
     x.add_argument("checkpoint")
@@ -408,10 +407,7 @@ def main(argv=None) -> int:
     t6.set_defaults(func=cmd_table6)
 
     args = ap.parse_args(argv)
-    if args.cmd in ("table4", "table6"):
-        args.argv = list(argv)[1:] if argv is not None else sys.argv[2:]
-    if args.cmd == "evaluate":
-        args.argv = list(argv) if argv is not None else None
+    args.argv = list(argv) if argv is not None else sys.argv[1:]
     if args.cmd == "render" and args.dim is None:
         args.dim = 3 if any(h in args.program for h in ("sp(", "cu(", "cy(", "p(", "u(", "y(")) else 2
     return args.func(args)
