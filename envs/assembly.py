@@ -82,6 +82,8 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
+from ._checks import can_render, check_int, check_render_mode
+
 __all__ = [
     "COMMANDS",
     "AssemblyTarget",
@@ -290,10 +292,9 @@ class ShapeAssemblyEnv(gym.Env):
                  max_copies: int = 4, reward: str = "fscore", invalid_action: str = "ignore",
                  invalid_penalty: float = 0.1, min_size: float = 0.01, bound: float = 2.0,
                  render_mode: str | None = None, render_size: int = 256):
-        for name, v, lo in (("n_points", n_points, 2), ("max_cuboids", max_cuboids, 1), ("max_lines", max_lines, 1),
-                            ("max_copies", max_copies, 1), ("render_size", render_size, 16)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name} must be an int >= {lo}, got {v!r}")
+        self.n_points, self.max_cuboids = check_int("n_points", n_points, 2), check_int("max_cuboids", max_cuboids)
+        self.max_lines, self.max_copies = check_int("max_lines", max_lines), check_int("max_copies", max_copies)
+        self.render_size = check_int("render_size", render_size, 16)
         if reward not in REWARDS:
             raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
         if invalid_action not in INVALID_ACTIONS:
@@ -304,13 +305,9 @@ class ShapeAssemblyEnv(gym.Env):
             raise ValueError(f"min_size must lie in (0, 1], got {min_size!r}")
         if not (np.isfinite(bound) and bound > 0):
             raise ValueError(f"bound must be a positive number, got {bound!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.n_points, self.max_cuboids, self.max_lines = int(n_points), int(max_cuboids), int(max_lines)
-        self.max_copies = int(max_copies)
+        self.render_mode = check_render_mode(render_mode, self.metadata)
         self.reward_kind, self.invalid_action = reward, invalid_action
         self.invalid_penalty, self.min_size, self.bound = float(invalid_penalty), float(min_size), float(bound)
-        self.render_mode, self.render_size = render_mode, int(render_size)
         self.targets = _as_source(targets)
         M = self.max_cuboids
         self.action_space = spaces.Dict({
@@ -521,11 +518,8 @@ class ShapeAssemblyEnv(gym.Env):
     # rendering
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            gym.logger.warn("render() needs render_mode='rgb_array'")
+        if not can_render(self):
             return None
-        if not self._started:
-            raise RuntimeError("call reset() before render()")
         import cv2
 
         from shapeprog.picture import VIEW_DIRECTION

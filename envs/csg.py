@@ -83,6 +83,7 @@ from csgnet import metrics
 from csgnet.renderer import StackMachine, pack, popcount, primitive_cache, unpack
 from csgnet.vocab import PAD_CODE, vocabulary
 
+from ._checks import can_render, check_int, check_render_mode
 from .targets import Target, as_target_source
 
 __all__ = ["CSGEnv", "CSGVectorEnv", "CSGConfig"]
@@ -117,12 +118,8 @@ class CSGConfig:
             raise ValueError(f"dim must be 2 or 3, got {dim!r}")
         if max_length is None:
             max_length = 13 if dim == 2 else 7
-        if isinstance(max_length, bool) or not isinstance(max_length, (int, np.integer)) or max_length < 1:
-            raise ValueError(f"max_length must be a positive int, got {max_length!r}")
-        if stack_size is None:
-            stack_size = (int(max_length) + 1) // 2
-        if isinstance(stack_size, bool) or not isinstance(stack_size, (int, np.integer)) or stack_size < 1:
-            raise ValueError(f"stack_size must be a positive int, got {stack_size!r}")
+        max_length = check_int("max_length", max_length)
+        stack_size = check_int("stack_size", (max_length + 1) // 2 if stack_size is None else stack_size)
         if reward is None:
             reward = "chamfer" if dim == 2 else "iou"
         if reward not in REWARDS:
@@ -137,10 +134,9 @@ class CSGConfig:
             raise ValueError(f"invalid_reward must be one of {INVALID_REWARDS}, got {invalid_reward!r}")
         if invalid_action not in INVALID_ACTIONS:
             raise ValueError(f"invalid_action must be one of {INVALID_ACTIONS}, got {invalid_action!r}")
-        if isinstance(render_scale, bool) or not isinstance(render_scale, (int, np.integer)) or render_scale < 1:
-            raise ValueError(f"render_scale must be a positive int, got {render_scale!r}")
-        return cls(int(dim), int(max_length), int(stack_size), reward, float(gamma), invalid_reward,
-                   invalid_action, bool(observe_steps), int(render_scale))
+        render_scale = check_int("render_scale", render_scale)
+        return cls(int(dim), max_length, stack_size, reward, float(gamma), invalid_reward, invalid_action,
+                   bool(observe_steps), render_scale)
 
     @property
     def canvas(self) -> tuple[int, ...]:
@@ -378,9 +374,7 @@ class CSGEnv(gym.Env):
                  render_scale: int = 4, device=None):
         self.config = CSGConfig.build(dim, max_length, stack_size, reward, gamma, invalid_reward, invalid_action,
                                       observe_steps, render_scale)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.render_mode = render_mode
+        self.render_mode = check_render_mode(render_mode, self.metadata)
         self.targets = as_target_source(targets, self.config.dim, self.config.max_length)
         self._episodes = _Episodes(1, self.config, self.targets, device)
         self.action_space = spaces.Discrete(self._episodes.V)
@@ -418,12 +412,7 @@ class CSGEnv(gym.Env):
         return self._episodes.masks()[0]
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            gym.logger.warn("render() needs render_mode='rgb_array' (e.g. gymnasium.make(..., render_mode='rgb_array'))")
-            return None
-        if not self._started:
-            raise RuntimeError("call reset() before render()")
-        return self._episodes.frame(0)
+        return self._episodes.frame(0) if can_render(self) else None
 
     @property
     def program(self) -> str:
@@ -451,14 +440,10 @@ class CSGVectorEnv(VectorEnv):
                  stack_size: int | None = None, reward: str | None = None, gamma: float | None = None,
                  invalid_reward: str = "zero", invalid_action: str = "terminate", observe_steps: bool = True,
                  render_mode: str | None = None, render_scale: int = 4, device=None):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
+        self.num_envs = check_int("num_envs", num_envs)
         self.config = CSGConfig.build(dim, max_length, stack_size, reward, gamma, invalid_reward, invalid_action,
                                       observe_steps, render_scale)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.render_mode = render_mode
-        self.num_envs = int(num_envs)
+        self.render_mode = check_render_mode(render_mode, self.metadata)
         self.targets = as_target_source(targets, self.config.dim, self.config.max_length)
         self._episodes = _Episodes(self.num_envs, self.config, self.targets, device)
         self.single_action_space = spaces.Discrete(self._episodes.V)
@@ -542,12 +527,7 @@ class CSGVectorEnv(VectorEnv):
         return self._episodes.masks()
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            gym.logger.warn("render() needs render_mode='rgb_array'")
-            return None
-        if not self._started:
-            raise RuntimeError("call reset() before render()")
-        return tuple(self._episodes.frame(i) for i in range(self.num_envs))
+        return tuple(self._episodes.frame(i) for i in range(self.num_envs)) if can_render(self) else None
 
 
 def _put(infos: dict, key: str, rows: np.ndarray, values: np.ndarray, n: int) -> None:

@@ -25,6 +25,8 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 import torch
 
+from ._checks import check_int
+
 __all__ = [
     "Target",
     "TargetSource",
@@ -122,11 +124,7 @@ class SyntheticTargets:
         bad = [L for L in self.lengths if L < 3 or L % 2 == 0]
         if bad:
             raise ValueError(f"program lengths must be odd and >= 3, got {bad}")
-        if size is None:
-            size = 512 if self.dim == 2 else 64
-        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
-            raise ValueError(f"size must be a positive int, got {size!r}")
-        self.size = int(size)
+        self.size = check_int("size", (512 if self.dim == 2 else 64) if size is None else size)
         self.seed = int(seed)
         self.rules = rules
 

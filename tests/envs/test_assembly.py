@@ -191,8 +191,14 @@ def test_render_frame():
 def test_bad_arguments():
     with pytest.raises(ValueError, match="reward must be"):
         ShapeAssemblyEnv(targets=[BOX], reward="iou")
-    with pytest.raises(ValueError, match="max_cuboids"):
+    with pytest.raises(ValueError, match="max_cuboids must be a positive int, got 0"):
         ShapeAssemblyEnv(targets=[BOX], max_cuboids=0)
+    with pytest.raises(ValueError, match="n_points must be an int >= 2, got 1"):
+        ShapeAssemblyEnv(targets=[BOX], n_points=1)
+    with pytest.raises(ValueError, match="render_mode must be None or one of"):
+        ShapeAssemblyEnv(targets=[BOX], render_mode="human")
+    with pytest.raises(RuntimeError, match="reset"):
+        ShapeAssemblyEnv(targets=[BOX], render_mode="rgb_array").render()
     with pytest.raises(ValueError, match="unknown category"):
         CorpusTargets("lamp")
     env = ShapeAssemblyEnv(targets=[BOX])

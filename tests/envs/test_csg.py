@@ -199,6 +199,16 @@ def test_bad_arguments():
     env.step(V2.stop)
     with pytest.raises(RuntimeError, match="ended"):
         env.step(0)
+    with pytest.raises(ValueError, match="max_length must be a positive int, got 0"):
+        CSGEnv(max_length=0)
+    with pytest.raises(ValueError, match="num_envs must be a positive int"):
+        CSGVectorEnv(0)
+    with pytest.raises(ValueError, match="render_mode must be None or one of"):
+        CSGVectorEnv(2, render_mode="human")
+    with pytest.warns(UserWarning, match="render_mode='rgb_array'"):
+        assert env.render() is None
+    with pytest.raises(RuntimeError, match="reset"):
+        CSGVectorEnv(2, targets=_array_targets(PROGRAMS_2D, 2), render_mode="rgb_array").render()
 
 
 # ------------------------------------------------------------------------------------------------
