@@ -67,10 +67,7 @@ class ModelConfig:
             object.__setattr__(self, "stack_k", default_stack_k(self.max_len))
         if self.stack_k < 1 or self.max_len < 1 or self.hidden < 1 or self.input_pool < 1:
             raise ValueError(f"stack_k, max_len, hidden and input_pool must be positive: {self}")
-        side = 64 // self.input_pool
-        for _ in self.channels:
-            side = (side + 1) // 2 if self.dim == 3 else side // 2
-        if side < 1:
+        if self.feature_side < 1:
             raise ValueError(f"{len(self.channels)} encoder blocks leave no spatial extent of a 64-sided input")
 
     @property
@@ -78,12 +75,18 @@ class ModelConfig:
         return 1 + (self.stack_k if self.stack else 0)
 
     @property
-    def feature_size(self) -> int:
-        """Length of the flattened encoder output (2048 for both paper encoders)."""
+    def feature_side(self) -> int:
+        """Spatial side of the encoder output: each 2D block halves it (conv pad 1 keeps it), each 3D
+        block's conv (kernel 4, pad 2) adds one before the halving."""
         side = 64 // self.input_pool
         for _ in self.channels:
             side = (side + 1) // 2 if self.dim == 3 else side // 2
-        return self.channels[-1] * side ** self.dim
+        return side
+
+    @property
+    def feature_size(self) -> int:
+        """Length of the flattened encoder output (2048 for both paper encoders)."""
+        return self.channels[-1] * self.feature_side ** self.dim
 
     @property
     def vocab_size(self) -> int:
