@@ -397,14 +397,18 @@ class ShapeAssemblyEnv(gym.Env):
             points = torch.zeros(1, 3, dtype=torch.float32)
         return -float(metrics.chamfer(points, self._target_points))
 
+    def _flat_program(self, lines: list):
+        """The flat :class:`shapeprog.lang.Program` of the bbox line followed by ``lines``."""
+        from shapeprog.lang import Block, Program
+
+        return Program((Block("Program_0", (self._bbox_line, *lines)),), flat=True)
+
     @property
     def program(self) -> str:
         """The program written so far (flat ShapeAssembly text, bbox line included)."""
-        from shapeprog.lang import Block, Program, to_text
+        from shapeprog.lang import to_text
 
-        if not self._started:
-            return ""
-        return to_text(Program((Block("Program_0", (self._bbox_line, *self._lines)),), flat=True))
+        return to_text(self._flat_program(self._lines)) if self._started else ""
 
     # -------------------------------------------------------------------------------------------
     # actions
@@ -455,9 +459,9 @@ class ShapeAssemblyEnv(gym.Env):
 
     def _execute(self, lines: list) -> np.ndarray:
         from shapeprog import ParseError, execute
-        from shapeprog.lang import Block, Program, parse, to_text
+        from shapeprog.lang import parse, to_text
 
-        program = Program((Block("Program_0", (self._bbox_line, *lines)),), flat=True)
+        program = self._flat_program(lines)
         try:
             parse(to_text(program))  # the language's own checks, as for a program read from a file
             with torch.no_grad():
@@ -522,13 +526,10 @@ class ShapeAssemblyEnv(gym.Env):
             return None
         import cv2
 
-        from shapeprog.picture import VIEW_DIRECTION
+        from shapeprog.picture import _camera  # the view of shapeprog.picture.render_png
 
         S = self.render_size
-        back = np.asarray(VIEW_DIRECTION, dtype=np.float64)
-        right = np.cross([0.0, 1.0, 0.0], back)
-        right /= np.linalg.norm(right)
-        up = np.cross(back, right)
+        right, up, _ = _camera()
         scale = 0.9 * S / max(float(np.linalg.norm(self._bbox)), 1e-9)
 
         def project(p):  # (..., 3) -> (..., 2) integer pixel coordinates (x right, y down)
