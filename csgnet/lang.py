@@ -267,24 +267,34 @@ def to_text(program: Program, long: bool = True) -> str:
 # ---------------------------------------------------------------------------------------------
 # validity
 
+def _scan(tokens: Sequence[Token | str]) -> tuple[int | None, int, int]:
+    """Run the validity automaton over ``tokens``.
+
+    Returns:
+        ``(underflow, draws, ops)``: the index of the first operator that lacks two operands (``None``
+        if there is none; the scan stops there) and the draws and operators counted up to it.
+    """
+    draws = ops = 0
+    for i, t in enumerate(tokens):
+        if isinstance(t, Draw) or t == "d":
+            draws += 1
+        else:
+            ops += 1
+            if draws <= ops:
+                return i, draws, ops
+    return None, draws, ops
+
+
 def prefix_status(tokens: Sequence[Token | str]) -> str:
     """Classify a token prefix: ``"invalid"`` (some operator lacks two operands), ``"complete"`` (one
     shape on the stack) or ``"open"`` (valid so far, more than one shape on the stack, or empty).
 
     Tokens may be :class:`Draw`/:class:`Op` or type letters (``"d"`` for a draw, an operator char).
     """
-    draws = ops = 0
-    for t in tokens:
-        is_draw = isinstance(t, Draw) or t == "d"
-        if is_draw:
-            draws += 1
-        else:
-            ops += 1
-        if draws <= ops:
-            return "invalid"
-    if draws == 0:
-        return "open"
-    return "complete" if draws - 1 == ops else "open"
+    underflow, draws, ops = _scan(tokens)
+    if underflow is not None:
+        return "invalid"
+    return "complete" if draws > 0 and draws - 1 == ops else "open"
 
 
 def is_valid(program: Program | Sequence[Token]) -> bool:
@@ -379,15 +389,11 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
     if strict:
         if not tokens:
             raise ParseError("empty program", text, 0 if text else None)
-        draws = ops = 0
-        for t, p in zip(tokens, positions):
-            if isinstance(t, Draw):
-                draws += 1
-            else:
-                ops += 1
-                if draws <= ops:
-                    raise ParseError(f"stack underflow: operator {t.op!r} needs two shapes on the stack",
-                                     text, p, t.op)
+        underflow, draws, ops = _scan(tokens)
+        if underflow is not None:
+            op = tokens[underflow].op
+            raise ParseError(f"stack underflow: operator {op!r} needs two shapes on the stack",
+                             text, positions[underflow], op)
         if draws - 1 != ops:
             raise ParseError(f"unfinished program: {draws - ops} shapes left on the stack "
                              f"({draws - ops - 1} more operators needed)", text, len(text))
