@@ -15,6 +15,7 @@ from typing import Iterable
 
 import numpy as np
 
+from . import primitives as P
 from .lang import OPERATORS, STOP, Draw, Op, Program, parse
 
 __all__ = ["Vocabulary", "vocabulary", "KIND_CODES", "OP_CODES", "STOP_CODE"]
@@ -32,12 +33,12 @@ PAD_CODE = 9  # padding is a stop
 def _fits_2d(kind: str, x: int, y: int, r: int) -> bool:
     if kind == "c":
         return x - r >= 0 and y - r >= 0 and x + r <= 63 and y + r <= 63
+    # the spec's square and triangle rules bound the rasteriser's own truncated extents
     if kind == "s":
-        L = 1.412 * r
-        return all(int(c - L / 2) >= 0 and int(c + L / 2) <= 63 for c in (x, y))
-    L = 1.732 * r  # triangle
-    return (int(x - L / 2) >= 0 and int(x + L / 2) <= 63
-            and int(y - L / 1.732) >= 0 and int(y + L / (2 * 1.732)) <= 63)
+        lo_row, hi_row, lo_col, hi_col = P.square_bounds(x, y, r)
+    else:
+        hi_row, lo_row, lo_col, hi_col = P.triangle_vertices(x, y, r)
+    return lo_row >= 0 and lo_col >= 0 and hi_row <= 63 and hi_col <= 63
 
 
 def _fits_3d(kind: str, x: int, y: int, z: int, r: int, h: int | None = None) -> bool:
