@@ -4,26 +4,27 @@ from csgnet.lang import parse
 from csgnet.vocab import vocabulary
 
 
-def test_2d_vocabulary_layout():
+# (dim, size, [(token head, first index, end index) per primitive type], first tokens): spec section (a)
+LAYOUTS = [
+    (2, 400, [("c(", 0, 91), ("s(", 91, 260), ("t(", 260, 396)],
+     ("c(16,16,12)", "c(16,16,16)", "c(16,16,8)")),  # plain string sort: '12' before '16' before '8'
+    (3, 6635, [("p(", 0, 649), ("u(", 649, 1990), ("y(", 1990, 6631)], ("p(16,16,16,12)",)),
+]
+
+
+@pytest.mark.parametrize("dim,n,blocks,first", LAYOUTS)
+def test_vocabulary_layout(dim, n, blocks, first):
+    v = vocabulary(dim)
+    assert len(v) == n and v.start == n and v.stop == n - 1
+    for head, lo, hi in blocks:
+        assert all(t.startswith(head) for t in v.tokens[lo:hi]), head
+    assert v.tokens[n - 4:] == ("+", "*", "-", "$")
+    assert v.tokens[:len(first)] == first
+
+
+def test_2d_vocabulary_holds_only_primitives_inside_the_canvas():
     v = vocabulary(2)
-    assert len(v) == 400 and v.start == 400 and v.stop == 399
-    assert all(t.startswith("c(") for t in v.tokens[0:91])
-    assert all(t.startswith("s(") for t in v.tokens[91:260])
-    assert all(t.startswith("t(") for t in v.tokens[260:396])
-    assert v.tokens[396:] == ("+", "*", "-", "$")
-    # plain string sort: '12' before '16' before '8'
-    assert v.tokens[:3] == ("c(16,16,12)", "c(16,16,16)", "c(16,16,8)")
     assert "c(32,32,28)" in v.tokens and "c(32,32,32)" not in v.tokens
-
-
-def test_3d_vocabulary_layout():
-    v = vocabulary(3)
-    assert len(v) == 6635 and v.stop == 6634 and v.start == 6635
-    assert all(t.startswith("p(") for t in v.tokens[0:649])
-    assert all(t.startswith("u(") for t in v.tokens[649:1990])
-    assert all(t.startswith("y(") for t in v.tokens[1990:6631])
-    assert v.tokens[6631:] == ("+", "*", "-", "$")
-    assert v.tokens[0] == "p(16,16,16,12)"
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -31,7 +32,8 @@ def test_token_index_round_trip(dim):
     v = vocabulary(dim)
     for i, t in enumerate(v.tokens):
         assert v.index(t) == i
-    assert v.decode(v.encode(parse(v.tokens[5] + v.tokens[7] + "+", dim))).tokens == parse(v.tokens[5] + v.tokens[7] + "+", dim).tokens
+    program = parse(v.tokens[5] + v.tokens[7] + "+", dim)
+    assert v.decode(v.encode(program)) == program
 
 
 def test_encode_decode_program_and_cut_at_stop():
