@@ -105,7 +105,8 @@ def main(argv=None) -> int:
           f"{', constrained' if args.constrained else ''}): {ips:.1f} images/s")
     if not args.skip_train:
         for dim, stack, size, over, batch in [
-                (2, False, "small", {}, 96), (2, True, "small", {"input_pool": 2, "channels": [8, 16, 32]}, 96),
+                (2, False, "small", {}, 96), (2, True, "small", {}, 96),
+                (2, True, "small", {"input_pool": 2, "channels": [8, 16, 32]}, 96),
                 (2, False, "paper", {}, 100), (3, False, "small", {}, 48), (3, True, "small", {}, 48)]:
             sps = bench_train(dim, stack, size, over, batch, args.train_steps, device)
             label = f"{'CSGNetStack' if stack else 'CSGNet'} {dim}D {size}{' ' + str(over) if over else ''}"
