@@ -6,6 +6,13 @@ import gymnasium as gym
 import numpy as np
 
 
+def check_dim(dim) -> int:
+    """``dim`` as an int, or a ``ValueError`` if it is not 2 or 3."""
+    if dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+    return int(dim)
+
+
 def check_int(name: str, value, minimum: int = 1) -> int:
     """``value`` as an int, or a ``ValueError`` naming ``name`` if it is not an int >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:

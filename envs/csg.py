@@ -83,7 +83,7 @@ from csgnet import metrics
 from csgnet.renderer import StackMachine, pack, popcount, primitive_cache, unpack
 from csgnet.vocab import PAD_CODE, vocabulary
 
-from ._checks import can_render, check_int, check_render_mode
+from ._checks import can_render, check_dim, check_int, check_render_mode
 from .targets import Target, as_target_source
 
 __all__ = ["CSGEnv", "CSGVectorEnv", "CSGConfig"]
@@ -114,8 +114,7 @@ class CSGConfig:
     @classmethod
     def build(cls, dim=2, max_length=None, stack_size=None, reward=None, gamma=None, invalid_reward="zero",
               invalid_action="terminate", observe_steps=True, render_scale=4) -> "CSGConfig":
-        if dim not in (2, 3):
-            raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+        dim = check_dim(dim)
         if max_length is None:
             max_length = 13 if dim == 2 else 7
         max_length = check_int("max_length", max_length)
@@ -135,7 +134,7 @@ class CSGConfig:
         if invalid_action not in INVALID_ACTIONS:
             raise ValueError(f"invalid_action must be one of {INVALID_ACTIONS}, got {invalid_action!r}")
         render_scale = check_int("render_scale", render_scale)
-        return cls(int(dim), max_length, stack_size, reward, float(gamma), invalid_reward, invalid_action,
+        return cls(dim, max_length, stack_size, reward, float(gamma), invalid_reward, invalid_action,
                    bool(observe_steps), render_scale)
 
     @property

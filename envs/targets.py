@@ -25,7 +25,7 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 import torch
 
-from ._checks import check_int
+from ._checks import check_dim, check_int
 
 __all__ = [
     "Target",
@@ -65,27 +65,23 @@ class TargetSource(Protocol):
         ...
 
 
-def _check_dim(dim) -> int:
-    if dim not in (2, 3):
-        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
-    return int(dim)
-
-
 @lru_cache(maxsize=64)
 def _synthetic_pool(dim: int, length: int, size: int, seed: int, rules) -> tuple[np.ndarray, np.ndarray, tuple]:
     """Token indices ``(size, length) int64``, their renderings packed as ``(size, ...) uint8`` (bit ``k`` of
     byte ``j`` is pixel ``8 j + k`` of the flattened canvas) and their program texts; drawn once per
     argument set (a pure function of the arguments)."""
-    from csgnet.vocab import vocabulary
-
     from csgnet.data import sample_programs
-    from csgnet.renderer import pack, render_tokens
+    from csgnet.renderer import encode_tokens, execute
+    from csgnet.vocab import vocabulary
 
     rng = np.random.default_rng([seed, dim, length])
     pool = sample_programs(dim, length, size, rng, rules)
     pool.setflags(write=False)
-    words = torch.cat([pack(render_tokens(torch.from_numpy(pool[i:i + 256].copy()), dim))
-                       for i in range(0, size, 256)])
+    chunks = []
+    for i in range(0, size, 256):
+        ids = torch.from_numpy(pool[i:i + 256].copy())
+        chunks.append(execute(*encode_tokens(ids, dim), dim, token_ids=ids).canvas)  # packed words
+    words = torch.cat(chunks)
     packed = words.numpy().view(np.uint8).reshape(size, -1)
     packed.setflags(write=False)
     texts = tuple(vocabulary(dim).text(row) for row in pool)
@@ -115,7 +111,7 @@ class SyntheticTargets:
                  seed: int = 0, rules=None):
         from csgnet.data import TABLE2
 
-        self.dim = _check_dim(dim)
+        self.dim = check_dim(dim)
         if lengths is None:
             lengths = sorted(TABLE2[self.dim])
         self.lengths = tuple(int(L) for L in lengths)
@@ -275,7 +271,7 @@ def as_target_source(targets, dim: int, max_length: int | None = None) -> Target
         dim: the environment's dimension; the source must match it.
         max_length: the environment's longest program.
     """
-    dim = _check_dim(dim)
+    dim = check_dim(dim)
     if targets is None or (isinstance(targets, str) and targets == "synthetic"):
         from csgnet.data import TABLE2
 
