@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .geometry import CORNER_SIGNS, cuboid_corners, mesh_arrays
+from .geometry import corners_unchecked, cuboid_corners, mesh_arrays
 from .lang import AXES, NUM_FIELDS, Attach, Cuboid, Program, Reflect, Squeeze, Translate, numbers, statement_lines
 
 __all__ = ["ExecutedShape", "ExecutionPlan", "execute", "execute_batch", "program_parameters", "parameter_names"]
@@ -135,8 +135,7 @@ def _compile_block(block, offset: int, lines: list[int]) -> tuple[_BlockCode, in
     ops: list = []
     records: list[list[tuple[int, int]]] = []  # per slot: (op index, role)
     move_atts: list[list[int]] = []  # per slot: op indices where it was the subject
-    op_src: list = []  # per attach op index: its src affine form (for macros)
-    n_att = [0]
+    att_ops: list[_AttachOp] = []  # attach op j is att_ops[j]
     p = offset
     levels: list[int] = []
     last_w: dict[int, int] = {}
@@ -164,19 +163,19 @@ def _compile_block(block, offset: int, lines: list[int]) -> tuple[_BlockCode, in
         return slots[name]
 
     def attach(a, b, src, tgt, macro=None):
-        j = n_att[0]
+        j = len(att_ops)
         n = len(records[a])
         if aligned[a]:
             mode = FIRST if n == 0 else ALIGNED
         else:
             mode = FIRST if n == 0 else SECOND if n == 1 else GENERAL
-        ops.append(("attach", _AttachOp(a, b, mode, src, tgt, list(records[a]), macro, j)))
+        op = _AttachOp(a, b, mode, src, tgt, list(records[a]), macro, j)
+        ops.append(("attach", op))
+        att_ops.append(op)
         schedule(a, (b,) if macro is None else (b, macro[1], 0))
         records[b].append((j, 1))
         records[a].append((j, 0))
         move_atts[a].append(j)
-        op_src.append(src)
-        n_att[0] += 1
 
     new_slot("bbox", None, True, lines[0])
     for si, s in enumerate(block.statements):
@@ -234,8 +233,8 @@ def _compile_block(block, offset: int, lines: list[int]) -> tuple[_BlockCode, in
                 ops.append(("copy", new, A))
                 schedule(new, (A,))
                 for j in list(move_atts[A]):
-                    op = _find_attach(ops, j)
-                    c0, c1, ix = op_src[j]
+                    op = att_ops[j]
+                    c0, c1, ix = op.src
                     if isinstance(s, Reflect):
                         c0 = tuple(1.0 - c0[d] if d == k else c0[d] for d in range(3))
                         c1 = tuple(-c1[d] if d == k else c1[d] for d in range(3))
@@ -251,21 +250,10 @@ def _compile_block(block, offset: int, lines: list[int]) -> tuple[_BlockCode, in
     return _BlockCode(block.name, names, init_dims, ops, steps, slot_line, slot_source, slot_axis, child_names), p
 
 
-def _find_attach(ops, j):
-    n = -1
-    for kind, *rest in ops:
-        if kind == "attach":
-            n += 1
-            if n == j:
-                return rest[0]
-    raise IndexError(j)
-
-
 @dataclass
 class _Compiled:
     """Static structure of one program."""
 
-    program: Program
     blocks: list[_BlockCode]
     n_params: int
     instances: list = field(default_factory=list)  # BFS: (block idx, parent inst, parent slot, flip axis)
@@ -278,7 +266,7 @@ def _compile(program: Program) -> _Compiled:
     for b, block_lines in zip(program.blocks, lines):
         code, off = _compile_block(b, off, block_lines)
         blocks.append(code)
-    comp = _Compiled(program, blocks, off)
+    comp = _Compiled(blocks, off)
     index = {b.name: i for i, b in enumerate(program.blocks)}
     comp.leaf_slots = [[s for s in range(1, len(c.slots)) if _child_of(c, s, index)[0] is None] for c in blocks]
     # breadth-first instances; an instance = one placement of a block
@@ -345,12 +333,6 @@ def _point(pos, dims, ax, coords):
 def _point_c(pos, dims, ax, centred):
     """:func:`_point` of ``centred = coords - 0.5`` (computed once where a point is used often)."""
     return pos + torch.bmm((centred * dims).unsqueeze(1), ax).squeeze(1)
-
-
-def _corners(pos, dims, ax):
-    """Corners (n, 8, 3) of cuboids, as :func:`cuboid_corners` without its argument checks."""
-    signs = CORNER_SIGNS.to(device=dims.device, dtype=dims.dtype)
-    return pos[:, None, :] + (signs[None] * (0.5 * dims)[:, None, :]) @ ax
 
 
 def _to_local(pos, dims, ax, pts):
@@ -555,7 +537,7 @@ def _rule_aligned(pos, dims, ax, posB, dimsB, axB):
         n = pos.shape[0]
         both = torch.cat([pos, posB]), torch.cat([dims, dimsB]), torch.cat([ax, axB])
         other = torch.cat([posB, pos]), torch.cat([dimsB, dims]), torch.cat([axB, ax])
-        u = _to_local(*other, _corners(*both))
+        u = _to_local(*other, corners_unchecked(*both))
         inside = ((u >= 0) & (u <= 1)).all(-1).any(-1)
         idx = (~(inside[:n] | inside[n:])).nonzero().flatten()
     if idx.numel() == 0:

@@ -60,6 +60,11 @@ def cuboid_corners(centers: torch.Tensor, dims: torch.Tensor, axes: torch.Tensor
     _check("centers", centers, (None, 3))
     _check("dims", dims, (centers.shape[0], 3))
     _check("axes", axes, (centers.shape[0], 3, 3))
+    return corners_unchecked(centers, dims, axes)
+
+
+def corners_unchecked(centers: torch.Tensor, dims: torch.Tensor, axes: torch.Tensor) -> torch.Tensor:
+    """:func:`cuboid_corners` without the argument checks, for callers that built the tensors."""
     signs = CORNER_SIGNS.to(device=dims.device, dtype=dims.dtype)
     # (L, 8, 3) local offsets, then rotate: offset @ axes (rows are axis vectors).
     local = signs[None] * (0.5 * dims)[:, None, :]
