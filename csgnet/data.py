@@ -67,7 +67,7 @@ import json
 import math
 import platform
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -78,7 +78,7 @@ import torch
 from shapeio import atomic_write
 
 from .lang import Program, parse_lines
-from .renderer import popcount, primitive_cache
+from .renderer import StackMachine, encode_tokens, popcount, primitive_cache
 from .vocab import KIND_CODES, OP_CODES, vocabulary
 
 __all__ = [
@@ -153,8 +153,6 @@ class Rules:
 
     def resolved(self, dim: int) -> "Rules":
         """These rules with the per-dimension defaults filled in."""
-        from dataclasses import replace
-
         return replace(self,
                        op_weights=self.op_weights if self.op_weights is not None else _OP_WEIGHTS[dim],
                        min_pixels=self.min_pixels if self.min_pixels is not None else (100 if dim == 2 else 1000),
@@ -223,17 +221,27 @@ def _type_tables(dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return first, count, ops
 
 
+def _weights(w) -> np.ndarray:
+    return np.asarray(w) / sum(w)
+
+
+def _draw_primitives(dim: int, rules: Rules, shape, rng: np.random.Generator) -> np.ndarray:
+    """Vocabulary indices of random primitives, ``shape`` of them: a type drawn with ``type_weights``,
+    then a primitive of that type uniformly."""
+    first, count, _ = _type_tables(dim)
+    types = rng.choice(3, size=shape, p=_weights(rules.type_weights))
+    u = rng.random(shape)
+    return first[types] + np.minimum((u * count[types]).astype(np.int64), count[types] - 1)
+
+
 def _draw_candidates(dim: int, length: int, rules: Rules, size: int, rng: np.random.Generator) -> np.ndarray:
     """(size, length) int64 token indices of random valid programs (not yet checked against the rules)."""
     n = (length + 1) // 2
     patterns = _tree_patterns(n)
-    first, count, ops = _type_tables(dim)
+    ops = _type_tables(dim)[2]
     mask = patterns[rng.integers(len(patterns), size=size)]
-    tw = np.asarray(rules.type_weights) / sum(rules.type_weights)
-    ow = np.asarray(rules.op_weights) / sum(rules.op_weights)
-    types = rng.choice(3, size=(size, n), p=tw)
-    prims = first[types] + np.minimum((rng.random((size, n)) * count[types]).astype(np.int64), count[types] - 1)
-    opers = ops[rng.choice(3, size=(size, n - 1), p=ow)]
+    prims = _draw_primitives(dim, rules, (size, n), rng)
+    opers = ops[rng.choice(3, size=(size, n - 1), p=_weights(rules.op_weights))]
     tokens = np.empty((size, length), dtype=np.int64)
     tokens[mask] = prims.ravel()  # boolean assignment fills row-major: each row has n draws
     tokens[~mask] = opers.ravel()
@@ -251,8 +259,6 @@ def check_programs(tokens: np.ndarray | torch.Tensor, dim: int, rules: Rules | N
     Returns:
         (B,) bool.
     """
-    from .renderer import StackMachine, encode_tokens
-
     rules = (rules or Rules()).resolved(dim)
     tokens = torch.as_tensor(np.asarray(tokens), dtype=torch.int64)
     if tokens.dim() != 2:
@@ -275,6 +281,10 @@ def check_programs(tokens: np.ndarray | torch.Tensor, dim: int, rules: Rules | N
     return ok
 
 
+def _result_count(a: np.ndarray, b: np.ndarray, ab: np.ndarray, op: np.ndarray) -> np.ndarray:
+    """``ON(op(A, B))`` from ``ON(A)``, ``ON(B)``, ``ON(A & B)`` and the operator kind codes."""
+    return np.where(op == OP_CODES["+"], a + b - ab, np.where(op == OP_CODES["*"], ab, a - ab))
+
 
 def _op_passes(a: np.ndarray, b: np.ndarray, ab: np.ndarray, op: np.ndarray, rules: Rules) -> np.ndarray:
     """Rule (b) for operations ``op(A, B)`` given ``ON(A)``, ``ON(B)``, ``ON(A & B)`` and the operator
@@ -286,7 +296,7 @@ def _op_passes(a: np.ndarray, b: np.ndarray, ab: np.ndarray, op: np.ndarray, rul
         return np.where(union, (a_only >= tau) & (b_only >= tau),
                         np.where(inter, (a_only >= tau) & (b_only >= tau) & (ab >= tau),
                                  (ab >= tau) & (a_only >= tau)))
-    result = np.where(union, a + b - ab, np.where(inter, ab, a_only))
+    result = _result_count(a, b, ab, op)
     return np.where(union | inter, a + b - result >= tau, a - result >= tau)
 
 
@@ -303,15 +313,12 @@ class _Builder:
 
     def __init__(self, dim: int, rules: Rules, rng: np.random.Generator):
         self.dim, self.rules, self.rng = dim, rules, rng
-        self.first, self.count, self.ops = _type_tables(dim)
-        self.tw = np.asarray(rules.type_weights) / sum(rules.type_weights)
-        self.ow = np.asarray(rules.op_weights) / sum(rules.op_weights)
+        self.ops = _type_tables(dim)[2]
+        self.ow = _weights(rules.op_weights)
         self.pools: dict[int, list] = {}
 
     def _primitives(self, m: int):
-        types = self.rng.choice(3, size=m, p=self.tw)
-        u = self.rng.random(m)
-        idx = self.first[types] + np.minimum((u * self.count[types]).astype(np.int64), self.count[types] - 1)
+        idx = _draw_primitives(self.dim, self.rules, m, self.rng)
         canvas = primitive_cache(self.dim, "cpu").get(torch.from_numpy(idx))
         return [idx[:, None], canvas, popcount(canvas), np.zeros(m, dtype=np.int64)]
 
@@ -357,12 +364,8 @@ class _Builder:
             ab = popcount(la & ra)
             good = _op_passes(left[2], right[2], ab, code, self.rules)
             g = torch.from_numpy(good)
-            res = torch.where(torch.from_numpy(code == OP_CODES["+"]).view((-1,) + (1,) * (la.dim() - 1)), la | ra,
-                              torch.where(torch.from_numpy(code == OP_CODES["*"]).view((-1,) + (1,) * (la.dim() - 1)),
-                                          la & ra, la & ~ra))[g]
-            a, b = left[2][good], right[2][good]
-            ab_g, code_g = ab[good], code[good]
-            cnt = np.where(code_g == OP_CODES["+"], a + b - ab_g, np.where(code_g == OP_CODES["*"], ab_g, a - ab_g))
+            res = _combine(la[g], ra[g], code[good])
+            cnt = _result_count(left[2][good], right[2][good], ab[good], code[good])
             tokens = np.concatenate([left[0][good], right[0][good], op[good][:, None]], axis=1)
             self._give_back(k, [tokens, res, cnt, np.zeros(len(cnt), dtype=np.int64)])
             bad = ~good
@@ -372,6 +375,17 @@ class _Builder:
                 kb = bad.copy()
                 kb[bad] = keep
                 self._give_back(jj, [side[0][kb], side[1][torch.from_numpy(kb)], side[2][kb], fails[keep]])
+
+
+def _combine(a: torch.Tensor, b: torch.Tensor, code: np.ndarray) -> torch.Tensor:
+    """Packed canvases ``op(a[i], b[i])`` for the operator kind codes ``code``; ``a``, ``b``: (N, *C)."""
+    out = torch.empty_like(a)
+    for op, fn in ((OP_CODES["+"], torch.bitwise_or), (OP_CODES["*"], torch.bitwise_and),
+                   (OP_CODES["-"], lambda x, y: x & ~y)):
+        rows = torch.from_numpy(np.flatnonzero(code == op))
+        if len(rows):
+            out[rows] = fn(a[rows], b[rows])
+    return out
 
 
 def sample_programs(dim: int, length: int, n: int, rng: np.random.Generator, rules: Rules | None = None,
