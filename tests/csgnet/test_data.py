@@ -1,7 +1,6 @@
 import collections
 import math
 import shutil
-import warnings
 
 import numpy as np
 import pytest
@@ -19,7 +18,7 @@ from csgnet.data import (
     sample_programs,
     split_sizes,
 )
-from csgnet.lang import Draw, Node, Program
+from csgnet.lang import Draw, Program
 from csgnet.render_np import render_np
 from csgnet.vocab import vocabulary
 
