@@ -11,7 +11,7 @@ Measured in one run on the same machine, with the same random policy and the sam
 The policy samples a token kind uniformly among those the action mask allows (draw, operator, stop),
 then a token of that kind uniformly, and with probability ``--eps`` (default 0.05) any token at all (so
 some episodes end early on an invalid token). Only the environment and policy steps are timed; the
-synthetic target pool is drawn before timing.
+synthetic target pool is drawn before timing (its drawing time per length is printed first).
 
 Also timed: the end-of-episode reward alone (2D: :func:`csgnet.metrics.reward` called once per episode
 against one batched call over the same ``N`` pairs), and ``ShapeAssembly-v0`` steps with random lines.
@@ -80,7 +80,13 @@ def bench_csg(dim: int, n: int, seconds: float, eps: float, device: str) -> None
     from envs.csg import CSGEnv, CSGVectorEnv
     from envs.targets import SyntheticTargets
 
-    src = SyntheticTargets(dim).prepare()  # draw the pool before timing
+    src = SyntheticTargets(dim)
+    print(f"\n{dim}D synthetic target pool ({src.size} programs per length, drawn before the episodes are timed):")
+    for i, length in zip(range(0, len(src), src.size), src.lengths):
+        t0 = time.perf_counter()
+        src.tokens(i)  # draws and renders the pool of this length
+        dt = time.perf_counter() - t0
+        print(f"  length {length}: {dt:.1f} s, {1000 * dt / src.size:.1f} ms per program")
     single = CSGEnv(dim=dim, targets=src, device=device)
     sync = gym.vector.SyncVectorEnv([lambda: CSGEnv(dim=dim, targets=src, device=device) for _ in range(n)])
     vec = CSGVectorEnv(n, dim=dim, targets=src, device=device)
@@ -105,7 +111,6 @@ def bench_csg(dim: int, n: int, seconds: float, eps: float, device: str) -> None
 
 def bench_reward(n: int, repeats: int) -> None:
     """2D reward: n per-episode calls against one batched call, same pairs."""
-    import csgnet
     from csgnet import metrics
     from envs.targets import SyntheticTargets
 
@@ -114,7 +119,6 @@ def bench_reward(n: int, repeats: int) -> None:
     targets = np.stack([src.sample(rng).shape for _ in range(n)])
     preds = np.stack([src.sample(rng).shape for _ in range(n)])
     preds[: n // 4] = targets[: n // 4]  # some perfect programs
-    del csgnet
     t_loop = t_batch = float("inf")
     for _ in range(repeats):
         t0 = time.perf_counter()

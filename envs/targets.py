@@ -91,18 +91,17 @@ def _synthetic_pool(dim: int, length: int, size: int, seed: int, rules) -> tuple
 class SyntheticTargets:
     """Targets rendered from synthetic programs (:func:`csgnet.data.sample_programs`).
 
-    Drawing a rule-abiding program takes tens of milliseconds (2D, length 13) to a third of a second
-    (3D, length 7), far more than an RL step, so the source draws a fixed pool of ``size`` distinct
-    programs per length once (deterministically from ``seed``, on the first episode, and shared by
-    every source with the same arguments in the process); each episode then picks a length uniformly
-    and a program of that length uniformly with the environment's generator.
+    Drawing a rule-abiding program costs as much as a whole episode of the vector environment or more
+    (``python bench/bench_envs.py --threads 1`` prints the cost per length), so the source draws a fixed
+    pool of ``size`` distinct programs per length once (deterministically from ``seed``, on the first
+    episode, and shared by every source with the same arguments in the process); each episode then
+    picks a length uniformly and a program of that length uniformly with the environment's generator.
 
     Args:
         dim: 2 or 3.
         lengths: program lengths to draw (odd; default every synthetic length of ``dim``: 3-13 in 2D,
             3-7 in 3D).
-        size: programs per length in the pool (default 512 in 2D, 64 in 3D: about one second of
-            sampling per length on one core).
+        size: programs per length in the pool (default 512 in 2D, 64 in 3D).
         seed: the pool's seed (the pool is the same for every environment seed).
         rules: :class:`csgnet.data.Rules` of the sampler (default rules if None).
     """

@@ -75,7 +75,7 @@ def test_replaying_a_program_rebuilds_its_cuboids():
     np.testing.assert_allclose(obs["cuboids"][:n], expected, atol=2e-6)
     obs, reward, terminated, _, info = env.step(_action(0))
     assert terminated and reward == 0.0
-    assert total == pytest.approx(info["score"]) and info["score"] > 0.8
+    assert total == pytest.approx(info["score"]) and 0.8 < info["score"] < 1.0  # 1 only without sampling noise
     # the same program, up to the float32 precision of the action's numbers
     assert to_text(parse(info["program"]), decimals=5) == to_text(parse(EX0), decimals=5)
     # the target cloud lies on the target's surface: every point is inside (or on) a cuboid
