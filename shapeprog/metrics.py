@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from shapeprog.geometry import CORNER_SIGNS
-from shapeprog.sampling import check_corners, lattice_voxelize
+from shapeprog.sampling import check_corners, lattice_voxelize, numpy_corners
 
 __all__ = [
     "nearest_neighbors",
@@ -492,23 +492,13 @@ def _ground_corners(corners: np.ndarray) -> np.ndarray:
     return (np.array([0.0, low - 0.005, 0.0]) + _SIGNS * half)[None]
 
 
-def _as_numpy_corners(corners) -> np.ndarray:
-    """Validated float64 corners from a floating-point tensor or any array-like (cast to float64)."""
-    if isinstance(corners, torch.Tensor):
-        corners = check_corners(corners).detach().cpu().numpy()
-    corners = check_corners(np.asarray(corners, dtype=np.float64), arrays=True)
-    if corners.shape[0] == 0:
-        raise ValueError("`corners` holds no cuboid (L = 0)")
-    return corners
-
-
 def contact_graph(corners, tolerance: float = 0.02, surface: bool = True) -> np.ndarray:
     """Adjacency ``(L + 1, L + 1) bool`` of parts and the ground (last node).
 
     Two parts, or a part and the ground box, are adjacent when their minimum distance is below
     ``tolerance`` times the diagonal of the shape's axis-aligned bounding box.
     """
-    corners = _as_numpy_corners(corners)
+    corners = numpy_corners(corners)
     flat = corners.reshape(-1, 3)
     scale = float(np.linalg.norm(flat.max(0) - flat.min(0)))
     dist = box_distances(np.concatenate([corners, _ground_corners(corners)]), surface=surface)
@@ -631,7 +621,7 @@ def stability(
     """
     if inertia not in ("identity", "box"):
         raise ValueError(f"`inertia` must be 'identity' or 'box', got {inertia!r}")
-    corners = _as_numpy_corners(corners)
+    corners = numpy_corners(corners)
     adj = contact_graph(corners, contact_tolerance, surface)
     if not _rooted(adj).all():
         return False

@@ -58,6 +58,17 @@ def check_corners(corners, name: str = "corners", where=None, arrays: bool = Fal
     return corners
 
 
+def numpy_corners(corners) -> np.ndarray:
+    """Validated ``(L, 8, 3)`` float64 NumPy corners of at least one cuboid, from a floating-point
+    tensor or any array-like (cast to float64); errors as :func:`check_corners`, and for ``L = 0``."""
+    if isinstance(corners, torch.Tensor):
+        corners = check_corners(corners).detach().cpu().numpy()
+    corners = check_corners(np.asarray(corners, dtype=np.float64), arrays=True)
+    if corners.shape[0] == 0:
+        raise ValueError("`corners` holds no cuboid (L = 0)")
+    return corners
+
+
 def _triangles(corners: torch.Tensor) -> torch.Tensor:
     """Triangle vertices ``(12 L, 3, 3)`` of cuboids ``(L, 8, 3)`` in the specification's face order."""
     tri = torch.as_tensor(CUBOID_TRIANGLES, dtype=torch.long, device=corners.device)

@@ -49,7 +49,7 @@ Example:
     >>> from shapeprog.geometry import cuboid_corners
     >>> box = cuboid_corners(torch.zeros(1, 3), torch.tensor([[2.0, 1.0, 1.0]]), torch.eye(3)[None])
     >>> img = silhouette(box, "front", size=16, margin=0)
-    >>> int(img.sum()), img[4:12].all()  # 16 x 8 pixels, rows 4..11
+    >>> int(img.sum()), bool(img[4:12].all())  # 16 x 8 pixels, rows 4..11
     (128, True)
 """
 from __future__ import annotations
@@ -58,6 +58,8 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+
+from .sampling import numpy_corners
 
 __all__ = ["VIEWS", "SPLITS", "Silhouettes", "silhouette", "silhouettes", "split_ids", "build", "write"]
 
@@ -72,19 +74,6 @@ MIN_WIDTH = 1.0
 
 # per view: (screen-right axis, sign), (screen-up axis, sign) in the ShapeAssembly frame
 _VIEW_AXES = {"front": ((0, 1.0), (1, 1.0)), "side": ((2, -1.0), (1, 1.0))}
-
-
-def _as_numpy(corners) -> np.ndarray:
-    if type(corners).__module__.startswith("torch"):
-        corners = corners.detach().cpu().numpy()
-    c = np.asarray(corners, dtype=np.float64)
-    if c.ndim != 3 or c.shape[1:] != (8, 3):
-        raise ValueError(f"corners must have shape (L, 8, 3), got {c.shape}")
-    if len(c) == 0:
-        raise ValueError("a shape needs at least one cuboid, got corners of shape (0, 8, 3)")
-    if not np.isfinite(c).all():
-        raise ValueError("corners contain non-finite values")
-    return c
 
 
 def _project(c: np.ndarray, view: str) -> np.ndarray:
@@ -110,7 +99,7 @@ def silhouette(corners, view: str, size: int = SIZE, margin: int = MARGIN) -> np
     """
     if size < 1 or not 0 <= 2 * margin < size:
         raise ValueError(f"need size >= 1 and 0 <= margin < size / 2, got size={size}, margin={margin}")
-    c = _as_numpy(corners)
+    c = numpy_corners(corners)
     pts = _project(c, view)  # (L, 8, 2)
     lo, hi = pts.reshape(-1, 2).min(axis=0), pts.reshape(-1, 2).max(axis=0)
     extent = float((hi - lo).max())

@@ -165,7 +165,9 @@ def test_bad_input():
         S.silhouette(np.zeros((8, 3)), "front")
     with pytest.raises(ValueError, match="unknown view 'top'"):
         S.silhouette(boxes([0, 0, 0], [1, 1, 1]), "top")
-    with pytest.raises(ValueError, match="non-finite"):
+    with pytest.raises(ValueError, match="NaN or infinite"):
         S.silhouette(np.full((1, 8, 3), np.nan), "front")
+    with pytest.raises(ValueError, match=r"no cuboid \(L = 0\)"):
+        S.silhouette(np.zeros((0, 8, 3)), "side")
     with pytest.raises(ValueError, match="margin < size / 2"):
         S.silhouette(boxes([0, 0, 0], [1, 1, 1]), "front", size=8, margin=4)
