@@ -22,8 +22,8 @@ then forms four float64 copies of 64x64 arrays per pair. Here:
 2. **Edges and distances** are the reference's own calls, ``cv2.Canny(img, 1, 3)`` and
    ``cv2.distanceTransform(255 - E, DIST_L2, 3)``, one per image, written straight into preallocated
    arrays, optionally on several threads (OpenCV releases the GIL). Both cost about 2.5 ns per
-   pixel whatever the image size, so tiling images into one large call saves nothing; the 3x3
-   transform cannot be tiled anyway (its float sums depend on the path order, and distances would
+   pixel whatever the image size (a one-off measurement while developing, not printed by a script),
+   so tiling images into one large call saves nothing; the 3x3 transform cannot be tiled anyway (its float sums depend on the path order, and distances would
    leak between tiles).
 3. **Combination.** ``sum(D1 * E2)`` is ``255 * (D1 . [E2 > 0])``: each pair gathers the distances
    of one image at the other's edge pixels (a few hundred values, not 4096) and sums the float32
@@ -62,7 +62,6 @@ IOU_DENOMINATORS = ("union", "union+1")
 _IMAGE_BLOCK = 256  # images per block of OpenCV calls in chamfer (scratch arrays stay small)
 
 
-
 # ---------------------------------------------------------------------------------------------
 # input handling
 
@@ -70,7 +69,7 @@ def _is_torch(a) -> bool:
     return type(a).__module__.startswith("torch")
 
 
-def _as_bool_numpy(a, name: str) -> np.ndarray:
+def _as_bool_numpy(a) -> np.ndarray:
     if _is_torch(a):
         a = a.detach().cpu().numpy()
     a = np.asarray(a)
@@ -101,7 +100,7 @@ def edges(images, chunk: int = 1024) -> np.ndarray:
     Returns:
         (N, 64, 64) bool (or (64, 64)).
     """
-    a = _as_bool_numpy(images, "images")
+    a = _as_bool_numpy(images)
     _check_2d(a, "images")
     single = a.ndim == 2
     if single:
@@ -229,8 +228,8 @@ def chamfer(pred, target, workers: int | None = None, chunk: int = 2048):
     Raises:
         ValueError: if the shapes are not (64, 64) / (N, 64, 64) or do not match.
     """
-    p = _as_bool_numpy(pred, "pred")
-    t = _as_bool_numpy(target, "target")
+    p = _as_bool_numpy(pred)
+    t = _as_bool_numpy(target)
     _check_2d(p, "pred")
     _check_2d(t, "target")
     single = p.ndim == 2 and t.ndim == 2
@@ -418,6 +417,11 @@ def iou_3d(pred, target):
 # ---------------------------------------------------------------------------------------------
 # reward
 
+def _shaped_reward(cd, gamma: float):
+    """``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma``."""
+    return np.clip(1.0 - cd / (SIZE * math.sqrt(2.0)), 0.0, 1.0) ** gamma
+
+
 def reward(pred, target, gamma: float = 20.0, invalid: str = "zero", valid=None, workers: int | None = None,
            return_chamfer: bool = False):
     """The RL reward ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma`` from the chamfer distance.
@@ -440,17 +444,17 @@ def reward(pred, target, gamma: float = 20.0, invalid: str = "zero", valid=None,
     cd = chamfer(pred, target, workers=workers)
     single = np.ndim(cd) == 0
     cd = np.atleast_1d(np.asarray(cd, np.float64))
-    r = np.clip(1.0 - cd / (SIZE * math.sqrt(2.0)), 0.0, 1.0) ** gamma
+    r = _shaped_reward(cd, gamma)
     if invalid == "zero":
-        p = _as_bool_numpy(pred, "pred")
+        p = _as_bool_numpy(pred)
         p = p[None] if p.ndim == 2 else p
         empty = ~p.reshape(p.shape[0], -1).any(axis=1)
         r = np.where(empty, 0.0, r)
     if valid is not None:
-        v = _as_bool_numpy(valid, "valid").reshape(-1)
+        v = _as_bool_numpy(valid).reshape(-1)
         if v.shape[0] != r.shape[0]:
             raise _shape_error("valid", f"({r.shape[0]},)", v.shape)
-        penalty = 0.0 if invalid == "zero" else (1.0 - CHAMFER_PENALTY / (SIZE * math.sqrt(2.0))) ** gamma
+        penalty = 0.0 if invalid == "zero" else _shaped_reward(CHAMFER_PENALTY, gamma)
         r = np.where(v, r, penalty)
     if return_chamfer:
         return (float(r[0]), float(cd[0])) if single else (r, cd)

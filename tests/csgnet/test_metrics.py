@@ -197,6 +197,9 @@ def test_reward():
     assert metrics.reward(img, img) == 1.0
     cd = metrics.chamfer(other, img)
     assert metrics.reward(other, img) == pytest.approx((1 - cd / (64 * math.sqrt(2))) ** 20)
+    assert metrics.reward(other, img, return_chamfer=True) == (metrics.reward(other, img), cd)
+    rs, cds = metrics.reward(np.stack([other, empty]), img, return_chamfer=True)
+    assert rs.tolist() == [metrics.reward(other, img), 0.0] and cds.tolist() == [cd, 16.0]
     assert metrics.reward(empty, img) == 0.0
     ref = metrics.reward(empty, img, invalid="reference")
     assert ref == pytest.approx((1 - 16 / (64 * math.sqrt(2))) ** 20) and ref == pytest.approx(0.0204, abs=1e-4)
