@@ -181,6 +181,10 @@ def test_iou_3d():
     inter = (a & b).reshape(2, -1).sum(1)
     union = (a | b).reshape(2, -1).sum(1)
     assert np.allclose(got, inter / (union + 1))
+    assert got[1] == 0.0  # disjoint: the cube at the centre, a shape in the corner
+    # a cube inside a sphere: |A and B| = the cube's 31^3 voxels, |A or B| = the sphere's 124487
+    sphere, cube = csgnet.render(["sp(32,32,32,32)", "cu(32,32,32,32)"], 3)
+    assert metrics.iou_3d(cube, sphere) == 31 ** 3 / (124487 + 1)
     empty = np.zeros((N, N, N), bool)
     assert metrics.iou_3d(empty, empty) == 0.0
     assert metrics.iou_3d(vols[0], vols[0]) == pytest.approx(vols[0].sum() / (vols[0].sum() + 1))
