@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from shapeprog.geometry import cuboid_corners
@@ -13,3 +15,11 @@ def boxes(centers, dims, axes=None, dtype=torch.float64):
     d = torch.as_tensor(dims, dtype=dtype).reshape(-1, 3)
     a = torch.eye(3, dtype=dtype).expand(c.shape[0], 3, 3) if axes is None else torch.as_tensor(axes, dtype=dtype)
     return cuboid_corners(c, d, a)
+
+
+def rotation(axis, angle, dtype=torch.float64):
+    """Rotation matrix ``(3, 3)`` about ``axis`` by ``angle`` radians (Rodrigues), independent of the executor."""
+    k = torch.as_tensor(axis, dtype=dtype)
+    k = k / k.norm()
+    K = torch.tensor([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]], dtype=dtype)
+    return torch.eye(3, dtype=dtype) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K

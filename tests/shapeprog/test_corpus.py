@@ -7,7 +7,7 @@ import torch
 
 from shapeprog import corpus
 from shapeprog.execute import execute_batch
-from shapeprog.lang import Program
+from shapeprog.lang import Program, parse
 
 
 @pytest.mark.parametrize("cat,train,val", [("chair", 3339, 496), ("table", 5762, 774), ("storage", 1435, 116)])
@@ -75,7 +75,6 @@ def test_example_points():
 def test_corpus_sample_executes_without_nan():
     rng = random.Random(0)
     sample = [(c, i) for c in corpus.CATEGORIES for i in rng.sample(corpus.ids(c, "all"), 40)]
-    from shapeprog.lang import parse
     progs = [parse(corpus.read(c, i), f"{c}/{i}.txt") for c, i in sample]
     with torch.no_grad():
         shapes = execute_batch(progs)
@@ -88,8 +87,6 @@ def test_corpus_sample_executes_without_nan():
 def test_full_corpus_executes_and_matches_reference_statistics():
     """All 11,922 programs run without NaN, and the leaf counts and extent statistics equal the
     figures the specification reports for the reference executor (section (b))."""
-    from shapeprog.lang import parse
-
     progs = [parse(corpus.read(c, i), f"{c}/{i}.txt") for c in corpus.CATEGORIES for i in corpus.ids(c, "all")]
     leaves, ext = [], []
     with torch.no_grad():

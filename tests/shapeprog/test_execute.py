@@ -48,21 +48,21 @@ def test_first_attach_translates_point_onto_target():
 
 # ----------------------------------------------------------------------------- second
 
+# A non-aligned post 0.5 high whose bottom and then top are attached to the bbox's: the second
+# attach (the second rule) stretches it to height 1. A third attach runs the general rule.
+POST = ("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.1, 0.5, 0.1, False)",
+        "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
+        "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)")
+
 
 def test_second_attach_stretches_along_height():
-    p = flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.1, 0.5, 0.1, False)",
-             "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
-             "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)")
-    s = execute(p, dtype=torch.float64)
+    s = execute(flat(*POST), dtype=torch.float64)
     # |(0,.5,0) + s(0,1,0)| = 1  ->  s = 0.5: height 1.0, bottom stays at -0.5
     assert close(s.dims[0], [0.1, 1.0, 0.1]) and close(s.centers[0], [0.0, 0.0, 0.0])
 
 
 def test_second_attach_stretches_and_rotates_onto_target():
-    p = flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.1, 0.5, 0.1, False)",
-             "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
-             "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.7, 1.0, 0.5)")
-    s = execute(p, dtype=torch.float64)
+    s = execute(flat(*POST[:3], "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.7, 1.0, 0.5)"), dtype=torch.float64)
     h = math.sqrt(0.2 ** 2 + 1.0)  # grows to the distance between the two targets
     assert close(s.dims[0], [0.1, h, 0.1])
     assert close(local_point(s, 0, [0.5, 0.0, 0.5]), [0.0, -0.5, 0.0])
@@ -88,11 +88,7 @@ def test_general_rule_scales_the_best_matching_free_dimension():
     # third attach of a non-aligned cuboid: two colinear records (bottom and top), so orient is
     # skipped (the target is already in the rotation plane) and maybeScale widens the length:
     # d = 1 / |cv_x(src) - cv_x(bottom)| = 2, s = |t . x| = 0.15, length += 0.3.
-    p = flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.1, 0.5, 0.1, False)",
-             "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
-             "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)",
-             "attach(cube0, bbox, 1.0, 0.5, 0.5, 0.7, 0.5, 0.5)")
-    s = execute(p, dtype=torch.float64)
+    s = execute(flat(*POST, "attach(cube0, bbox, 1.0, 0.5, 0.5, 0.7, 0.5, 0.5)"), dtype=torch.float64)
     assert close(s.dims[0], [0.4, 1.0, 0.1]) and close(s.centers[0], [0.0, 0.0, 0.0])
     assert close(local_point(s, 0, [1.0, 0.5, 0.5]), [0.2, 0.0, 0.0])
 
@@ -100,10 +96,7 @@ def test_general_rule_scales_the_best_matching_free_dimension():
 def _general_rotation_program(cx, cz):
     """A vertical post (bottom and top attached) whose front-face centre is then attached to the
     bbox point (cx, 0, cz): a third attach of a non-aligned cuboid, i.e. the general rule."""
-    return flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.1, 0.5, 0.1, False)",
-                "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
-                "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)",
-                f"attach(cube0, bbox, 0.5, 0.5, 1.0, {0.5 + cx}, 0.5, {0.5 + cz})")
+    return flat(*POST, f"attach(cube0, bbox, 0.5, 0.5, 1.0, {0.5 + cx}, 0.5, {0.5 + cz})")
 
 
 def test_general_rule_orients_about_the_colinear_axis():
@@ -303,9 +296,7 @@ def test_hierarchy_scales_dims_not_positions_and_flips_reflected_copy():
 
 
 def test_batch_equals_single_calls():
-    progs = [parse(HIER), _aligned_program(0.1), flat("bbox = Cuboid(1.0, 1.0, 1.0, True)",
-             "cube0 = Cuboid(0.1, 0.5, 0.1, False)", "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)",
-             "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.7, 1.0, 0.5)")]
+    progs = [parse(HIER), _aligned_program(0.1), flat(*POST[:3], "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.7, 1.0, 0.5)")]
     batch = execute_batch(progs)
     for p, b in zip(progs, batch):
         one = execute(p)
@@ -364,10 +355,7 @@ GRAD_PROGRAMS = {
         "attach(cube2, cube0, 0.4, 1.0, 0.6, 0.3, 0.02, 0.2)",
         "translate(cube2, X, 3, 0.45)", "reflect(cube1, Z)"]) + "\n",
     "aligned_growth": _aligned_grad_program(),
-    "general_orient_scale": "bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.1, 0.5, 0.1, False)\n"
-                            "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n"
-                            "attach(cube0, bbox, 0.5, 1.0, 0.5, 0.5, 1.0, 0.5)\n"
-                            "attach(cube0, bbox, 0.5, 0.5, 1.0, 0.56, 0.5, 0.58)\n",
+    "general_orient_scale": "\n".join(POST + ("attach(cube0, bbox, 0.5, 0.5, 1.0, 0.56, 0.5, 0.58)",)) + "\n",
 }
 
 

@@ -1,4 +1,5 @@
 """Fitting: the loss decreases, the result is a valid program in the corpus format."""
+import pytest
 import torch
 
 import shapeprog
@@ -45,7 +46,5 @@ def test_fit_zero_steps_returns_the_program_and_checks_points():
     p = parse(PROG)
     r = shapeprog.fit(p, torch.zeros(10, 3), steps=0)
     assert r.program == p and r.text == PROG and r.losses == []
-    import pytest
-
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         shapeprog.fit(p, torch.zeros(10, 2))

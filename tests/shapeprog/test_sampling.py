@@ -4,16 +4,9 @@ import math
 import pytest
 import torch
 
-from sa_testutil import boxes
+from sa_testutil import boxes, rotation
 from shapeprog.geometry import cuboid_corners
 from shapeprog.sampling import inside_cuboids, lattice_voxelize, sample_surface, triangle_areas, voxelize
-
-
-def rotation(axis, angle, dtype=torch.float64):
-    k = torch.as_tensor(axis, dtype=dtype)
-    k = k / k.norm()
-    K = torch.tensor([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]], dtype=dtype)
-    return torch.eye(3, dtype=dtype) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
 def box_surface_distance(points, center, dims, axes):

@@ -1,38 +1,23 @@
 """Tests of shapeprog.silhouettes: exact cuboid rasterisation, fit, views, splits, determinism, CLI."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 import torch
 from scipy.spatial import ConvexHull
 
 from csgnet.shapes2d import load_silhouettes
+from sa_testutil import boxes, rotation
 from shapeprog import corpus, execute, parse
 from shapeprog import silhouettes as S
 from shapeprog.__main__ import main
 from shapeprog.geometry import cuboid_corners
 
 
-def boxes(centers, dims, axes=None) -> torch.Tensor:
-    c = torch.tensor(centers, dtype=torch.float64).reshape(-1, 3)
-    d = torch.tensor(dims, dtype=torch.float64).reshape(-1, 3)
-    a = torch.eye(3, dtype=torch.float64).expand(len(c), 3, 3) if axes is None else axes
-    return cuboid_corners(c, d, a)
-
-
 def rect(r0, r1, c0, c1, size=64):
     img = np.zeros((size, size), bool)
     img[r0:r1 + 1, c0:c1 + 1] = True
     return img
-
-
-def rotation(axis, angle) -> torch.Tensor:
-    axis = torch.tensor(axis, dtype=torch.float64)
-    axis = axis / axis.norm()
-    k = torch.tensor([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]], dtype=torch.float64)
-    return torch.eye(3, dtype=torch.float64) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
 
 
 def test_axis_aligned_cuboid_is_the_exact_rectangle():
