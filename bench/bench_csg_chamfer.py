@@ -34,31 +34,16 @@ import numpy as np
 import cv2
 
 import csgnet
-from bench_csg_render import random_programs  # the same random programs as the render benchmark
+# the same random programs and timing as the render benchmark; its import puts tests/ on the path
+from bench_csg_render import random_programs, timed
+from csg_testutil import reference_chamfer
 from csgnet import metrics
 
 
 def chamfer_pairs_baseline(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """The reference's per-pair loop (one Canny and one distance transform per image per pair)."""
-    out = np.empty(len(pred), np.float64)
-    full = 255 * pred.shape[-1] * pred.shape[-2]
-    for i in range(len(pred)):
-        img1 = pred[i].astype(np.uint8) * 255
-        img2 = target[i].astype(np.uint8) * 255
-        s1, s2 = int(img1.sum()), int(img2.sum())
-        if s1 == 0 or s2 == 0 or s1 == full or s2 == full:
-            out[i] = 16.0
-            continue
-        e1 = cv2.Canny(img1, 1, 3)
-        e2 = cv2.Canny(img2, 1, 3)
-        if e1.sum() == 0 or e2.sum() == 0:
-            out[i] = 16.0
-            continue
-        d1 = cv2.distanceTransform(~e1, cv2.DIST_L2, 3).astype(np.float64)
-        d2 = cv2.distanceTransform(~e2, cv2.DIST_L2, 3).astype(np.float64)
-        E1, E2 = e1.astype(np.float64), e2.astype(np.float64)
-        out[i] = (np.sum(d1 * E2) / (np.sum(E2) + 1) + np.sum(d2 * E1) / (np.sum(E1) + 1)) / 2.0
-    return out
+    """The reference's per-pair loop (one Canny and one distance transform per image per pair;
+    ``reference_chamfer`` of ``tests/csg_testutil.py``, the chamfer tests' oracle)."""
+    return np.array([reference_chamfer(a, b) for a, b in zip(pred, target)], np.float64)
 
 
 def main(argv=None) -> None:
@@ -115,18 +100,6 @@ def main(argv=None) -> None:
     print(f"# load average after the run: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
     if not same:
         raise SystemExit("batched and per-pair chamfer differ")
-
-
-def timed(fn, repeat: int) -> tuple[float, float]:
-    """Best wall time and best process CPU time of ``repeat`` calls after one untimed warm-up."""
-    fn()
-    wall = cpu = float("inf")
-    for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        wall = min(wall, time.perf_counter() - t0)
-        cpu = min(cpu, time.process_time() - c0)
-    return wall, cpu
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """Programs per second: the batched CSG renderer against a plain per-program baseline.
 
-Baselines (written here, as the original code works):
+Baselines (as the original code works):
 * 2D: every primitive drawn with scikit-image (``disk``, ``polygon`` + ``polygon_perimeter``) into a
-  fresh 64x64 bool array, booleans with NumPy, a Python list as the stack.
+  fresh 64x64 bool array (``skimage_2d`` of ``tests/csg_testutil.py``, the renderer tests' oracle),
+  booleans with NumPy, a Python list as the stack.
 * 3D: a dictionary of pre-rendered primitive volumes keyed by vocabulary token (the original training
   path), booleans with NumPy.
 
@@ -31,6 +32,7 @@ import os
 import platform
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -38,6 +40,9 @@ import torch
 from csgnet.lang import Draw, Program
 from csgnet.renderer import encode_programs, encode_tokens, execute, render_tokens, stack_trace, unpack
 from csgnet.vocab import vocabulary
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from csg_testutil import skimage_2d  # noqa: E402  (the reference's scikit-image drawing calls)
 
 
 def random_programs(dim: int, n: int, length: int, rng: np.random.Generator) -> np.ndarray:
@@ -62,30 +67,6 @@ def random_programs(dim: int, n: int, length: int, rng: np.random.Generator) -> 
 
 # ---------------------------------------------------------------------------------------------
 # baselines
-
-def _baseline_2d_draw(d: Draw) -> np.ndarray:
-    from skimage import draw
-
-    img = np.zeros((64, 64), bool)
-    x, y, r = d.params
-    if d.kind == "c":
-        rr, cc = draw.disk((y, x), r, shape=(64, 64))
-        img[rr, cc] = True
-        return img
-    if d.kind == "s":
-        L = r * 1.412
-        rows = [int(y - L / 2.0), int(y - L / 2.0), int(y + L / 2.0), int(y + L / 2.0)]
-        cols = [int(x - L / 2.0), int(x + L / 2.0), int(x + L / 2.0), int(x - L / 2.0)]
-    else:
-        L = 1.732 * r
-        rows = [int(y + L / (2 * 1.732)), int(y + L / (2 * 1.732)), int(y - L / 1.732)]
-        cols = [int(x - L / 2.0), int(x + L / 2.0), x]
-    rr, cc = draw.polygon(rows, cols, shape=(64, 64))
-    img[rr, cc] = True
-    rr, cc = draw.polygon_perimeter(rows, cols, shape=(64, 64))
-    img[rr, cc] = True
-    return img
-
 
 def _run_stack(tokens, get_prim):
     stack = []
@@ -144,7 +125,7 @@ def main(argv=None):
         progs = [vocab.decode(t) for t in toks[:bn]]
         if dim == 2:
             def run_one(p):
-                return _run_stack(p.tokens, _baseline_2d_draw)
+                return _run_stack(p.tokens, lambda d: skimage_2d(d.kind, *d.params))
         else:
             from csgnet.render_np import draw_np
 

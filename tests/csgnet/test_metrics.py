@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import random
 
 import cv2
 import numpy as np
@@ -10,26 +11,10 @@ import pytest
 import torch
 
 import csgnet
+from csg_testutil import random_program, reference_chamfer
 from csgnet import metrics
-from csgnet.lang import Draw, Op, Program
 
 N = 64
-
-
-def reference_chamfer(a: np.ndarray, b: np.ndarray) -> float:
-    """The reference's per-pair computation (train_utils.chamfer), written out independently."""
-    img1 = a.astype(np.uint8) * 255
-    img2 = b.astype(np.uint8) * 255
-    for s in (img1.sum(), img2.sum()):
-        if s == 0 or s == 255 * N * N:
-            return 16.0
-    e1, e2 = cv2.Canny(img1, 1, 3), cv2.Canny(img2, 1, 3)
-    if e1.sum() == 0 or e2.sum() == 0:
-        return 16.0
-    d1 = cv2.distanceTransform(~e1, cv2.DIST_L2, 3).astype(np.float64)
-    d2 = cv2.distanceTransform(~e2, cv2.DIST_L2, 3).astype(np.float64)
-    E1, E2 = e1.astype(np.float64), e2.astype(np.float64)
-    return float((np.sum(d1 * E2) / (np.sum(E2) + 1) + np.sum(d2 * E1) / (np.sum(E1) + 1)) / 2.0)
 
 
 def square(r0, r1, c0, c1):
@@ -38,29 +23,12 @@ def square(r0, r1, c0, c1):
     return img
 
 
-def random_programs(n, rng, lo=-6, hi=70):
-    """Random valid programs with arbitrary integer parameters, many touching or crossing the border."""
-    out = []
-    for _ in range(n):
-        n_draw = int(rng.integers(1, 8))
-        toks, depth, placed = [], 0, 0
-        while placed < n_draw or depth > 1:
-            if placed < n_draw and (depth < 2 or rng.random() < 0.5):
-                toks.append(Draw("cst"[rng.integers(3)],
-                                 (int(rng.integers(lo, hi)), int(rng.integers(lo, hi)), int(rng.integers(1, 40)))))
-                depth += 1
-                placed += 1
-            else:
-                toks.append(Op("+*-"[rng.integers(3)]))
-                depth -= 1
-        out.append(Program(tuple(toks), 2))
-    return out
-
-
 @pytest.fixture(scope="module")
 def shapes():
-    rng = np.random.default_rng(7)
-    imgs = csgnet.render(random_programs(600, rng), 2)
+    rng = random.Random(7)
+    # arbitrary integer parameters, many shapes touching or crossing the border
+    imgs = csgnet.render([random_program(rng, 2, rng.randint(1, 7), lo=-6, hi=69, sizes=(1, 39))
+                          for _ in range(600)], 2)
     # add shapes that fill whole border rows/columns and a few degenerate ones
     extra = [square(0, 63, 0, 20), square(0, 10, 0, 63), square(50, 63, 40, 63), square(0, 63, 0, 63),
              np.zeros((N, N), bool), square(5, 5, 5, 5), square(0, 0, 0, 63)]

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import csgnet
-from csg_testutil import random_program
+from csg_testutil import random_program, skimage_2d
 from csgnet.lang import Draw, Program, parse
 from csgnet.render_np import bresenham, draw_np, render_np
 from csgnet.renderer import (StackMachine, encode_programs, encode_tokens, execute, pack, render_programs, render_tokens,
@@ -16,28 +16,6 @@ from csgnet.renderer import (StackMachine, encode_programs, encode_tokens, execu
 from csgnet.vocab import KIND_CODES, PAD_CODE, vocabulary
 
 skdraw = pytest.importorskip("skimage.draw")
-
-
-def _skimage_2d(kind, x, y, r):
-    """The reference's drawing calls, with modern scikit-image names (the test oracle)."""
-    img = np.zeros((64, 64), bool)
-    if kind == "c":
-        rr, cc = skdraw.disk((y, x), r, shape=(64, 64))
-        img[rr, cc] = True
-        return img
-    if kind == "s":
-        L = r * 1.412
-        rows = [int(y - L / 2.0), int(y - L / 2.0), int(y + L / 2.0), int(y + L / 2.0)]
-        cols = [int(x - L / 2.0), int(x + L / 2.0), int(x + L / 2.0), int(x - L / 2.0)]
-    else:
-        L = 1.732 * r
-        rows = [int(y + L / (2 * 1.732))] * 2 + [int(y - L / 1.732)]
-        cols = [int(x - L / 2.0), int(x + L / 2.0), x]
-    rr, cc = skdraw.polygon(rows, cols, shape=(64, 64))
-    img[rr, cc] = True
-    rr, cc = skdraw.polygon_perimeter(rows, cols, shape=(64, 64))
-    img[rr, cc] = True
-    return img
 
 
 # ------------------------------------------------------------------- exact pixels from the spec
@@ -110,7 +88,7 @@ def test_every_vocabulary_primitive_matches_scikit_image():
     imgs = render_tokens(ids, 2).numpy()
     for i in range(v.num_primitives):
         d = v.decode([i]).tokens[0]
-        assert (imgs[i] == _skimage_2d(d.kind, *d.params)).all(), d
+        assert (imgs[i] == skimage_2d(d.kind, *d.params)).all(), d
 
 
 def test_off_grid_primitives_match_scikit_image():
@@ -120,7 +98,7 @@ def test_off_grid_primitives_match_scikit_image():
     draws += [Draw("t", (32, 32, r)) for r in (13, 26, 27, 52, 53, 54)]  # float-sensitive apex rows
     imgs = render_programs([Program((d,), 2) for d in draws], 2).numpy()
     for d, img in zip(draws, imgs):
-        assert (img == _skimage_2d(d.kind, *d.params)).all(), d
+        assert (img == skimage_2d(d.kind, *d.params)).all(), d
         assert (img == draw_np(d)).all(), d
 
 
