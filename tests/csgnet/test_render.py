@@ -13,7 +13,8 @@ from csgnet.lang import Draw, Program, parse
 from csgnet.render_np import bresenham, draw_np, render_np
 from csgnet.renderer import (StackMachine, encode_programs, encode_tokens, execute, pack, render_programs, render_tokens,
                               stack_trace, unpack)
-from csgnet.vocab import KIND_CODES, PAD_CODE, vocabulary
+from csgnet.data import ProgramDataset
+from csgnet.vocab import GRID, KIND_CODES, PAD_CODE, SIZES, vocabulary
 
 skdraw = pytest.importorskip("skimage.draw")
 
@@ -59,7 +60,6 @@ def test_3d_voxel_counts():
 
 def test_3d_is_clipped_never_wrapped():
     vol = csgnet.render("sp(2,60,30,8)", 3)[0]
-    ref = np.zeros((80, 80, 80), bool)
     i, j, k = np.ogrid[:80, :80, :80]
     ref = (i - 10) ** 2 + (j - 68) ** 2 + (k - 38) ** 2 <= 49  # same sphere on a padded grid
     assert (vol == ref[8:72, 8:72, 8:72]).all()
@@ -91,10 +91,13 @@ def test_every_vocabulary_primitive_matches_scikit_image():
         assert (imgs[i] == skimage_2d(d.kind, *d.params)).all(), d
 
 
-def test_off_grid_primitives_match_scikit_image():
+def test_grammar_and_off_grid_primitives_match_scikit_image():
+    # every grammar triple, inside the canvas (the vocabulary) or not
+    draws = [Draw(k, (x, y, r)) for k in "cst" for x in GRID for y in GRID for r in SIZES]
+    assert len(draws) == 3 * 343
     rng = random.Random(7)
-    draws = [Draw(k, (rng.randint(-20, 84), rng.randint(-20, 84), rng.randint(0, 70)))
-             for k in "cst" for _ in range(700)]
+    draws += [Draw(k, (rng.randint(-20, 84), rng.randint(-20, 84), rng.randint(0, 70)))
+              for k in "cst" for _ in range(700)]
     draws += [Draw("t", (32, 32, r)) for r in (13, 26, 27, 52, 53, 54)]  # float-sensitive apex rows
     imgs = render_programs([Program((d,), 2) for d in draws], 2).numpy()
     for d, img in zip(draws, imgs):
@@ -123,12 +126,7 @@ def test_batched_equals_numpy_path(dim, count, max_prims, vocab_only):
     for p, o in zip(progs, out):
         assert (o == render_np(p)).all(), p.text()
     if vocab_only:  # the token-index path (primitive cache) gives the same
-        v = vocabulary(dim)
-        T = max(len(p) for p in progs)
-        ids = np.full((len(progs), T), v.stop)
-        for i, p in enumerate(progs):
-            ids[i, : len(p)] = v.encode(p)
-        assert (csgnet.render(ids, dim) == out).all()
+        assert (csgnet.render(ProgramDataset(progs, dim).tokens, dim) == out).all()
 
 
 def test_batched_equals_single_calls():
@@ -240,10 +238,8 @@ def test_planned_execute_equals_stack_machine(dim, T):
     weighted = np.where(rng.random((120, T)) < 0.4, rng.integers(v.num_primitives, len(v) - 1, size=(120, T)),
                         rng.integers(0, v.num_primitives, size=(120, T)))  # ops often enough to be valid
     valid_progs = [random_program(random.Random(i), dim, 1 + i % ((T + 1) // 2), vocab_only=True) for i in range(60)]
-    ids = np.full((60, T), v.stop)
-    for i, p in enumerate(valid_progs):
-        ids[i, :len(p)] = v.encode(p)
-    tokens = torch.from_numpy(np.concatenate([noise, weighted, ids]))
+    ids = ProgramDataset(valid_progs, dim, max_len=T).tokens[:, :T]  # padded with $
+    tokens = torch.cat([torch.from_numpy(noise), torch.from_numpy(weighted), ids])
     kinds, params = encode_tokens(tokens, dim)
     want, want_valid = _machine_run(kinds, params, dim, tokens)
     assert want_valid.sum() > 60  # the comparison covers many valid programs
