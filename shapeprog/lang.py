@@ -327,9 +327,9 @@ def _parse_statement(ln: _Line) -> tuple[Statement, list[tuple[str, str, int]]]:
             raise ln.error(f"unknown command {cmd[1]!r}", cmd)
     else:
         cmd = ln.take("name")
-        if cmd[1] not in _ARGS or cmd[1] == "Cuboid":
-            if cmd[1] == "Cuboid":
-                raise ln.error("Cuboid needs a name: 'NAME = Cuboid(...)'", cmd)
+        if cmd[1] == "Cuboid":
+            raise ln.error("Cuboid needs a name: 'NAME = Cuboid(...)'", cmd)
+        if cmd[1] not in _ARGS:
             raise ln.error(f"unknown command {cmd[1]!r}", cmd)
     ln.take("punct", "(")
     args: list[tuple[str, str, int]] = []
@@ -421,7 +421,7 @@ def _check_block(
         if names[0][1] == "bbox":
             verb = type(s).__name__.lower()
             raise ln.error(f"bbox cannot be moved ({verb} of bbox)", names[0])
-        if isinstance(s, Squeeze) and s.b == s.a or isinstance(s, Squeeze) and s.c == s.a:
+        if isinstance(s, Squeeze) and s.a in (s.b, s.c):
             raise ln.error(f"{s.a!r} cannot be squeezed against itself", names[0])
         if isinstance(s, Attach) and s.a == s.b:
             raise ln.error(f"{s.a!r} cannot be attached to itself", names[1])

@@ -86,6 +86,9 @@ ERRORS = [
     ("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.1, 0.1, 0.1, True)\n"
      "attach(bbox, cube0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5)\n", 3, 8, "bbox", "bbox cannot be moved"),
     ("bbox = Cuboid(1.0, 1.0, 1.0, True)\nreflect(bbox, X)\n", 2, 9, "bbox", "bbox cannot be moved"),
+    ("bbox = Cuboid(1.0, 1.0, 1.0, True)\nCuboid(0.1, 0.1, 0.1, True)\n", 2, 1, "Cuboid", "Cuboid needs a name"),
+    ("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.1, 0.1, 0.1, True)\n"
+     "squeeze(cube0, bbox, cube0, top, 0.5, 0.5)\n", 3, 9, "cube0", "cannot be squeezed against itself"),
     ("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.1, 0.1, 0.1, True)\ntranslate(cube0, X, 0, 0.5)\n",
      3, 21, "0", "positive integer"),
     ("bbox = Cuboid(1.0, 1.0, 1.0, Maybe)\n", 1, 30, "Maybe", "expected True or False"),
