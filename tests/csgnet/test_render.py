@@ -58,6 +58,19 @@ def test_3d_voxel_counts():
     assert cyl[20 + 7, 30, 40] and not cyl[20 + 8, 30, 40]  # axis 0 is x
 
 
+def test_zero_sizes_follow_the_formulas():
+    assert not csgnet.render("c(32,32,0)")[0].any()  # an empty circle, as scikit-image's disk
+    sphere, cyl = csgnet.render(["sp(32,32,32,0)", "cy(32,32,32,8,0)"], 3)
+    cross = np.zeros((64, 64, 64), bool)
+    for axis in range(3):
+        for d in (-1, 0, 1):
+            c = [32, 32, 32]
+            c[axis] += d
+            cross[tuple(c)] = True
+    assert (sphere == cross).all()  # (r - 1)^2 = 1: the centre and its 6 neighbours
+    assert np.nonzero(cyl.any(axis=(0, 1)))[0].tolist() == [32]  # h = 0: one layer
+
+
 def test_3d_is_clipped_never_wrapped():
     vol = csgnet.render("sp(2,60,30,8)", 3)[0]
     i, j, k = np.ogrid[:80, :80, :80]
