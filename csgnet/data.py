@@ -78,7 +78,7 @@ import torch
 from shapeio import atomic_write
 
 from .lang import Program, parse_lines
-from .renderer import StackMachine, encode_tokens, popcount, primitive_cache
+from .renderer import StackMachine, apply_op_, encode_tokens, popcount, primitive_cache
 from .vocab import KIND_CODES, OP_CODES, vocabulary
 
 __all__ = [
@@ -380,11 +380,10 @@ class _Builder:
 def _combine(a: torch.Tensor, b: torch.Tensor, code: np.ndarray) -> torch.Tensor:
     """Packed canvases ``op(a[i], b[i])`` for the operator kind codes ``code``; ``a``, ``b``: (N, *C)."""
     out = torch.empty_like(a)
-    for op, fn in ((OP_CODES["+"], torch.bitwise_or), (OP_CODES["*"], torch.bitwise_and),
-                   (OP_CODES["-"], lambda x, y: x & ~y)):
+    for op in OP_CODES.values():
         rows = torch.from_numpy(np.flatnonzero(code == op))
         if len(rows):
-            out[rows] = fn(a[rows], b[rows])
+            out[rows] = apply_op_(op, a[rows], b[rows])  # the gathers are copies: a and b stay as they are
     return out
 
 

@@ -483,6 +483,18 @@ def primitive_cache(dim: int, device) -> PrimitiveCache:
     return _PRIM_CACHES[key]
 
 
+def apply_op_(code: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``a = a op b`` in place on packed words, for an operator kind code (``b`` is overwritten by a
+    subtraction); returns ``a``."""
+    if code == _UNION:
+        a |= b
+    elif code == _INTER:
+        a &= b
+    else:
+        a &= b.bitwise_not_()
+    return a
+
+
 def _copy_rows(dst: torch.Tensor, rows: torch.Tensor, src: torch.Tensor) -> None:
     """``dst[rows] = src`` for 2D tensors (NumPy's row copies on the CPU: several times faster than
     ``index_copy_`` there)."""
@@ -561,13 +573,7 @@ class StackMachine:
                 n = oi.numel()
                 a = torch.index_select(self._flat, 0, f1, out=self._bufa[:n])
                 b = torch.index_select(self._flat, 0, f1 + 1, out=self._bufb[:n])
-                if code == _UNION:
-                    a |= b
-                elif code == _INTER:
-                    a &= b
-                else:
-                    a &= b.bitwise_not_()
-                _copy_rows(self._flat, f1, a)
+                _copy_rows(self._flat, f1, apply_op_(code, a, b))
         self.sp = torch.where(self.broken, torch.zeros_like(sp), sp + is_draw.long() - is_op.long())
 
     def reorder(self, index: torch.Tensor) -> None:
@@ -887,13 +893,7 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
             if f0 < f1:
                 torch.index_select(done if a_op else prim_slabs, 0, a_src[f0:f1], out=table[1 + f0:1 + f1])
                 torch.index_select(done if b_op else prim_slabs, 0, b_src[f0:f1], out=tmp[f0 - g0:f1 - g0])
-        dst, src = table[1 + g0:1 + g1], tmp[:g1 - g0]
-        if code == _UNION:
-            dst |= src
-        elif code == _INTER:
-            dst &= src
-        else:
-            dst &= src.bitwise_not_()
+        apply_op_(code, table[1 + g0:1 + g1], tmp[:g1 - g0])
 
     # results: the slabs of each program's range (the rest of a canvas is zero)
     has = np.flatnonzero(plan.final >= 0)
