@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-from .lang import Program
+from .lang import Program, completable
 from .renderer import PAD_CODE, StackMachine, primitive_cache, unpack
 from .vocab import vocabulary
 
@@ -121,10 +121,8 @@ class _Rows:
         """Apply the validity constraint and the finished-row rule to log-probabilities ``(B, V)``."""
         neg = torch.tensor(float("-inf"), dtype=logp.dtype, device=logp.device)
         if constrained:
-            remaining = self.max_len - t  # tokens left, this one included
-            d = self.depth[:, None]
-            ok = torch.where(self.is_draw[None], d <= remaining - 1,
-                             torch.where(self.is_op[None], d >= 2, d == 1))
+            draw_ok, op_ok, stop_ok = completable(self.depth[:, None], self.max_len - t)
+            ok = torch.where(self.is_draw[None], draw_ok, torch.where(self.is_op[None], op_ok, stop_ok))
             logp = torch.where(ok, logp, neg)
         if finish and bool(self.done.any()):
             rows = torch.nonzero(self.done).flatten()

@@ -297,6 +297,21 @@ def prefix_status(tokens: Sequence[Token | str]) -> str:
     return "complete" if draws > 0 and draws - 1 == ops else "open"
 
 
+def completable(depth, remaining):
+    """Which kinds of token keep a program completable within a length limit.
+
+    With ``depth`` shapes on the stack and ``remaining`` tokens allowed (the next one included), a valid
+    program can still be finished after a draw iff ``depth <= remaining - 1`` (the operators needed to
+    reduce the stack must fit), after an operator iff ``depth >= 2``, and by ``$`` iff ``depth == 1``.
+    This holds in every state reached by following the rule from the empty stack. Elementwise on ints,
+    NumPy arrays and torch tensors (decoders and environments mask with it).
+
+    Returns:
+        ``(draw_ok, op_ok, stop_ok)``.
+    """
+    return depth <= remaining - 1, depth >= 2, depth == 1
+
+
 def is_valid(program: Program | Sequence[Token]) -> bool:
     """The spec's whole-expression check: every prefix has D > O and D - 1 = O at the end.
 

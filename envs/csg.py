@@ -80,6 +80,7 @@ from gymnasium.vector.utils import batch_space
 from gymnasium.vector.vector_env import AutoresetMode
 
 from csgnet import metrics
+from csgnet.lang import completable
 from csgnet.renderer import StackMachine, pack, popcount, primitive_cache, unpack
 from csgnet.vocab import PAD_CODE, vocabulary
 
@@ -202,9 +203,9 @@ class _Episodes:
         """Per episode in ``rows``: may it write a draw, an operator, the stop token (each bool) and
         still complete a valid program within ``max_length`` tokens? All False once it has ended or
         written an illegal token."""
-        d, t = self.depth[rows], self.steps[rows]
         live = ~self.done[rows] & ~self.invalid[rows]
-        return live & (d <= self.cfg.max_length - t - 1), live & (d >= 2), live & (d == 1)
+        draw, op, stop = completable(self.depth[rows], self.cfg.max_length - self.steps[rows])
+        return live & draw, live & op, live & stop
 
     def masks(self) -> np.ndarray:
         """``(n, V) bool``: tokens after which a valid program can still be completed."""

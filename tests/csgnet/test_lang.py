@@ -116,3 +116,30 @@ def test_with_params_replaces_draw_parameters_in_order():
     assert p3.with_params(range(9)).text() == "cy(0,1,2,3,4)sp(5,6,7,8)+"
     with pytest.raises(ValueError, match="9 parameter values needed"):
         p.with_params([1, 2])
+
+
+def test_completable_agrees_with_exhaustive_completion():
+    """From every state reachable by following the rule (the empty stack, or one that can still finish),
+    draw/op/stop are allowed exactly when a valid program within the length limit extends the prefix."""
+    import numpy as np
+
+    from csgnet.lang import completable
+
+    for limit in range(1, 8):
+        for depth in range(0, 6):
+            for used in range(limit):
+                remaining = limit - used
+
+                def can_finish(d, r):  # with d shapes and r tokens left, can we end with one shape?
+                    return d >= 1 and d - 1 <= r
+
+                if depth and not can_finish(depth, remaining):
+                    continue  # unreachable when every earlier token followed the rule
+
+                draw, op, stop = completable(depth, remaining)
+                assert draw == can_finish(depth + 1, remaining - 1)
+                assert op == (depth >= 2 and can_finish(depth - 1, remaining - 1))
+                assert stop == (depth == 1)
+    d = np.array([0, 1, 2, 3])
+    assert [a.tolist() for a in completable(d, 3)] == [[True, True, True, False], [False, False, True, True],
+                                                       [False, True, False, False]]
