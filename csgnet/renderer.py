@@ -43,8 +43,8 @@ import numpy as np
 import torch
 
 from . import primitives as P
-from .lang import Draw, Program, parse
-from .vocab import KIND_CODES, OP_CODES, PAD_CODE, vocabulary
+from .lang import Program, parse
+from .vocab import KIND_CODES, OP_CODES, PAD_CODE, vocabulary, write_codes
 
 __all__ = [
     "encode_programs",
@@ -364,12 +364,7 @@ def encode_programs(programs: Sequence[Program | str], dim: int, device=None) ->
     for b, p in enumerate(progs):
         if p.dim != dim:
             raise ValueError(f"program {b} is {p.dim}D, expected {dim}D: {p.text()!r}")
-        for t, tok in enumerate(p.tokens):
-            if isinstance(tok, Draw):
-                kinds[b, t] = KIND_CODES[tok.kind]
-                params[b, t, : len(tok.params)] = tok.params
-            else:
-                kinds[b, t] = OP_CODES[tok.op]
+        write_codes(p.tokens, kinds[b], params[b])
     return torch.from_numpy(kinds).to(device), torch.from_numpy(params).to(device)
 
 

@@ -30,6 +30,17 @@ STOP_CODE = 9
 PAD_CODE = 9  # padding is a stop
 
 
+def write_codes(tokens, kinds: np.ndarray, params: np.ndarray) -> None:
+    """Write the renderer codes of ``tokens`` (:class:`Draw`, :class:`Op`; anything else is left as it
+    is) into ``kinds[i]`` and ``params[i, :n]`` (zero-padded rows of 5)."""
+    for i, t in enumerate(tokens):
+        if isinstance(t, Draw):
+            kinds[i] = KIND_CODES[t.kind]
+            params[i, : len(t.params)] = t.params
+        elif isinstance(t, Op):
+            kinds[i] = OP_CODES[t.op]
+
+
 def _fits_2d(kind: str, x: int, y: int, r: int) -> bool:
     if kind == "c":
         return x - r >= 0 and y - r >= 0 and x + r <= 63 and y + r <= 63
@@ -163,12 +174,7 @@ class Vocabulary:
         """Renderer table: ``kinds (V,) int64`` codes and ``params (V, 5) int64`` (zero-padded)."""
         kinds = np.full(len(self.tokens), STOP_CODE, dtype=np.int64)
         params = np.zeros((len(self.tokens), 5), dtype=np.int64)
-        for i, t in enumerate(self._draws):
-            if isinstance(t, Draw):
-                kinds[i] = KIND_CODES[t.kind]
-                params[i, : len(t.params)] = t.params
-            elif isinstance(t, Op):
-                kinds[i] = OP_CODES[t.op]
+        write_codes(self._draws, kinds, params)
         return kinds, params
 
 
