@@ -15,7 +15,6 @@ Entry points:
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from .lang import Draw, Op, ParseError, Program, is_valid, parse, parse_lines, to_text

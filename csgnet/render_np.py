@@ -45,10 +45,10 @@ def bresenham(r0: int, c0: int, r1: int, c1: int) -> list[tuple[int, int]]:
 
 
 def _circle(x, y, r):
-    rows = np.arange(SIZE, dtype=np.float64)[:, None]
-    cols = np.arange(SIZE, dtype=np.float64)[None, :]
     if r <= 0:
         return np.zeros((SIZE, SIZE), bool)
+    rows = np.arange(SIZE, dtype=np.float64)[:, None]
+    cols = np.arange(SIZE, dtype=np.float64)[None, :]
     return P.circle_test(rows - y, cols - x, float(r))
 
 

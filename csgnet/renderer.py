@@ -967,7 +967,7 @@ def stack_trace(programs, dim: int, k: int | None = None, lengths=None, packed: 
         slot 0 the top; empty slots, states after an underflow, are all False.
     """
     ids = None
-    if isinstance(programs, torch.Tensor) or isinstance(programs, np.ndarray):
+    if isinstance(programs, (torch.Tensor, np.ndarray)):
         ids = torch.as_tensor(programs).long()
         kinds, params = encode_tokens(ids, dim, lengths)
     else:
