@@ -809,8 +809,9 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
     slabs: a primitive's first to last non-empty slab, the hull of the operands' ranges for a union,
     their intersection for an intersection, the first operand's range for a difference. Each
     operation is computed on its range only, into a table of slabs whose row 0 is all zeros (what an
-    operand reads outside its own range); operations with an empty range cost nothing. A 3D result
-    then takes about a third of the dense work.
+    operand reads outside its own range); operations with an empty range cost nothing. (On the random
+    3D length-7 vocabulary programs of ``bench/bench_csg_render.py`` the operations covered about 40%
+    of the dense slabs in a one-off count; no script prints it.)
 
     Returns an :class:`Execution`, or with ``as_bool`` the bool canvases (unpacking only the result
     slabs that hold something).
