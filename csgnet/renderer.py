@@ -580,6 +580,13 @@ class StackMachine:
         self._flat.copy_(self._flat.index_select(0, rows))
         self.sp, self.broken, self.stopped = self.sp[index], self.broken[index], self.stopped[index]
 
+    def reset(self, rows) -> None:
+        """Empty the stacks of ``rows`` (indices or a bool mask) so they start a new program."""
+        rows = torch.as_tensor(rows, device=self.sp.device)
+        self.sp[rows] = 0
+        self.broken[rows] = False
+        self.stopped[rows] = False
+
     def top(self, k: int) -> torch.Tensor:
         """(B, k, *C) packed: slot 0 = top of stack, empty slots zero."""
         return self._top(k)

@@ -194,10 +194,7 @@ class _Episodes:
         self.depth[rows] = 0
         self.invalid[rows] = False
         self.done[rows] = False
-        m = self.machine
-        m.sp[idx] = 0
-        m.broken[idx] = False
-        m.stopped[idx] = False
+        self.machine.reset(idx)
 
     def _allowed(self, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per episode in ``rows``: may it write a draw, an operator, the stop token (each bool) and

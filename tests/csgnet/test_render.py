@@ -324,3 +324,18 @@ def test_popcount_counts_every_bit_including_the_sign_bit():
     img[0, :, 63] = True          # the last column: the sign bit of every row word
     img[1] = True
     assert popcount(pack(torch.from_numpy(img))).tolist() == [64, 4096]
+
+
+def test_stack_machine_reset_starts_rows_afresh():
+    from csgnet.renderer import primitive_cache
+
+    vocab = vocabulary(2)
+    ids = torch.tensor([vocab.encode("c(32,32,16)")[0], vocab.encode("s(24,24,12)")[0]])
+    kinds = primitive_cache(2, "cpu").kinds[ids]
+    m = StackMachine(2, 2, depth=3)
+    m.step(kinds, token_ids=ids)
+    m.step(torch.full((2,), PAD_CODE), token_ids=ids)  # both stop
+    m.reset(torch.tensor([1]))
+    m.step(kinds[[1, 0]], token_ids=ids[[1, 0]])       # row 0 ignores it (stopped), row 1 draws anew
+    want = csgnet.render(["c(32,32,16)", "c(32,32,16)"])
+    assert torch.equal(unpack(m.result(), 2), torch.from_numpy(want)) and m.valid.all()
