@@ -86,7 +86,7 @@ def _cmd_fit(args) -> int:
 
         pts = torch.as_tensor(example_points())
     else:
-        pts = torch.as_tensor(read_points(args.points), dtype=torch.float32)
+        pts = read_points(args.points)  # (N, 3) float32
     g = torch.Generator().manual_seed(args.seed)
     thr = float(adaptive_threshold(pts))  # the target's F-score threshold, the same before and after
 

@@ -59,9 +59,9 @@ class FitResult:
     seconds: float = 0.0
 
 
-def _sharing(program: Program) -> torch.Tensor:
-    """Index map full -> free parameter: child bbox dims share their Program_m line's dims."""
-    names = parameter_names(program)
+def _sharing(program: Program, names: list[str]) -> torch.Tensor:
+    """Index map full -> free parameter: child bbox dims share their Program_m line's dims.
+    ``names``: :func:`parameter_names` of ``program``."""
     pos = {n: i for i, n in enumerate(names)}
     owner = list(range(len(names)))
     for b in program.blocks:
@@ -72,9 +72,10 @@ def _sharing(program: Program) -> torch.Tensor:
     return torch.tensor(owner)
 
 
-def _bounds(program: Program, dtype, device) -> tuple[torch.Tensor, torch.Tensor]:
+def _bounds(names: list[str], dtype, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Lower and upper bound of every parameter (``names``: :func:`parameter_names`)."""
     lo, hi = [], []
-    for n in parameter_names(program):
+    for n in names:
         if ":cuboid." in n:
             lo.append(0.01)
             hi.append(float("inf"))
@@ -125,14 +126,15 @@ def fit(
     device = points.device
     target = points.to(dtype)
     full0 = program_parameters(program, dtype, device)
-    owner = _sharing(program).to(device)
+    names = parameter_names(program)
+    owner = _sharing(program, names).to(device)
     free_idx = torch.unique(owner)
     remap = torch.full((full0.shape[0],), -1, dtype=torch.int64, device=device)
     remap[free_idx] = torch.arange(free_idx.numel(), device=device)
     gather = remap[owner]
     z0 = full0[free_idx].clone()
     z = z0.clone().requires_grad_(True)
-    lo, hi = _bounds(program, dtype, device)
+    lo, hi = _bounds(names, dtype, device)
     lo, hi = lo[free_idx], hi[free_idx]
     opt = torch.optim.Adam([z], lr=lr)
     plan = ExecutionPlan([program], dtype, device)  # compiled once, run every step
