@@ -526,10 +526,10 @@ class ShapeAssemblyEnv(gym.Env):
             return None
         import cv2
 
-        from shapeprog.picture import _camera  # the view of shapeprog.picture.render_png
+        from shapeprog.picture import camera  # the view of shapeprog.picture.render_png
 
         S = self.render_size
-        right, up, _ = _camera()
+        right, up, _ = camera()
         scale = 0.9 * S / max(float(np.linalg.norm(self._bbox)), 1e-9)
 
         def project(p):  # (..., 3) -> (..., 2) integer pixel coordinates (x right, y down)

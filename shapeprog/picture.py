@@ -16,7 +16,7 @@ import torch
 from shapeprog.geometry import mesh_arrays
 from shapeprog.sampling import check_corners
 
-__all__ = ["render_png", "part_colors", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
+__all__ = ["render_png", "part_colors", "camera", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
 
 #: Part palette (RGB uint8): colours are assigned by label rank, cycling.
 PALETTE = np.array(
@@ -54,7 +54,9 @@ def part_colors(n: int, labels=None) -> np.ndarray:
     return PALETTE[np.asarray(keys).reshape(-1) % len(PALETTE)]
 
 
-def _camera():
+def camera() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The picture's view frame: unit ``(right, up, back)`` vectors, ``back`` = :data:`VIEW_DIRECTION`
+    (screen x = right, screen y = up)."""
     back = VIEW_DIRECTION
     right = np.cross(np.array([0.0, 1.0, 0.0]), back)
     right /= np.linalg.norm(right)
@@ -126,7 +128,7 @@ def render_png(
     big = size * _SUPERSAMPLE
     image = np.full((big, big, 3), 255.0)
     if n > 0:
-        right, up, back = _camera()
+        right, up, back = camera()
         pts, faces = (t.numpy() for t in mesh_arrays(torch.from_numpy(corners)))  # (8 L, 3), (12 L, 3)
         sx, sy, depth = pts @ right, pts @ up, pts @ back
         extent = max(sx.max() - sx.min(), sy.max() - sy.min(), 1e-9)
