@@ -6,12 +6,20 @@ Baselines (as the original code works):
   booleans with NumPy, a Python list as the stack.
 * 3D: a dictionary of pre-rendered primitive volumes keyed by vocabulary token (the original training
   path), booleans with NumPy.
+Each comes in two forms:
+* A, final shape: the stack is run and only its last top is kept (the least work that yields the
+  target; faster than the original code).
+* B, reference path: what the reference data generator yields for every program and the reference
+  training scripts read the target from (spec section b, "Stack trace"): the stack trace of all T+1
+  states with S = length // 2 + 1 slots (slot 0 the top, empty slots zero), of which plain CSGNet uses
+  state T's slot 0.
 
 Both sides render the same random valid programs (2D length 13, 3D length 7) from vocabulary tokens, in
 one run on the same machine. The batched renderer is timed to bool output (what ``csgnet.render`` returns)
 and, separately, to its packed output (what the training path consumes before one unpack per batch).
 For context it also times programs with every primitive moved off the 8-pixel grid (drawn, not looked up)
-and the packed stack trace of the top 4 slots that CSGNetStack trains on (the baseline builds neither).
+and the stack trace of the same S slots that CSGNetStack trains on, packed and as bools (the like-for-like
+counterpart of baseline B).
 
 Timing is the same for both sides: one untimed warm-up pass, then the best of ``--repeat`` passes. Each
 result is dropped when the next one is made (per program for the baseline, per batch for the batched
@@ -38,7 +46,7 @@ import numpy as np
 import torch
 
 from csgnet.lang import Draw, Program
-from csgnet.renderer import encode_programs, encode_tokens, execute, render_tokens, stack_trace, unpack
+from csgnet.renderer import SIZE, encode_programs, encode_tokens, execute, render_tokens, stack_trace, unpack
 from csgnet.vocab import vocabulary
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -78,6 +86,24 @@ def _run_stack(tokens, get_prim):
             stack.append(np.logical_or(a, b) if t.op == "+" else
                          np.logical_and(a, b) if t.op == "*" else np.logical_and(a, np.logical_not(b)))
     return stack[-1]
+
+
+def _run_trace(tokens, get_prim, slots, shape):
+    """The reference training path: the stack trace ``(T+1, slots, *shape)`` (state 0 empty, slot 0 the
+    top, empty slots zero), as the reference data generator yields it for every program; plain CSGNet
+    then trains on state T's slot 0 (spec section b, "Stack trace")."""
+    trace = np.zeros((len(tokens) + 1, slots) + shape, dtype=bool)
+    stack = []
+    for t, tok in enumerate(tokens):
+        if isinstance(tok, Draw):
+            stack.append(get_prim(tok))
+        else:
+            b, a = stack.pop(), stack.pop()
+            stack.append(np.logical_or(a, b) if tok.op == "+" else
+                         np.logical_and(a, b) if tok.op == "*" else np.logical_and(a, np.logical_not(b)))
+        for j, item in enumerate(reversed(stack[-slots:])):
+            trace[t + 1, j] = item
+    return trace
 
 
 def timed(fn, repeat=3, sync=False):
@@ -139,7 +165,16 @@ def main(argv=None):
             for p in progs:
                 run_one(p)
 
+        slots = length // 2 + 1  # the reference generator's S (4 in 3D, 7 in 2D)
+        get_prim = ((lambda d: skimage_2d(d.kind, *d.params)) if dim == 2 else
+                    (lambda d: table[d.text(long=False)]))
+
+        def baseline_trace():
+            for p in progs:
+                _run_trace(p.tokens, get_prim, slots, (SIZE,) * dim)[-1, 0]
+
         t_base = timed(baseline, args.repeat)
+        t_ref = timed(baseline_trace, args.repeat)
 
         tt = torch.from_numpy(toks[:n]).to(dev)
 
@@ -157,17 +192,21 @@ def main(argv=None):
                 kinds, params = encode_tokens(tt[i:i + batch], dim)
                 execute(kinds, params, dim, token_ids=tt[i:i + batch])
 
-        def batched_trace():
+        def batched_trace(packed=True):
             for i in range(0, n, batch):
-                stack_trace(tt[i:i + batch], dim, k=4, packed=True)
+                stack_trace(tt[i:i + batch], dim, k=slots, packed=packed)
 
         t_ours = timed(batched, args.repeat, sync)
         t_packed = timed(batched_packed, args.repeat, sync)
         t_trace = timed(batched_trace, args.repeat, sync)
+        t_trace_bool = timed(lambda: batched_trace(False), args.repeat, sync)
         # exactness on the baseline's programs, both outputs
         check = render_tokens(tt[:batch], dim).cpu().numpy()[: min(bn, batch)]
         same = all((check[i] == run_one(progs[i])).all() for i in range(len(check)))
         same &= bool((unpack(batched_batch(0, False), dim).cpu().numpy()[: len(check)] == check).all())
+        tr = stack_trace(tt[:8], dim, k=slots).cpu().numpy()
+        same &= all((tr[:, i] == _run_trace(progs[i].tokens, get_prim, slots, (SIZE,) * dim)).all()
+                    for i in range(min(8, bn)))
 
         # off-grid parameters: every primitive shifted off the 8-pixel grid (generic path)
         off = [Program(tuple(Draw(t.kind, tuple(v + 3 if j < dim else v + 1 for j, v in enumerate(t.params)))
@@ -176,18 +215,23 @@ def main(argv=None):
         kinds_off, params_off = encode_programs(off, dim, dev)
         t_off = timed(lambda: unpack(execute(kinds_off, params_off, dim).canvas, dim), args.repeat, sync)
 
-        print(f"{dim}D length {length}, batch {batch}: programs/s (ratio to the baseline), by wall time | by CPU time")
+        print(f"{dim}D length {length}, batch {batch}: programs/s and ratios to baseline A | B, "
+              f"by wall time || by CPU time")
 
         def row(name, count, t):
             rw, rc = count / t[0], count / t[1]
-            print(f"  {name:44s} {rw:9.0f} ({rw * t_base[0] / bn:6.1f}x) | {rc:9.0f} ({rc * t_base[1] / bn:6.1f}x)")
+            print(f"  {name:50s} {rw:8.0f} {rw * t_base[0] / bn:6.1f}x {rw * t_ref[0] / bn:6.1f}x || "
+                  f"{rc:8.0f} {rc * t_base[1] / bn:6.1f}x {rc * t_ref[1] / bn:6.1f}x")
 
-        row(f"baseline (per program, {'scikit-image draws' if dim == 2 else 'pre-rendered primitives'})", bn, t_base)
+        prim = "scikit-image draws" if dim == 2 else "pre-rendered primitives"
+        row(f"A: baseline, final shape ({prim})", bn, t_base)
+        row(f"B: baseline, reference path (trace of {slots} slots)", bn, t_ref)
         row("batched renderer -> bool (render_tokens)", n, t_ours)
         row("batched renderer -> packed bits (execute)", n, t_packed)
         row("batched, off-grid params -> bool", batch, t_off)
-        row("batched stack trace (top 4 slots) -> packed", n, t_trace)
-        print(f"  identical to the baseline on {len(check)} programs: {same}")
+        row(f"batched stack trace ({slots} slots) -> packed", n, t_trace)
+        row(f"batched stack trace ({slots} slots) -> bool", n, t_trace_bool)
+        print(f"  identical to the baselines on {len(check)} programs (traces on {min(8, bn)}): {same}")
         if dim == 3:
             print(f"  (the baseline's dictionary: {len(table)} pre-rendered volumes, "
                   f"{sum(v.nbytes for v in table.values()) / 2**20:.0f} MiB)")

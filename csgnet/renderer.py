@@ -303,24 +303,29 @@ def unpack(words: torch.Tensor, dim: int) -> torch.Tensor:
         shifts = torch.arange(8, dtype=torch.uint8, device=words.device)
         bits = (by.unsqueeze(-1) >> shifts) & 1
         return bits.reshape(shape).bool()
-    out = _POOL.empty(shape, np.bool_)
+    # Larger than the pool keeps: a fresh allocation, zeroed by the OS page by page on first touch
+    # (calloc), so the all-zero rows (the empty slots of a 3D stack trace) cost nothing here.
+    zeroed = int(np.prod(shape, dtype=np.int64)) > _POOL.max_bytes
+    out = torch.from_numpy(np.zeros(shape, np.bool_)) if zeroed else _POOL.empty(shape, np.bool_)
     if words.numel():
-        _unpack_rows(words.numpy().reshape(-1, SIZE), out.numpy().reshape(-1, SIZE * SIZE).view(np.uint8))
+        _unpack_rows(words.numpy().reshape(-1, SIZE), out.numpy().reshape(-1, SIZE * SIZE).view(np.uint8),
+                     zeroed=zeroed)
     return out
 
 
-def _unpack_rows(w: np.ndarray, out: np.ndarray, chunk: int = 256) -> None:
+def _unpack_rows(w: np.ndarray, out: np.ndarray, chunk: int = 256, zeroed: bool = False) -> None:
     """Unpack rows of 64 words (a 2D image, or one x-slab of a 3D volume) into ``out`` ``(R, 4096)``.
 
-    All-zero rows (most of a typical 3D volume) are cleared with ``memset``-speed writes; only the
-    other rows go through ``np.unpackbits`` (in chunks, so its temporary stays in cache).
+    All-zero rows (most of a typical 3D volume) are cleared with ``memset``-speed writes (or left
+    alone if ``out`` is ``zeroed`` already); only the other rows go through ``np.unpackbits`` (in
+    chunks, so its temporary stays in cache).
     """
     nz = w.view(np.uint64).max(axis=1) != 0
     rows = np.flatnonzero(nz)
-    if len(rows) * 4 < len(nz) * 3:
+    if zeroed or len(rows) * 4 < len(nz) * 3:
         # Clear the zero rows run by run (contiguous slices), then fill in the others.
         edges = np.flatnonzero(np.diff(nz.view(np.int8), prepend=1, append=1))
-        for a, b in zip(edges[0::2].tolist(), edges[1::2].tolist()):
+        for a, b in ([] if zeroed else zip(edges[0::2].tolist(), edges[1::2].tolist())):
             out[a:b] = 0
         for i in range(0, len(rows), chunk):
             r = rows[i:i + chunk]
@@ -522,11 +527,13 @@ class StackMachine:
         # Stale slots above the stack pointer are never read, so the storage need not be cleared.
         words = int(np.prod(_canvas_words(dim)))
         alloc = _WORKSPACE.get if workspace else (lambda name, n, dev: torch.empty(n, dtype=torch.int64, device=dev))
-        self.stack = alloc("stack", batch * self.depth * words, device).view((batch, self.depth) + _canvas_words(dim))
+        # (B*S + 1, words): the stacks' rows, then one zero row that empty trace slots are gathered from.
+        self._rows = alloc("stack", (batch * self.depth + 1) * words, device).view(-1, words)
+        self._rows[-1].zero_()
+        self._flat = self._rows[:-1]  # (B*S, words): row gathers and row copies are plain row copies
+        self.stack = self._flat.view((batch, self.depth) + _canvas_words(dim))
         self._bufa = alloc("a", batch * words, device).view(batch, words)
         self._bufb = alloc("b", batch * words, device).view(batch, words)
-        # (B*S, words) view: row gathers and row copies on 2D rows are plain row copies.
-        self._flat = self.stack.view(batch * self.depth, -1)
         self.sp = torch.zeros(batch, dtype=torch.int64, device=device)
         self.broken = torch.zeros(batch, dtype=torch.bool, device=device)
         self.stopped = torch.zeros(batch, dtype=torch.bool, device=device)
@@ -594,12 +601,13 @@ class StackMachine:
     def _top(self, k: int, out: torch.Tensor | None = None) -> torch.Tensor:
         """:meth:`top`, written into ``out`` (a contiguous (B, k, *C) tensor) if given."""
         slots = self.sp[:, None] - 1 - torch.arange(k, device=self.sp.device)[None, :]
-        ok = slots >= 0
-        flat = (self._ar[:, None] * self.depth + slots.clamp(min=0, max=self.depth - 1)).flatten()
+        zero_row = self._rows.shape[0] - 1
+        flat = torch.where(slots >= 0, self._ar[:, None] * self.depth + slots.clamp(max=self.depth - 1),
+                           zero_row).flatten()
         if out is None:
-            out = torch.empty(ok.shape + self.stack.shape[2:], dtype=self.stack.dtype, device=self.stack.device)
-        torch.index_select(self._flat, 0, flat, out=out.view(flat.shape[0], -1))
-        return out.masked_fill_(~ok.view(ok.shape + (1,) * (out.dim() - 2)), 0)
+            out = torch.empty(slots.shape + self.stack.shape[2:], dtype=self.stack.dtype, device=self.stack.device)
+        torch.index_select(self._rows, 0, flat, out=out.view(flat.shape[0], -1))
+        return out
 
     @property
     def valid(self) -> torch.Tensor:
