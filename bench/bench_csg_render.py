@@ -83,9 +83,13 @@ def _run_stack(tokens, get_prim):
             stack.append(get_prim(t))
         else:
             b, a = stack.pop(), stack.pop()
-            stack.append(np.logical_or(a, b) if t.op == "+" else
-                         np.logical_and(a, b) if t.op == "*" else np.logical_and(a, np.logical_not(b)))
+            stack.append(_bool_op(t.op, a, b))
     return stack[-1]
+
+
+def _bool_op(op, a, b):
+    return (np.logical_or(a, b) if op == "+" else
+            np.logical_and(a, b) if op == "*" else np.logical_and(a, np.logical_not(b)))
 
 
 def _run_trace(tokens, get_prim, slots, shape):
@@ -99,8 +103,7 @@ def _run_trace(tokens, get_prim, slots, shape):
             stack.append(get_prim(tok))
         else:
             b, a = stack.pop(), stack.pop()
-            stack.append(np.logical_or(a, b) if tok.op == "+" else
-                         np.logical_and(a, b) if tok.op == "*" else np.logical_and(a, np.logical_not(b)))
+            stack.append(_bool_op(tok.op, a, b))
         for j, item in enumerate(reversed(stack[-slots:])):
             trace[t + 1, j] = item
     return trace
