@@ -302,8 +302,13 @@ def test_results_stay_valid_while_referenced():
     assert (third.numpy() == np.stack([render_np(v.decode(list(r))) for r in a.numpy()])).all()
 
 
+@pytest.mark.parametrize("pool_max", [None, 0])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_unpack_matches_numpy_unpackbits(dim):
+def test_unpack_matches_numpy_unpackbits(dim, pool_max, monkeypatch):
+    from csgnet import renderer
+
+    if pool_max is not None:  # outputs larger than the pool keeps: calloc'd zeros, zero rows untouched
+        monkeypatch.setattr(renderer._POOL, "max_bytes", pool_max)
     rng = np.random.default_rng(dim)
     shape = (300, 64) if dim == 2 else (20, 64, 64)
     words = rng.integers(-2**63, 2**63 - 1, size=shape, dtype=np.int64, endpoint=True)
