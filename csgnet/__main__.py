@@ -248,7 +248,14 @@ def _write_table(text: str, out) -> None:
         print(f"wrote {out}")
 
 
+# The shipped 2D models, supervised and RL-tuned on the silhouettes (docs/benchmarks.md says how each
+# was trained): Table 4's rows when no --weights are given.
+TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2d.pt"),
+                 ("CSGNetStack supervised", "csgnetstack2d.pt"), ("CSGNetStack RL", "rl_csgnetstack2d.pt"))
+
+
 def cmd_table4(args) -> int:
+    from .inference import WEIGHTS
     from .protocols import subset, table4, table4_markdown
     from .shapes2d import load_silhouettes
 
@@ -256,7 +263,8 @@ def cmd_table4(args) -> int:
     idx = subset(len(test), None if args.images <= 0 else args.images, args.seed)
     train = None if args.no_nn else load_silhouettes("train", args.silhouettes)
     iters = [None if i in ("inf", "none") else int(i) for i in args.iterations]
-    rows = table4(_labelled_models(args.weights), test[idx], train, tuple(args.beams), iters,
+    specs = args.weights or [f"{label}={WEIGHTS / name}" for label, name in TABLE4_MODELS]
+    rows = table4(_labelled_models(specs), test[idx], train, tuple(args.beams), iters,
                   constrained=args.constrained, progress=lambda s: print(s, flush=True))
     note = (f"`{_command(args)}`; {len(idx)} of {len(test)} test silhouettes "
             f"(seed {args.seed}); {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
@@ -382,7 +390,8 @@ def main(argv=None) -> int:
 
     t4 = sub.add_parser("table4", help="Table 4 protocol: parsing the test silhouettes, with refinement")
     t4.add_argument("--weights", nargs="*", default=None,
-                    help="2D weights files or checkpoints, optionally LABEL=PATH (default: the shipped model)")
+                    help="2D weights files or checkpoints, optionally LABEL=PATH (default: the four shipped "
+                    "2D models, supervised and RL-tuned)")
     t4.add_argument("--images", type=int, default=50, help="test silhouettes evaluated (0: all 1,386)")
     t4.add_argument("--seed", type=int, default=0, help="seed of the subset")
     t4.add_argument("--beams", type=int, nargs="+", default=[1, 10])

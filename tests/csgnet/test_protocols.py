@@ -148,7 +148,10 @@ def test_cli_writes_both_tables(tmp_path, capsys):
     assert main(["table4", "--images", "2", "--beams", "1", "--iterations", "0", "1", "--no-nn",
                  "--out", str(out4)]) == 0
     text = out4.read_text()
-    assert "| CSGNet (shipped) | k=1 |" in text and "2 of 1386 test silhouettes" in text
+    # no --weights: the four shipped 2D models, supervised and RL-tuned
+    for label in ("CSGNet supervised", "CSGNet RL", "CSGNetStack supervised", "CSGNetStack RL"):
+        assert f"| {label} | k=1 |" in text
+    assert "2 of 1386 test silhouettes" in text
     assert "python -m csgnet table4 --images 2" in text
     assert main(["table6", "--per-length", "2", "--lengths", "3", "--beams", "2", "--out", str(out6)]) == 0
     text = out6.read_text()
