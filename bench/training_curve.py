@@ -1,6 +1,10 @@
 """Print a training run's validation curve (per epoch) from its TensorBoard event files, as markdown.
 
+Supervised runs (``train.py``) and REINFORCE runs (``train_rl.py``: validation reward, and the policy
+entropy per counted step of the last training step logged) alike.
+
     python bench/training_curve.py runs/csgnet2d_small/version_0
+    python bench/training_curve.py runs/rl_csgnet2d_small/version_0 --every 5
 """
 from __future__ import annotations
 
@@ -9,15 +13,16 @@ import sys
 from pathlib import Path
 
 
-def curve(run: Path) -> str:
+def curve(run: Path, every: int = 1) -> str:
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     ea = EventAccumulator(str(run), size_guidance={"scalars": 0})
     ea.Reload()
     tags = ea.Tags()["scalars"]
     epochs = {e.step: int(e.value) for e in ea.Scalars("epoch")} if "epoch" in tags else {}
-    cols = [t for t in ("val/loss", "val/iou", "val/chamfer", "val/valid") if t in tags]
+    cols = [t for t in ("val/loss", "val/reward", "val/iou", "val/chamfer", "val/valid") if t in tags]
     train = ea.Scalars("train/loss") if "train/loss" in tags else []
+    entropy = ea.Scalars("train/entropy") if "train/entropy" in tags else []
     rows = {}
     for t in cols:
         for e in ea.Scalars(t):
@@ -25,24 +30,32 @@ def curve(run: Path) -> str:
             rows[e.step]["wall"] = e.wall_time
     if not rows:
         raise SystemExit(f"{run}: no validation scalars")
-    t0 = min(e.wall_time for e in (train or [])) if train else min(r["wall"] for r in rows.values())
-    head = "| epoch | step | minutes | train loss | " + " | ".join(cols) + " |"
-    lines = [head, "|" + "---|" * (4 + len(cols))]
-    for step in sorted(rows):
+    t0 = min([e.wall_time for e in train] + [r["wall"] for r in rows.values()])  # the first event logged
+    extra = ["train/entropy"] if entropy else []
+    head = "| epoch | step | minutes | train loss | " + " | ".join(extra + cols) + " |"
+    lines = [head, "|" + "---|" * (4 + len(extra) + len(cols))]
+    steps = sorted(rows)
+    for i, step in enumerate(steps):
+        if i % every and i != len(steps) - 1:
+            continue
         r = rows[step]
         tl = [e.value for e in train if e.step <= step]
+        seen = [e.value for e in entropy if e.step <= step]
+        ent = [f"{seen[-1] if seen else float('nan'):.3f}"] if entropy else []
         lines.append(f"| {epochs.get(step, '')} | {step + 1} | {(r['wall'] - t0) / 60:.1f} | "
-                     f"{tl[-1] if tl else float('nan'):.3f} | " + " | ".join(f"{r.get(t, float('nan')):.4f}" for t in cols) + " |")
+                     f"{tl[-1] if tl else float('nan'):.3f} | "
+                     + " | ".join(ent + [f"{r.get(t, float('nan')):.4f}" for t in cols]) + " |")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("runs", nargs="+")
+    ap.add_argument("--every", type=int, default=1, help="print every N-th validation (and the last)")
     args = ap.parse_args(argv)
     for run in args.runs:
         print(f"#### {run}\n")
-        print(curve(Path(run)))
+        print(curve(Path(run), args.every))
         print()
     print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
     return 0
