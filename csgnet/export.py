@@ -36,11 +36,10 @@ import numpy as np
 from shapeio import atomic_write
 
 from . import primitives as P
+from .primitives import SIZE
 from .lang import Draw, Program, parse
 
 __all__ = ["save_png", "voxels_to_mesh", "save_obj", "to_scad", "save_scad"]
-
-SIZE = 64
 
 
 def _to_numpy_bool(a, name: str, shape: tuple[int, ...]) -> np.ndarray:

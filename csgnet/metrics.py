@@ -43,6 +43,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .primitives import SIZE
+
 __all__ = [
     "CHAMFER_PENALTY",
     "IOU_DENOMINATORS",
@@ -53,7 +55,6 @@ __all__ = [
     "reward",
 ]
 
-SIZE = 64
 CHAMFER_PENALTY = 16.0
 """The reference's fixed chamfer distance for an empty/full image or an empty edge map."""
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "SIZE",
     "trunc",
     "square_bounds",
     "triangle_vertices",
@@ -23,6 +24,9 @@ __all__ = [
     "cube_half",
     "cylinder_half_height",
 ]
+
+SIZE = 64
+"""Side of every canvas in pixels (2D) or voxels (3D): the one definition the csgnet modules import."""
 
 
 def trunc(a):

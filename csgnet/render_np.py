@@ -13,11 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from . import primitives as P
+from .primitives import SIZE
 from .lang import Draw, Program, is_valid
 
 __all__ = ["draw_np", "render_np", "bresenham", "SIZE"]
-
-SIZE = 64
 
 
 def bresenham(r0: int, c0: int, r1: int, c1: int) -> list[tuple[int, int]]:

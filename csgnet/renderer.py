@@ -43,6 +43,7 @@ import numpy as np
 import torch
 
 from . import primitives as P
+from .primitives import SIZE
 from .lang import Program, parse
 from .vocab import KIND_CODES, OP_CODES, PAD_CODE, vocabulary, write_codes
 
@@ -63,7 +64,6 @@ __all__ = [
     "SIZE",
 ]
 
-SIZE = 64
 _UNION, _INTER, _SUB = OP_CODES["+"], OP_CODES["*"], OP_CODES["-"]
 
 _PREFIX_CACHE: dict = {}
