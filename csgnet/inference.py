@@ -60,9 +60,14 @@ def fit_to_canvas(mask: np.ndarray, margin: int = MARGIN, name: str = "shape") -
     scaled = scaled[tuple(slice(0, side) for _ in scaled.shape)]
     if not scaled.any():
         raise InputError(f"{name}: the shape vanishes when scaled to {side} cells (too thin)")
+    return _centred(scaled)
+
+
+def _centred(mask: np.ndarray) -> np.ndarray:
+    """``mask`` (no side above 64) placed in the middle of an empty 64-sided canvas."""
     out = np.zeros((64,) * mask.ndim, dtype=bool)
-    start = [(64 - n) // 2 for n in scaled.shape]
-    out[tuple(slice(a, a + n) for a, n in zip(start, scaled.shape))] = scaled
+    start = [(64 - n) // 2 for n in mask.shape]
+    out[tuple(slice(a, a + n) for a, n in zip(start, mask.shape))] = mask
     return out
 
 
@@ -154,10 +159,7 @@ def _voxelise(path: Path) -> np.ndarray:
         raise InputError(f"{name}: the mesh has no volume")
     if max(vol.shape) > side:  # voxelisation can add one layer
         return fit_to_canvas(vol, name=name)
-    out = np.zeros((64, 64, 64), dtype=bool)
-    start = [(64 - n) // 2 for n in vol.shape]
-    out[tuple(slice(a, a + n) for a, n in zip(start, vol.shape))] = vol
-    return out
+    return _centred(vol)
 
 
 # ------------------------------------------------------------------------------------------------
