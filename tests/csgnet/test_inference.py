@@ -84,13 +84,10 @@ def test_meshes_are_voxelised_and_flat_ones_refused(tmp_path):
         load_shape(tmp_path / "bad.stl")
 
 
-def test_npy_volume_passes_through():
+def test_npy_volume_passes_through(tmp_path):
     vol = csgnet.render("cu(32,32,32,20)", 3)[0]
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as d:
-        np.save(Path(d) / "v.npy", vol)
-        assert np.array_equal(load_shape(Path(d) / "v.npy"), vol)
+    np.save(tmp_path / "v.npy", vol)
+    assert np.array_equal(load_shape(tmp_path / "v.npy"), vol)
 
 
 @pytest.mark.parametrize("stack", [False, True])
@@ -114,8 +111,13 @@ def test_infer_returns_scored_programs(stack):
 
 def test_infer_3d():
     m = tiny(3)
-    res = infer(m, csgnet.render(["sp(32,32,32,16)"], 3)[0], beam=2)
-    assert len(res) == 1 and np.isnan(res[0].chamfer) and 0 <= res[0].iou <= 1
+    shape = csgnet.render(["sp(32,32,32,16)"], 3)[0]
+    res = infer(m, shape, beam=2)
+    assert len(res) == 1 and np.isnan(res[0].chamfer) and len(res[0].beams) == 2
+    r = res[0]
+    assert r.valid  # grammar-constrained decoding by default
+    pred = csgnet.render(r.text, 3)[0]
+    assert r.iou == pytest.approx(float(csgnet.metrics.iou_3d(pred, shape)))  # |A∧B| / (|A∨B| + 1)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
