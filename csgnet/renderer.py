@@ -323,11 +323,11 @@ def _unpack_rows(w: np.ndarray, out: np.ndarray, chunk: int = 256, zeroed: bool 
     nz = w.view(np.uint64).max(axis=1) != 0
     rows = np.flatnonzero(nz)
     if zeroed or len(rows) * 4 < len(nz) * 3:
-        # Clear the zero rows run by run (contiguous slices), then fill in the others.
-        edges = np.flatnonzero(np.diff(nz.view(np.int8), prepend=1, append=1))
-        for a, b in ([] if zeroed else zip(edges[0::2].tolist(), edges[1::2].tolist())):
-            out[a:b] = 0
-        for i in range(0, len(rows), chunk):
+        if not zeroed:  # clear the zero rows run by run (contiguous slices)
+            edges = np.flatnonzero(np.diff(nz.view(np.int8), prepend=1, append=1))
+            for a, b in zip(edges[0::2].tolist(), edges[1::2].tolist()):
+                out[a:b] = 0
+        for i in range(0, len(rows), chunk):  # then fill in the others
             r = rows[i:i + chunk]
             out[r] = np.unpackbits(w[r].view(np.uint8), axis=-1, bitorder="little")
     else:
