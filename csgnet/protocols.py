@@ -117,11 +117,6 @@ def nearest_silhouettes(train, targets, chunk: int = 4096) -> np.ndarray:
     return best_iou_matches(_check_targets(targets, "targets"), chunks).numpy()
 
 
-def _scores(pred: torch.Tensor, target: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-    iou, cd = score_renders(pred, target, 2)
-    return cd, iou
-
-
 def table4(models: Sequence[tuple[str, torch.nn.Module]], targets, train=None, beams: Sequence[int] = (1, 10),
            iterations: Sequence = ITERATIONS, constrained: bool = False, mode: str = "improved", batch: int = 50,
            progress: Callable[[str], None] | None = None) -> list[Table4Row]:
@@ -157,7 +152,7 @@ def table4(models: Sequence[tuple[str, torch.nn.Module]], targets, train=None, b
         idx = nearest_silhouettes(train, tgt)
         nn_img = torch.as_tensor(np.asarray(train)[idx]).bool()
         secs = (time.perf_counter() - t0) / n
-        cd, iou = _scores(nn_img, tgt)
+        iou, cd = score_renders(nn_img, tgt, 2)
         rows.append(Table4Row("nearest neighbour", "training silhouette, max IoU", {0: float(cd.mean())}, {0: cd},
                               float(iou.mean()), secs))
         say(f"nearest neighbour: CD {cd.mean():.3f}")
