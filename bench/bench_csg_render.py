@@ -153,24 +153,25 @@ def main(argv=None):
         toks = random_programs(dim, max(n, bn), length, rng)
         progs = [vocab.decode(t) for t in toks[:bn]]
         if dim == 2:
-            def run_one(p):
-                return _run_stack(p.tokens, lambda d: skimage_2d(d.kind, *d.params))
+            def get_prim(d):
+                return skimage_2d(d.kind, *d.params)
         else:
             from csgnet.render_np import draw_np
 
             needed = {d.text(long=False) for p in progs for d in p.draws}
             table = {k: draw_np(vocab.decode([vocab.index(k)]).tokens[0]) for k in needed}
 
-            def run_one(p):
-                return _run_stack(p.tokens, lambda d: table[d.text(long=False)])
+            def get_prim(d):
+                return table[d.text(long=False)]
+
+        def run_one(p):
+            return _run_stack(p.tokens, get_prim)
 
         def baseline():
             for p in progs:
                 run_one(p)
 
         slots = length // 2 + 1  # the reference generator's S (4 in 3D, 7 in 2D)
-        get_prim = ((lambda d: skimage_2d(d.kind, *d.params)) if dim == 2 else
-                    (lambda d: table[d.text(long=False)]))
 
         def baseline_trace():
             for p in progs:
@@ -180,11 +181,6 @@ def main(argv=None):
         t_ref = timed(baseline_trace, args.repeat)
 
         tt = torch.from_numpy(toks[:n]).to(dev)
-
-        def batched_batch(i, to_bool=True):
-            kinds, params = encode_tokens(tt[i:i + batch], dim)
-            words = execute(kinds, params, dim, token_ids=tt[i:i + batch]).canvas
-            return unpack(words, dim) if to_bool else words
 
         def batched():
             for i in range(0, n, batch):
@@ -206,7 +202,8 @@ def main(argv=None):
         # exactness on the baseline's programs, both outputs
         check = render_tokens(tt[:batch], dim).cpu().numpy()[: min(bn, batch)]
         same = all((check[i] == run_one(progs[i])).all() for i in range(len(check)))
-        same &= bool((unpack(batched_batch(0, False), dim).cpu().numpy()[: len(check)] == check).all())
+        packed = execute(*encode_tokens(tt[:batch], dim), dim, token_ids=tt[:batch]).canvas
+        same &= bool((unpack(packed, dim).cpu().numpy()[: len(check)] == check).all())
         tr = stack_trace(tt[:8], dim, k=slots).cpu().numpy()
         same &= all((tr[:, i] == _run_trace(progs[i].tokens, get_prim, slots, (SIZE,) * dim)).all()
                     for i in range(min(8, bn)))
