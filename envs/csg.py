@@ -159,8 +159,8 @@ class _Episodes:
     (stack depth, tokens written) in NumPy arrays.
     """
 
-    def __init__(self, n: int, cfg: CSGConfig, source, device=None):
-        self.n, self.cfg, self.source = n, cfg, source
+    def __init__(self, n: int, cfg: CSGConfig, device=None):
+        self.n, self.cfg = n, cfg
         self.device = torch.device("cpu" if device is None else device)
         vocab = vocabulary(cfg.dim)
         self.vocab = vocab
@@ -296,14 +296,13 @@ class _Episodes:
         """The text of episode ``row``'s tokens (:meth:`csgnet.Vocabulary.text`)."""
         return self.vocab.text(self.tokens[row, : self.steps[row]])
 
-    def frame(self, row: int) -> np.ndarray:
-        """``(64 s, 130 s, 3) uint8``: target beside the current shape (``s = render_scale``)."""
-        if self.done[row]:
-            words = self.machine.result()[row]  # empty for an invalid program
-        else:
-            words = self.machine.top(1)[row, 0]
-        current = unpack(words[None], self.cfg.dim)[0].cpu().numpy()
-        return _side_by_side(self.target[row], current, self.cfg.render_scale)
+    def frames(self) -> tuple[np.ndarray, ...]:
+        """Per episode, ``(64 s, 130 s, 3) uint8``: target beside the current shape (``s = render_scale``):
+        the top of the stack while the episode runs, its program's result (empty if invalid) once ended."""
+        done = torch.as_tensor(self.done, device=self.device).view((-1,) + (1,) * (self.cfg.dim - 1))
+        words = torch.where(done, self.machine.result(), self.machine.top(1)[:, 0])
+        current = unpack(words, self.cfg.dim).cpu().numpy()
+        return tuple(_side_by_side(t, c, self.cfg.render_scale) for t, c in zip(self.target, current))
 
 
 def _panel(shape: np.ndarray, color: np.ndarray) -> np.ndarray:
@@ -373,7 +372,7 @@ class CSGEnv(gym.Env):
                                       observe_steps, render_scale)
         self.render_mode = check_render_mode(render_mode, self.metadata)
         self.targets = as_target_source(targets, self.config.dim, self.config.max_length)
-        self._episodes = _Episodes(1, self.config, self.targets, device)
+        self._episodes = _Episodes(1, self.config, device)
         self.action_space = spaces.Discrete(self._episodes.V)
         self.observation_space = self.config.observation_space()
         self._started = False
@@ -409,7 +408,7 @@ class CSGEnv(gym.Env):
         return self._episodes.masks()[0]
 
     def render(self):
-        return self._episodes.frame(0) if can_render(self) else None
+        return self._episodes.frames()[0] if can_render(self) else None
 
     @property
     def program(self) -> str:
@@ -442,7 +441,7 @@ class CSGVectorEnv(VectorEnv):
                                       observe_steps, render_scale)
         self.render_mode = check_render_mode(render_mode, self.metadata)
         self.targets = as_target_source(targets, self.config.dim, self.config.max_length)
-        self._episodes = _Episodes(self.num_envs, self.config, self.targets, device)
+        self._episodes = _Episodes(self.num_envs, self.config, device)
         self.single_action_space = spaces.Discrete(self._episodes.V)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.single_observation_space = self.config.observation_space()
@@ -524,7 +523,7 @@ class CSGVectorEnv(VectorEnv):
         return self._episodes.masks()
 
     def render(self):
-        return tuple(self._episodes.frame(i) for i in range(self.num_envs)) if can_render(self) else None
+        return self._episodes.frames() if can_render(self) else None
 
 
 def _put(infos: dict, key: str, rows: np.ndarray, values: np.ndarray, n: int) -> None:

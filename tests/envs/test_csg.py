@@ -311,6 +311,11 @@ def test_render_shows_target_and_current_shape():
     np.testing.assert_array_equal(~(right == 255).all(axis=-1), csgnet.render("s(24,24,8)")[0])
     env.step(V2.op_index("+"))  # invalid: ends, and the current shape is the (empty) result
     assert (env.render()[:, 132:] == 255).all()
+    env.reset(seed=0)
+    _play(env, [V2.index("s(24,24,8)"), V2.index("c(32,32,8)")])
+    assert not (env.render()[:, 132:] == 255).all()  # the top of the stack while the episode runs
+    env.step(V2.stop)  # two shapes left: invalid, the result is empty although the stack is not
+    assert (env.render()[:, 132:] == 255).all()
 
 
 # ------------------------------------------------------------------------------------------------
@@ -320,7 +325,7 @@ def test_render_shows_target_and_current_shape():
 def test_vector_env_equals_single_envs(dim, invalid_action, small_2d, small_3d):
     n = 5 if dim == 2 else 3
     kwargs = dict(targets=small_2d if dim == 2 else small_3d, invalid_action=invalid_action,
-                  max_length=7 if dim == 2 else 5)
+                  max_length=7 if dim == 2 else 5, render_mode="rgb_array", render_scale=1)
     env_id = f"CSG{dim}D-v0"
     vec = gym.make_vec(env_id, num_envs=n, **kwargs)
     assert isinstance(vec.unwrapped, CSGVectorEnv)
@@ -339,6 +344,7 @@ def test_vector_env_equals_single_envs(dim, invalid_action, small_2d, small_3d):
         s1, s2 = vec.step(actions), sync.step(actions)
         for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), s1, s2):
             assert data_equivalence(a, b), (t, name)
+        assert data_equivalence(vec.render(), sync.render()), t  # running and ended episodes alike
         ends += int(s1[2].sum())
     assert ends >= n  # episodes ended and were reset along the way
     vec.close()
