@@ -100,7 +100,7 @@ class _Rows:
             self.machine = None
             f = model.project_features(model.encode(targets))
             self.projected = f.repeat_interleave(repeat, 0) if repeat > 1 else f
-            self.w_tok = (model.token_input_weight(),)
+            self.w_tok = model.token_input_weight()
         self.h = None
         self.prev = torch.full((B,), model.start, dtype=torch.long, device=self.device)
         self.depth = torch.zeros(B, dtype=torch.long, device=self.device)

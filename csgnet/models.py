@@ -276,15 +276,16 @@ class CSGNet(nn.Module):
         return F.linear(self.feature_drop(features), w)
 
     def step_projected(self, projected: torch.Tensor, tokens: torch.Tensor, hidden: torch.Tensor | None,
-                       weights: tuple[torch.Tensor, ...] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                       token_weight: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`step` with the features given as :meth:`project_features` (the same GRU equations:
         ``r = σ(x_r + h_r)``, ``z = σ(x_z + h_z)``, ``n = tanh(x_n + r·h_n)``, ``h' = (1 - z)·n + z·h``).
 
-        ``weights``: the token part of the input weights, made contiguous once by the caller
-        (:meth:`token_input_weight`), to avoid a copy per step.
+        ``token_weight``: :meth:`token_input_weight`, made contiguous once by the caller to avoid a copy
+        per step (default: made here).
         """
-        w_tok = self.token_input_weight() if weights is None else weights[0]
-        gi = projected + F.linear(self.embed(tokens), w_tok, self.gru.bias_ih_l0)
+        if token_weight is None:
+            token_weight = self.token_input_weight()
+        gi = projected + F.linear(self.embed(tokens), token_weight, self.gru.bias_ih_l0)
         if hidden is None:
             hidden = projected.new_zeros(projected.shape[0], self.config.hidden)
         gh = F.linear(hidden, self.gru.weight_hh_l0, self.gru.bias_hh_l0)
@@ -297,6 +298,7 @@ class CSGNet(nn.Module):
         return self.head(h), h
 
     def token_input_weight(self) -> torch.Tensor:
+        """The token-embedding columns of the GRU input weights, ``(3H, E)``, contiguous."""
         return self.gru.weight_ih_l0[:, self.config.feature_size:].contiguous()
 
     def num_parameters(self) -> int:
