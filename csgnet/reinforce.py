@@ -37,10 +37,12 @@ import numpy as np
 import torch
 
 from . import metrics
+from .data import jitter, load_dataset
 from .decode import Sampled, greedy, sample
 from .models import CSGNet, ModelConfig, preset
-from .renderer import render_tokens
-from .training import Cycle, ShardedBatches, distributed, image_grid, image_logger, set_stream_epoch
+from .renderer import render_programs, render_tokens
+from .training import (Cycle, ShardedBatches, distributed, image_grid, image_logger, set_stream_epoch,
+                       stream_loader)
 
 __all__ = ["ReinforceModule", "TargetDataModule", "ShuffledBatches", "load_targets", "load_initial",
            "episode_rewards", "update_baseline", "policy_loss", "image_grid", "SOURCES"]
@@ -255,8 +257,6 @@ class ReinforceModule(L.LightningModule):
     def training_step(self, batch, batch_idx):
         targets = _images(batch)
         if self.hparams.augment:
-            from .data import jitter
-
             targets = jitter(targets, self._rng)
         s, pred, rewards, cd = self.rollout(targets)
         adv = self.advantage(rewards)
@@ -313,11 +313,10 @@ class ReinforceModule(L.LightningModule):
         if not v.get("reward"):
             return
         cat = {k: np.concatenate(x) for k, x in v.items()}
-        self.log("val/reward", float(cat["reward"].mean()), prog_bar=True)
-        self.log("val/chamfer", float(cat["chamfer"].mean()), prog_bar=True)
-        self.log("val/iou", float(cat["iou"].mean()))
-        self.log("val/valid", float(cat["valid"].mean()))
-        self.log("val/length", float(cat["length"].mean()))
+        # as in CSGNetModule: under DDP each rank validates a shard, sync_dist averages the ranks' means, so
+        # every rank's checkpoint and plateau scheduler see the same val/reward
+        for k in ("reward", "chamfer", "iou", "valid", "length"):
+            self.log(f"val/{k}", float(cat[k].mean()), prog_bar=k in ("reward", "chamfer"), sync_dist=True)
         exp = image_logger(self)
         if exp is not None and self._grid is not None:
             exp.add_image("val/targets_vs_greedy", image_grid(*self._grid), self.global_step)
@@ -406,9 +405,6 @@ def load_targets(source: str, split: str, path=None) -> np.ndarray:
                 if key in f.files:
                     return _check_images(f[key], f"{p}:{key}")
             raise ValueError(f"{p}: no array {split!r} or {split + '_images'!r} (found: {', '.join(f.files) or 'none'})")
-    from .data import load_dataset
-    from .renderer import render_programs
-
     progs = [q for _, ps in sorted(load_dataset(p, 2, split).items()) for q in ps]
     if not progs:
         raise ValueError(f"{p}: the 2D {split} split holds no programs")
@@ -433,10 +429,6 @@ class ShuffledBatches(ShardedBatches):
         cycle = Cycle(len(self.images), rng)
         for _ in range(steps):
             yield self.images[torch.as_tensor(cycle.take(self.batch))]
-
-
-def _first(batch):
-    return batch[0]
 
 
 class TargetDataModule(L.LightningDataModule):
@@ -498,9 +490,7 @@ class TargetDataModule(L.LightningDataModule):
         rank, world = distributed(self.trainer)
         steps = self.steps_per_epoch or max(1, len(self.train_images) // self.batch_size)
         ds = ShuffledBatches(self.train_images, self.batch_size, steps, self.seed, rank, world)
-        if self.trainer is not None:
-            ds.set_epoch(self.trainer.current_epoch)
-        return torch.utils.data.DataLoader(ds, batch_size=1, collate_fn=_first, num_workers=self.num_workers)
+        return stream_loader(ds, self.trainer, self.num_workers)
 
     def val_dataloader(self):
         return torch.utils.data.DataLoader(torch.utils.data.TensorDataset(self.val_images), batch_size=self.batch_size,

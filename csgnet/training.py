@@ -100,6 +100,17 @@ def distributed(trainer) -> tuple[int, int]:
     return (trainer.global_rank, trainer.world_size) if trainer is not None else (0, 1)
 
 
+def stream_loader(ds: ShardedBatches, trainer, num_workers: int = 0) -> torch.utils.data.DataLoader:
+    """A DataLoader over a batch stream (each item already a batch), at the trainer's current epoch."""
+    if trainer is not None:
+        ds.set_epoch(trainer.current_epoch)
+    return torch.utils.data.DataLoader(ds, batch_size=1, collate_fn=_collate_first, num_workers=num_workers)
+
+
+def _collate_first(batch):
+    return batch[0]
+
+
 def set_stream_epoch(trainer, epoch: int) -> None:
     """Tell the training stream (a :class:`ShardedBatches`) which epoch starts, so it reseeds."""
     ds = getattr(trainer.train_dataloader, "dataset", None)
@@ -139,10 +150,6 @@ class MixedLengthBatches(ShardedBatches):
                     toks = self.tables[n][torch.as_tensor(cycles[n].take(self.per_length))]
                 parts.append(toks)
             yield torch.cat(parts), lengths.clone()
-
-
-def _collate_first(batch):
-    return batch[0]
 
 
 class CSGDataModule(L.LightningDataModule):
@@ -217,10 +224,7 @@ class CSGDataModule(L.LightningDataModule):
         rank, world = distributed(self.trainer)
         ds = MixedLengthBatches(self.dim, self.lengths, self.batch_size, self._steps(), self.max_len,
                                 self.train_tables, self.seed, rank, world)
-        if self.trainer is not None:
-            ds.set_epoch(self.trainer.current_epoch)
-        return torch.utils.data.DataLoader(ds, batch_size=1, collate_fn=_collate_first,
-                                           num_workers=self.num_workers, persistent_workers=False)
+        return stream_loader(ds, self.trainer, self.num_workers)
 
     def val_dataloader(self):
         lengths = (self.val_tokens != vocabulary(self.dim).stop).sum(1)
