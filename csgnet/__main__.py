@@ -4,7 +4,7 @@
     python -m csgnet render "sp(32,32,32,20)cu(32,32,32,28)*" --dim 3 -o out.obj
     python -m csgnet generate --dim 2 --scale 0.001 --out data/synthetic --workers 2
     python -m csgnet demo --out demo_output
-    python -m csgnet parse examples/house.png examples/bracket.stl --beam 10 --out parse_output
+    python -m csgnet parse examples/house.png examples/snowman.stl --beam 10 --out parse_output
     python -m csgnet evaluate --dim 2 --data data/synthetic --weights csgnet/weights/csgnet2d.pt --out table.md
     python -m csgnet export-weights runs/x/checkpoints/best-012.ckpt --out csgnet/weights/csgnet2d.pt
     python -m csgnet table4 --weights "CSGNet RL=runs/rl.pt" csgnet/weights/csgnet2d.pt --images 50 --out table4.md
@@ -114,8 +114,9 @@ def cmd_demo(args) -> int:
 def cmd_parse(args) -> int:
     """Infer a program for each input shape with a trained model."""
     import numpy as np
+    from shapeio import atomic_write
 
-    from . import export
+    from . import export, render
     from .inference import InputError, infer, load_model, load_pretrained, load_shape
 
     out = Path(args.out)
@@ -153,10 +154,6 @@ def cmd_parse(args) -> int:
                 print(f"  refined ({len(valid)} beams): {ref.text}\n  chamfer {res.chamfer:.3f} -> {ref.score:.3f} px")
         stem = out / Path(src).stem
         out.mkdir(parents=True, exist_ok=True)
-        from shapeio import atomic_write
-
-        from . import render
-
         atomic_write(stem.with_suffix(".txt"), (res.text if program is None else program.text()) + "\n")
         img = np.zeros((64,) * dim, dtype=bool) if program is None else render(program, dim)[0]
         if dim == 2:
@@ -202,8 +199,7 @@ def cmd_evaluate(args) -> int:
         print(f"decoding with {name} ...", flush=True)
         rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
                                constrained=args.constrained)
-    note = (f"`{_command(args)}`; beam mode {args.mode!r}, "
-            f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
+    note = f"`{_command(args)}`; beam mode {args.mode!r}, {_decoding(args)}."
     _write_table(markdown_tables(rows, args.dim, note), args.out)
     return 0
 
@@ -239,6 +235,11 @@ def _command(args) -> str:
     return "python -m csgnet " + shlex.join(args.argv)
 
 
+def _decoding(args) -> str:
+    """How the written tables' programs were decoded, for their notes."""
+    return f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
+
+
 def _write_table(text: str, out) -> None:
     print(text)
     if out:
@@ -267,7 +268,7 @@ def cmd_table4(args) -> int:
     rows = table4(_labelled_models(specs), test[idx], train, tuple(args.beams), iters,
                   constrained=args.constrained, progress=lambda s: print(s, flush=True))
     note = (f"`{_command(args)}`; {len(idx)} of {len(test)} test silhouettes "
-            f"(seed {args.seed}); {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
+            f"(seed {args.seed}); {_decoding(args)}.")
     _write_table(table4_markdown(rows, note, iters), args.out)
     return 0
 
@@ -296,7 +297,7 @@ def cmd_table6(args) -> int:
     rows = table6(model, programs, tuple(args.beams), constrained=args.constrained,
                   progress=lambda s: print(s, flush=True))
     note = (f"`{_command(args)}`; {label}; targets: {source}, lengths "
-            f"{', '.join(map(str, lengths))}; {'grammar-constrained' if args.constrained else 'unconstrained'} decoding.")
+            f"{', '.join(map(str, lengths))}; {_decoding(args)}.")
     _write_table(table6_markdown(rows, note), args.out)
     return 0
 
