@@ -126,10 +126,14 @@ class SyntheticTargets:
     def __len__(self) -> int:
         return self.size * len(self.lengths)
 
+    def _pool(self, li: int) -> tuple[np.ndarray, np.ndarray, tuple]:
+        """The pool of ``self.lengths[li]`` (:func:`_synthetic_pool`)."""
+        return _synthetic_pool(self.dim, self.lengths[li], self.size, self.seed, self.rules)
+
     def prepare(self) -> "SyntheticTargets":
         """Draw every length's pool now (otherwise each is drawn on its first use); returns self."""
-        for i in range(0, len(self), self.size):
-            self.tokens(i)
+        for li in range(len(self.lengths)):
+            self._pool(li)
         return self
 
     def tokens(self, index: int) -> np.ndarray:
@@ -137,12 +141,13 @@ class SyntheticTargets:
         if not 0 <= index < len(self):
             raise IndexError(f"target index {index} out of range [0, {len(self)})")
         li, i = divmod(int(index), self.size)
-        return _synthetic_pool(self.dim, self.lengths[li], self.size, self.seed, self.rules)[0][i]
+        return self._pool(li)[0][i]
 
     def sample(self, rng: np.random.Generator) -> Target:
         li = int(rng.integers(len(self.lengths)))
         i = int(rng.integers(self.size))
-        _, packed, texts = _synthetic_pool(self.dim, self.lengths[li], self.size, self.seed, self.rules)
+        _, packed, texts = self._pool(li)
+        # one row: np.unpackbits directly (csgnet.renderer.unpack's per-call set-up costs more than the row)
         shape = np.unpackbits(packed[i], bitorder="little").view(bool).reshape((SIZE,) * self.dim)
         return Target(shape, li * self.size + i, texts[i])
 

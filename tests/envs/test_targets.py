@@ -7,15 +7,20 @@ import pytest
 import csgnet
 from envs.csg import CSGEnv
 from envs.targets import ArrayTargets, ImageFolderTargets, SyntheticTargets, Target, TargetSource, as_target_source
+from envs.targets import _synthetic_pool
 
 
 def test_synthetic_targets_are_rendered_pool_programs():
     src = SyntheticTargets(2, lengths=[3, 7], size=5, seed=3)
-    assert len(src) == 10 and src.prepare() is src
+    assert len(src) == 10
+    drawn = _synthetic_pool.cache_info().misses
+    assert src.prepare() is src
+    assert _synthetic_pool.cache_info().misses == drawn + 2  # both pools drawn now, ...
     rng = np.random.default_rng(0)
     lengths = set()
     for _ in range(20):
         t = src.sample(rng)
+        assert _synthetic_pool.cache_info().misses == drawn + 2  # ... none on sampling
         prog = csgnet.parse(t.program, 2)  # strict: a valid program
         lengths.add(len(prog))
         np.testing.assert_array_equal(t.shape, csgnet.render(prog)[0])
