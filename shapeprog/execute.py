@@ -357,10 +357,12 @@ def _rodrigues(axis, angle):
     return eye + s * K + (1 - c) * torch.bmm(K, K)
 
 
-def _safe_unit(v, ok, all_ok=False):
+def _safe_unit(v, ok, all_ok: bool | None = None):
     """v / |v| where ``ok``; a fixed unit vector elsewhere (keeps gradients finite).
-    ``all_ok``: the caller knows that every row is ok."""
-    if all_ok or bool(ok.all()):
+    ``all_ok``: whether every row is ok, when the caller already knows it (None: tested here)."""
+    if all_ok is None:
+        all_ok = bool(ok.all())
+    if all_ok:
         return v / _norm(v)[:, None]
     e = torch.zeros_like(v)
     e[:, 0] = 1.0
@@ -391,7 +393,7 @@ def _min_rotation(nb, nc, act):
         R = _rodrigues(_safe_unit(cr, turn, True), torch.acos(dot))
     else:
         eye = torch.eye(3, dtype=nb.dtype, device=nb.device).expand(n, 3, 3)
-        axis = _safe_unit(cr, turn)
+        axis = _safe_unit(cr, turn, False)
         angle = torch.acos(torch.where(turn, dot, torch.zeros_like(dot)))
         R = torch.where(turn[:, None, None], _rodrigues(axis, angle), eye)
     if not all_turn and bool(degenerate.any()):
