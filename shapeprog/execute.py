@@ -32,7 +32,7 @@ Example:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import torch
 
@@ -256,8 +256,8 @@ class _Compiled:
 
     blocks: list[_BlockCode]
     n_params: int
-    instances: list = field(default_factory=list)  # BFS: (block idx, parent inst, parent slot, flip axis)
-    leaf_slots: list = field(default_factory=list)  # per block: its slots that are leaves (no bbox, no sub-program)
+    instances: list  # BFS: (block idx, parent inst, parent slot, flip axis)
+    leaf_slots: list  # per block: its slots that are leaves (no bbox, no sub-program)
 
 
 def _compile(program: Program) -> _Compiled:
@@ -266,22 +266,18 @@ def _compile(program: Program) -> _Compiled:
     for b, block_lines in zip(program.blocks, lines):
         code, off = _compile_block(b, off, block_lines)
         blocks.append(code)
-    comp = _Compiled(blocks, off)
     index = {b.name: i for i, b in enumerate(program.blocks)}
-    comp.leaf_slots = [[s for s in range(1, len(c.slots)) if _child_of(c, s, index)[0] is None] for c in blocks]
+    # per block, per slot after the bbox: (sub-program block or None, flip axis)
+    children = [[_child_of(c, s, index) for s in range(1, len(c.slots))] for c in blocks]
+    leaf_slots = [[s for s, (child, _) in enumerate(ch, 1) if child is None] for ch in children]
     # breadth-first instances; an instance = one placement of a block
     queue = [(0, -1, -1, None)]
     qi = 0
     while qi < len(queue):
-        bidx, _, _, _ = queue[qi]
-        code = blocks[bidx]
-        for s in range(1, len(code.slots)):
-            child, flip = _child_of(code, s, index)
-            if child is not None:
-                queue.append((child, qi, s, flip))
+        bidx = queue[qi][0]
+        queue.extend((child, qi, s, flip) for s, (child, flip) in enumerate(children[bidx], 1) if child is not None)
         qi += 1
-    comp.instances = queue
-    return comp
+    return _Compiled(blocks, off, queue, leaf_slots)
 
 
 def _child_of(code: _BlockCode, s: int, index: dict) -> tuple[int | None, int | None]:
