@@ -41,7 +41,6 @@ import torch
 
 def _synthetic(n: int, length: int, shift: int, seed: int):
     from csgnet.data import sample_programs
-    from csgnet.lang import Draw, Program
     from csgnet.renderer import render_programs
     from csgnet.vocab import vocabulary
 
@@ -49,8 +48,10 @@ def _synthetic(n: int, length: int, shift: int, seed: int):
     vocab = vocabulary(2)
     progs = [vocab.decode(t) for t in sample_programs(2, length, n, rng)]
     targets = render_programs(progs, 2).numpy()
-    starts = [Program(tuple(Draw(t.kind, tuple(int(v + rng.integers(-shift, shift + 1)) for v in t.params))
-                            if isinstance(t, Draw) else t for t in p.tokens), 2) for p in progs]
+    starts = []
+    for p in progs:
+        params = np.array([v for d in p.draws for v in d.params])
+        starts.append(p.with_params(params + rng.integers(-shift, shift + 1, len(params))))
     return starts, targets
 
 
@@ -133,10 +134,12 @@ def main(argv=None):
         return metrics.chamfer(render_programs([prog], 2)[0].numpy(), target)
 
     iters = [None if s.strip().lower() == "none" else int(s) for s in args.maxiter.split(",")]
-    def timed(fn):
+
+    def timed(fn, n=len(targets)):
+        """``fn()``, with its wall-clock and CPU (process) seconds per image over ``n`` images."""
         w0, c0 = time.perf_counter(), time.process_time()
         out = fn()
-        return out, (time.perf_counter() - w0) / len(targets), (time.process_time() - c0) / len(targets)
+        return out, (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
 
     print("| maxiter | mode | chamfer before | chamfer after (program) | reported | wall s/image | "
           "CPU s/image | evaluations/image | renders/image |")
@@ -178,12 +181,9 @@ def main(argv=None):
               "ratio (CPU) | same programs and scores |")
         print("|---|---|---|---|---|")
         for it in (1, None):
-            w0, c0 = time.perf_counter(), time.process_time()
-            base = [_plain_powell(s, t, it) for s, t in zip(starts[:n], targets[:n])]
-            wb, cb = (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
-            w0, c0 = time.perf_counter(), time.process_time()
-            ours = [csgnet.refine(s, t, maxiter=it, mode="reference") for s, t in zip(starts[:n], targets[:n])]
-            wo, co = (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
+            base, wb, cb = timed(lambda: [_plain_powell(s, t, it) for s, t in zip(starts[:n], targets[:n])], n)
+            ours, wo, co = timed(lambda: [csgnet.refine(s, t, maxiter=it, mode="reference")
+                                          for s, t in zip(starts[:n], targets[:n])], n)
             same = all(b[0] == o.program and b[1] == o.score for b, o in zip(base, ours))
             print(f"| {it if it is not None else 'unlimited'} | {wb:.3f} / {cb:.3f} | {wo:.3f} / {co:.3f} | "
                   f"{cb / co:.0f}x | {same} |", flush=True)
