@@ -103,8 +103,8 @@ def bench_csg(dim: int, n: int, seconds: float, eps: float, device: str) -> None
     rows.append(("CSGVectorEnv", n, r, e))
     base = rows[0][2]
     print(f"\n{dim}D, max length {single.config.max_length}, reward {single.config.reward}, device {device}")
-    print(f"| env | episodes in parallel | episodes/s | ratio to single |")
-    print(f"|---|---|---|---|")
+    print("| env | episodes in parallel | episodes/s | ratio to single |")
+    print("|---|---|---|---|")
     for name, k, rate, eps_done in rows:
         print(f"| {name} | {k} | {rate:,.0f} | {rate / base:.1f}x |   ({eps_done} episodes)")
 
