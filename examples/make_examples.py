@@ -7,9 +7,10 @@ and fits into 64×64. 3D: small meshes that ``parse`` voxelises to 64³.
 """
 from pathlib import Path
 
-import numpy as np
 import trimesh
 from PIL import Image, ImageDraw
+
+from shapeio import atomic_write
 
 HERE = Path(__file__).parent
 
@@ -55,14 +56,13 @@ def snowman() -> trimesh.Trimesh:
 
 
 def main() -> None:
-    house().save(HERE / "house.png")
-    ring().save(HERE / "ring.png")
-    bolt().convert("RGB").save(HERE / "bolt.jpg", quality=92)
-    table().export(HERE / "table.obj")
-    snowman().export(HERE / "snowman.stl")
+    atomic_write(HERE / "house.png", lambda f: house().save(f, format="PNG"))
+    atomic_write(HERE / "ring.png", lambda f: ring().save(f, format="PNG"))
+    atomic_write(HERE / "bolt.jpg", lambda f: bolt().convert("RGB").save(f, format="JPEG", quality=92))
+    atomic_write(HERE / "table.obj", lambda f: table().export(f, file_type="obj"))
+    atomic_write(HERE / "snowman.stl", lambda f: snowman().export(f, file_type="stl"))
     print("wrote", ", ".join(sorted(p.name for p in HERE.iterdir() if p.suffix != ".py")))
 
 
 if __name__ == "__main__":
-    np.random.seed(0)
     main()
