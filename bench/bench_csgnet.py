@@ -49,21 +49,14 @@ def bench_beam(model, n: int, batch: int, width: int, constrained: bool, device)
 
 
 def bench_train(dim: int, stack: bool, size: str, overrides: dict, batch: int, steps: int, device) -> float:
-    from csgnet.data import sample_programs
-    from csgnet.training import DEFAULT_LENGTHS, CSGNetModule
-    from csgnet.vocab import vocabulary
+    from csgnet.training import DEFAULT_LENGTHS, CSGNetModule, MixedLengthBatches
 
     m = CSGNetModule(dim=dim, stack=stack, size=size, model=overrides).to(device)
     opt = torch.optim.Adam(m.parameters(), lr=1e-3)
-    rng = np.random.default_rng(0)
     lengths = DEFAULT_LENGTHS[dim]
-    per = batch // len(lengths)
-    tok = torch.full((per * len(lengths), max(lengths) + 1), vocabulary(dim).stop)
-    lens = []
-    for i, L in enumerate(lengths):
-        tok[i * per:(i + 1) * per, :L] = torch.as_tensor(sample_programs(dim, L, per, rng))
-        lens += [L] * per
-    tok, lens = tok.to(device), torch.tensor(lens, device=device)
+    # one batch of the training stream (programs sampled on the fly, equal counts per length)
+    tok, lens = next(iter(MixedLengthBatches(dim, lengths, batch, 1, max(lengths), tables=None, seed=0)))
+    tok, lens = tok.to(device), lens.to(device)
     times = []
     for i in range(steps + 1):
         t0 = time.perf_counter()
