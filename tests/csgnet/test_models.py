@@ -132,12 +132,14 @@ def test_beam_scores_are_sorted_and_equal_teacher_forced_logprobs(stack):
 
 def test_finished_beams_stop_and_reference_mode_keeps_decoding():
     m = tiny(2, False, seed=2)
-    # make '$' overwhelmingly likely at every step: every beam finishes immediately after step 1
+    # make '$' overwhelmingly likely at every step: the best beam is '$' at step 1, the two others take
+    # one primitive at step 1 and '$' at step 2, and decoding stops there
     with torch.no_grad():
         m.head[-1].bias[m.stop] = 50.0
     tgt = targets(["c(32,32,16)"])
     d = beam_search(m, tgt, 3, max_len=6)
-    assert d.lengths[0, 0] == 0 and d.tokens.shape[2] <= 6
+    assert d.tokens.shape[2] == 2 and d.lengths.tolist() == [[0, 1, 1]]
+    assert (d.tokens[0, 1:, 1] == m.stop).all()
     # improved: the '$'-only hypothesis is kept once, its score is its own log-probability
     assert torch.isfinite(d.logprob[0, 0])
     r = beam_search(m, tgt, 3, max_len=6, mode="reference")
