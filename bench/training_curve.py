@@ -1,7 +1,8 @@
 """Print a training run's validation curve (per epoch) from its TensorBoard event files, as markdown.
 
 Supervised runs (``train.py``) and REINFORCE runs (``train_rl.py``: validation reward, and the policy
-entropy per counted step of the last training step logged) alike.
+entropy per counted step of the last training step logged) alike. Below each table: the learning-rate
+changes (when a ``LearningRateMonitor`` logged them) and the first and last logged policy entropy.
 
     python bench/training_curve.py runs/csgnet2d_small/version_0
     python bench/training_curve.py runs/rl_csgnet2d_small/version_0 --every 5
@@ -45,7 +46,25 @@ def curve(run: Path, every: int = 1) -> str:
         lines.append(f"| {epochs.get(step, '')} | {step + 1} | {(r['wall'] - t0) / 60:.1f} | "
                      f"{tl[-1] if tl else float('nan'):.3f} | "
                      + " | ".join(ent + [f"{r.get(t, float('nan')):.4f}" for t in cols]) + " |")
+    lines += _schedule(ea, tags, entropy)
     return "\n".join(lines)
+
+
+def _schedule(ea, tags, entropy) -> list[str]:
+    """The learning-rate changes (LearningRateMonitor's ``lr-*`` scalars) and the first and last logged
+    policy entropy, at their TensorBoard steps."""
+    out = []
+    for tag in (t for t in tags if t.startswith("lr-")):
+        changes, prev = [], None
+        for e in ea.Scalars(tag):
+            if e.value != prev:
+                changes.append(f"{e.value:.3g} from step {e.step}")
+                prev = e.value
+        out.append(f"\n{tag}: " + ", ".join(changes))
+    if entropy:
+        out.append(f"\ntrain/entropy: {entropy[0].value:.3f} at step {entropy[0].step} (first logged), "
+                   f"{entropy[-1].value:.3f} at step {entropy[-1].step} (last)")
+    return out
 
 
 def main(argv=None) -> int:
