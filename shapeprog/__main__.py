@@ -117,7 +117,10 @@ def _cmd_silhouettes(args) -> int:
     from .silhouettes import build, write
 
     t0 = time.perf_counter()
-    data = build(size=args.size, margin=args.margin, limit=args.limit, progress=not args.quiet)
+    try:
+        data = build(size=args.size, margin=args.margin, limit=args.limit, progress=not args.quiet)
+    except ValueError as e:  # --size / --margin, checked before any program runs
+        raise SystemExit(f"error: {e}") from None
     write(args.out, data, margin=args.margin)
     counts = ", ".join(f"{split} {len(s.images)}" for split, s in data.items())
     print(f"wrote {args.out}: {counts} images in {time.perf_counter() - t0:.1f} s")

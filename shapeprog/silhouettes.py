@@ -84,6 +84,11 @@ def _project(c: np.ndarray, view: str) -> np.ndarray:
     return np.stack([sa * c[..., a], sb * c[..., b]], axis=-1)
 
 
+def _check_frame(size: int, margin: int) -> None:
+    if size < 1 or not 0 <= 2 * margin < size:
+        raise ValueError(f"need size >= 1 and 0 <= margin < size / 2, got size={size}, margin={margin}")
+
+
 def silhouette(corners, view: str, size: int = SIZE, margin: int = MARGIN) -> np.ndarray:
     """The binary silhouette of one shape's cuboids in one view.
 
@@ -97,8 +102,7 @@ def silhouette(corners, view: str, size: int = SIZE, margin: int = MARGIN) -> np
     Returns:
         (size, size) bool.
     """
-    if size < 1 or not 0 <= 2 * margin < size:
-        raise ValueError(f"need size >= 1 and 0 <= margin < size / 2, got size={size}, margin={margin}")
+    _check_frame(size, margin)
     c = numpy_corners(corners)
     pts = _project(c, view)  # (L, 8, 2)
     lo, hi = pts.reshape(-1, 2).min(axis=0), pts.reshape(-1, 2).max(axis=0)
@@ -183,7 +187,11 @@ def build(categories=("chair", "table", "storage"), size: int = SIZE, margin: in
         category order and then the split file order, each shape's views in :data:`VIEWS` order.
         Programs that fail to parse or execute (none in the shipped corpus) are skipped with a
         warning naming them.
+
+    Raises:
+        ValueError: a ``size`` / ``margin`` that :func:`silhouette` rejects, before any program runs.
     """
+    _check_frame(size, margin)
     import torch
     from tqdm import tqdm
 

@@ -156,3 +156,13 @@ def test_bad_input():
         S.silhouette(np.zeros((0, 8, 3)), "side")
     with pytest.raises(ValueError, match="margin < size / 2"):
         S.silhouette(boxes([0, 0, 0], [1, 1, 1]), "front", size=8, margin=4)
+
+
+def test_bad_frame_is_refused_before_building(tmp_path):
+    """A size / margin that no image accepts is an error up front, not a set of skipped shapes."""
+    with pytest.raises(ValueError, match="got size=64, margin=40"):
+        S.build(margin=40, limit=1, progress=False)
+    out = tmp_path / "sil.npz"
+    with pytest.raises(SystemExit, match="error: need size >= 1 and 0 <= margin < size / 2"):
+        main(["silhouettes", "--out", str(out), "--margin", "40", "--limit", "1", "--quiet"])
+    assert not out.exists()
