@@ -59,13 +59,13 @@ from typing import Sequence
 import numpy as np
 
 from .lang import Draw, Program, is_valid, parse
+from .primitives import SIZE
 
 __all__ = ["METRICS", "MODES", "RefineResult", "refine", "refine_beams"]
 
 METRICS = ("chamfer", "iou")
 MODES = ("improved", "reference")
 
-SIZE = 64
 POSITION_RANGE = (8, 56)
 """Positions searched (both modes) and, in the reference mode, every value inside the objective."""
 RADIUS_RANGE = (8, 32)

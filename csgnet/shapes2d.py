@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .primitives import SIZE
+
 __all__ = ["SPLITS", "SilhouetteSplit", "load_cad_h5", "load_silhouettes", "silhouettes_path"]
 
 SPLITS = ("train", "val", "test")
-SIZE = 64
 
 
 def _check_split(split: str) -> None:

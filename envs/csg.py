@@ -81,6 +81,7 @@ from gymnasium.vector.vector_env import AutoresetMode
 
 from csgnet import metrics
 from csgnet.lang import completable
+from csgnet.primitives import SIZE
 from csgnet.renderer import StackMachine, pack, popcount, primitive_cache, unpack
 from csgnet.vocab import PAD_CODE, vocabulary
 
@@ -89,7 +90,6 @@ from .targets import Target, as_target_source
 
 __all__ = ["CSGEnv", "CSGVectorEnv", "CSGConfig"]
 
-SIZE = 64
 REWARDS = ("chamfer", "iou")
 INVALID_REWARDS = ("zero", "reference")
 INVALID_ACTIONS = ("terminate", "continue")

@@ -25,6 +25,8 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 import torch
 
+from csgnet.primitives import SIZE
+
 from ._checks import check_dim, check_int
 
 __all__ = [
@@ -35,8 +37,6 @@ __all__ = [
     "ImageFolderTargets",
     "as_target_source",
 ]
-
-SIZE = 64
 
 
 @dataclass(frozen=True)
