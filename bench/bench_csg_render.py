@@ -156,7 +156,7 @@ def main(argv=None):
             def get_prim(d):
                 return skimage_2d(d.kind, *d.params)
         else:
-            from csgnet.render_np import draw_np
+            from csgnet.renderer.reference import draw_np
 
             needed = {d.text(long=False) for p in progs for d in p.draws}
             table = {k: draw_np(vocab.decode([vocab.index(k)]).tokens[0]) for k in needed}

@@ -49,7 +49,7 @@ def bench_beam(model, n: int, batch: int, width: int, constrained: bool, device)
 
 
 def bench_train(dim: int, stack: bool, size: str, overrides: dict, batch: int, steps: int, device) -> float:
-    from csgnet.training import DEFAULT_LENGTHS, CSGNetModule, MixedLengthBatches
+    from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule, MixedLengthBatches
 
     m = CSGNetModule(dim=dim, stack=stack, size=size, model=overrides).to(device)
     opt = torch.optim.Adam(m.parameters(), lr=1e-3)

@@ -6,11 +6,11 @@
 Models: the shipped ``csgnet/weights/csgnet2d.pt`` and ``csgnetstack2d.pt`` (random small-preset weights
 where a file is missing), or ``--weights`` / ``--stack-weights``.
 
-One step is what :class:`csgnet.reinforce.ReinforceModule` does per batch: jitter the targets, sample
+One step is what :class:`csgnet.train.reinforce.ReinforceModule` does per batch: jitter the targets, sample
 one program per target in train mode (:func:`csgnet.decode.sample`; CSGNetStack executes each sampled
 prefix), render the programs, score them against the targets, update the baseline, form the loss and
 run backward plus an SGD step. Targets are the validation silhouettes. Two ways of computing the
-reward are timed in the same run: batched (one :func:`csgnet.reinforce.episode_rewards` call per batch,
+reward are timed in the same run: batched (one :func:`csgnet.train.reinforce.episode_rewards` call per batch,
 what training uses) and, as the baseline, one :func:`csgnet.metrics.reward` call per episode (the
 reference's per-image loop), on the same samples in each step, so the two step rates share the
 sampling, rendering and backward times. The two give identical rewards (checked every step).
@@ -30,7 +30,7 @@ import torch
 
 def _model(weights, stack: bool):
     from csgnet.models import CSGNet, preset
-    from csgnet.reinforce import load_initial
+    from csgnet.train.reinforce import load_initial
 
     from csgnet.inference import WEIGHTS
 
@@ -49,7 +49,7 @@ def bench(model, targets: torch.Tensor, batch: int, steps: int, device) -> dict:
     from csgnet import metrics
     from csgnet.data import jitter
     from csgnet.decode import sample
-    from csgnet.reinforce import episode_rewards, policy_loss, update_baseline
+    from csgnet.train.reinforce import episode_rewards, policy_loss, update_baseline
     from csgnet.renderer import render_tokens
 
     torch.manual_seed(0)

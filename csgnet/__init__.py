@@ -8,7 +8,7 @@ Entry points:
 * :mod:`csgnet.metrics`: chamfer distance and IoU as the paper computes them.
 * :func:`load_pretrained` / :func:`infer`: the shipped neural parsers and program inference on
   bool images / volumes (:mod:`csgnet.inference`); models in :mod:`csgnet.models`, decoding in
-  :mod:`csgnet.decode`, Lightning training in :mod:`csgnet.training`, tables in :mod:`csgnet.evaluate`.
+  :mod:`csgnet.decode`, Lightning training in :mod:`csgnet.train.supervised`, tables in :mod:`csgnet.paper.tables`.
 * :func:`refine` / :func:`refine_beams`: Powell refinement of a program's parameters toward a target
   image (:mod:`csgnet.refinement`).
 """
@@ -64,8 +64,8 @@ def render(programs, dim: int = 2, device=None) -> np.ndarray:
 def __getattr__(name):  # lazy submodules: csgnet.metrics etc. without work at import
     import importlib
 
-    if name in {"metrics", "export", "data", "render_np", "renderer", "primitives", "refinement", "models",
-                "decode", "training", "inference", "evaluate"}:
+    if name in {"metrics", "export", "data", "renderer", "primitives", "refinement", "models", "score",
+                "decode", "train", "paper", "inference"}:
         return importlib.import_module(f".{name}", __name__)
     if name in {"load_pretrained", "infer", "load_model", "load_shape"}:  # functions of csgnet.inference
         return getattr(importlib.import_module(".inference", __name__), name)

@@ -182,7 +182,7 @@ def _is_valid(text: str, dim: int = 2) -> bool:
 
 def cmd_evaluate(args) -> int:
     from .data import load_dataset
-    from .evaluate import evaluate_model, markdown_tables, nearest_neighbour
+    from .paper.tables import evaluate_model, markdown_tables, nearest_neighbour
 
     tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
     tests = {L: p[: args.per_length] for L, p in tests.items()}
@@ -205,7 +205,7 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_export_weights(args) -> int:
-    from .training import export_weights
+    from .train.supervised import export_weights
 
     path = export_weights(args.checkpoint, args.out, half=not args.float32)
     print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
@@ -257,7 +257,7 @@ TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2
 
 def cmd_table4(args) -> int:
     from .inference import WEIGHTS
-    from .protocols import subset, table4, table4_markdown
+    from .paper.protocols import subset, table4, table4_markdown
     from .shapes2d import load_silhouettes
 
     test = load_silhouettes("test", args.silhouettes)
@@ -276,7 +276,7 @@ def cmd_table4(args) -> int:
 def cmd_table6(args) -> int:
     import numpy as np
 
-    from .protocols import table6, table6_markdown
+    from .paper.protocols import table6, table6_markdown
 
     lengths = args.lengths or [3, 5, 7, 9, 11, 13]
     if args.data:

@@ -25,8 +25,8 @@ import torch
 import torch.nn.functional as F
 
 from .lang import Program, completable
-from .renderer import PAD_CODE, StackMachine, primitive_cache, unpack
-from .vocab import vocabulary
+from .renderer import StackMachine, primitive_cache, unpack
+from .vocab import PAD_CODE, vocabulary
 
 __all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled"]
 

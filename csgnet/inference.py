@@ -3,7 +3,7 @@
 * :func:`load_shape` reads a PNG/JPG (binarised and fitted into 64×64, aspect kept), a ``.npy`` grid
   (2D or 3D) or a mesh (``.obj``, ``.ply``, ``.stl``, ... voxelised to 64³ with trimesh).
 * :func:`load_pretrained` returns a shipped model (``csgnet/weights/``); :func:`load_model` reads any
-  weights file written by :func:`csgnet.training.export_weights` or a Lightning checkpoint.
+  weights file written by :func:`csgnet.train.supervised.export_weights` or a Lightning checkpoint.
 * :func:`infer` decodes a batch of shapes with beam search and returns, per shape, the chosen program
   with its log-probability and its IoU / chamfer to the input.
 """
@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from .decode import decode
-from .evaluate import score_beams
+from .score import score_beams
 from .lang import Program
 from .models import CSGNet, ModelConfig, preset
 

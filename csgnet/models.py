@@ -3,7 +3,7 @@
 One class, :class:`CSGNet`, covers both models: with ``config.stack`` the encoder sees the target
 concatenated with the top-K maps of the execution stack at every step (CSGNetStack); without it the
 target is encoded once (CSGNet). The modules know nothing about training loops, data or decoding
-(:mod:`csgnet.decode`, :mod:`csgnet.training`).
+(:mod:`csgnet.decode`, :mod:`csgnet.train.supervised`).
 
 Sizes are configuration (:class:`ModelConfig`); :func:`preset` gives the ``paper`` sizes (parameter
 counts equal to the reference's: 31,037,840 for 2D CSGNet, 36,562,243 for 3D CSGNet) and a ``small``

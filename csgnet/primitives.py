@@ -1,7 +1,7 @@
 """The one definition of the CSG primitives' geometry, shared by both renderers.
 
 Every function here is written with plain arithmetic so that it evaluates identically on Python numbers,
-NumPy arrays (the per-program path, :mod:`csgnet.render_np`) and float64/int64 torch tensors (the batched
+NumPy arrays (the per-program path, :mod:`csgnet.renderer.reference`) and float64/int64 torch tensors (the batched
 path, :mod:`csgnet.renderer`). The float expressions are evaluated in float64 in exactly the order the spec
 (``../specs/csg.md`` section (b)) writes them, because the truncations are float-sensitive (for example the
 triangle apex row at r = 27).

@@ -19,7 +19,7 @@ from csgnet.data import (
     split_sizes,
 )
 from csgnet.lang import Draw, Program
-from csgnet.render_np import render_np
+from csgnet.renderer.reference import render_np
 from csgnet.vocab import vocabulary
 
 SCALE = 0.001

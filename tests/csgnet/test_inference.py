@@ -151,7 +151,7 @@ def test_parse_cli_reports_bad_input(tmp_path, capsys):
 
 
 def test_evaluate_rows_and_nearest_neighbour():
-    from csgnet.evaluate import evaluate_model, markdown_tables, nearest_neighbour
+    from csgnet.paper.tables import evaluate_model, markdown_tables, nearest_neighbour
 
     tests = {3: [csgnet.parse(t) for t in ["c(32,32,16)s(24,40,12)+", "t(32,32,20)c(32,32,8)-"]]}
     rows = evaluate_model(tiny(2), tests, beams=(1, 3), name="tiny", batch=2)

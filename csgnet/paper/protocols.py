@@ -41,10 +41,10 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
-from .decode import Decoded, beam_search, decode, greedy
-from .evaluate import best_iou_matches, score_beams, score_renders
-from .lang import Draw, Program
-from .renderer import render_programs
+from ..decode import Decoded, beam_search, decode, greedy
+from ..score import best_iou_matches, score_beams, score_renders
+from ..lang import Draw, Program
+from ..renderer import render_programs
 
 __all__ = ["Table4Row", "table4", "table4_markdown", "nearest_silhouettes", "subset", "ITERATIONS",
            "Table6Row", "table6", "table6_markdown", "beam_detections", "primitive_boxes", "box_iou",
@@ -136,7 +136,7 @@ def table4(models: Sequence[tuple[str, torch.nn.Module]], targets, train=None, b
     Returns:
         The rows, nearest neighbour first, then per model and beam width.
     """
-    from .refinement import refine_beams
+    from ..refinement import refine_beams
 
     tgt = _check_targets(targets, "targets")
     n = len(tgt)

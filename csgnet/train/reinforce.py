@@ -15,7 +15,7 @@ The procedure of ``../specs/csg.md`` section (f), the paper's fine-tuning on 2D 
   the program's tokens and its ``$`` (all steps when no ``$`` was sampled); no entropy bonus;
 * SGD with momentum 0.9 (not Nesterov), lr 0.01; gradient-norm clipping at 10 and the accumulation of
   10 batches of 300 images per update come from the Trainer (``gradient_clip_val``,
-  ``accumulate_grad_batches``, see ``configs/rl_*.yaml``); the learning rate drops x0.2 after more than
+  ``accumulate_grad_batches``, see ``configs/csgnet/rl_*.yaml``); the learning rate drops x0.2 after more than
   8 epochs without a better validation reward; the best validation reward is checkpointed;
 * training targets are jittered (:func:`csgnet.data.jitter`), validation targets are not; validation
   decodes greedily (arg-max) and reports the mean chamfer distance, reward and IoU.
@@ -24,7 +24,7 @@ The procedure of ``../specs/csg.md`` section (f), the paper's fine-tuning on 2D 
 ``cad.h5``, a folder of images, a ``.npz`` file, the renders of a synthetic dataset, or arrays given in
 code (:meth:`TargetDataModule.from_arrays`).
 
-``python train_rl.py fit --config configs/rl_csgnet2d_small.yaml`` runs it through LightningCLI (see
+``python train_rl.py fit --config configs/csgnet/rl_csgnet2d_small.yaml`` runs it through LightningCLI (see
 ``docs/reinforce.md``); ``--ckpt_path last`` resumes.
 """
 from __future__ import annotations
@@ -36,12 +36,12 @@ import lightning as L
 import numpy as np
 import torch
 
-from . import metrics
-from .data import jitter, load_dataset
-from .decode import Sampled, greedy, sample
-from .models import CSGNet, ModelConfig, preset
-from .renderer import render_programs, render_tokens
-from .training import (Cycle, ShardedBatches, distributed, image_grid, image_logger, set_stream_epoch,
+from .. import metrics
+from ..data import jitter, load_dataset
+from ..decode import Sampled, greedy, sample
+from ..models import CSGNet, ModelConfig, preset
+from ..renderer import render_programs, render_tokens
+from .supervised import (Cycle, ShardedBatches, distributed, image_grid, image_logger, set_stream_epoch,
                        stream_loader)
 
 __all__ = ["ReinforceModule", "TargetDataModule", "ShuffledBatches", "load_targets", "load_initial",
@@ -100,8 +100,8 @@ def load_initial(path, overrides: dict | None = None) -> tuple[CSGNet, dict]:
     """A model initialised from supervised weights, loading the tensors whose names and shapes match.
 
     Args:
-        path: a weights file (:func:`csgnet.training.export_weights`) or a Lightning checkpoint of
-            :class:`csgnet.training.CSGNetModule` (or of :class:`ReinforceModule`).
+        path: a weights file (:func:`csgnet.train.supervised.export_weights`) or a Lightning checkpoint of
+            :class:`csgnet.train.supervised.CSGNetModule` (or of :class:`ReinforceModule`).
         overrides: :class:`~csgnet.models.ModelConfig` fields to change (e.g. ``{"dropout": 0.2}``);
             tensors whose shape changes as a result are left at their initial values.
 
@@ -109,7 +109,7 @@ def load_initial(path, overrides: dict | None = None) -> tuple[CSGNet, dict]:
         ``(model, report)`` where ``report`` lists the ``loaded``, ``skipped`` (shape mismatch) and
         ``missing`` tensor names.
     """
-    from .inference import load_model
+    from ..inference import load_model
 
     src = load_model(path)
     config = src.config
@@ -180,7 +180,7 @@ class ReinforceModule(L.LightningModule):
             if not path.is_file():
                 raise FileNotFoundError(
                     f"{path}: no such weights file to start REINFORCE from; train a supervised model first "
-                    f"(python train.py fit --config configs/csgnet2d_small.yaml) or pass its weights with "
+                    f"(python train.py fit --config configs/csgnet/csgnet2d_small.yaml) or pass its weights with "
                     f"--model.init")
             self.model, report = load_initial(path, model)
             if report["skipped"] or report["missing"]:
@@ -372,18 +372,18 @@ def load_targets(source: str, split: str, path=None) -> np.ndarray:
     if split not in ("train", "val", "test"):
         raise ValueError(f"unknown split {split!r}; expected train, val or test")
     if source == "silhouettes":
-        from .shapes2d import load_silhouettes
+        from ..shapes2d import load_silhouettes
 
         return _check_images(load_silhouettes(split, path), f"silhouettes {split}")
     if path is None:
         raise ValueError(f"the {source!r} target source needs a path")
     p = Path(path)
     if source == "cad":
-        from .shapes2d import load_cad_h5
+        from ..shapes2d import load_cad_h5
 
         return _check_images(load_cad_h5(p, split), f"{p}:{split}_images")
     if source == "folder":
-        from .inference import IMAGE_SUFFIXES, load_shape
+        from ..inference import IMAGE_SUFFIXES, load_shape
 
         d = p / split
         if not d.is_dir():

@@ -11,7 +11,7 @@
 * :class:`AtomicCheckpointIO` writes checkpoints through a temporary file and a rename, so an
   interrupted run never leaves a truncated checkpoint behind.
 
-``python train.py fit --config configs/csgnetstack2d_small.yaml`` runs it through LightningCLI.
+``python train.py fit --config configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI.
 """
 from __future__ import annotations
 
@@ -26,12 +26,12 @@ from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from shapeio import atomic_write
 
-from . import metrics
-from .data import ProgramDataset, jitter, load_dataset, sample_programs, split_sizes
-from .decode import greedy
-from .models import CSGNet, ModelConfig, preset
-from .renderer import render_tokens, stack_trace
-from .vocab import vocabulary
+from .. import metrics
+from ..data import ProgramDataset, jitter, load_dataset, sample_programs, split_sizes
+from ..decode import greedy
+from ..models import CSGNet, ModelConfig, preset
+from ..renderer import render_tokens, stack_trace
+from ..vocab import vocabulary
 
 __all__ = ["CSGDataModule", "CSGNetModule", "AtomicCheckpointIO", "ShardedBatches", "MixedLengthBatches", "Cycle",
            "export_weights", "image_grid", "DEFAULT_LENGTHS"]

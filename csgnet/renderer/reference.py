@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import primitives as P
-from .primitives import SIZE
-from .lang import Draw, Program, is_valid
+from .. import primitives as P
+from ..primitives import SIZE
+from ..lang import Draw, Program, is_valid
 
 __all__ = ["draw_np", "render_np", "bresenham", "SIZE"]
 

@@ -12,12 +12,12 @@ import csgnet
 from csgnet import metrics
 from csgnet.decode import sample
 from csgnet.models import CSGNet, preset
-from csgnet.reinforce import (ReinforceModule, ShuffledBatches, TargetDataModule, episode_rewards, load_initial,
+from csgnet.train.reinforce import (ReinforceModule, ShuffledBatches, TargetDataModule, episode_rewards, load_initial,
                               load_targets, policy_loss, update_baseline)
 from csgnet.renderer import render_tokens
-from csgnet.training import AtomicCheckpointIO
+from csgnet.train.supervised import AtomicCheckpointIO
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TINY = {"hidden": 32, "channels": [4, 4, 4], "embed": 16, "dropout": 0.0, "enc_dropout": 0.0}
 SHAPES = ["c(32,32,16)", "s(24,40,12)", "t(40,24,16)"]
 
@@ -196,7 +196,7 @@ def test_fit_logs_checkpoints_resumes_and_exports(tmp_path):
     from lightning.pytorch.loggers import TensorBoardLogger
 
     from csgnet.inference import load_model
-    from csgnet.training import export_weights
+    from csgnet.train.supervised import export_weights
 
     save_weights(tmp_path / "w.pt", stack=True)
     targets = csgnet.render(SHAPES)
@@ -232,7 +232,7 @@ def test_fit_logs_checkpoints_resumes_and_exports(tmp_path):
 
 
 def test_training_targets_are_jittered_and_validation_targets_are_not(monkeypatch):
-    import csgnet.reinforce as rl
+    import csgnet.train.reinforce as rl
 
     targets = torch.from_numpy(csgnet.render(SHAPES * 4))
     m = tiny_module(augment=True, seed=3)
@@ -301,16 +301,16 @@ def test_target_sources_and_their_errors(tmp_path):
     assert sil.shape[1:] == (64, 64) and sil.dtype == bool and len(sil) > 100
 
 
-@pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs").glob("rl_*.yaml")))
+@pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs" / "csgnet").glob("rl_*.yaml")))
 def test_rl_configs_parse_and_build(config, tmp_path, monkeypatch):
     from lightning.pytorch.cli import LightningCLI
 
     monkeypatch.chdir(ROOT)
-    text = (ROOT / "configs" / config).read_text()
+    text = (ROOT / "configs" / "csgnet" / config).read_text()
     stack = "stack: true" in text
     save_weights(tmp_path / "w.pt", stack=stack)
     cli = LightningCLI(ReinforceModule, TargetDataModule, run=False,
-                       args=["--config", f"configs/{config}", "--trainer.logger", "false",
+                       args=["--config", f"configs/csgnet/{config}", "--trainer.logger", "false",
                              "--model.init", str(tmp_path / "w.pt")])
     assert cli.model.config.stack == ("stack" in config) == stack
     hp = cli.model.hparams

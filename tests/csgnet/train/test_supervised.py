@@ -6,10 +6,10 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from csgnet.training import AtomicCheckpointIO, CSGDataModule, CSGNetModule, MixedLengthBatches, export_weights
+from csgnet.train.supervised import AtomicCheckpointIO, CSGDataModule, CSGNetModule, MixedLengthBatches, export_weights
 from csgnet.vocab import vocabulary
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TINY = {"hidden": 16, "channels": [2, 2, 2], "embed": 8, "dropout": 0.0, "enc_dropout": 0.0}
 
 
@@ -154,14 +154,14 @@ def test_missing_dataset_names_the_generate_command(tmp_path):
         dm.setup("fit")
 
 
-@pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs").glob("*.yaml")
+@pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs" / "csgnet").glob("*.yaml")
                                            if not p.name.startswith("rl_")))  # rl_*: test_reinforce.py
 def test_configs_parse_and_build(config, monkeypatch):
     from lightning.pytorch.cli import LightningCLI
 
     monkeypatch.chdir(ROOT)
     cli = LightningCLI(CSGNetModule, CSGDataModule, run=False,
-                       args=["--config", f"configs/{config}", "--trainer.logger", "false"])
+                       args=["--config", f"configs/csgnet/{config}", "--trainer.logger", "false"])
     assert cli.model.config.dim == cli.datamodule.dim
     name = config[:-5]
     assert cli.model.config.stack == ("stack" in name)

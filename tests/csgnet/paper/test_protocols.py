@@ -7,7 +7,7 @@ import csgnet
 from csgnet.decode import Decoded
 from csgnet.lang import Draw
 from csgnet.primitives import square_bounds
-from csgnet.protocols import (average_precision, beam_detections, box_iou, detection_ap, nearest_silhouettes,
+from csgnet.paper.protocols import (average_precision, beam_detections, box_iou, detection_ap, nearest_silhouettes,
                               primitive_boxes, subset, table4, table4_markdown, table6, table6_markdown)
 from csgnet.vocab import vocabulary
 

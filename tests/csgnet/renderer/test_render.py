@@ -10,7 +10,7 @@ import torch
 import csgnet
 from csg_testutil import random_program, skimage_2d
 from csgnet.lang import Draw, Program, parse
-from csgnet.render_np import bresenham, draw_np, render_np
+from csgnet.renderer.reference import bresenham, draw_np, render_np
 from csgnet.renderer import (StackMachine, encode_programs, encode_tokens, execute, pack, render_programs, render_tokens,
                               stack_trace, unpack)
 from csgnet.data import ProgramDataset
