@@ -302,16 +302,14 @@ def test_target_sources_and_their_errors(tmp_path):
 
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs" / "csgnet").glob("rl_*.yaml")))
-def test_rl_configs_parse_and_build(config, tmp_path, monkeypatch):
-    from lightning.pytorch.cli import LightningCLI
-
+def test_rl_configs_parse_and_build(config, tmp_path, monkeypatch, train_main):
     monkeypatch.chdir(ROOT)
     text = (ROOT / "configs" / "csgnet" / config).read_text()
     stack = "stack: true" in text
     save_weights(tmp_path / "w.pt", stack=stack)
-    cli = LightningCLI(ReinforceModule, TargetDataModule, run=False,
-                       args=["--config", f"configs/csgnet/{config}", "--trainer.logger", "false",
-                             "--model.init", str(tmp_path / "w.pt")])
+    cli = train_main(["--config", f"configs/csgnet/{config}", "--trainer.logger", "false",
+                      "--model.init", str(tmp_path / "w.pt")], run=False)
+    assert isinstance(cli.model, ReinforceModule) and isinstance(cli.datamodule, TargetDataModule)
     assert cli.model.config.stack == ("stack" in config) == stack
     hp = cli.model.hparams
     assert (hp.lr, hp.momentum, hp.gamma, hp.max_len, hp.invalid_reward) == (0.01, 0.9, 20.0, 13, "zero")

@@ -156,12 +156,10 @@ def test_missing_dataset_names_the_generate_command(tmp_path):
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs" / "csgnet").glob("*.yaml")
                                            if not p.name.startswith("rl_")))  # rl_*: test_reinforce.py
-def test_configs_parse_and_build(config, monkeypatch):
-    from lightning.pytorch.cli import LightningCLI
-
+def test_configs_parse_and_build(config, monkeypatch, train_main):
     monkeypatch.chdir(ROOT)
-    cli = LightningCLI(CSGNetModule, CSGDataModule, run=False,
-                       args=["--config", f"configs/csgnet/{config}", "--trainer.logger", "false"])
+    cli = train_main(["--config", f"configs/csgnet/{config}", "--trainer.logger", "false"], run=False)
+    assert isinstance(cli.model, CSGNetModule) and isinstance(cli.datamodule, CSGDataModule)
     assert cli.model.config.dim == cli.datamodule.dim
     name = config[:-5]
     assert cli.model.config.stack == ("stack" in name)
