@@ -12,10 +12,10 @@ import csgnet
 from csgnet import metrics
 from csgnet.decode import sample
 from csgnet.models import CSGNet, preset
-from csgnet.train.reinforce import (ReinforceModule, ShuffledBatches, TargetDataModule, episode_rewards, load_initial,
-                              load_targets, policy_loss, update_baseline)
 from csgnet.renderer import render_tokens
-from csgnet.train.supervised import AtomicCheckpointIO
+from csgnet.train.checkpoint import AtomicCheckpointIO
+from csgnet.train.reinforce import (ReinforceModule, TargetDataModule, episode_rewards, load_initial, load_targets,
+                                    policy_loss, update_baseline)
 
 ROOT = Path(__file__).resolve().parents[3]
 TINY = {"hidden": 32, "channels": [4, 4, 4], "embed": 16, "dropout": 0.0, "enc_dropout": 0.0}
@@ -263,18 +263,6 @@ def test_training_targets_are_jittered_and_validation_targets_are_not(monkeypatc
 
 # ---------------------------------------------------------------------------------------------
 # data
-
-def test_shuffled_batches_visit_every_image_once_per_pass():
-    images = torch.arange(10).view(10, 1, 1).expand(10, 64, 64).clone()
-    ds = ShuffledBatches(images, batch=4, steps=5, seed=1)
-    seen = torch.cat([b[:, 0, 0] for b in ds])
-    assert len(seen) == 20
-    assert sorted(seen[:10].tolist()) == list(range(10)) and sorted(seen[10:20].tolist()) == list(range(10))
-    again = torch.cat([b[:, 0, 0] for b in ShuffledBatches(images, 4, 5, seed=1)])
-    assert torch.equal(seen, again)
-    ds.set_epoch(1)
-    assert not torch.equal(torch.cat([b[:, 0, 0] for b in ds]), seen)
-
 
 def test_target_sources_and_their_errors(tmp_path):
     from PIL import Image

@@ -6,54 +6,13 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from csgnet.train.supervised import AtomicCheckpointIO, CSGDataModule, CSGNetModule, MixedLengthBatches, export_weights
+from csgnet.train.checkpoint import AtomicCheckpointIO
+from csgnet.train.streams import MixedLengthBatches
+from csgnet.train.supervised import CSGDataModule, CSGNetModule, export_weights
 from csgnet.vocab import vocabulary
 
 ROOT = Path(__file__).resolve().parents[3]
 TINY = {"hidden": 16, "channels": [2, 2, 2], "embed": 8, "dropout": 0.0, "enc_dropout": 0.0}
-
-
-def tables(n=10):
-    stop = vocabulary(2).stop
-    out = {}
-    for L_ in (3, 5):
-        t = torch.full((n, 6), stop)
-        t[:, :L_] = torch.arange(n * L_).view(n, L_) % 300
-        out[L_] = t
-    return out
-
-
-def test_mixed_batches_hold_equal_counts_per_length_and_are_deterministic():
-    ds = MixedLengthBatches(2, [3, 5], batch=8, steps=5, max_len=5, tables=tables())
-    batches = list(ds)
-    assert len(batches) == 5
-    for tok, lengths in batches:
-        assert tok.shape == (8, 6)
-        assert (lengths == 3).sum() == 4 and (lengths == 5).sum() == 4
-        stop = vocabulary(2).stop
-        assert ((tok != stop).sum(1) == lengths).all()
-    again = list(MixedLengthBatches(2, [3, 5], batch=8, steps=5, max_len=5, tables=tables()))
-    assert all(torch.equal(a[0], b[0]) for a, b in zip(batches, again))
-    # every program of a length is used once before any repeats
-    seen = torch.cat([tok[lengths == 3] for tok, lengths in batches[:2]])
-    assert len({tuple(r.tolist()) for r in seen[:8]}) == 8
-
-
-def test_ranks_draw_different_shards():
-    a = list(MixedLengthBatches(2, [3, 5], 8, 4, 5, tables(), seed=0, rank=0, world=2))
-    b = list(MixedLengthBatches(2, [3, 5], 8, 4, 5, tables(), seed=0, rank=1, world=2))
-    assert len(a) == len(b) == 2
-    assert not torch.equal(a[0][0], b[0][0])
-
-
-def test_on_the_fly_batches_are_valid_programs():
-    import csgnet
-
-    ds = MixedLengthBatches(2, [3, 5], batch=4, steps=1, max_len=5, tables=None, seed=3)
-    tok, lengths = next(iter(ds))
-    vocab = vocabulary(2)
-    for row, n in zip(tok, lengths):
-        assert csgnet.is_valid(vocab.decode(row[: int(n)].tolist()))
 
 
 def test_loss_is_the_spec_normalisation():
@@ -117,20 +76,6 @@ def test_fit_validates_checkpoints_and_resumes(tmp_path):
     t2 = _trainer(tmp_path, 4, cb)
     t2.fit(CSGNetModule(dim=2, stack=True, model=TINY), dm, ckpt_path=str(tmp_path / "ckpt" / "last.ckpt"))
     assert cb.step == 2 and t2.global_step == 4
-
-
-def test_atomic_checkpoint_io_leaves_nothing_on_failure(tmp_path):
-    io = AtomicCheckpointIO()
-    io.save_checkpoint({"a": torch.zeros(2)}, tmp_path / "x.ckpt")
-    assert torch.load(tmp_path / "x.ckpt", weights_only=True)["a"].shape == (2,)
-
-    class Bad:
-        def __reduce__(self):
-            raise RuntimeError("cannot pickle")
-
-    with pytest.raises(RuntimeError):
-        io.save_checkpoint({"a": Bad()}, tmp_path / "y.ckpt")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.ckpt"]
 
 
 def test_export_weights_round_trip(tmp_path):

@@ -19,7 +19,7 @@ def _config(tmp_path: Path) -> Path:
             "enable_model_summary": False, "num_sanity_val_steps": 0, "default_root_dir": str(tmp_path),
             "logger": {"class_path": "lightning.pytorch.loggers.TensorBoardLogger",
                        "init_args": {"save_dir": str(tmp_path), "name": "tb"}},
-            "plugins": [{"class_path": "csgnet.train.supervised.AtomicCheckpointIO"}],
+            "plugins": [{"class_path": "csgnet.train.checkpoint.AtomicCheckpointIO"}],
             "callbacks": [{"class_path": "lightning.pytorch.callbacks.ModelCheckpoint",
                            "init_args": {"dirpath": str(tmp_path / "ckpt"), "save_last": True}}]},
     }
