@@ -5,7 +5,7 @@
 * :mod:`csgnet.train.reinforce`: REINFORCE fine-tuning on target images (``ReinforceModule``,
   ``TargetDataModule``);
 * :mod:`csgnet.train.streams`: batch streams split over ranks and DataLoader workers;
-* :mod:`csgnet.train.logs`: TensorBoard image grids;
+* :mod:`csgnet.train.logs`: validation values averaged over ranks, TensorBoard image grids;
 * :mod:`csgnet.train.checkpoint`: ``AtomicCheckpointIO``, checkpoints written atomically.
 
 The repository's ``train.py`` runs any of these modules from a config file. This package imports no

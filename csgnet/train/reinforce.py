@@ -21,7 +21,7 @@ from ..data import jitter, load_dataset
 from ..decode import Sampled, greedy, sample
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_programs, render_tokens
-from .logs import image_grid, image_logger
+from .logs import EpochValues, log_means, log_pairs
 from .streams import ShuffledBatches, distributed, set_stream_epoch, stream_loader
 
 __all__ = ["ReinforceModule", "TargetDataModule", "load_targets", "load_initial", "episode_rewards",
@@ -185,8 +185,7 @@ class ReinforceModule(L.LightningModule):
         self.register_buffer("baseline", torch.zeros((), dtype=torch.float64))
         self._gen: torch.Generator | None = None
         self._rng = np.random.default_rng([int(seed), 0])
-        self._val: dict[str, list] = {}
-        self._grid = None
+        self._val = EpochValues()
         self._last_image_step = -1
 
     # ------------------------------------------------------------------------------------------
@@ -260,16 +259,12 @@ class ReinforceModule(L.LightningModule):
         step = self.global_step
         if not n or every <= 0 or step % every or step == self._last_image_step:
             return
-        exp = image_logger(self)
-        if exp is None:
-            return
-        self._last_image_step = step
-        exp.add_image("train/targets_vs_samples", image_grid(targets[:n], pred[:n]), step)
+        if log_pairs(self, "train/targets_vs_samples", targets[:n], pred[:n]):
+            self._last_image_step = step
 
     # ------------------------------------------------------------------------------------------
     def on_validation_epoch_start(self):
-        self._val = {"reward": [], "chamfer": [], "iou": [], "valid": [], "length": []}
-        self._grid = None
+        self._val = EpochValues(self.hparams.log_images)
 
     def validation_step(self, batch, batch_idx):
         targets = _images(batch)
@@ -278,28 +273,17 @@ class ReinforceModule(L.LightningModule):
         r, cd = episode_rewards(pred, targets, dec.valid[:, 0], self.hparams.gamma, self.hparams.invalid_reward,
                                 self.hparams.reward_workers)
         iou = np.nan_to_num(np.asarray(metrics.iou(pred.cpu(), targets.cpu(), denominator="union"), np.float64))
-        v = self._val
-        v["reward"].append(r)
-        v["chamfer"].append(cd)
-        v["iou"].append(iou)
-        v["valid"].append(dec.valid[:, 0].cpu().numpy())
-        v["length"].append(dec.lengths[:, 0].cpu().numpy())
-        if self._grid is None and self.hparams.log_images:
-            k = int(self.hparams.log_images)
-            self._grid = (targets[:k].cpu(), pred[:k].cpu())
+        self._val.add(targets, pred, reward=r, chamfer=cd, iou=iou, valid=dec.valid[:, 0].cpu().numpy(),
+                      length=dec.lengths[:, 0].cpu().numpy())
 
     def on_validation_epoch_end(self):
-        v = self._val
-        if not v.get("reward"):
+        if not self._val:
             return
-        cat = {k: np.concatenate(x) for k, x in v.items()}
-        # as in CSGNetModule: under DDP each rank validates a shard, sync_dist averages the ranks' means, so
-        # every rank's checkpoint and plateau scheduler see the same val/reward
-        for k in ("reward", "chamfer", "iou", "valid", "length"):
-            self.log(f"val/{k}", float(cat[k].mean()), prog_bar=k in ("reward", "chamfer"), sync_dist=True)
-        exp = image_logger(self)
-        if exp is not None and self._grid is not None:
-            exp.add_image("val/targets_vs_greedy", image_grid(*self._grid), self.global_step)
+        v = self._val.arrays()
+        log_means(self, {f"val/{k}": v[k].mean() for k in ("reward", "chamfer", "iou", "valid", "length")},
+                  prog_bar=("val/reward", "val/chamfer"))
+        if self._val.grid is not None:
+            log_pairs(self, "val/targets_vs_greedy", *self._val.grid)
 
     def configure_optimizers(self):
         opt = torch.optim.SGD(self.model.parameters(), lr=self.hparams.lr, momentum=self.hparams.momentum)

@@ -31,7 +31,7 @@ from ..decode import greedy
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_tokens, stack_trace
 from ..vocab import vocabulary
-from .logs import image_grid, image_logger
+from .logs import EpochValues, log_means, log_pairs
 from .streams import MixedLengthBatches, distributed, set_stream_epoch, stream_loader
 
 __all__ = ["CSGDataModule", "CSGNetModule", "export_weights", "DEFAULT_LENGTHS"]
@@ -150,7 +150,7 @@ class CSGNetModule(L.LightningModule):
         self.augment = (dim == 2) if augment is None else bool(augment and dim == 2)
         self.monitor = "val/chamfer" if dim == 2 else "val/iou"
         self._rng = np.random.default_rng(seed)
-        self._val: dict[str, list] = {}
+        self._val = EpochValues()
 
     # ------------------------------------------------------------------------------------------
     def _inputs(self, tokens: torch.Tensor, lengths: torch.Tensor, augment: bool):
@@ -187,8 +187,7 @@ class CSGNetModule(L.LightningModule):
         set_stream_epoch(self.trainer, self.current_epoch)
 
     def on_validation_epoch_start(self):
-        self._val = {"length": [], "iou": [], "chamfer": [], "valid": [], "loss": []}
-        self._grid = None
+        self._val = EpochValues(self.hparams.log_images)
 
     def validation_step(self, batch, batch_idx):
         tokens, lengths = batch
@@ -201,44 +200,27 @@ class CSGNetModule(L.LightningModule):
         else:
             iou = metrics.iou_3d(pred.cpu(), target.cpu())
             cd = np.full(len(iou), np.nan)
-        v = self._val
-        v["length"].append(lengths.cpu().numpy())
-        v["iou"].append(np.asarray(iou, dtype=np.float64))
-        v["chamfer"].append(np.asarray(cd, dtype=np.float64))
-        v["valid"].append(dec.valid[:, 0].cpu().numpy())
-        v["loss"].append(float(loss) * len(lengths))
-        if self._grid is None and self.hparams.log_images:
-            n = int(self.hparams.log_images)
-            self._grid = (target[:n].cpu(), pred[:n].cpu())
+        self._val.add(target, pred, length=lengths.cpu().numpy(), iou=np.asarray(iou, dtype=np.float64),
+                      chamfer=np.asarray(cd, dtype=np.float64), valid=dec.valid[:, 0].cpu().numpy(),
+                      loss=float(loss) * len(lengths))
 
     def on_validation_epoch_end(self):
-        v = self._val
-        if not v.get("length"):
+        if not self._val:
             return
-        length = np.concatenate(v["length"])
-        iou = np.concatenate(v["iou"])
-        cd = np.concatenate(v["chamfer"])
-        # under DDP each rank holds a shard of the validation set: sync_dist averages the ranks' means
-        self.log("val/loss", sum(v["loss"]) / len(length), sync_dist=True)
-        self.log("val/iou", float(np.nanmean(iou)), prog_bar=True, sync_dist=True)
-        self.log("val/valid", float(np.concatenate(v["valid"]).mean()), sync_dist=True)
+        v = self._val.arrays()
+        length, iou, cd = v["length"], v["iou"], v["chamfer"]
+        means = {"val/loss": sum(v["loss"].tolist()) / len(length), "val/iou": np.nanmean(iou),
+                 "val/valid": v["valid"].mean()}
         if self.config.dim == 2:
-            self.log("val/chamfer", float(cd.mean()), prog_bar=True, sync_dist=True)
+            means["val/chamfer"] = cd.mean()
         for n in np.unique(length):
             sel = length == n
-            self.log(f"val_iou/len{int(n):02d}", float(np.nanmean(iou[sel])), sync_dist=True)
+            means[f"val_iou/len{int(n):02d}"] = np.nanmean(iou[sel])
             if self.config.dim == 2:
-                self.log(f"val_chamfer/len{int(n):02d}", float(cd[sel].mean()), sync_dist=True)
-        self._log_grid()
-
-    def _log_grid(self):
-        exp = image_logger(self)
-        if self._grid is None or exp is None:
-            return
-        tgt, pred = self._grid
-        if tgt.dim() == 4:  # 3D: silhouettes along z
-            tgt, pred = tgt.any(-1), pred.any(-1)
-        exp.add_image("val/targets_vs_predictions", image_grid(tgt, pred), self.global_step)
+                means[f"val_chamfer/len{int(n):02d}"] = cd[sel].mean()
+        log_means(self, means, prog_bar=("val/iou", "val/chamfer"))
+        if self._val.grid is not None:
+            log_pairs(self, "val/targets_vs_predictions", *self._val.grid)
 
     def configure_optimizers(self):
         opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
