@@ -1,4 +1,7 @@
-"""Batch streams: equal counts per length, determinism, shards per rank, reshuffled passes."""
+"""Batch streams: equal counts per length, determinism, shards per rank, reshuffled passes; no Lightning."""
+import subprocess
+import sys
+
 import torch
 
 from csgnet.train.streams import MixedLengthBatches, ShuffledBatches
@@ -58,3 +61,10 @@ def test_shuffled_batches_visit_every_image_once_per_pass():
     assert torch.equal(seen, again)
     ds.set_epoch(1)
     assert not torch.equal(torch.cat([b[:, 0, 0] for b in ds]), seen)
+
+
+def test_streams_and_the_plain_pytorch_layers_do_not_import_lightning():
+    code = ("import sys, csgnet, csgnet.models, csgnet.decode, csgnet.inference, csgnet.train, csgnet.train.streams; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('lightning', 'pytorch_lightning')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
