@@ -19,6 +19,12 @@ import time
 import numpy as np
 import torch
 
+from csgnet.data import sample_programs
+from csgnet.decode import beam_search
+from csgnet.inference import load_model, load_pretrained
+from csgnet.renderer import render_programs, render_tokens
+from csgnet.vocab import vocabulary
+
 
 def _device(name):
     if name == "auto":
@@ -27,11 +33,6 @@ def _device(name):
 
 
 def bench_beam(model, n: int, batch: int, width: int, constrained: bool, device) -> float:
-    from csgnet.data import sample_programs
-    from csgnet.decode import beam_search
-    from csgnet.renderer import render_programs, render_tokens
-    from csgnet.vocab import vocabulary
-
     rng = np.random.default_rng(0)
     vocab = vocabulary(2)
     progs = [vocab.text(r) for r in sample_programs(2, 13, n, rng)]
@@ -49,7 +50,9 @@ def bench_beam(model, n: int, batch: int, width: int, constrained: bool, device)
 
 
 def bench_train(dim: int, stack: bool, size: str, overrides: dict, batch: int, steps: int, device) -> float:
-    from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule, MixedLengthBatches
+    # Lightning (under csgnet.train) is imported only when training is timed: --skip-train runs without it
+    from csgnet.train.streams import MixedLengthBatches
+    from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule
 
     m = CSGNetModule(dim=dim, stack=stack, size=size, model=overrides).to(device)
     opt = torch.optim.Adam(m.parameters(), lr=1e-3)
@@ -86,8 +89,6 @@ def main(argv=None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     device = _device(args.device)
-    from csgnet.inference import load_model, load_pretrained
-
     model = (load_model(args.weights) if args.weights else load_pretrained(2)).to(device)
     name = ("CSGNetStack" if model.config.stack else "CSGNet") + f" hidden {model.config.hidden}"
     print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "

@@ -27,13 +27,17 @@ import warnings
 import numpy as np
 import torch
 
+from csgnet import metrics
+from csgnet.data import jitter
+from csgnet.decode import sample
+from csgnet.inference import WEIGHTS
+from csgnet.models import CSGNet, preset
+from csgnet.renderer import render_tokens
+from csgnet.shapes2d import load_silhouettes
+from csgnet.train.reinforce import episode_rewards, load_initial, policy_loss, update_baseline
+
 
 def _model(weights, stack: bool):
-    from csgnet.models import CSGNet, preset
-    from csgnet.train.reinforce import load_initial
-
-    from csgnet.inference import WEIGHTS
-
     if weights:
         return load_initial(weights)[0], os.path.basename(weights)
     shipped = WEIGHTS / ("csgnetstack2d.pt" if stack else "csgnet2d.pt")
@@ -46,12 +50,6 @@ def _model(weights, stack: bool):
 def bench(model, targets: torch.Tensor, batch: int, steps: int, device) -> dict:
     """Time ``steps`` update steps; each step scores the same samples both ways (batched and per episode),
     so the two step times share the sampling, rendering and backward measurements."""
-    from csgnet import metrics
-    from csgnet.data import jitter
-    from csgnet.decode import sample
-    from csgnet.train.reinforce import episode_rewards, policy_loss, update_baseline
-    from csgnet.renderer import render_tokens
-
     torch.manual_seed(0)
     model = model.to(device).train()
     opt = torch.optim.SGD(model.parameters(), lr=0.0, momentum=0.9)  # lr 0: every step sees the same policy
@@ -115,8 +113,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     warnings.filterwarnings("ignore")
-    from csgnet.shapes2d import load_silhouettes
-
     targets = torch.from_numpy(load_silhouettes("val"))
     print(f"command: python bench/bench_rl.py {' '.join(sys.argv[1:] if argv is None else argv)}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, torch "

@@ -1,7 +1,7 @@
 """Print a training run's validation curve (per epoch) from its TensorBoard event files, as markdown.
 
-Supervised runs (``train.py``) and REINFORCE runs (``train_rl.py``: validation reward, and the policy
-entropy per counted step of the last training step logged) alike. Below each table: the learning-rate
+Every run of ``train.py`` alike: supervised runs and REINFORCE runs (validation reward, and the policy
+entropy per counted step of the last training step logged). Below each table: the learning-rate
 changes (when a ``LearningRateMonitor`` logged them) and the first and last logged policy entropy.
 
     python bench/training_curve.py runs/csgnet2d_small/version_0

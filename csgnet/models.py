@@ -1,4 +1,4 @@
-"""CSGNet and CSGNetStack as plain PyTorch modules (``../specs/csg.md`` section (d)).
+"""CSGNet and CSGNetStack as plain PyTorch modules (the spec's section (d), ``docs/csgnet_models.md``).
 
 One class, :class:`CSGNet`, covers both models: with ``config.stack`` the encoder sees the target
 concatenated with the top-K maps of the execution stack at every step (CSGNetStack); without it the
@@ -124,8 +124,10 @@ def preset(name: str, dim: int, stack: bool = False, **overrides) -> ModelConfig
     return ModelConfig(dim=int(dim), stack=bool(stack), **{**PRESETS[key], **overrides})
 
 
-class Encoder2D(nn.Module):
-    """conv 3×3 (pad 1) → ReLU → [Dropout] → MaxPool 2, per block; no dropout in the last block."""
+class _ConvEncoder(nn.Module):
+    """Conv blocks (:meth:`block`) after an optional max-pool of the input, flattened channel-major."""
+
+    pool = None  # the max-pool function of the input's dimension
 
     def __init__(self, in_channels: int, channels: tuple[int, ...], dropout: float, input_pool: int = 1):
         super().__init__()
@@ -133,37 +135,41 @@ class Encoder2D(nn.Module):
         layers: list[nn.Module] = []
         c_in = in_channels
         for i, c in enumerate(channels):
-            layers += [nn.Conv2d(c_in, c, 3, padding=1), nn.ReLU()]
-            if i < len(channels) - 1:
-                layers.append(nn.Dropout(dropout))
-            layers.append(nn.MaxPool2d(2))
+            layers += self.block(c_in, c, dropout, last=i == len(channels) - 1)
             c_in = c
         self.net = nn.Sequential(*layers)
 
+    @staticmethod
+    def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
+        raise NotImplementedError
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, C, 64, 64)`` or ``(B, C, 64, 64, 64)`` float → ``(B, F)`` features, flattened channel-major."""
         if self.input_pool > 1:
-            x = F.max_pool2d(x, self.input_pool)
-        return self.net(x).flatten(1)  # channel-major (C, H, W)
+            x = self.pool(x, self.input_pool)
+        return self.net(x).flatten(1)
 
 
-class Encoder3D(nn.Module):
+class Encoder2D(_ConvEncoder):
+    """conv 3×3 (pad 1) → ReLU → [Dropout] → MaxPool 2, per block; no dropout in the last block."""
+
+    pool = staticmethod(F.max_pool2d)
+
+    @staticmethod
+    def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
+        return [nn.Conv2d(c_in, c_out, 3, padding=1), nn.ReLU(), *([] if last else [nn.Dropout(dropout)]),
+                nn.MaxPool2d(2)]
+
+
+class Encoder3D(_ConvEncoder):
     """conv3d 4 (stride 1, pad 2) → ReLU → MaxPool3d 2 → Dropout → BatchNorm3d, per block."""
 
-    def __init__(self, in_channels: int, channels: tuple[int, ...], dropout: float, input_pool: int = 1):
-        super().__init__()
-        self.input_pool = int(input_pool)
-        layers: list[nn.Module] = []
-        c_in = in_channels
-        for c in channels:
-            layers += [nn.Conv3d(c_in, c, 4, padding=2), nn.ReLU(), nn.MaxPool3d(2), nn.Dropout(dropout),
-                       nn.BatchNorm3d(c)]
-            c_in = c
-        self.net = nn.Sequential(*layers)
+    pool = staticmethod(F.max_pool3d)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.input_pool > 1:
-            x = F.max_pool3d(x, self.input_pool)
-        return self.net(x).flatten(1)
+    @staticmethod
+    def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
+        return [nn.Conv3d(c_in, c_out, 4, padding=2), nn.ReLU(), nn.MaxPool3d(2), nn.Dropout(dropout),
+                nn.BatchNorm3d(c_out)]
 
 
 class CSGNet(nn.Module):

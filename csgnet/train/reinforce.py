@@ -1,31 +1,11 @@
-"""REINFORCE fine-tuning of a supervised CSGNet / CSGNetStack on target images without programs.
+"""REINFORCE fine-tuning of a supervised 2D CSGNet / CSGNetStack on target images without programs.
 
-The procedure of ``../specs/csg.md`` section (f), the paper's fine-tuning on 2D CAD shapes:
-
-* programs are **sampled** from the policy (:func:`csgnet.decode.sample`) with the network in train
-  mode, so dropout is active while sampling as in the reference; for CSGNetStack the stack maps the
-  encoder sees are those of the sampled prefix;
-* each program is cut at its first ``$`` and rendered; the **reward** is
-  ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma`` (``gamma = 20``) with the reference chamfer distance
-  ``CD`` in pixels, computed for the whole batch at once; invalid programs get 0 (the paper), or the
-  reference's 0.0204 (``CD = 16``) with ``invalid_reward="reference"``;
-* the **baseline** is a running average ``b <- 0.7 b + 0.3 mean(R)`` (``b0 = 0``), updated *before* the
-  advantage ``R - b`` is formed, and never differentiated;
-* the **loss** is ``-mean_i (R_i - b) * sum_{t < n_i} log pi(a_t)`` where the ``n_i`` counted steps are
-  the program's tokens and its ``$`` (all steps when no ``$`` was sampled); no entropy bonus;
-* SGD with momentum 0.9 (not Nesterov), lr 0.01; gradient-norm clipping at 10 and the accumulation of
-  10 batches of 300 images per update come from the Trainer (``gradient_clip_val``,
-  ``accumulate_grad_batches``, see ``configs/csgnet/rl_*.yaml``); the learning rate drops x0.2 after more than
-  8 epochs without a better validation reward; the best validation reward is checkpointed;
-* training targets are jittered (:func:`csgnet.data.jitter`), validation targets are not; validation
-  decodes greedily (arg-max) and reports the mean chamfer distance, reward and IoU.
-
-:class:`TargetDataModule` serves the target images: the shipped PartNet silhouettes, the paper's
-``cad.h5``, a folder of images, a ``.npz`` file, the renders of a synthetic dataset, or arrays given in
-code (:meth:`TargetDataModule.from_arrays`).
-
-``python train_rl.py fit --config configs/csgnet/rl_csgnet2d_small.yaml`` runs it through LightningCLI (see
-``docs/reinforce.md``); ``--ckpt_path last`` resumes.
+The pieces of the objective are plain functions (:func:`episode_rewards`, :func:`update_baseline`,
+:func:`policy_loss`); :class:`ReinforceModule` samples programs from the policy, scores them with the
+chamfer reward against a running-average baseline and validates greedily; :class:`TargetDataModule`
+serves the target images (:func:`load_targets`). ``docs/reinforce.md`` describes the procedure step by
+step beside the paper's and the reference's, and how to run it:
+``python train.py fit --config configs/csgnet/rl_csgnet2d_small.yaml`` (``--ckpt_path last`` resumes).
 """
 from __future__ import annotations
 
@@ -41,11 +21,11 @@ from ..data import jitter, load_dataset
 from ..decode import Sampled, greedy, sample
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_programs, render_tokens
-from .supervised import (Cycle, ShardedBatches, distributed, image_grid, image_logger, set_stream_epoch,
-                       stream_loader)
+from .logs import EpochValues, log_means, log_pairs
+from .streams import ShuffledBatches, distributed, set_stream_epoch, stream_loader
 
-__all__ = ["ReinforceModule", "TargetDataModule", "ShuffledBatches", "load_targets", "load_initial",
-           "episode_rewards", "update_baseline", "policy_loss", "image_grid", "SOURCES"]
+__all__ = ["ReinforceModule", "TargetDataModule", "load_targets", "load_initial", "episode_rewards",
+           "update_baseline", "policy_loss", "SOURCES"]
 
 SOURCES = ("silhouettes", "cad", "folder", "npz", "synthetic")
 
@@ -205,8 +185,7 @@ class ReinforceModule(L.LightningModule):
         self.register_buffer("baseline", torch.zeros((), dtype=torch.float64))
         self._gen: torch.Generator | None = None
         self._rng = np.random.default_rng([int(seed), 0])
-        self._val: dict[str, list] = {}
-        self._grid = None
+        self._val = EpochValues()
         self._last_image_step = -1
 
     # ------------------------------------------------------------------------------------------
@@ -280,16 +259,12 @@ class ReinforceModule(L.LightningModule):
         step = self.global_step
         if not n or every <= 0 or step % every or step == self._last_image_step:
             return
-        exp = image_logger(self)
-        if exp is None:
-            return
-        self._last_image_step = step
-        exp.add_image("train/targets_vs_samples", image_grid(targets[:n], pred[:n]), step)
+        if log_pairs(self, "train/targets_vs_samples", targets[:n], pred[:n]):
+            self._last_image_step = step
 
     # ------------------------------------------------------------------------------------------
     def on_validation_epoch_start(self):
-        self._val = {"reward": [], "chamfer": [], "iou": [], "valid": [], "length": []}
-        self._grid = None
+        self._val = EpochValues(self.hparams.log_images)
 
     def validation_step(self, batch, batch_idx):
         targets = _images(batch)
@@ -298,28 +273,17 @@ class ReinforceModule(L.LightningModule):
         r, cd = episode_rewards(pred, targets, dec.valid[:, 0], self.hparams.gamma, self.hparams.invalid_reward,
                                 self.hparams.reward_workers)
         iou = np.nan_to_num(np.asarray(metrics.iou(pred.cpu(), targets.cpu(), denominator="union"), np.float64))
-        v = self._val
-        v["reward"].append(r)
-        v["chamfer"].append(cd)
-        v["iou"].append(iou)
-        v["valid"].append(dec.valid[:, 0].cpu().numpy())
-        v["length"].append(dec.lengths[:, 0].cpu().numpy())
-        if self._grid is None and self.hparams.log_images:
-            k = int(self.hparams.log_images)
-            self._grid = (targets[:k].cpu(), pred[:k].cpu())
+        self._val.add(targets, pred, reward=r, chamfer=cd, iou=iou, valid=dec.valid[:, 0].cpu().numpy(),
+                      length=dec.lengths[:, 0].cpu().numpy())
 
     def on_validation_epoch_end(self):
-        v = self._val
-        if not v.get("reward"):
+        if not self._val:
             return
-        cat = {k: np.concatenate(x) for k, x in v.items()}
-        # as in CSGNetModule: under DDP each rank validates a shard, sync_dist averages the ranks' means, so
-        # every rank's checkpoint and plateau scheduler see the same val/reward
-        for k in ("reward", "chamfer", "iou", "valid", "length"):
-            self.log(f"val/{k}", float(cat[k].mean()), prog_bar=k in ("reward", "chamfer"), sync_dist=True)
-        exp = image_logger(self)
-        if exp is not None and self._grid is not None:
-            exp.add_image("val/targets_vs_greedy", image_grid(*self._grid), self.global_step)
+        v = self._val.arrays()
+        log_means(self, {f"val/{k}": v[k].mean() for k in ("reward", "chamfer", "iou", "valid", "length")},
+                  prog_bar=("val/reward", "val/chamfer"))
+        if self._val.grid is not None:
+            log_pairs(self, "val/targets_vs_greedy", *self._val.grid)
 
     def configure_optimizers(self):
         opt = torch.optim.SGD(self.model.parameters(), lr=self.hparams.lr, momentum=self.hparams.momentum)
@@ -409,26 +373,6 @@ def load_targets(source: str, split: str, path=None) -> np.ndarray:
     if not progs:
         raise ValueError(f"{p}: the 2D {split} split holds no programs")
     return _check_images(render_programs(progs, 2).numpy(), f"{p} 2D {split}")
-
-
-class ShuffledBatches(ShardedBatches):
-    """``steps`` batches of ``batch`` images, reshuffled after each pass over the set (the reference's
-    CAD generator). Deterministic for a seed, epoch and rank; DataLoader workers split the steps.
-
-    Yields:
-        ``(batch, 64, 64)`` bool tensors.
-    """
-
-    def __init__(self, images: torch.Tensor, batch: int, steps: int, seed: int = 0, rank: int = 0, world: int = 1):
-        if batch < 1 or steps < 1:
-            raise ValueError(f"batch and steps must be positive, got {batch} and {steps}")
-        super().__init__(steps, seed, rank, world)
-        self.images, self.batch = images, int(batch)
-
-    def _batches(self, steps: int, rng: np.random.Generator):
-        cycle = Cycle(len(self.images), rng)
-        for _ in range(steps):
-            yield self.images[torch.as_tensor(cycle.take(self.batch))]
 
 
 class TargetDataModule(L.LightningDataModule):

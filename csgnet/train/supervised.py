@@ -8,10 +8,10 @@
   reduce-on-plateau ×0.2 after more than 8 epochs without improvement of the validation chamfer (2D) or
   IoU (3D), validation by greedy decoding with IoU and chamfer per program length, and image grids of
   targets beside predicted renders in TensorBoard.
-* :class:`AtomicCheckpointIO` writes checkpoints through a temporary file and a rename, so an
-  interrupted run never leaves a truncated checkpoint behind.
+* :func:`export_weights` turns a training checkpoint into a small weights file.
 
-``python train.py fit --config configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI.
+The batch stream is :class:`csgnet.train.streams.MixedLengthBatches`. ``python train.py fit --config
+configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI (``docs/csgnet_models.md``).
 """
 from __future__ import annotations
 
@@ -22,7 +22,6 @@ import lightning as L
 import numpy as np
 import torch
 import torch.nn.functional as F
-from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from shapeio import atomic_write
 
@@ -32,124 +31,12 @@ from ..decode import greedy
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_tokens, stack_trace
 from ..vocab import vocabulary
+from .logs import EpochValues, log_means, log_pairs
+from .streams import MixedLengthBatches, distributed, set_stream_epoch, stream_loader
 
-__all__ = ["CSGDataModule", "CSGNetModule", "AtomicCheckpointIO", "ShardedBatches", "MixedLengthBatches", "Cycle",
-           "export_weights", "image_grid", "DEFAULT_LENGTHS"]
+__all__ = ["CSGDataModule", "CSGNetModule", "export_weights", "DEFAULT_LENGTHS"]
 
 DEFAULT_LENGTHS = {2: [3, 5, 7, 9, 11, 13], 3: [3, 5, 7]}
-
-
-class AtomicCheckpointIO(TorchCheckpointIO):
-    """Lightning checkpoint IO that writes to a temporary file and renames it into place."""
-
-    def save_checkpoint(self, checkpoint, path, storage_options=None):
-        if storage_options is not None:
-            raise TypeError(f"{type(self).__name__} does not take storage_options")
-        atomic_write(path, lambda f: torch.save(checkpoint, f), mkdir=True)
-
-
-class ShardedBatches(torch.utils.data.IterableDataset):
-    """Base of the batch streams: ``steps`` batches per epoch, split over distributed ranks and DataLoader
-    workers; each shard draws from its own generator seeded by ``(seed, epoch, shard)``, so the stream
-    is deterministic for a given seed, epoch, rank and worker count. Subclasses implement
-    :meth:`_batches`.
-    """
-
-    def __init__(self, steps: int, seed: int = 0, rank: int = 0, world: int = 1):
-        self.steps, self.seed, self.rank, self.world = int(steps), int(seed), int(rank), int(world)
-        self.epoch = 0
-
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-    def __len__(self) -> int:
-        return self.steps
-
-    def __iter__(self):
-        info = torch.utils.data.get_worker_info()
-        wid, nw = (info.id, info.num_workers) if info is not None else (0, 1)
-        shard = self.rank * nw + wid
-        rng = np.random.default_rng([self.seed, self.epoch, shard])
-        return self._batches(len(range(shard, self.steps, self.world * nw)), rng)
-
-    def _batches(self, steps: int, rng: np.random.Generator):
-        raise NotImplementedError
-
-
-class Cycle:
-    """Indices ``0 .. n - 1`` in a random order, drawn ``k`` at a time and reshuffled whenever used up."""
-
-    def __init__(self, n: int, rng: np.random.Generator):
-        self.n, self.rng = int(n), rng
-        self.order, self.pos = rng.permutation(self.n), 0
-
-    def take(self, k: int) -> np.ndarray:
-        parts = []
-        while k:
-            if self.pos >= self.n:
-                self.order, self.pos = self.rng.permutation(self.n), 0
-            m = min(k, self.n - self.pos)
-            parts.append(self.order[self.pos: self.pos + m])
-            self.pos += m
-            k -= m
-        return np.concatenate(parts)
-
-
-def distributed(trainer) -> tuple[int, int]:
-    """``(rank, world size)`` of a trainer (``(0, 1)`` without one)."""
-    return (trainer.global_rank, trainer.world_size) if trainer is not None else (0, 1)
-
-
-def stream_loader(ds: ShardedBatches, trainer, num_workers: int = 0) -> torch.utils.data.DataLoader:
-    """A DataLoader over a batch stream (each item already a batch), at the trainer's current epoch."""
-    if trainer is not None:
-        ds.set_epoch(trainer.current_epoch)
-    return torch.utils.data.DataLoader(ds, batch_size=1, collate_fn=_collate_first, num_workers=num_workers)
-
-
-def _collate_first(batch):
-    return batch[0]
-
-
-def set_stream_epoch(trainer, epoch: int) -> None:
-    """Tell the training stream (a :class:`ShardedBatches`) which epoch starts, so it reseeds."""
-    ds = getattr(trainer.train_dataloader, "dataset", None)
-    if isinstance(ds, ShardedBatches):
-        ds.set_epoch(epoch)
-
-
-class MixedLengthBatches(ShardedBatches):
-    """A stream of ``steps`` batches, each with ``batch // len(lengths)`` programs per length.
-
-    Programs come from per-length token tables (``tables[L]``: ``(N_L, max_len + 1)``), reshuffled
-    whenever a length's table is used up (short-program sets cycle more often, as in the reference), or
-    are sampled on the fly with :func:`csgnet.data.sample_programs` when ``tables`` is None.
-
-    Yields:
-        ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded.
-    """
-
-    def __init__(self, dim: int, lengths: list[int], batch: int, steps: int, max_len: int,
-                 tables: dict[int, torch.Tensor] | None = None, seed: int = 0, rank: int = 0, world: int = 1):
-        super().__init__(steps, seed, rank, world)
-        self.dim, self.lengths, self.max_len = dim, list(lengths), int(max_len)
-        self.per_length = max(1, int(batch) // len(self.lengths))
-        self.tables = tables
-
-    def _batches(self, steps: int, rng: np.random.Generator):
-        stop = vocabulary(self.dim).stop
-        lengths = torch.tensor([n for n in self.lengths for _ in range(self.per_length)])
-        cycles = None if self.tables is None else {n: Cycle(self.tables[n].shape[0], rng) for n in self.lengths}
-        for _ in range(steps):
-            parts = []
-            for n in self.lengths:
-                if cycles is None:
-                    toks = torch.full((self.per_length, self.max_len + 1), stop, dtype=torch.int64)
-                    toks[:, :n] = torch.as_tensor(sample_programs(self.dim, n, self.per_length, rng))
-                else:
-                    toks = self.tables[n][torch.as_tensor(cycles[n].take(self.per_length))]
-                parts.append(toks)
-            yield torch.cat(parts), lengths.clone()
 
 
 class CSGDataModule(L.LightningDataModule):
@@ -263,7 +150,7 @@ class CSGNetModule(L.LightningModule):
         self.augment = (dim == 2) if augment is None else bool(augment and dim == 2)
         self.monitor = "val/chamfer" if dim == 2 else "val/iou"
         self._rng = np.random.default_rng(seed)
-        self._val: dict[str, list] = {}
+        self._val = EpochValues()
 
     # ------------------------------------------------------------------------------------------
     def _inputs(self, tokens: torch.Tensor, lengths: torch.Tensor, augment: bool):
@@ -300,8 +187,7 @@ class CSGNetModule(L.LightningModule):
         set_stream_epoch(self.trainer, self.current_epoch)
 
     def on_validation_epoch_start(self):
-        self._val = {"length": [], "iou": [], "chamfer": [], "valid": [], "loss": []}
-        self._grid = None
+        self._val = EpochValues(self.hparams.log_images)
 
     def validation_step(self, batch, batch_idx):
         tokens, lengths = batch
@@ -314,44 +200,27 @@ class CSGNetModule(L.LightningModule):
         else:
             iou = metrics.iou_3d(pred.cpu(), target.cpu())
             cd = np.full(len(iou), np.nan)
-        v = self._val
-        v["length"].append(lengths.cpu().numpy())
-        v["iou"].append(np.asarray(iou, dtype=np.float64))
-        v["chamfer"].append(np.asarray(cd, dtype=np.float64))
-        v["valid"].append(dec.valid[:, 0].cpu().numpy())
-        v["loss"].append(float(loss) * len(lengths))
-        if self._grid is None and self.hparams.log_images:
-            n = int(self.hparams.log_images)
-            self._grid = (target[:n].cpu(), pred[:n].cpu())
+        self._val.add(target, pred, length=lengths.cpu().numpy(), iou=np.asarray(iou, dtype=np.float64),
+                      chamfer=np.asarray(cd, dtype=np.float64), valid=dec.valid[:, 0].cpu().numpy(),
+                      loss=float(loss) * len(lengths))
 
     def on_validation_epoch_end(self):
-        v = self._val
-        if not v.get("length"):
+        if not self._val:
             return
-        length = np.concatenate(v["length"])
-        iou = np.concatenate(v["iou"])
-        cd = np.concatenate(v["chamfer"])
-        # under DDP each rank holds a shard of the validation set: sync_dist averages the ranks' means
-        self.log("val/loss", sum(v["loss"]) / len(length), sync_dist=True)
-        self.log("val/iou", float(np.nanmean(iou)), prog_bar=True, sync_dist=True)
-        self.log("val/valid", float(np.concatenate(v["valid"]).mean()), sync_dist=True)
+        v = self._val.arrays()
+        length, iou, cd = v["length"], v["iou"], v["chamfer"]
+        means = {"val/loss": sum(v["loss"].tolist()) / len(length), "val/iou": np.nanmean(iou),
+                 "val/valid": v["valid"].mean()}
         if self.config.dim == 2:
-            self.log("val/chamfer", float(cd.mean()), prog_bar=True, sync_dist=True)
+            means["val/chamfer"] = cd.mean()
         for n in np.unique(length):
             sel = length == n
-            self.log(f"val_iou/len{int(n):02d}", float(np.nanmean(iou[sel])), sync_dist=True)
+            means[f"val_iou/len{int(n):02d}"] = np.nanmean(iou[sel])
             if self.config.dim == 2:
-                self.log(f"val_chamfer/len{int(n):02d}", float(cd[sel].mean()), sync_dist=True)
-        self._log_grid()
-
-    def _log_grid(self):
-        exp = image_logger(self)
-        if self._grid is None or exp is None:
-            return
-        tgt, pred = self._grid
-        if tgt.dim() == 4:  # 3D: silhouettes along z
-            tgt, pred = tgt.any(-1), pred.any(-1)
-        exp.add_image("val/targets_vs_predictions", image_grid(tgt, pred), self.global_step)
+                means[f"val_chamfer/len{int(n):02d}"] = cd[sel].mean()
+        log_means(self, means, prog_bar=("val/iou", "val/chamfer"))
+        if self._val.grid is not None:
+            log_pairs(self, "val/targets_vs_predictions", *self._val.grid)
 
     def configure_optimizers(self):
         opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
@@ -359,23 +228,6 @@ class CSGNetModule(L.LightningModule):
         sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode=mode, factor=self.hparams.plateau_factor,
                                                            patience=self.hparams.plateau_patience)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": self.monitor, "interval": "epoch"}}
-
-
-def image_grid(targets: torch.Tensor, preds: torch.Tensor, cols: int = 4) -> torch.Tensor:
-    """A ``(1, H, W)`` float image: pairs target | prediction (black shapes on white), ``cols`` per row."""
-    targets, preds = targets.bool().cpu(), preds.bool().cpu()
-    gap = torch.ones(targets.shape[1], 2, dtype=torch.bool)
-    pairs = [torch.cat([a, gap, b], 1) for a, b in zip(targets, preds)]
-    rows = [torch.cat([p, torch.ones(2, p.shape[1], dtype=torch.bool)], 0) for p in pairs]
-    rows += [torch.ones_like(rows[0])] * (-len(rows) % cols)
-    grid = torch.cat([torch.cat(rows[i:i + cols], 1) for i in range(0, len(rows), cols)], 0)
-    return (~grid).float()[None]
-
-
-def image_logger(module: L.LightningModule):
-    """The module's logger experiment if it takes images (TensorBoard), else None."""
-    exp = getattr(module.logger, "experiment", None) if module.logger is not None else None
-    return exp if hasattr(exp, "add_image") else None
 
 
 def export_weights(checkpoint: str | os.PathLike, out: str | os.PathLike, half: bool = True) -> Path:

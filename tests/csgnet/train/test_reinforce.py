@@ -12,10 +12,10 @@ import csgnet
 from csgnet import metrics
 from csgnet.decode import sample
 from csgnet.models import CSGNet, preset
-from csgnet.train.reinforce import (ReinforceModule, ShuffledBatches, TargetDataModule, episode_rewards, load_initial,
-                              load_targets, policy_loss, update_baseline)
 from csgnet.renderer import render_tokens
-from csgnet.train.supervised import AtomicCheckpointIO
+from csgnet.train.checkpoint import AtomicCheckpointIO
+from csgnet.train.reinforce import (ReinforceModule, TargetDataModule, episode_rewards, load_initial, load_targets,
+                                    policy_loss, update_baseline)
 
 ROOT = Path(__file__).resolve().parents[3]
 TINY = {"hidden": 32, "channels": [4, 4, 4], "embed": 16, "dropout": 0.0, "enc_dropout": 0.0}
@@ -264,18 +264,6 @@ def test_training_targets_are_jittered_and_validation_targets_are_not(monkeypatc
 # ---------------------------------------------------------------------------------------------
 # data
 
-def test_shuffled_batches_visit_every_image_once_per_pass():
-    images = torch.arange(10).view(10, 1, 1).expand(10, 64, 64).clone()
-    ds = ShuffledBatches(images, batch=4, steps=5, seed=1)
-    seen = torch.cat([b[:, 0, 0] for b in ds])
-    assert len(seen) == 20
-    assert sorted(seen[:10].tolist()) == list(range(10)) and sorted(seen[10:20].tolist()) == list(range(10))
-    again = torch.cat([b[:, 0, 0] for b in ShuffledBatches(images, 4, 5, seed=1)])
-    assert torch.equal(seen, again)
-    ds.set_epoch(1)
-    assert not torch.equal(torch.cat([b[:, 0, 0] for b in ds]), seen)
-
-
 def test_target_sources_and_their_errors(tmp_path):
     from PIL import Image
 
@@ -302,16 +290,14 @@ def test_target_sources_and_their_errors(tmp_path):
 
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs" / "csgnet").glob("rl_*.yaml")))
-def test_rl_configs_parse_and_build(config, tmp_path, monkeypatch):
-    from lightning.pytorch.cli import LightningCLI
-
+def test_rl_configs_parse_and_build(config, tmp_path, monkeypatch, train_main):
     monkeypatch.chdir(ROOT)
     text = (ROOT / "configs" / "csgnet" / config).read_text()
     stack = "stack: true" in text
     save_weights(tmp_path / "w.pt", stack=stack)
-    cli = LightningCLI(ReinforceModule, TargetDataModule, run=False,
-                       args=["--config", f"configs/csgnet/{config}", "--trainer.logger", "false",
-                             "--model.init", str(tmp_path / "w.pt")])
+    cli = train_main(["--config", f"configs/csgnet/{config}", "--trainer.logger", "false",
+                      "--model.init", str(tmp_path / "w.pt")], run=False)
+    assert isinstance(cli.model, ReinforceModule) and isinstance(cli.datamodule, TargetDataModule)
     assert cli.model.config.stack == ("stack" in config) == stack
     hp = cli.model.hparams
     assert (hp.lr, hp.momentum, hp.gamma, hp.max_len, hp.invalid_reward) == (0.01, 0.9, 20.0, 13, "zero")

@@ -6,54 +6,13 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from csgnet.train.supervised import AtomicCheckpointIO, CSGDataModule, CSGNetModule, MixedLengthBatches, export_weights
+from csgnet.train.checkpoint import AtomicCheckpointIO
+from csgnet.train.streams import MixedLengthBatches
+from csgnet.train.supervised import CSGDataModule, CSGNetModule, export_weights
 from csgnet.vocab import vocabulary
 
 ROOT = Path(__file__).resolve().parents[3]
 TINY = {"hidden": 16, "channels": [2, 2, 2], "embed": 8, "dropout": 0.0, "enc_dropout": 0.0}
-
-
-def tables(n=10):
-    stop = vocabulary(2).stop
-    out = {}
-    for L_ in (3, 5):
-        t = torch.full((n, 6), stop)
-        t[:, :L_] = torch.arange(n * L_).view(n, L_) % 300
-        out[L_] = t
-    return out
-
-
-def test_mixed_batches_hold_equal_counts_per_length_and_are_deterministic():
-    ds = MixedLengthBatches(2, [3, 5], batch=8, steps=5, max_len=5, tables=tables())
-    batches = list(ds)
-    assert len(batches) == 5
-    for tok, lengths in batches:
-        assert tok.shape == (8, 6)
-        assert (lengths == 3).sum() == 4 and (lengths == 5).sum() == 4
-        stop = vocabulary(2).stop
-        assert ((tok != stop).sum(1) == lengths).all()
-    again = list(MixedLengthBatches(2, [3, 5], batch=8, steps=5, max_len=5, tables=tables()))
-    assert all(torch.equal(a[0], b[0]) for a, b in zip(batches, again))
-    # every program of a length is used once before any repeats
-    seen = torch.cat([tok[lengths == 3] for tok, lengths in batches[:2]])
-    assert len({tuple(r.tolist()) for r in seen[:8]}) == 8
-
-
-def test_ranks_draw_different_shards():
-    a = list(MixedLengthBatches(2, [3, 5], 8, 4, 5, tables(), seed=0, rank=0, world=2))
-    b = list(MixedLengthBatches(2, [3, 5], 8, 4, 5, tables(), seed=0, rank=1, world=2))
-    assert len(a) == len(b) == 2
-    assert not torch.equal(a[0][0], b[0][0])
-
-
-def test_on_the_fly_batches_are_valid_programs():
-    import csgnet
-
-    ds = MixedLengthBatches(2, [3, 5], batch=4, steps=1, max_len=5, tables=None, seed=3)
-    tok, lengths = next(iter(ds))
-    vocab = vocabulary(2)
-    for row, n in zip(tok, lengths):
-        assert csgnet.is_valid(vocab.decode(row[: int(n)].tolist()))
 
 
 def test_loss_is_the_spec_normalisation():
@@ -119,20 +78,6 @@ def test_fit_validates_checkpoints_and_resumes(tmp_path):
     assert cb.step == 2 and t2.global_step == 4
 
 
-def test_atomic_checkpoint_io_leaves_nothing_on_failure(tmp_path):
-    io = AtomicCheckpointIO()
-    io.save_checkpoint({"a": torch.zeros(2)}, tmp_path / "x.ckpt")
-    assert torch.load(tmp_path / "x.ckpt", weights_only=True)["a"].shape == (2,)
-
-    class Bad:
-        def __reduce__(self):
-            raise RuntimeError("cannot pickle")
-
-    with pytest.raises(RuntimeError):
-        io.save_checkpoint({"a": Bad()}, tmp_path / "y.ckpt")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.ckpt"]
-
-
 def test_export_weights_round_trip(tmp_path):
     from csgnet.inference import load_model
 
@@ -156,12 +101,10 @@ def test_missing_dataset_names_the_generate_command(tmp_path):
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs" / "csgnet").glob("*.yaml")
                                            if not p.name.startswith("rl_")))  # rl_*: test_reinforce.py
-def test_configs_parse_and_build(config, monkeypatch):
-    from lightning.pytorch.cli import LightningCLI
-
+def test_configs_parse_and_build(config, monkeypatch, train_main):
     monkeypatch.chdir(ROOT)
-    cli = LightningCLI(CSGNetModule, CSGDataModule, run=False,
-                       args=["--config", f"configs/csgnet/{config}", "--trainer.logger", "false"])
+    cli = train_main(["--config", f"configs/csgnet/{config}", "--trainer.logger", "false"], run=False)
+    assert isinstance(cli.model, CSGNetModule) and isinstance(cli.datamodule, CSGDataModule)
     assert cli.model.config.dim == cli.datamodule.dim
     name = config[:-5]
     assert cli.model.config.stack == ("stack" in name)

@@ -1,0 +1,13 @@
+"""Training of the CSGNet models with PyTorch Lightning: the only part of :mod:`csgnet` that imports it.
+
+* :mod:`csgnet.train.supervised`: supervised training (``CSGNetModule``, ``CSGDataModule``) and
+  ``export_weights``;
+* :mod:`csgnet.train.reinforce`: REINFORCE fine-tuning on target images (``ReinforceModule``,
+  ``TargetDataModule``);
+* :mod:`csgnet.train.streams`: batch streams split over ranks and DataLoader workers;
+* :mod:`csgnet.train.logs`: validation values averaged over ranks, TensorBoard image grids;
+* :mod:`csgnet.train.checkpoint`: ``AtomicCheckpointIO``, checkpoints written atomically.
+
+The repository's ``train.py`` runs any of these modules from a config file. This package imports no
+submodule itself, so ``import csgnet.train.<module>`` loads only what that module needs.
+"""

@@ -1,0 +1,42 @@
+"""``train.py``: one LightningCLI runs every family's config (fit, resume, validate, TensorBoard)."""
+from pathlib import Path
+
+import yaml
+
+TINY = {"hidden": 16, "channels": [2, 2, 2], "embed": 8, "dropout": 0.0, "enc_dropout": 0.0}
+
+
+def _config(tmp_path: Path) -> Path:
+    config = {
+        "seed_everything": 0,
+        "model": {"class_path": "csgnet.train.supervised.CSGNetModule",
+                  "init_args": {"dim": 2, "stack": False, "model": TINY, "log_images": 4}},
+        "data": {"class_path": "csgnet.train.supervised.CSGDataModule",
+                 "init_args": {"dim": 2, "data_dir": None, "lengths": [3, 5], "batch_size": 4,
+                               "steps_per_epoch": 2, "val_per_length": 2}},
+        "trainer": {
+            "max_steps": 2, "accelerator": "cpu", "devices": 1, "enable_progress_bar": False,
+            "enable_model_summary": False, "num_sanity_val_steps": 0, "default_root_dir": str(tmp_path),
+            "logger": {"class_path": "lightning.pytorch.loggers.TensorBoardLogger",
+                       "init_args": {"save_dir": str(tmp_path), "name": "tb"}},
+            "plugins": [{"class_path": "csgnet.train.checkpoint.AtomicCheckpointIO"}],
+            "callbacks": [{"class_path": "lightning.pytorch.callbacks.ModelCheckpoint",
+                           "init_args": {"dirpath": str(tmp_path / "ckpt"), "save_last": True}}]},
+    }
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(config))
+    return path
+
+
+def test_fit_resume_and_validate_through_the_one_cli(tmp_path, train_main):
+    config = _config(tmp_path)
+    cli = train_main(["fit", "--config", str(config)])
+    assert cli.trainer.global_step == 2 and (tmp_path / "ckpt" / "last.ckpt").is_file()
+    assert "val/chamfer" in cli.trainer.callback_metrics
+    assert list((tmp_path / "tb").glob("version_0/events.out.tfevents.*"))
+    assert (tmp_path / "tb" / "version_0" / "config.yaml").is_file()  # the resolved config beside the logs
+    resumed = train_main(["fit", "--config", str(config), "--trainer.max_steps", "3", "--ckpt_path", "last"])
+    assert resumed.trainer.global_step == 3
+    val = train_main(["validate", "--config", str(config), "--trainer.logger", "false",
+                      "--ckpt_path", str(tmp_path / "ckpt" / "last.ckpt")])
+    assert "val/iou" in val.trainer.callback_metrics
