@@ -1,14 +1,10 @@
-"""The ShapeAssembly environment: Gymnasium API, line encoding, rewards and invalid actions."""
+"""The ShapeAssembly environment: line encoding, rewards and invalid actions (the Gymnasium API checks of
+every registered id are in tests/envs/test_registered.py)."""
 
-import warnings
-
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from gymnasium.utils.env_checker import check_env, data_equivalence
 
-import envs  # noqa: F401  (registers the environments)
 from envs.assembly import CloudTargets, CorpusTargets, ShapeAssemblyEnv
 from shapeprog import corpus, execute, parse, to_text
 from shapeprog import metrics as sa_metrics
@@ -47,14 +43,6 @@ def _actions_of(text, bbox):
             for _ in range(n):
                 index[f"cube{len(index) - 1}"] = len(index)
     return out
-
-
-def test_check_env_without_warnings():
-    for mode in (None, "rgb_array"):
-        env = gym.make("ShapeAssembly-v0", n_points=256, render_mode=mode)
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            check_env(env.unwrapped)
 
 
 def test_replaying_a_program_rebuilds_its_cuboids():
@@ -159,22 +147,6 @@ def test_cloud_targets():
         ShapeAssemblyEnv(targets=clouds, n_points=64).reset(seed=0)
     with pytest.raises(ValueError, match=r"\(N, P, 3\)"):
         CloudTargets(np.zeros((5, 3)))
-
-
-def test_sync_vector_env_is_deterministic():
-    def run():
-        vec = gym.make_vec("ShapeAssembly-v0", num_envs=2, vectorization_mode="sync", targets=[EX0, BOX],
-                           n_points=128, max_lines=4)
-        vec.action_space.seed(5)
-        out = [vec.reset(seed=7)]
-        for _ in range(6):
-            out.append(vec.step(vec.action_space.sample()))
-        vec.close()
-        return out
-
-    a, b = run(), run()
-    assert data_equivalence(a, b)
-    assert a[-1][2].shape == (2,)
 
 
 def test_render_frame():
