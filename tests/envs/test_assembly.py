@@ -102,6 +102,38 @@ def test_invalid_lines_are_ignored_with_a_penalty():
     assert obs["mask"].sum() == 2 and obs["steps"] == len(cases)
 
 
+def test_invalid_line_errors_name_the_line_and_command():
+    env = ShapeAssemblyEnv(targets=[BOX], n_points=64)
+    env.reset(seed=0)
+    env.step(_action(1, params=(0.5, 0.2, 0.5)))  # line 2: cube0
+    info = env.step(_action(3, (1, 1, 0)))[4]  # would be line 3
+    assert info["error"] == "line 3 (squeeze): cube0 cannot be squeezed against itself"
+    info = env.step(_action(2, (0, 1, 0)))[4]
+    assert info["error"].startswith("line 3 (attach): the attached cuboid cannot be bbox")
+
+
+def test_every_accepted_line_is_a_line_of_the_language():
+    """The statements the environment builds directly obey the language: the program parses, prints
+    back unchanged and has one statement per accepted line."""
+    env = ShapeAssemblyEnv(targets=[BOX], n_points=64, max_cuboids=4, max_lines=40, max_copies=2)
+    env.action_space.seed(0)
+    rng = np.random.default_rng(0)
+    accepted = 0
+    for episode in range(8):
+        env.reset(seed=episode)
+        lines, terminated = 1, False
+        while not terminated:
+            action = env.action_space.sample()
+            action["command"] = int(rng.integers(1, 6)) if rng.random() < 0.97 else 0
+            _, _, terminated, _, info = env.step(action)
+            if action["command"] and not info["invalid"]:
+                lines += 1
+            program = parse(env.program)
+            assert to_text(program) == env.program and len(program.root.statements) == lines
+        accepted += lines - 1
+    assert accepted >= 10
+
+
 def test_corner_outside_the_world_is_invalid():
     env = ShapeAssemblyEnv(targets=[EX0], n_points=128, invalid_action="terminate")
     env.reset(seed=0)

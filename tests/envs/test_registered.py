@@ -6,12 +6,16 @@ is checked here as soon as it is registered in ``envs/__init__.py``:
 * :func:`gymnasium.utils.env_checker.check_env` without warnings, with and without ``render_mode``;
 * seeding: two instances reset with the same seed and given the same actions match step for step
   (:func:`gymnasium.utils.env_match.check_environments_match`, renders included);
+* the package's boundary: making and stepping them imports no model, training or Lightning code;
 * the vector environment (``gymnasium.make_vec``): its observations lie in its spaces, runs with the
   same seeds are identical, and an id with a ``vector_entry_point`` behaves exactly like
   ``SyncVectorEnv`` over the single environment.
 """
 
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
@@ -25,11 +29,26 @@ ENV_IDS = sorted(env_id for env_id, spec in gym.registry.items()
                  if isinstance(spec.entry_point, str) and spec.entry_point.startswith("envs."))
 VECTOR_IDS = [env_id for env_id in ENV_IDS if gym.spec(env_id).vector_entry_point is not None]
 NUM_ENVS = 3
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_package_registers_its_environments():
     assert {"CSG2D-v0", "CSG3D-v0", "ShapeAssembly-v0"} <= set(ENV_IDS)
     assert "CSG2D-v0" in VECTOR_IDS and "CSG3D-v0" in VECTOR_IDS
+
+
+def test_environments_import_no_models_training_or_lightning():
+    code = (
+        "import sys, gymnasium as gym, envs\n"
+        f"for env_id in {ENV_IDS!r}:\n"
+        "    env = gym.make(env_id)\n"
+        "    env.reset(seed=0)\n"
+        "    env.step(env.action_space.sample())\n"
+        "bad = sorted(m for m in sys.modules if m.startswith(('csgnet.models', 'csgnet.train', 'lightning',\n"
+        "                                                   'pytorch_lightning')) or '.lit' in m)\n"
+        "assert not bad, bad\n"
+    )
+    subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True, timeout=300)
 
 
 @pytest.mark.parametrize("render_mode", [None, "rgb_array"])
