@@ -30,8 +30,14 @@ import shlex
 import sys
 import time
 
+import gymnasium as gym
 import numpy as np
 import torch
+
+from csgnet import metrics
+from envs.assembly import ShapeAssemblyEnv
+from envs.csg import CSGEnv, CSGVectorEnv
+from envs.targets import SyntheticTargets
 
 
 def policy(masks: np.ndarray, rng: np.random.Generator, eps: float, stop: int) -> np.ndarray:
@@ -75,11 +81,6 @@ def _time_vector(vec, masks_of, seconds: float, rng, eps: float) -> tuple[float,
 
 
 def bench_csg(dim: int, n: int, seconds: float, eps: float, device: str) -> None:
-    import gymnasium as gym
-
-    from envs.csg import CSGEnv, CSGVectorEnv
-    from envs.targets import SyntheticTargets
-
     src = SyntheticTargets(dim)
     print(f"\n{dim}D synthetic target pool ({src.size} programs per length, drawn before the episodes are timed):")
     for i, length in zip(range(0, len(src), src.size), src.lengths):
@@ -111,9 +112,6 @@ def bench_csg(dim: int, n: int, seconds: float, eps: float, device: str) -> None
 
 def bench_reward(n: int, repeats: int) -> None:
     """2D reward: n per-episode calls against one batched call, same pairs."""
-    from csgnet import metrics
-    from envs.targets import SyntheticTargets
-
     src = SyntheticTargets(2).prepare()
     rng = np.random.default_rng(3)
     targets = np.stack([src.sample(rng).shape for _ in range(n)])
@@ -133,8 +131,6 @@ def bench_reward(n: int, repeats: int) -> None:
 
 
 def bench_assembly(seconds: float) -> None:
-    from envs.assembly import ShapeAssemblyEnv
-
     env = ShapeAssemblyEnv()
     env.action_space.seed(0)
     env.reset(seed=0)

@@ -1,86 +1,26 @@
-"""ShapeAssembly program synthesis as a Gymnasium environment: one program line per step.
+"""ShapeAssembly program synthesis as a Gymnasium environment, one program line per step.
 
-``ShapeAssembly-v0`` (:class:`ShapeAssemblyEnv`).
-
-Episode
-    :meth:`reset` draws a target shape from the target source with the environment's ``np_random``
-    (by default a random program of the vendored PartNet corpus, :class:`CorpusTargets`, executed with
-    :func:`shapeprog.execute`) and samples ``n_points`` points uniformly on its surface
-    (:func:`shapeprog.sampling.sample_surface`). The agent writes a *flat* ShapeAssembly program (one
-    block) whose first line, ``bbox = Cuboid(l, h, w, True)``, is given: the target's root bounding box.
-    Each step appends one line, and the program so far is executed after every line. The episode ends
-    at the stop command or after ``max_lines`` lines (both terminations: the program is finished;
-    nothing is truncated by a time limit).
-
-Action space (``Dict``; the encoding of one program line)
-    * ``"command"``: ``Discrete(6)``: 0 stop, 1 ``Cuboid``, 2 ``attach``, 3 ``squeeze``, 4 ``reflect``,
-      5 ``translate``.
-    * ``"cuboids"``: ``MultiDiscrete([M + 1] * 3)``, cuboid indices: 0 is ``bbox``, ``i >= 1`` the
-      ``i``-th cuboid created so far (``cube{i-1}``; reflect and translate copies count, in creation
-      order). ``M = max_cuboids``.
-    * ``"params"``: ``Box(0, 1, (6,), float32)``, the continuous numbers.
-    * ``"aligned"``: ``Discrete(2)``; ``"face"``: ``Discrete(6)`` (right, left, top, bot, front, back);
-      ``"axis"``: ``Discrete(3)`` (X, Y, Z); ``"copies"``: ``Discrete(max_copies)`` (``n = copies + 1``).
-
-    Per command, the fields used (others are ignored):
-
-    ===========  =====================================================================================
-    Cuboid       ``cube{n} = Cuboid(l, h, w, aligned)`` with ``(l, h, w) = bbox * max(params[0:3],
-                 min_size)`` (extents as fractions of the bounding box); ``n`` = cuboids so far.
-    attach       ``attach(cuboids[0], cuboids[1], *params[0:6])``
-    squeeze      ``squeeze(cuboids[0], cuboids[1], cuboids[2], face, params[0], params[1])``
-    reflect      ``reflect(cuboids[0], axis)``
-    translate    ``translate(cuboids[0], axis, copies + 1, params[0])``
-    ===========  =====================================================================================
-
-Invalid actions
-    A line is invalid when it names a cuboid that does not exist, moves ``bbox`` (first index 0),
-    attaches or squeezes a cuboid against itself, would create more than ``max_cuboids`` cuboids, or
-    when its program fails to execute, gives non-finite corners or puts a corner outside the world cube
-    ``[-bound, bound]^3``. With ``invalid_action="ignore"`` (default) the line is dropped (the program
-    and the observation stay as they were), the step costs ``invalid_penalty`` and counts towards
-    ``max_lines``; with ``"terminate"`` the episode also ends. ``info["invalid"]`` says whether the
-    line was dropped and ``info["error"]`` why.
-
-Observation space (``Dict``)
-    * ``"target"``: ``Box(-bound, bound, (n_points, 3), float32)``, the target's surface samples.
-    * ``"bbox"``: ``Box(0, 2 bound, (3,), float32)``, the root bounding box extents (l, h, w).
-    * ``"cuboids"``: ``Box(-bound, bound, (M, 8, 3), float32)``, the corners of the executed cuboids so
-      far (corner order of :mod:`shapeprog.geometry`), zero rows after the last one.
-    * ``"mask"``: ``Box(0, 1, (M,), bool)``, which rows of ``"cuboids"`` exist.
-    * ``"steps"``: ``Discrete(max_lines + 1)``, lines written.
-
-Reward
-    The improvement of a score of the current shape against the target cloud, so that an episode's
-    return is the final score minus the empty shape's score, less the penalties:
-
-    * ``reward="fscore"`` (default): score = F-score / 100 (:func:`shapeprog.metrics.fscore`, the
-      target's adaptive threshold, ``n_points`` samples of the current cuboids); the empty shape
-      scores 0.
-    * ``reward="chamfer"``: score = ``-chamfer`` (:func:`shapeprog.metrics.chamfer`); the empty shape's
-      chamfer is measured from a single point at the bounding box centre.
-
-    The current shape's surface samples are redrawn after every valid line, so the score of a shape is
-    itself a sample (noise of about one F-score point for 1024 points).
-
-Rendering
-    ``render_mode="rgb_array"``: the target cloud (grey) beside the current cuboids (blue wireframes
-    over their surface samples), both drawn from the same orthographic three-quarter view
-    (:data:`shapeprog.picture.VIEW_DIRECTION`) at the same scale.
-
-Versions
-    v0: first version.
+``ShapeAssembly-v0`` is :class:`ShapeAssemblyEnv`; its targets come from :class:`CorpusTargets`,
+:class:`ProgramTargets` or :class:`CloudTargets`. ``docs/envs.md`` explains the action encoding, the
+reward and the treatment of invalid lines.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any, Sequence
 
+import cv2
 import gymnasium as gym
 import numpy as np
 import torch
 from gymnasium import spaces
+
+from shapeprog import ParseError, corpus, execute, metrics, parse
+from shapeprog.lang import AXES, FACES, Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, to_text
+from shapeprog.picture import camera  # the view of shapeprog.picture.render_png
+from shapeprog.sampling import sample_surface
 
 from ._checks import can_render, check_int, check_render_mode
 
@@ -123,8 +63,6 @@ class AssemblyTarget:
 
 
 def _program_target(program, index: int, name: str) -> AssemblyTarget:
-    from shapeprog import execute
-
     shape = execute(program)
     if len(shape) == 0:
         raise ValueError(f"{name}: the program has no leaf cuboid")
@@ -143,8 +81,6 @@ class CorpusTargets:
     """
 
     def __init__(self, categories: Sequence[str] = ("chair", "table", "storage"), split: str = "train"):
-        from shapeprog import corpus
-
         if isinstance(categories, str):
             categories = (categories,)
         for c in categories:
@@ -159,8 +95,6 @@ class CorpusTargets:
     def ids(self) -> list[tuple[str, int]]:
         """``[(category, id), ...]`` of the split (read on first use)."""
         if self._ids is None:
-            from shapeprog import corpus
-
             self._ids = [(c, i) for c in self.categories for i in corpus.ids(c, self.split)]
         return self._ids
 
@@ -168,10 +102,6 @@ class CorpusTargets:
         return len(self.ids)
 
     def sample(self, rng: np.random.Generator) -> AssemblyTarget:
-        import warnings
-
-        from shapeprog import ParseError, corpus, parse
-
         for _ in range(100):
             k = int(rng.integers(len(self.ids)))
             cat, i = self.ids[k]
@@ -192,8 +122,6 @@ class ProgramTargets:
     """
 
     def __init__(self, programs: Sequence):
-        from shapeprog import parse
-
         progs = [parse(p, f"program {k}") if isinstance(p, str) else p for k, p in enumerate(programs)]
         if not progs:
             raise ValueError("ProgramTargets needs at least one program")
@@ -239,8 +167,6 @@ def _as_source(targets):
     if hasattr(targets, "sample"):
         return targets
     if isinstance(targets, str):
-        from shapeprog import corpus
-
         if targets in corpus.CATEGORIES:
             return CorpusTargets((targets,))
         return ProgramTargets([targets])
@@ -266,9 +192,27 @@ class _Invalid(Exception):
 
 
 class ShapeAssemblyEnv(gym.Env):
-    """Write a flat ShapeAssembly program, line by line, to match a target point cloud.
+    """Write a flat ShapeAssembly program, line by line, to match a target point cloud (``ShapeAssembly-v0``).
 
-    See the module docstring for the spaces, the action encoding, the reward and invalid actions.
+    Each episode's target is drawn from ``targets`` with ``np_random`` and sampled as ``n_points`` surface
+    points; the program's first line, ``bbox = Cuboid(l, h, w, True)``, is given (the target's box).
+
+    Action space:
+        ``Dict`` encoding one line: ``command`` ``Discrete(6)`` (stop, Cuboid, attach, squeeze, reflect,
+        translate), ``cuboids`` ``MultiDiscrete([M + 1] * 3)`` (0 = bbox, ``i`` = ``cube{i-1}``),
+        ``params`` ``Box(0, 1, (6,), float32)``, ``aligned`` ``Discrete(2)``, ``face`` ``Discrete(6)``,
+        ``axis`` ``Discrete(3)``, ``copies`` ``Discrete(max_copies)``; ``M = max_cuboids``.
+    Observation space:
+        ``Dict``: ``target`` ``(n_points, 3) float32`` cloud, ``bbox`` ``(3,) float32`` extents,
+        ``cuboids`` ``(M, 8, 3) float32`` corners of the cuboids so far with their ``mask`` ``(M,) bool``,
+        ``steps`` ``Discrete(max_lines + 1)``.
+    Reward:
+        The change of the current shape's score (F-score / 100, or minus the chamfer distance) after
+        each valid line; ``-invalid_penalty`` for an invalid line, which is dropped (``info["error"]``
+        names its line, command and fault).
+    Episode end:
+        Terminated by the stop command, after ``max_lines`` lines, or (``invalid_action="terminate"``)
+        at an invalid line; never truncated. The final info holds ``"program"``.
 
     Args:
         targets: None (the corpus train split), a corpus category name, ShapeAssembly programs (texts or
@@ -346,16 +290,12 @@ class ShapeAssemblyEnv(gym.Env):
                 raise ValueError(f"target {target.name}: the cloud must have shape ({self.n_points}, 3), "
                                  f"got {tuple(pts.shape)}")
         else:
-            from shapeprog.sampling import sample_surface
-
             pts, _ = sample_surface(target.corners.to(torch.float32), self.n_points, generator=self._gen)
         if not torch.isfinite(pts).all() or float(pts.abs().max()) > self.bound:
             raise ValueError(f"target {target.name}: points must lie in [-{self.bound}, {self.bound}]^3")
         self._target = target
         self._target_points = pts.contiguous()
         self._bbox = bbox
-        from shapeprog.lang import Cuboid
-
         self._bbox_line = Cuboid("bbox", *(_short(v) for v in bbox), True)
         self._lines: list = []
         self._count = 0  # cuboids created (copies included)
@@ -364,9 +304,7 @@ class ShapeAssemblyEnv(gym.Env):
         self._steps = 0
         self._done = False
         if self.reward_kind == "fscore":
-            from shapeprog.metrics import adaptive_threshold
-
-            self._threshold = float(adaptive_threshold(self._target_points))
+            self._threshold = float(metrics.adaptive_threshold(self._target_points))
         self._score = self._score_of(None)
         self._started = True
         return self._obs(), {"target": target.name, "score": self._score}
@@ -387,8 +325,6 @@ class ShapeAssemblyEnv(gym.Env):
         }
 
     def _score_of(self, points: torch.Tensor | None) -> float:
-        from shapeprog import metrics
-
         if self.reward_kind == "fscore":
             if points is None:
                 return 0.0
@@ -399,15 +335,11 @@ class ShapeAssemblyEnv(gym.Env):
 
     def _flat_program(self, lines: list):
         """The flat :class:`shapeprog.lang.Program` of the bbox line followed by ``lines``."""
-        from shapeprog.lang import Block, Program
-
         return Program((Block("Program_0", (self._bbox_line, *lines)),), flat=True)
 
     @property
     def program(self) -> str:
         """The program written so far (flat ShapeAssembly text, bbox line included)."""
-        from shapeprog.lang import to_text
-
         return to_text(self._flat_program(self._lines)) if self._started else ""
 
     # -------------------------------------------------------------------------------------------
@@ -424,9 +356,13 @@ class ShapeAssemblyEnv(gym.Env):
         return f"cube{index - 1}"
 
     def _line(self, action: dict):
-        """The statement an action encodes and the cuboids it creates; raises _Invalid."""
-        from shapeprog.lang import AXES, FACES, Attach, Cuboid, Reflect, Squeeze, Translate
+        """The statement an action encodes and the cuboids it creates.
 
+        The statement is built directly and held to the language's rules for a line of a block (the
+        cuboids it names exist, bbox is never moved, nothing is attached or squeezed to itself; see
+        :func:`shapeprog.lang.parse`) plus the environment's cuboid budget. Raises :class:`_Invalid`
+        naming the action field at fault.
+        """
         cmd = int(action["command"])
         c = [int(v) for v in np.asarray(action["cuboids"]).reshape(-1)]
         p = [_short(v) for v in np.asarray(action["params"]).reshape(-1)]
@@ -458,15 +394,11 @@ class ShapeAssemblyEnv(gym.Env):
         raise _Invalid(f"unknown command {cmd}")
 
     def _execute(self, lines: list) -> np.ndarray:
-        from shapeprog import ParseError, execute
-        from shapeprog.lang import parse, to_text
-
-        program = self._flat_program(lines)
+        """``(L, 8, 3) float32`` corners of the flat program of ``lines``; raises :class:`_Invalid`."""
         try:
-            parse(to_text(program))  # the language's own checks, as for a program read from a file
             with torch.no_grad():
-                shape = execute(program)
-        except (ParseError, ValueError, RuntimeError, IndexError, ZeroDivisionError) as e:
+                shape = execute(self._flat_program(lines))
+        except (ValueError, RuntimeError, IndexError, ZeroDivisionError) as e:
             raise _Invalid(f"the program does not execute: {e}") from None
         corners = shape.corners.numpy()
         if not np.isfinite(corners).all():
@@ -494,14 +426,13 @@ class ShapeAssemblyEnv(gym.Env):
                     raise _Invalid(f"the program has {corners.shape[0]} cuboids, expected {self._count + created}")
                 points = None
                 if corners.shape[0]:
-                    from shapeprog.sampling import sample_surface
-
                     try:
                         points, _ = sample_surface(torch.from_numpy(corners), self.n_points, generator=self._gen)
                     except ValueError as e:
                         raise _Invalid(f"the cuboids cannot be sampled: {e}") from None
             except _Invalid as e:
-                info.update(invalid=True, error=str(e))
+                where = f"line {len(self._lines) + 2} ({COMMANDS[int(action['command'])]})"
+                info.update(invalid=True, error=f"{where}: {e}")
                 reward = -self.invalid_penalty
                 terminated = self.invalid_action == "terminate"
             else:
@@ -524,9 +455,6 @@ class ShapeAssemblyEnv(gym.Env):
     def render(self):
         if not can_render(self):
             return None
-        import cv2
-
-        from shapeprog.picture import camera  # the view of shapeprog.picture.render_png
 
         S = self.render_size
         right, up, _ = camera()

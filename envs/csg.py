@@ -1,68 +1,8 @@
-"""CSG program synthesis as a Gymnasium environment: write a postfix program, one token per step.
+"""CSG program synthesis as a Gymnasium environment, one postfix token per step.
 
-``CSG2D-v0`` / ``CSG3D-v0`` (:class:`CSGEnv`) and their batched twin :class:`CSGVectorEnv` (what
-``gymnasium.make_vec("CSG2D-v0", num_envs=N)`` builds), which steps every episode of the batch through
-one :class:`csgnet.renderer.StackMachine` and scores every finished episode with one reward call.
-
-Episode
-    :meth:`reset` draws a target shape from the target source (:mod:`envs.targets`; synthetic programs by
-    default) with the environment's ``np_random``. Each step appends one token of the CSGNet vocabulary
-    (:func:`csgnet.vocabulary`) to the program and executes it on the stack. The episode ends when the
-    agent emits the stop token ``$``, when the program reaches ``max_length`` tokens (13 in 2D, 7 in 3D by
-    default; the program is then judged as it stands), or, with ``invalid_action="terminate"`` (the
-    default), at the first token after which no valid program can be completed within ``max_length``:
-    an operator with fewer than two shapes on the stack, ``$`` with other than one shape on the stack, or
-    a draw that leaves more shapes than the remaining tokens can combine. Such an episode gets the
-    invalid reward at once, since no continuation could earn more. With ``invalid_action="continue"``
-    the episode runs on to ``$`` or ``max_length`` as in the reference's REINFORCE sampling, and the
-    invalid program gets the invalid reward then. Every end is a termination (the program is finished
-    and scored), never a truncation; nothing is truncated by a time limit.
-
-Action space
-    ``Discrete(400)`` in 2D, ``Discrete(6635)`` in 3D: a vocabulary index. Primitives come first, then
-    ``+``, ``*``, ``-`` and ``$`` (index 399 / 6634). ``info["action_mask"]`` (``(V,) int8``) marks the
-    tokens that keep the program completable (all zero once the episode has ended); :meth:`action_masks`
-    returns it as bool.
-
-Observation space
-    A ``Dict``:
-
-    * ``"target"``: ``Box(0, 1, (64, 64), bool)`` (2D) or ``(64, 64, 64)`` (3D), the target shape.
-    * ``"stack"``: ``Box(0, 1, (K, 64, 64[, 64]), bool)``, the top ``K`` stack slots after the tokens so
-      far (slot 0 is the top; empty slots and every slot after a stack underflow are all False), exactly
-      :func:`csgnet.renderer.stack_trace` of the same tokens. ``K = stack_size`` defaults to
-      ``(max_length + 1) // 2``, the deepest stack a completable program can reach.
-    * ``"steps"``: ``Discrete(max_length + 1)``, tokens written so far (omitted with ``observe_steps=False``).
-
-Reward
-    0 on every step but the last. At the end:
-
-    * ``reward="chamfer"`` (2D default): :func:`csgnet.metrics.reward`, ``clip(1 - CD / (64 sqrt 2), 0, 1)
-      ** gamma`` with the reference's edge chamfer distance CD and ``gamma = 20``; a perfect program
-      scores 1.
-    * ``reward="iou"`` (3D default, also available in 2D): ``IoU ** gamma`` with
-      ``IoU = |P and T| / |P or T|`` (``gamma`` defaults to 1). The specification's chamfer reward is
-      defined on 2D images only; IoU is the 3D evaluation measure. The ``"union"`` denominator (not the
-      evaluation's ``|P or T| + 1``) is used so that a perfect program scores exactly 1, like the 2D
-      reward.
-    * An invalid program, and (chamfer, ``invalid_reward="zero"``) an empty rendering, gets 0, as the
-      paper states. ``invalid_reward="reference"`` gives the reference code's value instead: the reward
-      of chamfer distance 16, 0.0204 for gamma 20; for the IoU reward the reference value is 0 too.
-
-    The end-of-episode info holds ``"program"`` (text), ``"valid"`` and ``"iou"``.
-
-Rendering
-    ``render_mode="rgb_array"``: an RGB frame with the target (grey) beside the current shape (blue): the
-    top of the stack during the episode, the program's result once it has ended. 3D volumes are drawn
-    as depth-shaded views along their third axis. Each pixel becomes a ``render_scale`` square.
-
-Arguments (both classes)
-    dim (2 or 3), targets (see :func:`envs.targets.as_target_source`), max_length, stack_size, reward,
-    gamma, invalid_reward, invalid_action, observe_steps, render_mode, render_scale, device (torch device
-    of the stack machine; CPU by default).
-
-Versions
-    v0: first version.
+``CSG2D-v0`` / ``CSG3D-v0`` are :class:`CSGEnv`; ``gymnasium.make_vec`` builds their batched twin
+:class:`CSGVectorEnv`, which steps every episode through one :class:`csgnet.renderer.StackMachine`.
+Both run on :class:`_Episodes`. ``docs/envs.md`` explains the episode end, the rewards and the masks.
 """
 
 from __future__ import annotations
@@ -100,7 +40,7 @@ _SHAPE_BLUE = np.array([31, 119, 180], dtype=np.float64)
 
 @dataclass(frozen=True)
 class CSGConfig:
-    """The validated settings of a CSG environment (see the module docstring)."""
+    """The validated settings of a CSG environment (the arguments of :class:`CSGEnv`)."""
 
     dim: int
     max_length: int
@@ -333,7 +273,27 @@ def _reset_info(target: Target, mask: np.ndarray) -> dict[str, Any]:
 
 
 class CSGEnv(gym.Env):
-    """One CSG program-writing episode at a time (``CSG2D-v0``, ``CSG3D-v0``); see the module docstring.
+    """Write a postfix CSG program, one token per step, to match a target shape (``CSG2D-v0``, ``CSG3D-v0``).
+
+    Each episode's target is drawn from ``targets`` with ``np_random``; each token is executed on the
+    stack at once.
+
+    Action space:
+        ``Discrete(400)`` (2D) or ``Discrete(6635)`` (3D): a :func:`csgnet.vocabulary` index; ``$``
+        (the last index) stops. ``info["action_mask"]`` ``(V,) int8`` and :meth:`action_masks` mark the
+        tokens after which a valid program can still be completed.
+    Observation space:
+        ``Dict``: ``target`` ``(64, 64[, 64]) bool``; ``stack`` ``(K, 64, 64[, 64]) bool``, the top
+        ``K = stack_size`` stack slots (top first; :func:`csgnet.renderer.stack_trace` of the tokens);
+        ``steps`` ``Discrete(max_length + 1)`` (omitted with ``observe_steps=False``).
+    Reward:
+        0 until the end; then ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma`` (``"chamfer"``, 2D) or
+        ``IoU ** gamma`` (``"iou"``), 1 for a perfect program; 0 for an invalid one (0.0204 with the
+        chamfer reward and ``invalid_reward="reference"``). The final info holds ``"program"``,
+        ``"valid"`` and ``"iou"``.
+    Episode end:
+        Terminated at ``$``, at ``max_length`` tokens, or (``invalid_action="terminate"``) at the first
+        token after which no valid program can be completed; never truncated.
 
     Args:
         dim: 2 or 3.

@@ -1,14 +1,10 @@
-"""The ShapeAssembly environment: Gymnasium API, line encoding, rewards and invalid actions."""
+"""The ShapeAssembly environment: line encoding, rewards and invalid actions (the Gymnasium API checks of
+every registered id are in tests/envs/test_registered.py)."""
 
-import warnings
-
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from gymnasium.utils.env_checker import check_env, data_equivalence
 
-import envs  # noqa: F401  (registers the environments)
 from envs.assembly import CloudTargets, CorpusTargets, ShapeAssemblyEnv
 from shapeprog import corpus, execute, parse, to_text
 from shapeprog import metrics as sa_metrics
@@ -47,14 +43,6 @@ def _actions_of(text, bbox):
             for _ in range(n):
                 index[f"cube{len(index) - 1}"] = len(index)
     return out
-
-
-def test_check_env_without_warnings():
-    for mode in (None, "rgb_array"):
-        env = gym.make("ShapeAssembly-v0", n_points=256, render_mode=mode)
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            check_env(env.unwrapped)
 
 
 def test_replaying_a_program_rebuilds_its_cuboids():
@@ -114,6 +102,38 @@ def test_invalid_lines_are_ignored_with_a_penalty():
     assert obs["mask"].sum() == 2 and obs["steps"] == len(cases)
 
 
+def test_invalid_line_errors_name_the_line_and_command():
+    env = ShapeAssemblyEnv(targets=[BOX], n_points=64)
+    env.reset(seed=0)
+    env.step(_action(1, params=(0.5, 0.2, 0.5)))  # line 2: cube0
+    info = env.step(_action(3, (1, 1, 0)))[4]  # would be line 3
+    assert info["error"] == "line 3 (squeeze): cube0 cannot be squeezed against itself"
+    info = env.step(_action(2, (0, 1, 0)))[4]
+    assert info["error"].startswith("line 3 (attach): the attached cuboid cannot be bbox")
+
+
+def test_every_accepted_line_is_a_line_of_the_language():
+    """The statements the environment builds directly obey the language: the program parses, prints
+    back unchanged and has one statement per accepted line."""
+    env = ShapeAssemblyEnv(targets=[BOX], n_points=64, max_cuboids=4, max_lines=40, max_copies=2)
+    env.action_space.seed(0)
+    rng = np.random.default_rng(0)
+    accepted = 0
+    for episode in range(8):
+        env.reset(seed=episode)
+        lines, terminated = 1, False
+        while not terminated:
+            action = env.action_space.sample()
+            action["command"] = int(rng.integers(1, 6)) if rng.random() < 0.97 else 0
+            _, _, terminated, _, info = env.step(action)
+            if action["command"] and not info["invalid"]:
+                lines += 1
+            program = parse(env.program)
+            assert to_text(program) == env.program and len(program.root.statements) == lines
+        accepted += lines - 1
+    assert accepted >= 10
+
+
 def test_corner_outside_the_world_is_invalid():
     env = ShapeAssemblyEnv(targets=[EX0], n_points=128, invalid_action="terminate")
     env.reset(seed=0)
@@ -159,22 +179,6 @@ def test_cloud_targets():
         ShapeAssemblyEnv(targets=clouds, n_points=64).reset(seed=0)
     with pytest.raises(ValueError, match=r"\(N, P, 3\)"):
         CloudTargets(np.zeros((5, 3)))
-
-
-def test_sync_vector_env_is_deterministic():
-    def run():
-        vec = gym.make_vec("ShapeAssembly-v0", num_envs=2, vectorization_mode="sync", targets=[EX0, BOX],
-                           n_points=128, max_lines=4)
-        vec.action_space.seed(5)
-        out = [vec.reset(seed=7)]
-        for _ in range(6):
-            out.append(vec.step(vec.action_space.sample()))
-        vec.close()
-        return out
-
-    a, b = run(), run()
-    assert data_equivalence(a, b)
-    assert a[-1][2].shape == (2,)
 
 
 def test_render_frame():

@@ -1,0 +1,108 @@
+"""The public names: every ``__all__`` entry exists, and the README's entry points keep working.
+
+Packages and their public submodules (names without a leading underscore) are found by walking the
+package folders, so a new module is checked without a new test. The README's
+``python -m csgnet ...`` / ``python -m shapeprog ...`` subcommands are read from README.md itself.
+"""
+import importlib
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import csgnet
+import shapeprog
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "envs", "shapeio"]
+
+
+def _public_modules() -> list[str]:
+    """The packages and every module file under them (namespace sub-packages such as ``csgnet/train``
+    included) whose dotted name has no part with a leading underscore."""
+    names = set(PACKAGES)
+    for package in PACKAGES:
+        folder = Path(importlib.import_module(package).__file__).parent
+        for path in folder.rglob("*.py"):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            if not any(p.startswith("_") for p in parts):
+                names.add(".".join(parts))
+    return sorted(names)
+
+
+MODULES = _public_modules()
+# `python -m <package> <subcommand>` as the README writes it
+COMMANDS = sorted(set(re.findall(r"python -m (csgnet|shapeprog) ([a-z][\w-]*)", README)))
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_packages_declare_their_public_names(package):
+    module = importlib.import_module(package)
+    assert isinstance(module.__all__, (list, tuple))
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_every_name_in___all___exists(name):
+    module = importlib.import_module(name)
+    exported = getattr(module, "__all__", [])
+    assert len(set(exported)) == len(exported), f"{name}.__all__ lists a name twice"
+    missing = [n for n in exported if not hasattr(module, n)]
+    assert not missing, f"{name}.__all__ names missing attributes: {missing}"
+
+
+def test_the_readme_python_entry_points():
+    for name in ("parse", "render", "vocabulary", "load_pretrained", "infer", "refine"):
+        assert callable(getattr(csgnet, name))
+    for name in ("parse", "execute", "corpus", "fit"):
+        assert hasattr(shapeprog, name)
+    # "A first look"
+    prog = csgnet.parse("c(32,32,28)c(32,32,24)-s(32,32,28)s(32,32,20)-+t(32,32,20)+")
+    img = csgnet.render(prog)
+    assert img.shape == (1, 64, 64) and img.dtype == np.bool_ and img.any()
+    vol = csgnet.render(["sp(32,32,32,20)cu(32,32,32,28)*"], dim=3)
+    assert vol.shape == (1, 64, 64, 64) and vol.any()
+    tokens = csgnet.vocabulary(2).encode(prog)
+    assert len(tokens) == len(prog.tokens) and len(csgnet.vocabulary(2)) == 400
+    assert csgnet.metrics.chamfer(img[0], img[0]) == 0.0
+    model = csgnet.load_pretrained(2)
+    (res,) = csgnet.infer(model, img, beam=2)
+    assert isinstance(res.text, str) and np.isfinite(res.score) and 0.0 <= res.iou <= 1.0
+    refined = csgnet.refine(res.text, img[0], maxiter=0)
+    assert refined.score == refined.initial_score
+    # shapeprog
+    sa = shapeprog.parse(shapeprog.corpus.read("chair", 173), "chair/173.txt")
+    shape = shapeprog.execute(sa)
+    assert tuple(shape.corners.shape) == (6, 8, 3)
+    fitted = shapeprog.fit(sa, shape.corners.reshape(-1, 3).detach(), steps=1, samples=64, target_samples=None,
+                           generator=torch.Generator().manual_seed(0))
+    assert fitted is not None
+
+
+def test_the_readme_names_its_commands():
+    assert ("csgnet", "parse") in COMMANDS and ("shapeprog", "run") in COMMANDS
+
+
+@pytest.mark.parametrize("package, command", COMMANDS)
+def test_readme_subcommand_help(package, command, capsys):
+    main = importlib.import_module(f"{package}.__main__").main
+    with pytest.raises(SystemExit) as exit_:
+        main([command, "--help"])
+    assert exit_.value.code == 0
+    assert command in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("package", ["csgnet", "shapeprog"])
+def test_python_m_help(package):
+    out = subprocess.run([sys.executable, "-m", package, "--help"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    for p, command in COMMANDS:
+        if p == package:
+            assert command in out.stdout
