@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from csgnet.primitives import SIZE
+from shapeio.image import list_images, read_masks
 
 from ._checks import check_dim, check_int
 
@@ -210,7 +211,8 @@ class ImageFolderTargets:
 
     Each file must be a 64x64 image (grayscale, RGB or RGBA, converted to gray); a pixel is ON when
     its gray value exceeds ``threshold`` (bright shape on a dark background, the way
-    :func:`csgnet.render` output saves as 0/255), or, with ``invert=True``, when it does not.
+    :func:`csgnet.render` output saves as 0/255), or, with ``invert=True``, when it does not. This is
+    the fixed-threshold rule of :func:`shapeio.image.read_masks` without fitting (``docs/shapeio.md``).
 
     Args:
         folder: the directory.
@@ -226,30 +228,16 @@ class ImageFolderTargets:
 
     def __init__(self, folder: str | os.PathLike, threshold: int = 127, invert: bool = False):
         self.folder = Path(folder)
-        if not self.folder.is_dir():
-            raise FileNotFoundError(f"{self.folder}: no such directory of target images")
         self.threshold = int(threshold)
         self.invert = bool(invert)
         self._shapes: np.ndarray | None = None
-        self.files: list[Path] = sorted(p for p in self.folder.iterdir() if p.suffix.lower() == ".png" and p.is_file())
-        if not self.files:
-            raise FileNotFoundError(f"{self.folder}: no .png file in the directory")
+        self.files: list[Path] = list_images(self.folder, suffixes=(".png",))
 
     @property
     def shapes(self) -> np.ndarray:
         """``(N, 64, 64)`` bool, loaded on first access."""
         if self._shapes is None:
-            import cv2
-
-            out = np.empty((len(self.files), SIZE, SIZE), dtype=bool)
-            for i, f in enumerate(self.files):
-                img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
-                if img is None:
-                    raise ValueError(f"{f}: not a readable PNG image")
-                if img.shape != (SIZE, SIZE):
-                    raise ValueError(f"{f}: target images must be {SIZE}x{SIZE}, got {img.shape[1]}x{img.shape[0]}")
-                on = img > self.threshold
-                out[i] = ~on if self.invert else on
+            out = read_masks(self.files, SIZE, threshold=self.threshold, invert=self.invert, fit=False)
             out.setflags(write=False)
             self._shapes = out
         return self._shapes
