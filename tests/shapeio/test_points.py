@@ -1,0 +1,43 @@
+"""Tests of shapeio.points: binary PLY and OBJ point clouds."""
+import numpy as np
+import pytest
+
+from shapeio.points import obj_vertices, read_points, write_points
+
+
+def test_ply_round_trip_with_and_without_normals(tmp_path):
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(30, 3)).astype(np.float32)
+    nrm = rng.normal(size=(30, 3)).astype(np.float32)
+    write_points(tmp_path / "p.ply", pts, nrm)
+    p, n = read_points(tmp_path / "p.ply", return_normals=True)
+    assert p.dtype == np.float32 and np.array_equal(p, pts) and np.array_equal(n, nrm)
+    write_points(tmp_path / "q.ply", pts.astype(np.float64))
+    q, qn = read_points(tmp_path / "q.ply", return_normals=True)
+    assert np.array_equal(q, pts) and qn is None
+    assert (tmp_path / "q.ply").read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\nelement vertex 30\n")
+
+
+def test_obj_points(tmp_path):
+    assert obj_vertices(["# c", "v 1 2 3", "vn 0 0 1", "v 4 5 6 0.5 0.5 0.5"], "x").tolist() == [[1, 2, 3], [4, 5, 6]]
+    (tmp_path / "c.obj").write_text("v 1 2 3\nv 1 2 oops\n")
+    with pytest.raises(ValueError, match=r"c\.obj:2: expected 'v x y z'"):
+        read_points(tmp_path / "c.obj")
+
+
+def test_bad_input_names_the_file(tmp_path):
+    with pytest.raises(ValueError, match=r"p\.ply: `points` must have shape \(N, 3\)"):
+        write_points(tmp_path / "p.ply", np.zeros((4, 2)))
+    with pytest.raises(ValueError, match=r"p\.ply: `normals` must match"):
+        write_points(tmp_path / "p.ply", np.zeros((4, 3)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"p\.ply: `points` contains NaN"):
+        write_points(tmp_path / "p.ply", np.full((4, 3), np.nan))
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "bad.ply").write_bytes(b"ply\nformat nonsense\n")
+    with pytest.raises(ValueError, match=r"bad\.ply: cannot read PLY"):
+        read_points(tmp_path / "bad.ply")
+    (tmp_path / "x.xyz").write_text("1 2 3\n")
+    with pytest.raises(ValueError, match=r"x\.xyz: unsupported point-cloud format"):
+        read_points(tmp_path / "x.xyz")
+    with pytest.raises(FileNotFoundError, match=r"none\.ply: no such file"):
+        read_points(tmp_path / "none.ply")
