@@ -20,9 +20,9 @@ from shapeio.image import IMAGE_SUFFIXES, centre_on_canvas, fit_to_canvas, read_
 from shapeio.mesh import MESH_SUFFIXES, load_mesh
 
 from .decode import decode
-from .score import score_beams
-from .lang import Program
+from .lang import Program, parse
 from .models import CSGNet, ModelConfig, preset
+from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "fit_to_canvas", "load_model", "load_pretrained", "infer", "Inference",
            "WEIGHTS", "PRETRAINED"]
@@ -164,8 +164,6 @@ class Inference:
 
     @property
     def program(self) -> Program:
-        from .lang import parse
-
         return parse(self.text, self.dim)
 
 

@@ -25,7 +25,10 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 import torch
 
+from csgnet.data import TABLE2, sample_programs
 from csgnet.primitives import SIZE
+from csgnet.renderer import encode_tokens, execute
+from csgnet.vocab import vocabulary
 from shapeio.image import list_images, read_masks
 
 from ._checks import check_dim, check_int
@@ -71,10 +74,6 @@ def _synthetic_pool(dim: int, length: int, size: int, seed: int, rules) -> tuple
     """Token indices ``(size, length) int64``, their renderings packed as ``(size, ...) uint8`` (bit ``k`` of
     byte ``j`` is pixel ``8 j + k`` of the flattened canvas) and their program texts; drawn once per
     argument set (a pure function of the arguments)."""
-    from csgnet.data import sample_programs
-    from csgnet.renderer import encode_tokens, execute
-    from csgnet.vocab import vocabulary
-
     rng = np.random.default_rng([seed, dim, length])
     pool = sample_programs(dim, length, size, rng, rules)
     pool.setflags(write=False)
@@ -109,8 +108,6 @@ class SyntheticTargets:
 
     def __init__(self, dim: int = 2, lengths: Sequence[int] | None = None, size: int | None = None,
                  seed: int = 0, rules=None):
-        from csgnet.data import TABLE2
-
         self.dim = check_dim(dim)
         if lengths is None:
             lengths = sorted(TABLE2[self.dim])
@@ -265,8 +262,6 @@ def as_target_source(targets, dim: int, max_length: int | None = None) -> Target
     """
     dim = check_dim(dim)
     if targets is None or (isinstance(targets, str) and targets == "synthetic"):
-        from csgnet.data import TABLE2
-
         lengths = [L for L in sorted(TABLE2[dim]) if max_length is None or L <= max_length]
         if not lengths:
             raise ValueError(f"no synthetic program length fits max_length={max_length} "
