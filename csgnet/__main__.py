@@ -19,14 +19,21 @@ import shlex
 import sys
 from pathlib import Path
 
-from .lang import ParseError, parse
+import numpy as np
+
+from shapeio import atomic_write, refuse_overwrite
+from shapeio.image import write_png
+
+from . import export, render
+from .lang import ParseError, is_valid, parse
+from .shapes2d import load_silhouettes
+from .vocab import vocabulary
+
+# The modules that import torch or Lightning (data, inference, refinement, paper, train) are imported
+# inside the commands that need them, so that `--help` and `render` start without loading torch.
 
 
 def _write_render(program, dim: int, out: Path) -> Path:
-    import numpy as np
-
-    from . import export, render
-
     suffix = out.suffix.lower()
     if suffix == ".scad":
         return export.save_scad(program, out)
@@ -40,8 +47,6 @@ def _write_render(program, dim: int, out: Path) -> Path:
             raise SystemExit("error: OBJ output is for 3D programs; use .png, .npy or .scad for 2D")
         return export.save_obj(img, out)
     if suffix == ".npy":
-        from shapeio import atomic_write
-
         return atomic_write(out, lambda f: np.save(f, img, allow_pickle=False))
     raise SystemExit(f"error: unknown output type {suffix!r} for {out}; use .png, .obj, .npy or .scad")
 
@@ -52,8 +57,6 @@ def cmd_render(args) -> int:
     except ParseError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    from . import render
-
     img = render(program, args.dim)[0]
     print(f"{program.text()}  ({len(program)} tokens, {int(img.sum())} {'pixels' if args.dim == 2 else 'voxels'} on)")
     for out in args.output:
@@ -73,9 +76,6 @@ def cmd_generate(args) -> int:
 
 def cmd_demo(args) -> int:
     """The main job until the neural parsers ship: a small synthetic dataset and previews."""
-    import numpy as np
-
-    from . import export, render
     from .data import generate_dataset, load_dataset
 
     out = Path(args.out)
@@ -113,13 +113,16 @@ def cmd_demo(args) -> int:
 
 def cmd_parse(args) -> int:
     """Infer a program for each input shape with a trained model."""
-    import numpy as np
-    from shapeio import atomic_write
-
-    from . import export, render
     from .inference import InputError, infer, load_model, load_pretrained, load_shape
 
     out = Path(args.out)
+    outputs = [out / f"{Path(src).stem}{end}" for src in args.inputs
+               for end in (".txt", ".png", "_compare.png", ".obj", ".scad")]
+    try:
+        refuse_overwrite(outputs, args.inputs)
+    except FileExistsError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     models: dict = {}
     weights = {2: args.weights_2d, 3: args.weights_3d}
     status = 0
@@ -172,8 +175,6 @@ def cmd_parse(args) -> int:
 
 
 def _is_valid(text: str, dim: int = 2) -> bool:
-    from .lang import is_valid
-
     try:
         return bool(text) and is_valid(parse(text, dim))
     except ParseError:
@@ -243,8 +244,6 @@ def _decoding(args) -> str:
 def _write_table(text: str, out) -> None:
     print(text)
     if out:
-        from shapeio import atomic_write
-
         atomic_write(out, text, mkdir=True)
         print(f"wrote {out}")
 
@@ -258,7 +257,6 @@ TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2
 def cmd_table4(args) -> int:
     from .inference import WEIGHTS
     from .paper.protocols import subset, table4, table4_markdown
-    from .shapes2d import load_silhouettes
 
     test = load_silhouettes("test", args.silhouettes)
     idx = subset(len(test), None if args.images <= 0 else args.images, args.seed)
@@ -274,8 +272,6 @@ def cmd_table4(args) -> int:
 
 
 def cmd_table6(args) -> int:
-    import numpy as np
-
     from .paper.protocols import table6, table6_markdown
 
     lengths = args.lengths or [3, 5, 7, 9, 11, 13]
@@ -287,7 +283,6 @@ def cmd_table6(args) -> int:
         source = f"{args.data} (test split, {args.per_length} per length)"
     else:
         from .data import sample_programs
-        from .vocab import vocabulary
 
         rng = np.random.default_rng(args.seed)
         vocab = vocabulary(2)
@@ -303,8 +298,6 @@ def cmd_table6(args) -> int:
 
 
 def _contact_sheet(images, cols: int = 6):
-    import numpy as np
-
     h, w = images[0].shape
     rows = -(-len(images) // cols)
     sheet = np.full((rows * (h + 2), cols * (w + 2)), 128, np.uint8)  # grey frames
@@ -315,16 +308,7 @@ def _contact_sheet(images, cols: int = 6):
 
 
 def _save_sheet(sheet, path: Path, scale: int = 3) -> None:
-    import cv2
-    import numpy as np
-
-    from shapeio import atomic_write
-
-    big = np.kron(sheet, np.ones((scale, scale), np.uint8))
-    ok, buf = cv2.imencode(".png", big)
-    if not ok:
-        raise RuntimeError(f"could not encode {path}")
-    atomic_write(path, buf.tobytes(), mkdir=True)
+    write_png(path, sheet, scale=scale, mkdir=True)
 
 
 def main(argv=None) -> int:

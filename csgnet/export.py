@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from shapeio import atomic_write
+from shapeio.image import write_png
+from shapeio.mesh import write_mesh
 
 from . import primitives as P
 from .primitives import SIZE
@@ -65,18 +67,8 @@ def save_png(canvas, path, scale: int = 4) -> Path:
     Returns:
         The path written.
     """
-    import io
-
-    from PIL import Image
-
     img = _to_numpy_bool(canvas, "canvas", (SIZE, SIZE))
-    if not isinstance(scale, int) or scale < 1:
-        raise ValueError(f"scale must be a positive integer, got {scale!r}")
-    gray = np.where(img, np.uint8(0), np.uint8(255))
-    gray = np.repeat(np.repeat(gray, scale, axis=0), scale, axis=1)
-    buf = io.BytesIO()
-    Image.fromarray(gray, mode="L").save(buf, format="PNG")
-    return atomic_write(path, buf.getvalue())
+    return write_png(path, ~img, scale=scale)  # False (background) is white
 
 
 # ---------------------------------------------------------------------------------------------
@@ -112,12 +104,13 @@ def voxels_to_mesh(vol) -> tuple[np.ndarray, np.ndarray]:
 
 
 def save_obj(vol, path) -> Path:
-    """Save the marching-cubes mesh of a (64, 64, 64) bool volume as a Wavefront OBJ file."""
+    """Save the marching-cubes mesh of a (64, 64, 64) bool volume as a Wavefront OBJ file.
+
+    The first line is a comment naming the frame; coordinates are written with 6 significant digits.
+    """
     verts, faces = voxels_to_mesh(vol)
-    lines = ["# csgnet voxel mesh: vertices in voxel units, vol[x, y, z] frame, voxel centres at integers"]
-    lines += [f"v {x:.6g} {y:.6g} {z:.6g}" for x, y, z in verts]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
-    return atomic_write(path, ("\n".join(lines) + "\n").encode())
+    return write_mesh(path, verts, faces, file_type="obj", digits=6,
+                      comment="csgnet voxel mesh: vertices in voxel units, vol[x, y, z] frame, voxel centres at integers")
 
 
 # ---------------------------------------------------------------------------------------------

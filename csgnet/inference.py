@@ -15,10 +15,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from shapeio import InputError
+from shapeio.image import IMAGE_SUFFIXES, centre_on_canvas, fit_to_canvas, read_mask
+from shapeio.mesh import MESH_SUFFIXES, load_mesh
+
 from .decode import decode
-from .score import score_beams
-from .lang import Program
+from .lang import Program, parse
 from .models import CSGNet, ModelConfig, preset
+from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "fit_to_canvas", "load_model", "load_pretrained", "infer", "Inference",
            "WEIGHTS", "PRETRAINED"]
@@ -27,74 +31,20 @@ WEIGHTS = Path(__file__).parent / "weights"
 # the shipped model per dimension (trained with the command recorded in docs/benchmarks.md)
 PRETRAINED = {2: "csgnet2d.pt", 3: "csgnet3d.pt"}
 
-IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".webp"}
-MESH_SUFFIXES = {".obj", ".ply", ".stl", ".off", ".glb", ".gltf"}
 MARGIN = 4  # background voxels/pixels kept around a fitted shape (the vocabulary reaches 8..56)
-
-
-class InputError(ValueError):
-    """A shape file that cannot be turned into a 64-sided target."""
 
 
 # ------------------------------------------------------------------------------------------------
 # inputs
 
-def fit_to_canvas(mask: np.ndarray, margin: int = MARGIN, name: str = "shape") -> np.ndarray:
-    """Crop a bool image / volume to its foreground and scale it (aspect kept, nearest) into the middle
-    of a 64-sided canvas with ``margin`` empty cells on the longest side. A mask that is already 64-sided
-    is returned unchanged."""
-    from scipy.ndimage import zoom
-
-    mask = np.asarray(mask, dtype=bool)
-    if mask.shape == (64,) * mask.ndim:
-        return mask
-    idx = np.nonzero(mask)
-    if not idx[0].size:
-        raise InputError(f"{name}: empty (no foreground)")
-    lo = [int(i.min()) for i in idx]
-    hi = [int(i.max()) + 1 for i in idx]
-    crop = mask[tuple(slice(a, b) for a, b in zip(lo, hi))]
-    side = 64 - 2 * margin
-    s = side / max(crop.shape)
-    scaled = zoom(crop.astype(np.float32), s, order=1, grid_mode=True, mode="grid-constant") >= 0.5
-    scaled = scaled[tuple(slice(0, side) for _ in scaled.shape)]
-    if not scaled.any():
-        raise InputError(f"{name}: the shape vanishes when scaled to {side} cells (too thin)")
-    return _centred(scaled)
-
-
-def _centred(mask: np.ndarray) -> np.ndarray:
-    """``mask`` (no side above 64) placed in the middle of an empty 64-sided canvas."""
-    out = np.zeros((64,) * mask.ndim, dtype=bool)
-    start = [(64 - n) // 2 for n in mask.shape]
-    out[tuple(slice(a, a + n) for a, n in zip(start, mask.shape))] = mask
-    return out
-
-
-def _binarise(gray: np.ndarray, alpha: np.ndarray | None, name: str) -> np.ndarray:
-    from skimage.filters import threshold_otsu
-
-    if alpha is not None and alpha.min() < 255:
-        fg = alpha >= 128
-    else:
-        if gray.max() == gray.min():
-            raise InputError(f"{name}: the image is a single colour; nothing to parse")
-        fg = gray > threshold_otsu(gray)
-        border = np.concatenate([fg[0], fg[-1], fg[:, 0], fg[:, -1]])
-        if border.mean() > 0.5:  # light background: the shape is the dark part
-            fg = ~fg
-    if not fg.any() or fg.all():
-        raise InputError(f"{name}: no foreground after binarisation")
-    return fg
-
-
 def load_shape(path) -> np.ndarray:
     """Read a shape file as a 64-sided bool target: ``(64, 64)`` image (``img[row=y, col=x]``) or
     ``(64, 64, 64)`` volume (``vol[x, y, z]``).
 
-    * Images: grey levels thresholded with Otsu's method (the alpha channel if the image has
-      transparency); the side touching the border most is background. A 64×64 image is used as is,
-      larger or smaller ones are cropped to the shape and fitted into 64×64 with the aspect kept.
+    * Images: :func:`shapeio.image.read_mask` with its automatic rule (Otsu's threshold, or the alpha
+      channel if the image has transparency; the side touching the border most is background). A
+      64×64 image is used as is, larger or smaller ones are cropped to the shape and fitted into 64×64
+      with the aspect kept (:func:`shapeio.image.fit_to_canvas`).
     * ``.npy``: a 2D or 3D array, non-zero = inside; fitted the same way unless 64-sided.
     * Meshes: loaded with trimesh, scaled so the longest side spans 56 voxels, voxelised and filled.
 
@@ -107,16 +57,7 @@ def load_shape(path) -> np.ndarray:
         raise InputError(f"{name}: no such file")
     suffix = path.suffix.lower()
     if suffix in IMAGE_SUFFIXES:
-        from PIL import Image, UnidentifiedImageError
-
-        try:
-            with Image.open(path) as im:
-                im.load()
-                alpha = np.asarray(im.getchannel("A")) if "A" in im.getbands() else None
-                gray = np.asarray(im.convert("L"))
-        except (UnidentifiedImageError, OSError) as e:
-            raise InputError(f"{name}: cannot read the image ({e})") from None
-        return fit_to_canvas(_binarise(gray, alpha, name), name=name)
+        return fit_to_canvas(read_mask(path), MARGIN, name)
     if suffix == ".npy":
         try:
             arr = np.load(path, allow_pickle=False)
@@ -127,7 +68,7 @@ def load_shape(path) -> np.ndarray:
         mask = arr != 0
         if not mask.any():
             raise InputError(f"{name}: empty (no non-zero cells)")
-        return fit_to_canvas(mask, name=name)
+        return fit_to_canvas(mask, MARGIN, name)
     if suffix in MESH_SUFFIXES:
         return _voxelise(path)
     raise InputError(f"{name}: unknown file type {suffix!r}; use an image "
@@ -135,16 +76,11 @@ def load_shape(path) -> np.ndarray:
 
 
 def _voxelise(path: Path) -> np.ndarray:
-    import trimesh
+    # SciPy's ndimage takes tenths of a second to import: loaded only where a mesh is voxelised
     from scipy.ndimage import binary_fill_holes
 
     name = str(path)
-    try:
-        mesh = trimesh.load(path, force="mesh")
-    except Exception as e:  # trimesh raises many types for bad files
-        raise InputError(f"{name}: cannot read the mesh ({type(e).__name__}: {e})") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(f"{name}: the file holds no triangles")
+    mesh = load_mesh(path)
     extent = mesh.extents
     if extent.min() <= 1e-9 * max(extent.max(), 1e-30):
         raise InputError(f"{name}: the mesh has no volume (it is flat: extents {extent.tolist()})")
@@ -158,8 +94,8 @@ def _voxelise(path: Path) -> np.ndarray:
     if not vol.any():
         raise InputError(f"{name}: the mesh has no volume")
     if max(vol.shape) > side:  # voxelisation can add one layer
-        return fit_to_canvas(vol, name=name)
-    return _centred(vol)
+        return fit_to_canvas(vol, MARGIN, name)
+    return centre_on_canvas(vol)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -228,8 +164,6 @@ class Inference:
 
     @property
     def program(self) -> Program:
-        from .lang import parse
-
         return parse(self.text, self.dim)
 
 

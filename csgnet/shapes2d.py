@@ -15,23 +15,16 @@ the reference feeds the CAD images to the network). Nothing is read at import.
 from __future__ import annotations
 
 import os
-import zipfile
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from shapeio.silhouettes import SPLITS, SilhouetteSplit, check_split, read_silhouettes
+
 from .primitives import SIZE
 
 __all__ = ["SPLITS", "SilhouetteSplit", "load_cad_h5", "load_silhouettes", "silhouettes_path"]
-
-SPLITS = ("train", "val", "test")
-
-
-def _check_split(split: str) -> None:
-    if split not in SPLITS:
-        raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
 
 
 def silhouettes_path() -> Path:
@@ -39,27 +32,9 @@ def silhouettes_path() -> Path:
     return Path(str(resources.files("csgnet").joinpath("data", "silhouettes.npz")))
 
 
-@dataclass(frozen=True)
-class SilhouetteSplit:
-    """One split of the silhouette set.
-
-    Attributes:
-        images: (N, 64, 64) bool.
-        ids: (N,) str, the corpus shape of each image (``"chair/173"``).
-        views: (N,) str, ``"front"`` or ``"side"``.
-    """
-
-    images: np.ndarray
-    ids: np.ndarray
-    views: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.images)
-
-
 def load_silhouettes(split: str = "train", path: str | os.PathLike | None = None,
                      with_ids: bool = False) -> np.ndarray | SilhouetteSplit:
-    """Load one split of the PartNet silhouette set.
+    """Load one split of the PartNet silhouette set (file layout: :mod:`shapeio.silhouettes`).
 
     Args:
         split: ``"train"``, ``"val"`` or ``"test"``.
@@ -72,40 +47,15 @@ def load_silhouettes(split: str = "train", path: str | os.PathLike | None = None
 
     Raises:
         FileNotFoundError: no such file (the message names the command that builds it).
-        ValueError: an unknown split, or a file that is not a silhouette set.
+        ValueError: an unknown split, or a file that is not a silhouette set of this version.
     """
-    _check_split(split)
+    check_split(split)
     p = Path(path) if path is not None else silhouettes_path()
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no silhouette file; build one with "
                                 f"'python -m shapeprog silhouettes --out {p}'")
-    try:
-        z = np.load(p, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise ValueError(f"{p}: not a readable .npz file ({e})") from None
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise ValueError(f"{p}: not a silhouette set: a single array, not an .npz archive")
-    try:
-        with z:
-            keys = set(z.files)
-            need = {f"{split}_images", f"{split}_ids", f"{split}_views"}
-            if not need <= keys:
-                raise ValueError(f"{p}: not a silhouette set: missing {', '.join(sorted(need - keys))} "
-                                 f"(found {', '.join(sorted(keys)) or 'nothing'})")
-            size = int(z["size"]) if "size" in keys else SIZE
-            raw, ids, views = z[f"{split}_images"], z[f"{split}_ids"], z[f"{split}_views"]
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
-        raise ValueError(f"{p}: corrupt .npz file ({e})") from None
-    if raw.dtype == np.uint8 and raw.ndim == 3 and raw.shape[1:] == (size, -(-size // 8)):
-        images = np.unpackbits(raw, axis=-1, count=size).astype(bool)
-    elif raw.dtype == np.bool_ and raw.ndim == 3 and raw.shape[1:] == (size, size):
-        images = raw
-    else:
-        raise ValueError(f"{p}: {split}_images has dtype {raw.dtype} and shape {raw.shape}; expected "
-                         f"(N, {size}, {-(-size // 8)}) uint8 (packed bits) or (N, {size}, {size}) bool")
-    if len(ids) != len(images) or len(views) != len(images):
-        raise ValueError(f"{p}: {split} has {len(images)} images but {len(ids)} ids and {len(views)} views")
-    return SilhouetteSplit(images, ids, views) if with_ids else images
+    data = read_silhouettes(p, split)
+    return data if with_ids else data.images
 
 
 def _h5py():
@@ -133,7 +83,7 @@ def load_cad_h5(path: str | os.PathLike, split: str = "test") -> np.ndarray:
         FileNotFoundError: no such file.
         ValueError: not an HDF5 file, no such dataset, or a dataset that is not ``(N, 64, 64)``.
     """
-    _check_split(split)
+    check_split(split)
     h5py = _h5py()
     p = Path(path)
     if not p.is_file():

@@ -25,7 +25,11 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 import torch
 
+from csgnet.data import TABLE2, sample_programs
 from csgnet.primitives import SIZE
+from csgnet.renderer import encode_tokens, execute
+from csgnet.vocab import vocabulary
+from shapeio.image import list_images, read_masks
 
 from ._checks import check_dim, check_int
 
@@ -70,10 +74,6 @@ def _synthetic_pool(dim: int, length: int, size: int, seed: int, rules) -> tuple
     """Token indices ``(size, length) int64``, their renderings packed as ``(size, ...) uint8`` (bit ``k`` of
     byte ``j`` is pixel ``8 j + k`` of the flattened canvas) and their program texts; drawn once per
     argument set (a pure function of the arguments)."""
-    from csgnet.data import sample_programs
-    from csgnet.renderer import encode_tokens, execute
-    from csgnet.vocab import vocabulary
-
     rng = np.random.default_rng([seed, dim, length])
     pool = sample_programs(dim, length, size, rng, rules)
     pool.setflags(write=False)
@@ -108,8 +108,6 @@ class SyntheticTargets:
 
     def __init__(self, dim: int = 2, lengths: Sequence[int] | None = None, size: int | None = None,
                  seed: int = 0, rules=None):
-        from csgnet.data import TABLE2
-
         self.dim = check_dim(dim)
         if lengths is None:
             lengths = sorted(TABLE2[self.dim])
@@ -210,7 +208,8 @@ class ImageFolderTargets:
 
     Each file must be a 64x64 image (grayscale, RGB or RGBA, converted to gray); a pixel is ON when
     its gray value exceeds ``threshold`` (bright shape on a dark background, the way
-    :func:`csgnet.render` output saves as 0/255), or, with ``invert=True``, when it does not.
+    :func:`csgnet.render` output saves as 0/255), or, with ``invert=True``, when it does not. This is
+    the fixed-threshold rule of :func:`shapeio.image.read_masks` without fitting (``docs/shapeio.md``).
 
     Args:
         folder: the directory.
@@ -226,30 +225,16 @@ class ImageFolderTargets:
 
     def __init__(self, folder: str | os.PathLike, threshold: int = 127, invert: bool = False):
         self.folder = Path(folder)
-        if not self.folder.is_dir():
-            raise FileNotFoundError(f"{self.folder}: no such directory of target images")
         self.threshold = int(threshold)
         self.invert = bool(invert)
         self._shapes: np.ndarray | None = None
-        self.files: list[Path] = sorted(p for p in self.folder.iterdir() if p.suffix.lower() == ".png" and p.is_file())
-        if not self.files:
-            raise FileNotFoundError(f"{self.folder}: no .png file in the directory")
+        self.files: list[Path] = list_images(self.folder, suffixes=(".png",))
 
     @property
     def shapes(self) -> np.ndarray:
         """``(N, 64, 64)`` bool, loaded on first access."""
         if self._shapes is None:
-            import cv2
-
-            out = np.empty((len(self.files), SIZE, SIZE), dtype=bool)
-            for i, f in enumerate(self.files):
-                img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
-                if img is None:
-                    raise ValueError(f"{f}: not a readable PNG image")
-                if img.shape != (SIZE, SIZE):
-                    raise ValueError(f"{f}: target images must be {SIZE}x{SIZE}, got {img.shape[1]}x{img.shape[0]}")
-                on = img > self.threshold
-                out[i] = ~on if self.invert else on
+            out = read_masks(self.files, SIZE, threshold=self.threshold, invert=self.invert, fit=False)
             out.setflags(write=False)
             self._shapes = out
         return self._shapes
@@ -277,8 +262,6 @@ def as_target_source(targets, dim: int, max_length: int | None = None) -> Target
     """
     dim = check_dim(dim)
     if targets is None or (isinstance(targets, str) and targets == "synthetic"):
-        from csgnet.data import TABLE2
-
         lengths = [L for L in sorted(TABLE2[dim]) if max_length is None or L <= max_length]
         if not lengths:
             raise ValueError(f"no synthetic program length fits max_length={max_length} "

@@ -1,51 +1,16 @@
-"""File helpers shared by ``csgnet`` and ``shapeprog`` (which do not import each other)."""
+"""The file formats shared by ``csgnet`` and ``shapeprog`` (which do not import each other).
 
-from __future__ import annotations
+One module per format family, NumPy-level (no torch needed); see ``docs/shapeio.md``:
 
-import os
-import tempfile
-from pathlib import Path
-from typing import BinaryIO, Callable, Union
+* :mod:`shapeio.files`: :func:`atomic_write`, :func:`refuse_overwrite`, :class:`InputError`.
+* :mod:`shapeio.image`: the PNG writer, users' images as bool masks, folders of target images.
+* :mod:`shapeio.mesh`: the mesh writer (OBJ, PLY, GLB) and users' meshes.
+* :mod:`shapeio.points`: point clouds (binary PLY, OBJ ``v`` lines).
+* :mod:`shapeio.silhouettes`: the silhouette set's ``.npz`` layout and version.
 
-__all__ = ["atomic_write"]
+``import shapeio`` loads only :mod:`shapeio.files`; the format modules are imported by name.
+"""
 
+from .files import InputError, atomic_write, refuse_overwrite
 
-def atomic_write(path: Union[str, os.PathLike], data: Union[bytes, str, Callable[[BinaryIO], object]],
-                 mkdir: bool = False) -> Path:
-    """Write a file so that a reader never sees it half-written.
-
-    The content goes to a temporary file in the target's directory, is flushed to disk, then
-    ``os.replace``-d onto ``path``; on any error the temporary file is removed and ``path`` is untouched.
-
-    Args:
-        path: the target file.
-        data: bytes, text (written as UTF-8, ``\\n`` line ends kept), or a function that writes to the
-            open binary file.
-        mkdir: create the target's directory first.
-
-    Returns:
-        ``path`` as a :class:`~pathlib.Path`.
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if mkdir:
-        folder.mkdir(parents=True, exist_ok=True)
-    elif not folder.is_dir():
-        raise FileNotFoundError(f"{path}: directory {str(folder)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            if callable(data):
-                data(f)
-            else:
-                f.write(data.encode("utf-8") if isinstance(data, str) else data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
+__all__ = ["InputError", "atomic_write", "refuse_overwrite"]

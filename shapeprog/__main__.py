@@ -13,29 +13,43 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 import warnings
 from pathlib import Path
 
-from shapeio import atomic_write
+import torch
+
+from shapeio import atomic_write, refuse_overwrite
+
+from . import corpus, io
+from .execute import execute
+from .fit import fit
+from .lang import ParseError, parse
+from .metrics import adaptive_threshold, chamfer, fscore
+from .picture import render_png
+from .sampling import sample_surface
+from .silhouettes import build, write
 
 
 def _load_program(spec: str):
-    from .lang import parse
-
     path = Path(spec)
     if path.is_file():
         return parse(path.read_text(), file=str(path)), str(path)
     cat, _, ident = spec.partition("/")
-    from . import corpus
-
     if cat in corpus.CATEGORIES and ident.isdigit():
         return parse(corpus.read(cat, int(ident)), file=f"{cat}/{ident}.txt"), spec
     raise SystemExit(f"error: {spec!r} is neither a file nor a corpus id like 'chair/173'")
 
 
-def _write_mesh(path: str, shape) -> None:
-    from . import io
+def _refuse_overwrite(outputs, inputs) -> None:
+    """Stop before writing an output over an input file (a corpus id is no file: never matches)."""
+    try:
+        refuse_overwrite(outputs, [p for p in inputs if p is not None and Path(p).is_file()])
+    except FileExistsError as e:
+        raise SystemExit(f"error: {e}") from None
 
+
+def _write_mesh(path: str, shape) -> None:
     suffix = Path(path).suffix.lower()
     if suffix == ".obj":
         io.write_obj(path, shape.corners)
@@ -48,17 +62,12 @@ def _write_mesh(path: str, shape) -> None:
 
 
 def _png(path: str, shape, size: int) -> None:
-    from .picture import render_png
-
     render_png(shape.corners, path, labels=shape.line.numpy(), size=size)
 
 
 def _cmd_run(args) -> int:
-    import torch
-
-    from .execute import execute
-
     prog, name = _load_program(args.program)
+    _refuse_overwrite([args.output, args.png], [args.program])
     with torch.no_grad():
         shape = execute(prog, dtype=torch.float64 if args.float64 else torch.float32)
     print(f"{name}: {len(prog.blocks)} blocks, {len(shape)} leaf cuboids")
@@ -72,21 +81,12 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_fit(args) -> int:
-    import torch
-
-    from .execute import execute
-    from .fit import fit
-    from .io import read_points
-    from .metrics import adaptive_threshold, chamfer, fscore
-    from .sampling import sample_surface
-
     prog, name = _load_program(args.program)
+    _refuse_overwrite([args.output, args.mesh], [args.program, None if args.points == "example" else args.points])
     if args.points == "example":
-        from .corpus import example_points
-
-        pts = torch.as_tensor(example_points())
+        pts = torch.as_tensor(corpus.example_points())
     else:
-        pts = read_points(args.points)  # (N, 3) float32
+        pts = io.read_points(args.points)  # (N, 3) float32
     g = torch.Generator().manual_seed(args.seed)
     thr = float(adaptive_threshold(pts))  # the target's F-score threshold, the same before and after
 
@@ -112,10 +112,6 @@ def _cmd_fit(args) -> int:
 
 
 def _cmd_silhouettes(args) -> int:
-    import time
-
-    from .silhouettes import build, write
-
     t0 = time.perf_counter()
     try:
         data = build(size=args.size, margin=args.margin, limit=args.limit, progress=not args.quiet)
@@ -158,8 +154,6 @@ def main(argv=None) -> int:
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_silhouettes)
     args = ap.parse_args(argv)
-    from .lang import ParseError
-
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")

@@ -105,6 +105,6 @@ def example_text(name: str = "ex-0.txt") -> str:
 
 def example_points(name: str = "comp_pc.obj"):
     """The example point cloud as a (N, 3) float32 numpy array (10,000 points of a table)."""
-    from .io import _obj_vertices  # numpy, torch: loaded on first use only
+    from shapeio.points import obj_vertices as _obj_vertices  # numpy: loaded on first use only
 
     return _obj_vertices(example_text(name).splitlines(), name)

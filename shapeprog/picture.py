@@ -10,9 +10,11 @@ from __future__ import annotations
 import os
 from typing import Optional, Union
 
+import cv2
 import numpy as np
 import torch
 
+from shapeio.image import write_png
 from shapeprog.geometry import mesh_arrays
 from shapeprog.sampling import check_corners
 
@@ -121,7 +123,6 @@ def render_png(
     corners = check_corners(np.array(corners, dtype=np.float64), arrays=True)  # a copy: torch.from_numpy below
     if isinstance(size, bool) or not isinstance(size, int) or size < 8:
         raise ValueError(f"`size` must be an int >= 8, got {size!r}")
-    import cv2
 
     n = corners.shape[0]
     colors = part_colors(n, labels).astype(np.float64)
@@ -159,7 +160,5 @@ def render_png(
     image = cv2.resize(image, (size, size), interpolation=cv2.INTER_AREA)
     image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
     if path is not None:
-        from shapeprog.io import write_png
-
         write_png(path, image)
     return image

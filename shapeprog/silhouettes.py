@@ -55,19 +55,19 @@ Example:
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
+
+from shapeio.silhouettes import SPLITS, write_silhouettes
+from shapeio.silhouettes import SilhouetteSplit as Silhouettes
 
 from .sampling import numpy_corners
 
 __all__ = ["VIEWS", "SPLITS", "Silhouettes", "silhouette", "silhouettes", "split_ids", "build", "write"]
 
 VIEWS = ("front", "side")
-SPLITS = ("train", "val", "test")
 SIZE = 64
 MARGIN = 4
-FORMAT_VERSION = 1
 _EPS = 1e-9
 MIN_WIDTH = 1.0
 """Projections narrower than this (pixels) across some direction are widened to it."""
@@ -156,21 +156,6 @@ def split_ids(category: str) -> dict[str, list[int]]:
     return {"train": corpus.ids(category, "train"), "val": val[0::2], "test": val[1::2]}
 
 
-@dataclass
-class Silhouettes:
-    """One split of the silhouette set.
-
-    Attributes:
-        images: (N, size, size) bool.
-        ids: (N,) str, ``"category/id"``.
-        views: (N,) str, ``"front"`` / ``"side"``.
-    """
-
-    images: np.ndarray
-    ids: np.ndarray
-    views: np.ndarray
-
-
 def build(categories=("chair", "table", "storage"), size: int = SIZE, margin: int = MARGIN,
           limit: int | None = None, batch: int = 200, progress: bool = True) -> dict[str, Silhouettes]:
     """Execute the corpus programs and render their front and side silhouettes.
@@ -240,14 +225,6 @@ def build(categories=("chair", "table", "storage"), size: int = SIZE, margin: in
 
 
 def write(path, data: dict[str, Silhouettes], margin: int = MARGIN) -> None:
-    """Write a built set (see :func:`build`) as a compressed ``.npz`` (layout in the module docstring),
-    atomically."""
-    from shapeio import atomic_write
-
-    size = next(iter(data.values())).images.shape[-1]
-    arrays = {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(FORMAT_VERSION)}
-    for split, s in data.items():
-        arrays[f"{split}_images"] = np.packbits(s.images, axis=-1)
-        arrays[f"{split}_ids"] = s.ids
-        arrays[f"{split}_views"] = s.views
-    atomic_write(path, lambda f: np.savez_compressed(f, **arrays))
+    """Write a built set (see :func:`build`) as a compressed ``.npz``, atomically
+    (:func:`shapeio.silhouettes.write_silhouettes`; layout in :mod:`shapeio.silhouettes`)."""
+    write_silhouettes(path, data, margin)

@@ -16,11 +16,14 @@ import lightning as L
 import numpy as np
 import torch
 
+from shapeio.image import read_image_folder
+
 from .. import metrics
 from ..data import jitter, load_dataset
 from ..decode import Sampled, greedy, sample
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_programs, render_tokens
+from ..shapes2d import load_cad_h5, load_silhouettes
 from .logs import EpochValues, log_means, log_pairs
 from .streams import ShuffledBatches, distributed, set_stream_epoch, stream_loader
 
@@ -324,8 +327,8 @@ def load_targets(source: str, split: str, path=None) -> np.ndarray:
         * ``"silhouettes"``: the shipped PartNet silhouettes (or a file written by
           ``python -m shapeprog silhouettes`` at ``path``);
         * ``"cad"``: the paper's ``cad.h5`` at ``path`` (needs h5py, the ``cad`` extra);
-        * ``"folder"``: image files under ``path/<split>/`` (PNG, JPG, ...; each binarised and fitted into
-          64x64 as :func:`csgnet.inference.load_shape` does), in sorted name order;
+        * ``"folder"``: image files under ``path/<split>/`` (PNG, JPG, ...; each binarised by Otsu's rule and
+          fitted into 64x64, :func:`shapeio.image.read_image_folder`), in sorted name order;
         * ``"npz"``: a NumPy ``.npz`` at ``path`` holding ``<split>`` or ``<split>_images`` arrays
           ``(N, 64, 64)``;
         * ``"synthetic"``: the renders of the programs of a dataset written by ``python -m csgnet generate``
@@ -336,31 +339,18 @@ def load_targets(source: str, split: str, path=None) -> np.ndarray:
     if split not in ("train", "val", "test"):
         raise ValueError(f"unknown split {split!r}; expected train, val or test")
     if source == "silhouettes":
-        from ..shapes2d import load_silhouettes
-
         return _check_images(load_silhouettes(split, path), f"silhouettes {split}")
     if path is None:
         raise ValueError(f"the {source!r} target source needs a path")
     p = Path(path)
     if source == "cad":
-        from ..shapes2d import load_cad_h5
-
         return _check_images(load_cad_h5(p, split), f"{p}:{split}_images")
     if source == "folder":
-        from ..inference import IMAGE_SUFFIXES, load_shape
-
         d = p / split
         if not d.is_dir():
             raise FileNotFoundError(f"{d}: no such folder; the 'folder' source reads images from "
                                     f"{p}/train/, {p}/val/ and {p}/test/")
-        files = sorted(f for f in d.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
-        if not files:
-            raise FileNotFoundError(f"{d}: no image files ({', '.join(sorted(IMAGE_SUFFIXES))})")
-        shapes = [load_shape(f) for f in files]
-        bad = [str(f) for f, s in zip(files, shapes) if s.ndim != 2]
-        if bad:
-            raise ValueError(f"not 2D images: {', '.join(bad[:5])}")
-        return _check_images(np.stack(shapes), str(d))
+        return _check_images(read_image_folder(d), str(d))
     if source == "npz":
         if not p.is_file():
             raise FileNotFoundError(f"{p}: no such file")

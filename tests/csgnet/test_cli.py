@@ -40,3 +40,12 @@ def test_demo_main_job(tmp_path):
     for row in rows:
         name, text, on = row.split("\t")
         assert int(csgnet.render(text)[0].sum()) == int(on)
+
+
+def test_parse_refuses_to_write_over_its_input(tmp_path, capsys):
+    src = tmp_path / "shape.png"
+    assert main(["render", "c(32,32,20)", "-o", str(src)]) == 0
+    before = src.read_bytes()
+    assert main(["parse", str(src), "--out", str(tmp_path)]) == 2
+    assert "shape.png: this output would overwrite an input file" in capsys.readouterr().err
+    assert src.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["shape.png"]

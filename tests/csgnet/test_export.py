@@ -117,7 +117,7 @@ def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
     export.save_scad(p, tmp_path / "prog.scad")  # overwrite
     assert sorted(os.listdir(tmp_path)) == ["prog.scad"]
     # a write that fails at the final rename leaves the old file and no temp file
-    import shapeio
+    import shapeio.files as shapeio
 
     def boom(src, dst):
         raise OSError("disk full")

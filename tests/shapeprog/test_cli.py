@@ -37,3 +37,11 @@ def test_fit_command_writes_program(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "chamfer" in r.stdout and "F-score" in r.stdout
     assert out.read_text().startswith("Assembly Program_0 {\n\tbbox = Cuboid(")
+
+
+def test_outputs_never_overwrite_inputs(tmp_path):
+    prog = tmp_path / "p.txt"
+    prog.write_text("bbox = Cuboid(1.0, 1.0, 1.0, True)\n")
+    with pytest.raises(SystemExit, match=r"p\.txt: this output would overwrite an input file"):
+        main(["run", str(prog), "--png", str(prog)])
+    assert prog.read_text() == "bbox = Cuboid(1.0, 1.0, 1.0, True)\n"

@@ -1,4 +1,4 @@
-"""Tests for shapeprog.io: reference OBJ layout, trimesh round trips, atomic writes."""
+"""Tests for shapeprog.io: reference OBJ layout, trimesh round trips, atomic writes (PNG: tests/shapeio)."""
 import functools
 import os
 
@@ -10,7 +10,7 @@ trimesh = pytest.importorskip("trimesh")
 
 import sa_testutil
 from shapeprog import io as sio
-from shapeprog.io import read_points, write_glb, write_obj, write_ply, write_points, write_png, write_voxels
+from shapeprog.io import read_points, write_glb, write_obj, write_ply, write_points, write_voxels
 
 boxes = functools.partial(sa_testutil.boxes, dtype=torch.float32)  # the reference precision
 
@@ -123,16 +123,6 @@ def test_voxels_npy(tmp_path):
     assert back.dtype == np.bool_ and back.shape == (3, 4, 5) and back.sum() == 1 and back[1, 2, 3]
     with pytest.raises(ValueError, match="v2.npy"):
         write_voxels(tmp_path / "v2.npy", np.zeros((3, 3)))
-
-
-def test_png(tmp_path):
-    import cv2
-
-    img = np.zeros((4, 6, 3), np.uint8)
-    img[..., 0] = 200  # red
-    write_png(tmp_path / "a.png", img)
-    back = cv2.imread(str(tmp_path / "a.png"))[..., ::-1]
-    assert np.array_equal(back, img)
 
 
 def test_bad_input_names_the_file_and_leaves_nothing(tmp_path):

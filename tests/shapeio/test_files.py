@@ -26,3 +26,12 @@ def test_bytes_text_and_missing_directory(tmp_path):
         atomic_write(tmp_path / "no" / "a.txt", "x")
     assert atomic_write(tmp_path / "no" / "a.txt", "x", mkdir=True).read_text() == "x"
     assert sorted(os.listdir(tmp_path)) == ["a.bin", "a.txt", "no"]
+
+
+def test_refuse_overwrite_compares_resolved_paths(tmp_path, monkeypatch):
+    from shapeio import refuse_overwrite
+
+    monkeypatch.chdir(tmp_path)
+    refuse_overwrite(["out/a.png", None], ["a.png", None])  # different files: fine
+    with pytest.raises(FileExistsError, match=r"\./a\.png: this output would overwrite an input file"):
+        refuse_overwrite(["b.txt", "./a.png"], [tmp_path / "a.png"])

@@ -1,0 +1,147 @@
+"""The silhouette set's file: a NumPy ``.npz`` (no pickles) with one entry per split and field.
+
+* ``{split}_images``: ``(N, size, ceil(size / 8)) uint8``, ``np.packbits`` of the bool masks along
+  the column axis (NumPy's default big-endian bit order); ``(N, size, size) bool`` is read too;
+* ``{split}_ids``: ``(N,)`` str, ``"category/id"``; ``{split}_views``: ``(N,)`` str, ``"front"`` / ``"side"``;
+* ``size``, ``margin``: ints; ``version``: :data:`FORMAT_VERSION`.
+
+Written by :func:`write_silhouettes` (``python -m shapeprog silhouettes``), read by
+:func:`read_silhouettes` (``csgnet.shapes2d.load_silhouettes``); ``docs/silhouettes.md`` describes the set.
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Union
+
+import numpy as np
+
+from .files import atomic_write
+
+__all__ = ["FORMAT_VERSION", "SPLITS", "SilhouetteSplit", "check_split", "split_keys", "write_silhouettes",
+           "read_silhouettes"]
+
+PathLike = Union[str, os.PathLike]
+
+#: The layout version this module writes and reads.
+FORMAT_VERSION = 1
+SPLITS = ("train", "val", "test")
+SIZE = 64  # the image side of files without a ``size`` entry
+
+
+@dataclass(frozen=True)
+class SilhouetteSplit:
+    """One split of the silhouette set.
+
+    Attributes:
+        images: ``(N, size, size) bool``.
+        ids: ``(N,)`` str, the corpus shape of each image (``"chair/173"``).
+        views: ``(N,)`` str, ``"front"`` or ``"side"``.
+    """
+
+    images: np.ndarray
+    ids: np.ndarray
+    views: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+
+def check_split(split: str) -> None:
+    """Refuse a split name other than ``train``, ``val`` and ``test``."""
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
+
+
+def split_keys(split: str) -> tuple[str, str, str]:
+    """The file's entries of one split: images, ids, views."""
+    return f"{split}_images", f"{split}_ids", f"{split}_views"
+
+
+def write_silhouettes(path: PathLike, data: Mapping[str, SilhouetteSplit], margin: int) -> Path:
+    """Write a silhouette set as a compressed ``.npz``, atomically.
+
+    Args:
+        path: the output file.
+        data: ``{split: SilhouetteSplit}`` (any of ``train``, ``val``, ``test``), images all of one size.
+        margin: the fitting margin the images were drawn with (stored for readers).
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: naming ``path``: no split, an unknown split, or arrays of mismatched shapes.
+    """
+    if not data:
+        raise ValueError(f"{path}: no split to write")
+    size = next(iter(data.values())).images.shape[-1]
+    arrays = {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(FORMAT_VERSION)}
+    for split, s in data.items():
+        check_split(split)
+        images = np.asarray(s.images)
+        if images.dtype != np.bool_ or images.ndim != 3 or images.shape[1:] != (size, size):
+            raise ValueError(f"{path}: {split} images must be (N, {size}, {size}) bool, got {images.shape} {images.dtype}")
+        if len(s.ids) != len(images) or len(s.views) != len(images):
+            raise ValueError(f"{path}: {split} has {len(images)} images but {len(s.ids)} ids and {len(s.views)} views")
+        key_images, key_ids, key_views = split_keys(split)
+        arrays[key_images] = np.packbits(images, axis=-1)
+        arrays[key_ids] = s.ids
+        arrays[key_views] = s.views
+    return atomic_write(path, lambda f: np.savez_compressed(f, **arrays))
+
+
+def read_silhouettes(path: PathLike, split: str) -> SilhouetteSplit:
+    """Read one split of a silhouette file.
+
+    A file without a ``version`` entry is read as version 1; one without ``size`` as 64-sided.
+
+    Args:
+        path: an ``.npz`` written by :func:`write_silhouettes`.
+        split: ``"train"``, ``"val"`` or ``"test"``.
+
+    Returns:
+        The split, images unpacked to ``(N, size, size) bool``.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file: an unknown split, not an ``.npz``, a missing entry, another
+            version, or arrays of the wrong dtype or shape.
+    """
+    check_split(split)
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    try:
+        z = np.load(p, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise ValueError(f"{p}: not a readable .npz file ({e})") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ValueError(f"{p}: not a silhouette set: a single array, not an .npz archive")
+    key_images, key_ids, key_views = split_keys(split)
+    try:
+        with z:
+            keys = set(z.files)
+            need = {key_images, key_ids, key_views}
+            if not need <= keys:
+                raise ValueError(f"{p}: not a silhouette set: missing {', '.join(sorted(need - keys))} "
+                                 f"(found {', '.join(sorted(keys)) or 'nothing'})")
+            version = int(z["version"]) if "version" in keys else FORMAT_VERSION
+            if version != FORMAT_VERSION:
+                raise ValueError(f"{p}: silhouette file version {version}; this reader reads version {FORMAT_VERSION}")
+            size = int(z["size"]) if "size" in keys else SIZE
+            raw, ids, views = z[key_images], z[key_ids], z[key_views]
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise ValueError(f"{p}: corrupt .npz file ({e})") from None
+    if raw.dtype == np.uint8 and raw.ndim == 3 and raw.shape[1:] == (size, -(-size // 8)):
+        images = np.unpackbits(raw, axis=-1, count=size).astype(bool)
+    elif raw.dtype == np.bool_ and raw.ndim == 3 and raw.shape[1:] == (size, size):
+        images = raw
+    else:
+        raise ValueError(f"{p}: {key_images} has dtype {raw.dtype} and shape {raw.shape}; expected "
+                         f"(N, {size}, {-(-size // 8)}) uint8 (packed bits) or (N, {size}, {size}) bool")
+    if len(ids) != len(images) or len(views) != len(images):
+        raise ValueError(f"{p}: {split} has {len(images)} images but {len(ids)} ids and {len(views)} views")
+    return SilhouetteSplit(images, ids, views)
