@@ -79,7 +79,8 @@ from shapeio import atomic_write
 
 from .lang import Program, parse_lines
 from .renderer import StackMachine, apply_op_, encode_tokens, popcount, primitive_cache
-from .vocab import KIND_CODES, OP_CODES, vocabulary
+from . import primitives as P
+from .vocab import codes, vocabulary
 
 __all__ = [
     "TABLE2",
@@ -104,10 +105,8 @@ TABLE2 = {
     3: {3: (100_000, 10_000, 20_000), 5: (200_000, 20_000, 40_000), 7: (400_000, 40_000, 80_000)},
 }
 
-_TYPES = {2: "cst", 3: "puy"}
 _OPS = "+*-"
 _OP_WEIGHTS = {2: (1.0, 5.0, 3.0), 3: (1.0, 8.0, 6.0)}
-_OP_KIND = np.array([OP_CODES[o] for o in _OPS], dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -120,7 +119,8 @@ class Rules:
         min_pixels: rule (c): least ON pixels (voxels) of the final shape; ``None`` = 100 (2D), 1000 (3D).
         op_weights: drawing weights of ``+``, ``*``, ``-``; ``None`` = ``(1, 5, 3)`` (2D), ``(1, 8, 6)``
             (3D): subtract and intersect boosted so that the accepted operators are closer to uniform.
-        type_weights: drawing weights of the primitive types (2D c, s, t; 3D sphere, cube, cylinder).
+        type_weights: drawing weights of the primitive types, in table order (2D c, s, t; 3D sphere,
+            cube, cylinder); ``None`` = each row's ``synth_weight`` (all 1).
         retries: failed pairings after which an operand subtree is discarded (0: exact rejection
             sampling, see :func:`sample_programs`).
         chunk_size: accepted programs per chunk (the unit of parallel work and of seeding).
@@ -131,7 +131,7 @@ class Rules:
     change_rule: str = "operands"
     min_pixels: int | None = None
     op_weights: tuple[float, float, float] | None = None
-    type_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    type_weights: tuple[float, ...] | None = None
     retries: int = 3
     chunk_size: int = 256
     batch_size: int | None = None
@@ -145,15 +145,22 @@ class Rules:
             if getattr(self, name) is None:
                 continue
             w = tuple(float(v) for v in getattr(self, name))
-            if len(w) != 3 or min(w) < 0 or sum(w) <= 0:
-                raise ValueError(f"{name} must be 3 non-negative weights with a positive sum, got {w}")
+            if len(w) != 3 and name == "op_weights" or min(w, default=-1) < 0 or sum(w) <= 0:
+                many = "3" if name == "op_weights" else "per primitive type:"
+                raise ValueError(f"{name} must be {many} non-negative weights with a positive sum, got {w}")
             object.__setattr__(self, name, w)
         if self.chunk_size < 1:
             raise ValueError(f"chunk_size must be >= 1, got {self.chunk_size}")
 
     def resolved(self, dim: int) -> "Rules":
         """These rules with the per-dimension defaults filled in."""
+        types = P.primitives(dim)
+        if self.type_weights is not None and len(self.type_weights) != len(types):
+            raise ValueError(f"type_weights must have one weight per {dim}D primitive type "
+                             f"({', '.join(p.name for p in types)}), got {self.type_weights}")
         return replace(self,
+                       type_weights=self.type_weights if self.type_weights is not None else
+                       tuple(float(p.synth_weight) for p in types),
                        op_weights=self.op_weights if self.op_weights is not None else _OP_WEIGHTS[dim],
                        min_pixels=self.min_pixels if self.min_pixels is not None else (100 if dim == 2 else 1000),
                        batch_size=self.batch_size if self.batch_size is not None else (256 if dim == 2 else 64))
@@ -212,13 +219,16 @@ def _type_tables(dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per primitive type: first vocabulary index and count; and the op token indices."""
     vocab = vocabulary(dim)
     kinds, _ = vocab.table()
-    codes = [KIND_CODES[k] for k in _TYPES[dim]]
-    first = np.array([int(np.flatnonzero(kinds == c)[0]) for c in codes], dtype=np.int64)
-    count = np.array([int((kinds == c).sum()) for c in codes], dtype=np.int64)
-    for f, c, code in zip(first, count, codes):  # each type is one contiguous block (sorted by letter)
+    type_codes = [codes().kind[p.kind] for p in P.primitives(dim)]
+    first = np.array([int(np.flatnonzero(kinds == c)[0]) for c in type_codes], dtype=np.int64)
+    count = np.array([int((kinds == c).sum()) for c in type_codes], dtype=np.int64)
+    for f, c, code in zip(first, count, type_codes):  # each type is one contiguous block (sorted by letter)
         assert (kinds[f:f + c] == code).all()
     ops = np.array([vocab.op_index(o) for o in _OPS], dtype=np.int64)
     return first, count, ops
+
+
+P.on_change(_type_tables.cache_clear)
 
 
 def _weights(w) -> np.ndarray:
@@ -229,7 +239,7 @@ def _draw_primitives(dim: int, rules: Rules, shape, rng: np.random.Generator) ->
     """Vocabulary indices of random primitives, ``shape`` of them: a type drawn with ``type_weights``,
     then a primitive of that type uniformly."""
     first, count, _ = _type_tables(dim)
-    types = rng.choice(3, size=shape, p=_weights(rules.type_weights))
+    types = rng.choice(len(first), size=shape, p=_weights(rules.type_weights))
     u = rng.random(shape)
     return first[types] + np.minimum((u * count[types]).astype(np.int64), count[types] - 1)
 
@@ -269,7 +279,7 @@ def check_programs(tokens: np.ndarray | torch.Tensor, dim: int, rules: Rules | N
     ok = np.ones(B, dtype=bool)
     kinds_np = kinds.numpy()
     for t in range(T):
-        rows = np.flatnonzero(np.isin(kinds_np[:, t], list(OP_CODES.values())) & ok)
+        rows = np.flatnonzero(codes().is_op(kinds_np[:, t]) & ok)
         if rows.size:
             top = machine.top(2).index_select(0, torch.from_numpy(rows))
             a, b = popcount(top[:, 1]), popcount(top[:, 0])
@@ -283,14 +293,15 @@ def check_programs(tokens: np.ndarray | torch.Tensor, dim: int, rules: Rules | N
 
 def _result_count(a: np.ndarray, b: np.ndarray, ab: np.ndarray, op: np.ndarray) -> np.ndarray:
     """``ON(op(A, B))`` from ``ON(A)``, ``ON(B)``, ``ON(A & B)`` and the operator kind codes."""
-    return np.where(op == OP_CODES["+"], a + b - ab, np.where(op == OP_CODES["*"], ab, a - ab))
+    c = codes().op
+    return np.where(op == c["+"], a + b - ab, np.where(op == c["*"], ab, a - ab))
 
 
 def _op_passes(a: np.ndarray, b: np.ndarray, ab: np.ndarray, op: np.ndarray, rules: Rules) -> np.ndarray:
     """Rule (b) for operations ``op(A, B)`` given ``ON(A)``, ``ON(B)``, ``ON(A & B)`` and the operator
     kind codes, all ``(N,)``."""
     tau = rules.min_change * (a + b)
-    union, inter = op == OP_CODES["+"], op == OP_CODES["*"]
+    union, inter = op == codes().op["+"], op == codes().op["*"]
     a_only, b_only = a - ab, b - ab
     if rules.change_rule == "operands":
         return np.where(union, (a_only >= tau) & (b_only >= tau),
@@ -314,6 +325,7 @@ class _Builder:
     def __init__(self, dim: int, rules: Rules, rng: np.random.Generator):
         self.dim, self.rules, self.rng = dim, rules, rng
         self.ops = _type_tables(dim)[2]
+        self.op_codes = np.array([codes().op[o] for o in _OPS], dtype=np.int64)
         self.ow = _weights(rules.op_weights)
         self.pools: dict[int, list] = {}
 
@@ -359,7 +371,7 @@ class _Builder:
                 continue
             left, right = self.take(j, m), self.take(k - j, m)
             choice = self.rng.choice(3, size=m, p=self.ow)
-            op, code = self.ops[choice], _OP_KIND[choice]
+            op, code = self.ops[choice], self.op_codes[choice]
             la, ra = left[1], right[1]
             ab = popcount(la & ra)
             good = _op_passes(left[2], right[2], ab, code, self.rules)
@@ -380,7 +392,7 @@ class _Builder:
 def _combine(a: torch.Tensor, b: torch.Tensor, code: np.ndarray) -> torch.Tensor:
     """Packed canvases ``op(a[i], b[i])`` for the operator kind codes ``code``; ``a``, ``b``: (N, *C)."""
     out = torch.empty_like(a)
-    for op in OP_CODES.values():
+    for op in codes().op.values():
         rows = torch.from_numpy(np.flatnonzero(code == op))
         if len(rows):
             out[rows] = apply_op_(op, a[rows], b[rows])  # the gathers are copies: a and b stay as they are
@@ -462,6 +474,9 @@ def _token_texts(dim: int) -> tuple[str, ...]:
         else:
             out.append(vocab.decode([i]).text(long=True))
     return tuple(out)
+
+
+P.on_change(_token_texts.cache_clear)
 
 
 def _lines(rows: np.ndarray, dim: int) -> str:

@@ -59,7 +59,9 @@ from typing import Sequence
 import numpy as np
 
 from .lang import Draw, Program, is_valid, parse
-from .primitives import SIZE
+from .metrics import CHAMFER_PENALTY
+from .primitives import MAX_PARAMS, SIZE
+from .vocab import codes
 
 __all__ = ["METRICS", "MODES", "RefineResult", "refine", "refine_beams"]
 
@@ -72,7 +74,6 @@ RADIUS_RANGE = (8, 32)
 """Radii searched in the improved mode; the reference clips radii to it only at the end."""
 TOL = 1e-4
 """Powell's ``tol`` (the reference's value)."""
-EMPTY_CHAMFER = 16.0
 PREFETCH = 8
 """A missing primitive is drawn together with its axis neighbours up to this many pixels away."""
 
@@ -175,11 +176,11 @@ class _Scorer:
 
         count = _popcount(words)
         if self._t_bad or count in (0, SIZE * SIZE):
-            return EMPTY_CHAMFER
+            return CHAMFER_PENALTY
         edges = cv2.Canny(_image_u8(words), 1, 3)
         idx = np.flatnonzero(edges)
         if len(idx) == 0:
-            return EMPTY_CHAMFER
+            return CHAMFER_PENALTY
         dist = cv2.distanceTransform(255 - edges, cv2.DIST_L2, 3).ravel()
         s_pt = float(dist[self._t_idx].sum(dtype=np.float64)) * 255.0  # sum(D_pred * E_target)
         s_tp = float(self._t_dist[idx].sum(dtype=np.float64)) * 255.0  # sum(D_target * E_pred)
@@ -193,14 +194,14 @@ class _Scorer:
         import torch
 
         from .renderer import draw_packed
-        from .vocab import KIND_CODES
 
         keys = [k for k in dict.fromkeys(keys) if k not in self.leaves]
         if not keys:
             return
-        kinds = torch.tensor([KIND_CODES[k[0]] for k in keys], dtype=torch.int64)
-        params = torch.zeros((len(keys), 5), dtype=torch.int64)
-        params[:, :3] = torch.tensor([k[1:] for k in keys], dtype=torch.int64)
+        kind = codes().kind
+        kinds = torch.tensor([kind[k[0]] for k in keys], dtype=torch.int64)
+        params = torch.zeros((len(keys), MAX_PARAMS), dtype=torch.int64)
+        params[:, :len(keys[0]) - 1] = torch.tensor([k[1:] for k in keys], dtype=torch.int64)
         words = draw_packed(kinds, params, 2).numpy()
         for k, w in zip(keys, words):
             self.leaves[k] = w

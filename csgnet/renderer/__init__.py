@@ -40,7 +40,7 @@ import numpy as np
 import torch
 
 from ..lang import Program
-from ..primitives import SIZE
+from ..primitives import MAX_PARAMS, SIZE
 from .buffers import _POOL, pack, popcount, unpack
 from .plan import _execute_plan
 from .raster import _canvas_words, draw_packed
@@ -79,7 +79,7 @@ def execute(kinds: torch.Tensor, params: torch.Tensor, dim: int, trace_k: int | 
         token_ids: (B, T) vocabulary indices of the same programs, if they are vocabulary programs:
             primitives then come from the :class:`PrimitiveCache` instead of being drawn.
     """
-    if kinds.dim() != 2 or params.shape[:2] != kinds.shape or params.shape[-1] != 5:
+    if kinds.dim() != 2 or params.shape[:2] != kinds.shape or params.shape[-1] != MAX_PARAMS:
         raise ValueError(f"expected kinds (B, T) and params (B, T, 5), got {tuple(kinds.shape)} and {tuple(params.shape)}")
     B, T = kinds.shape
     if not trace_k:

@@ -9,7 +9,8 @@ import numpy as np
 import torch
 
 from ..lang import Program, parse
-from ..vocab import PAD_CODE, vocabulary, write_codes
+from .. import primitives as P
+from ..vocab import codes, vocabulary, write_codes
 from .raster import _blocks, _canvas_words, _slab_range, draw_packed
 
 # ------------------------------------------------------------------------------------------------
@@ -22,8 +23,8 @@ def encode_programs(programs: Sequence[Program | str], dim: int, device=None) ->
     """
     progs = [parse(p, dim, strict=False) if isinstance(p, str) else p for p in programs]
     T = max([len(p) for p in progs] + [1])
-    kinds = np.full((len(progs), T), PAD_CODE, dtype=np.int64)
-    params = np.zeros((len(progs), T, 5), dtype=np.int64)
+    kinds = np.full((len(progs), T), codes().stop, dtype=np.int64)
+    params = np.zeros((len(progs), T, P.MAX_PARAMS), dtype=np.int64)
     for b, p in enumerate(progs):
         if p.dim != dim:
             raise ValueError(f"program {b} is {p.dim}D, expected {dim}D: {p.text()!r}")
@@ -50,7 +51,7 @@ def encode_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None =
     params = cache.params.index_select(0, flat).view(tokens.shape + (5,))
     if lengths is not None:
         pos = torch.arange(tokens.shape[1], device=tokens.device)[None, :]
-        kinds = torch.where(pos < torch.as_tensor(lengths, device=tokens.device)[:, None], kinds, PAD_CODE)
+        kinds = torch.where(pos < torch.as_tensor(lengths, device=tokens.device)[:, None], kinds, codes().stop)
     return kinds, params
 
 
@@ -106,6 +107,7 @@ class PrimitiveCache:
 
 
 _PRIM_CACHES: dict = {}
+P.on_change(_PRIM_CACHES.clear)
 
 
 def primitive_cache(dim: int, device) -> PrimitiveCache:

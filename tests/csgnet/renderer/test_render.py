@@ -14,7 +14,8 @@ from csgnet.renderer.reference import bresenham, draw_np, render_np
 from csgnet.renderer import (StackMachine, encode_programs, encode_tokens, execute, pack, render_programs, render_tokens,
                               stack_trace, unpack)
 from csgnet.data import ProgramDataset
-from csgnet.vocab import GRID, KIND_CODES, PAD_CODE, SIZES, vocabulary
+from csgnet.primitives import GRID, SIZES
+from csgnet.vocab import KIND_CODES, PAD_CODE, vocabulary
 
 skdraw = pytest.importorskip("skimage.draw")
 
