@@ -25,7 +25,8 @@ import time
 
 import numpy as np
 
-from csgnet.data import TABLE2, Rules, _draw_candidates, check_programs, generate_dataset, load_dataset
+from csgnet.data import TABLE2, generate_dataset, load_dataset
+from csgnet.synth import Rules, _draw_candidates, check_programs
 
 
 def _scale_for(dim: int, length: int, n: int) -> float:

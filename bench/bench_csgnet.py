@@ -27,7 +27,7 @@ def _device(name):
 
 
 def bench_beam(model, n: int, batch: int, width: int, constrained: bool, device) -> float:
-    from csgnet.data import sample_programs
+    from csgnet.synth import sample_programs
     from csgnet.decode import beam_search
     from csgnet.renderer import render_programs, render_tokens
     from csgnet.vocab import vocabulary

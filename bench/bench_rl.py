@@ -47,7 +47,7 @@ def bench(model, targets: torch.Tensor, batch: int, steps: int, device) -> dict:
     """Time ``steps`` update steps; each step scores the same samples both ways (batched and per episode),
     so the two step times share the sampling, rendering and backward measurements."""
     from csgnet import metrics
-    from csgnet.data import jitter
+    from csgnet.train.augment import jitter
     from csgnet.decode import sample
     from csgnet.train.reinforce import episode_rewards, policy_loss, update_baseline
     from csgnet.renderer import render_tokens

@@ -34,6 +34,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from skimage.measure import marching_cubes
 
 from shapeio import atomic_write
 
@@ -97,8 +98,6 @@ def voxels_to_mesh(vol) -> tuple[np.ndarray, np.ndarray]:
     Returns:
         vertices (V, 3) float64 and faces (F, 3) int64. An empty volume gives empty arrays.
     """
-    from skimage.measure import marching_cubes
-
     v = _to_numpy_bool(vol, "vol", (SIZE, SIZE, SIZE))
     if not v.any():
         return np.zeros((0, 3), np.float64), np.zeros((0, 3), np.int64)

@@ -45,6 +45,7 @@ from ..decode import Decoded, beam_search, decode, greedy
 from ..score import best_iou_matches, score_beams, score_renders
 from ..lang import Draw, Program
 from ..primitives import primitives
+from ..refinement import refine_beams
 from ..renderer import render_programs
 
 __all__ = ["Table4Row", "table4", "table4_markdown", "nearest_silhouettes", "subset", "ITERATIONS",
@@ -138,8 +139,6 @@ def table4(models: Sequence[tuple[str, torch.nn.Module]], targets, train=None, b
     Returns:
         The rows, nearest neighbour first, then per model and beam width.
     """
-    from ..refinement import refine_beams
-
     tgt = _check_targets(targets, "targets")
     n = len(tgt)
     if n == 0:

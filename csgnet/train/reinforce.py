@@ -17,7 +17,7 @@ The procedure of ``../specs/csg.md`` section (f), the paper's fine-tuning on 2D 
   10 batches of 300 images per update come from the Trainer (``gradient_clip_val``,
   ``accumulate_grad_batches``, see ``configs/csgnet/rl_*.yaml``); the learning rate drops x0.2 after more than
   8 epochs without a better validation reward; the best validation reward is checkpointed;
-* training targets are jittered (:func:`csgnet.data.jitter`), validation targets are not; validation
+* training targets are jittered (:func:`csgnet.train.augment.jitter`), validation targets are not; validation
   decodes greedily (arg-max) and reports the mean chamfer distance, reward and IoU.
 
 :class:`TargetDataModule` serves the target images: the shipped PartNet silhouettes, the paper's
@@ -37,7 +37,8 @@ import numpy as np
 import torch
 
 from .. import metrics
-from ..data import jitter, load_dataset
+from ..data import load_dataset
+from .augment import jitter
 from ..decode import Sampled, greedy, sample
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_programs, render_tokens

@@ -27,7 +27,9 @@ from lightning.pytorch.plugins.io import TorchCheckpointIO
 from shapeio import atomic_write
 
 from .. import metrics
-from ..data import ProgramDataset, jitter, load_dataset, sample_programs, split_sizes
+from ..data import ProgramDataset, load_dataset, split_sizes
+from ..synth import sample_programs
+from .augment import jitter
 from ..decode import greedy
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_tokens, stack_trace
@@ -123,7 +125,7 @@ class MixedLengthBatches(ShardedBatches):
 
     Programs come from per-length token tables (``tables[L]``: ``(N_L, max_len + 1)``), reshuffled
     whenever a length's table is used up (short-program sets cycle more often, as in the reference), or
-    are sampled on the fly with :func:`csgnet.data.sample_programs` when ``tables`` is None.
+    are sampled on the fly with :func:`csgnet.synth.sample_programs` when ``tables`` is None.
 
     Yields:
         ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded.

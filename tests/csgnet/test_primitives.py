@@ -10,7 +10,7 @@ from csgnet.lang import Draw, ParseError, parse
 from csgnet.renderer import render_programs
 from csgnet.renderer.raster import bits
 from csgnet.renderer.reference import render_np
-from csgnet.data import Rules, sample_programs
+from csgnet.synth import Rules, sample_programs
 from csgnet.vocab import codes, vocabulary
 
 
