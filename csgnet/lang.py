@@ -39,6 +39,8 @@ __all__ = [
     "to_text",
     "is_valid",
     "prefix_status",
+    "split_tokens",
+    "draw_token",
     "OPERATORS",
     "STOP",
 ]
@@ -320,6 +322,65 @@ _TOKEN_RE = re.compile(
     r"|(?P<bad>[A-Za-z_]+\(?[^()+*$\-]*|.)"
 )
 _INT_RE = re.compile(r"[+-]?\d+")
+# The fast path: a text (before its first ``$``) that is whitespace, draw tokens and operators only.
+_WELL_FORMED = re.compile(r"(?:\s*(?:[A-Za-z_]+\([^()]*\)|[+*\-]))*\s*")
+_PIECE = re.compile(r"[A-Za-z_]+\([^()]*\)|[+*\-]")
+_OP_TOKENS = {o: Op(o) for o in OPERATORS}
+_DRAWS: dict = {}  # (dim, token text) -> Draw, or None for a token the slow path must explain
+_CACHE_MAX = 1 << 17
+
+
+@P.on_change
+def _clear_caches() -> None:
+    _DRAWS.clear()
+
+
+def split_tokens(text: str) -> list[str] | None:
+    """The token texts of ``text`` up to its first ``$`` (``["c(32,32,8)", "s(8,8,8)", "+"]``), or None
+    if that part holds anything else than whitespace, ``head(args)`` tokens and operators (then only
+    :func:`parse` can say what is wrong). Heads and arguments are not checked here."""
+    end = text.find(STOP)
+    body = text if end < 0 else text[:end]
+    if not _WELL_FORMED.fullmatch(body):
+        return None
+    return _PIECE.findall(body)
+
+
+def draw_token(token: str, dim: int) -> Draw | None:
+    """The :class:`Draw` of one well-formed token text of a ``dim``-D program (cached), or None if the
+    token is not a valid ``dim``-D primitive (:func:`parse` then raises the located error)."""
+    key = (dim, token)
+    try:
+        return _DRAWS[key]
+    except KeyError:
+        pass
+    head, _, rest = token.partition("(")
+    row = P.by_name(head)
+    draw = None
+    if row is not None and row.dim == dim:
+        try:
+            draw = Draw(row.kind, _parse_args(rest[:-1], head, row, "", 0))
+        except ParseError:
+            draw = None
+    if len(_DRAWS) >= _CACHE_MAX:
+        _DRAWS.clear()
+    _DRAWS[key] = draw
+    return draw
+
+
+def _fast_tokens(text: str, dim: int) -> list[Token] | None:
+    """The tokens of ``text`` from the cached per-token objects, or None where :func:`parse`'s full
+    scan is needed (a malformed or unknown token)."""
+    pieces = split_tokens(text)
+    if pieces is None:
+        return None
+    out = []
+    for piece in pieces:
+        t = _OP_TOKENS.get(piece) or _DRAWS.get((dim, piece)) or draw_token(piece, dim)
+        if t is None:
+            return None
+        out.append(t)
+    return out
 
 
 def _known(dim: int) -> str:
@@ -370,6 +431,10 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
         raise ValueError(f"dim must be 2 or 3, got {dim}")
     if not isinstance(text, str):
         raise TypeError(f"program text must be a str, got {type(text).__name__}")
+    fast = _fast_tokens(text, dim)
+    if fast is not None and (not strict or (fast and prefix_status(fast) == "complete")):
+        return Program(tuple(fast), dim)
+    # the full scan: locates the first error (or accepts what the fast path could not)
     tokens: list[Token] = []
     positions: list[int] = []
     pos = 0
