@@ -25,7 +25,9 @@ import time
 
 import numpy as np
 
-from csgnet.data import TABLE2, Rules, _draw_candidates, check_programs, generate_dataset, load_dataset
+from csgnet.data import TABLE2, generate_dataset, load_dataset
+from csgnet.primitives import primitives
+from csgnet.synth import Rules, _draw_candidates, check_programs
 
 
 def _scale_for(dim: int, length: int, n: int) -> float:
@@ -65,7 +67,7 @@ def main() -> None:
                         freq[getattr(tok, "kind", None) or tok.op] += 1
         n_prims = sum(v for k, v in freq.items() if k not in "+*-")
         n_ops = sum(freq[o] for o in "+*-")
-        types = ", ".join(f"{k} {freq[k] / n_prims:.2f}" for k in ("cst" if dim == 2 else "puy"))
+        types = ", ".join(f"{p.kind} {freq[p.kind] / n_prims:.2f}" for p in primitives(dim))
         ops = ", ".join(f"{o} {freq[o] / n_ops:.2f}" for o in "+*-")
         print(f"{dim}D length {length}: {total} programs in {dt:.1f} s with workers={args.workers}: "
               f"{total / dt:.0f} programs/s (types: {types}; operators: {ops})")

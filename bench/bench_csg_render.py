@@ -17,7 +17,8 @@ Each comes in two forms:
 Both sides render the same random valid programs (2D length 13, 3D length 7) from vocabulary tokens, in
 one run on the same machine. The batched renderer is timed to bool output (what ``csgnet.render`` returns)
 and, separately, to its packed output (what the training path consumes before one unpack per batch).
-For context it also times programs with every primitive moved off the 8-pixel grid (drawn, not looked up)
+It also times the same programs given as text (``render_programs`` on program strings: parsing,
+encoding and rendering), programs with every primitive moved off the 8-pixel grid (drawn, not looked up)
 and the stack trace of the same S slots that CSGNetStack trains on, packed and as bools (the like-for-like
 counterpart of baseline B).
 
@@ -46,7 +47,8 @@ import numpy as np
 import torch
 
 from csgnet.lang import Draw, Program
-from csgnet.renderer import SIZE, encode_programs, encode_tokens, execute, render_tokens, stack_trace, unpack
+from csgnet.renderer import (SIZE, encode_programs, encode_tokens, execute, render_programs, render_tokens, stack_trace,
+                             unpack)
 from csgnet.vocab import vocabulary
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -195,7 +197,14 @@ def main(argv=None):
             for i in range(0, n, batch):
                 stack_trace(tt[i:i + batch], dim, k=slots, packed=packed)
 
+        texts = [vocab.text(t) for t in toks[:n]]
+
+        def batched_text():
+            for i in range(0, n, batch):
+                render_programs(texts[i:i + batch], dim, dev)
+
         t_ours = timed(batched, args.repeat, sync)
+        t_text = timed(batched_text, args.repeat, sync)
         t_packed = timed(batched_packed, args.repeat, sync)
         t_trace = timed(batched_trace, args.repeat, sync)
         t_trace_bool = timed(lambda: batched_trace(False), args.repeat, sync)
@@ -205,6 +214,7 @@ def main(argv=None):
         packed = execute(*encode_tokens(tt[:batch], dim), dim, token_ids=tt[:batch]).canvas
         same &= bool((unpack(packed, dim).cpu().numpy()[: len(check)] == check).all())
         tr = stack_trace(tt[:8], dim, k=slots).cpu().numpy()
+        same &= bool((render_programs(texts[:batch], dim, dev).cpu().numpy()[: len(check)] == check).all())
         same &= all((tr[:, i] == _run_trace(progs[i].tokens, get_prim, slots, (SIZE,) * dim)).all()
                     for i in range(min(8, bn)))
 
@@ -228,6 +238,7 @@ def main(argv=None):
         row(f"B: baseline, reference path (trace of {slots} slots)", bn, t_ref)
         row("batched renderer -> bool (render_tokens)", n, t_ours)
         row("batched renderer -> packed bits (execute)", n, t_packed)
+        row("batched, from text -> bool (render_programs)", n, t_text)
         row("batched, off-grid params -> bool", batch, t_off)
         row(f"batched stack trace ({slots} slots) -> packed", n, t_trace)
         row(f"batched stack trace ({slots} slots) -> bool", n, t_trace_bool)

@@ -19,7 +19,7 @@ import time
 import numpy as np
 import torch
 
-from csgnet.data import sample_programs
+from csgnet.synth import sample_programs
 from csgnet.decode import beam_search
 from csgnet.inference import load_model, load_pretrained
 from csgnet.renderer import render_programs, render_tokens

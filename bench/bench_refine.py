@@ -3,7 +3,7 @@
 Targets and start programs:
 
 * ``--targets synthetic`` (default): the renderings of random synthetic programs
-  (``csgnet.data.sample_programs``, length ``--length``); each start program is the same program
+  (``csgnet.synth.sample_programs``, length ``--length``); each start program is the same program
   with every parameter moved by a uniform integer in ``[-shift, shift]`` (a parser's near miss).
 * ``--targets silhouettes``: images of the shipped silhouette test split; each start program is the
   nearest neighbour (lowest chamfer) among ``--pool`` random synthetic programs.
@@ -40,7 +40,7 @@ import torch
 
 
 def _synthetic(n: int, length: int, shift: int, seed: int):
-    from csgnet.data import sample_programs
+    from csgnet.synth import sample_programs
     from csgnet.renderer import render_programs
     from csgnet.vocab import vocabulary
 
@@ -57,7 +57,7 @@ def _synthetic(n: int, length: int, shift: int, seed: int):
 
 def _silhouettes(n: int, length: int, pool: int, seed: int):
     from csgnet import metrics
-    from csgnet.data import sample_programs
+    from csgnet.synth import sample_programs
     from csgnet.renderer import render_programs
     from csgnet.shapes2d import load_silhouettes
     from csgnet.vocab import vocabulary

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from csgnet import metrics
-from csgnet.data import jitter
+from csgnet.train.augment import jitter
 from csgnet.decode import sample
 from csgnet.inference import WEIGHTS
 from csgnet.models import CSGNet, preset

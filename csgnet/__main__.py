@@ -282,7 +282,7 @@ def cmd_table6(args) -> int:
         programs = [p for L in sorted(tests) for p in tests[L][: args.per_length]]
         source = f"{args.data} (test split, {args.per_length} per length)"
     else:
-        from .data import sample_programs
+        from .synth import sample_programs
 
         rng = np.random.default_rng(args.seed)
         vocab = vocabulary(2)

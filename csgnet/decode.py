@@ -26,7 +26,7 @@ import torch.nn.functional as F
 
 from .lang import Program, completable
 from .renderer import StackMachine, primitive_cache, unpack
-from .vocab import PAD_CODE, vocabulary
+from .vocab import codes, vocabulary
 
 __all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled"]
 
@@ -74,9 +74,9 @@ class Decoded:
 
 
 def _token_classes(dim: int, device) -> tuple[torch.Tensor, torch.Tensor, int]:
-    cache = primitive_cache(dim, device)
-    kinds = cache.kinds
-    return kinds < 6, (kinds >= 6) & (kinds <= 8), len(vocabulary(dim)) - 1
+    kinds = primitive_cache(dim, device).kinds
+    c = codes()
+    return c.is_draw(kinds), c.is_op(kinds), len(vocabulary(dim)) - 1
 
 
 class _Rows:
@@ -151,7 +151,7 @@ class _Rows:
         self.depth = self.depth + draw.long() - (op & ~self.broken).long()
         newly = live & stop
         if self.machine is not None:
-            self.machine.step(torch.where(live, kinds, torch.full_like(kinds, PAD_CODE)), token_ids=tokens)
+            self.machine.step(torch.where(live, kinds, torch.full_like(kinds, codes().stop)), token_ids=tokens)
         self.done |= newly
         self.history.append(torch.where(live, tokens, torch.full_like(tokens, self.stop)))
         self.parents.append(self._parent)

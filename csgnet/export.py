@@ -10,6 +10,8 @@ squares (cubes) of its on pixels (voxels).
 
 OpenSCAD (:func:`to_scad`)
 --------------------------
+Each primitive's form is the ``scad`` entry of its row in the table of :mod:`csgnet.primitives`.
+
 * 2D: SCAD's x is the column and SCAD's y is the row. Image rows grow downward, SCAD's y grows upward,
   so the whole model is wrapped in ``mirror([0, 1, 0])``: the CAD view then looks like the PNG (the
   triangle's apex points up on screen in both). Squares are exact: the rectangle of the inclusive pixel
@@ -32,6 +34,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from skimage.measure import marching_cubes
 
 from shapeio import atomic_write
 from shapeio.image import write_png
@@ -87,8 +90,6 @@ def voxels_to_mesh(vol) -> tuple[np.ndarray, np.ndarray]:
     Returns:
         vertices (V, 3) float64 and faces (F, 3) int64. An empty volume gives empty arrays.
     """
-    from skimage.measure import marching_cubes
-
     v = _to_numpy_bool(vol, "vol", (SIZE, SIZE, SIZE))
     if not v.any():
         return np.zeros((0, 3), np.float64), np.zeros((0, 3), np.int64)
@@ -116,40 +117,8 @@ def save_obj(vol, path) -> Path:
 # ---------------------------------------------------------------------------------------------
 # OpenSCAD
 
-def _num(v) -> str:
-    v = float(v)
-    return str(int(v)) if v.is_integer() else f"{v:.6g}"
-
-
 def _scad_draw(d: Draw, fn: int) -> str:
-    p = d.params
-    if d.kind == "c":
-        x, y, r = p
-        return f"translate([{x}, {y}]) circle(r = {r}, $fn = {fn});  // {d.text()}"
-    if d.kind == "s":
-        x, y, r = p
-        r0, r1, c0, c1 = (int(v) for v in P.square_bounds(x, y, r))
-        return (f"translate([{_num(c0 - 0.5)}, {_num(r0 - 0.5)}]) square([{c1 - c0 + 1}, {r1 - r0 + 1}]);"
-                f"  // {d.text()}: rows {r0}..{r1}, columns {c0}..{c1}")
-    if d.kind == "t":
-        x, y, r = p
-        rb, ra, cl, cr = (int(v) for v in P.triangle_vertices(x, y, r))
-        return (f"polygon([[{cl}, {rb}], [{cr}, {rb}], [{x}, {ra}]]);"
-                f"  // {d.text()}: base row {rb}, apex row {ra}")
-    if d.kind == "p":
-        x, y, z, r = p
-        return f"translate([{x}, {y}, {z}]) sphere(r = {max(r - 1, 0)}, $fn = {fn});  // {d.text()}"
-    if d.kind == "u":
-        x, y, z, r = p
-        q = P.cube_half(r)
-        if q < 0:
-            return f"// {d.text()}: empty"
-        return (f"translate([{_num(x - q - 0.5)}, {_num(y - q - 0.5)}, {_num(z - q - 0.5)}]) "
-                f"cube({2 * q + 1});  // {d.text()}")
-    x, y, z, r, h = p
-    hz = int(P.cylinder_half_height(h))
-    return (f"translate([{x}, {y}, {_num(z - hz - 0.5)}]) cylinder(r = {max(r - 1, 0)}, h = {2 * hz + 1}, "
-            f"$fn = {fn});  // {d.text()}")
+    return P.primitive(d.kind).scad(d.params, fn, d.text())
 
 
 _SCAD_OPS = {"+": "union", "*": "intersection", "-": "difference"}

@@ -3,7 +3,7 @@
 A program is a postfix sequence of tokens. A draw token pushes a primitive, an operator pops two
 shapes and pushes their combination; the result is the top of the stack at the end.
 
-Text formats (``../specs/csg.md`` section (a)):
+Text formats (the spec's section (a); the primitives are the rows of :mod:`csgnet.primitives`):
 
 * 2D: ``c(x,y,r)`` circle, ``s(x,y,r)`` square, ``t(x,y,r)`` triangle.
 * 3D: ``sp(x,y,z,r)`` sphere, ``cu(x,y,z,r)`` cube, ``cy(x,y,z,r,h)`` cylinder, or the vocabulary's
@@ -17,7 +17,7 @@ its 0-based character position. Whitespace between tokens is ignored, and everyt
 ``$`` is dropped, as for network output. Unlike the reference, positions may be negative integers
 (``c(-4,10,12)``): such shapes are clipped to the canvas. Radii and heights must be non-negative.
 
-This module needs only the standard library.
+This module needs only the standard library and the table of :mod:`csgnet.primitives` (NumPy).
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from typing import Iterable, Iterator, Sequence, Union
+
+from . import primitives as P
 
 __all__ = [
     "ParseError",
@@ -37,26 +39,14 @@ __all__ = [
     "to_text",
     "is_valid",
     "prefix_status",
-    "PRIMITIVES",
+    "split_tokens",
+    "draw_token",
     "OPERATORS",
     "STOP",
 ]
 
 STOP = "$"
 OPERATORS = {"+": "union", "*": "intersect", "-": "subtract"}
-
-# kind letter -> (name, dimension, parameter names). The letter is the one the vocabulary uses.
-PRIMITIVES = {
-    "c": ("circle", 2, ("x", "y", "r")),
-    "s": ("square", 2, ("x", "y", "r")),
-    "t": ("triangle", 2, ("x", "y", "r")),
-    "p": ("sphere", 3, ("x", "y", "z", "r")),
-    "u": ("cube", 3, ("x", "y", "z", "r")),
-    "y": ("cylinder", 3, ("x", "y", "z", "r", "h")),
-}
-# The long (dataset / README) names of the 3D primitives.
-LONG_3D = {"p": "sp", "u": "cu", "y": "cy"}
-_FROM_LONG_3D = {v: k for k, v in LONG_3D.items()}
 
 
 class ParseError(ValueError):
@@ -110,26 +100,26 @@ class Draw:
     params: tuple[int, ...]
 
     def __post_init__(self):
-        if self.kind not in PRIMITIVES:
-            raise ValueError(f"unknown primitive kind {self.kind!r}; expected one of {sorted(PRIMITIVES)}")
-        name, _, names = PRIMITIVES[self.kind]
-        if len(self.params) != len(names):
-            raise ValueError(f"{name} takes {len(names)} parameters {names}, got {len(self.params)}")
+        try:
+            row = P.primitive(self.kind)
+        except KeyError as e:
+            raise ValueError(e.args[0]) from None
+        if len(self.params) != len(row.params):
+            raise ValueError(f"{row.name} takes {len(row.params)} parameters {row.params}, got {len(self.params)}")
         if not all(isinstance(v, int) and not isinstance(v, bool) for v in self.params):
-            raise ValueError(f"{name} parameters must be integers, got {self.params}")
+            raise ValueError(f"{row.name} parameters must be integers, got {self.params}")
 
     @property
     def dim(self) -> int:
-        return PRIMITIVES[self.kind][1]
+        return P.primitive(self.kind).dim
 
     @property
     def name(self) -> str:
-        return PRIMITIVES[self.kind][0]
+        return P.primitive(self.kind).name
 
     def text(self, long: bool = True) -> str:
         """``c(32,32,8)``; in 3D ``sp(...)`` (``long=True``) or the vocabulary form ``p(...)``."""
-        head = LONG_3D[self.kind] if (long and self.kind in LONG_3D) else self.kind
-        return f"{head}({','.join(str(v) for v in self.params)})"
+        return f"{P.primitive(self.kind).head(long)}({','.join(str(v) for v in self.params)})"
 
 
 @dataclass(frozen=True)
@@ -332,11 +322,78 @@ _TOKEN_RE = re.compile(
     r"|(?P<bad>[A-Za-z_]+\(?[^()+*$\-]*|.)"
 )
 _INT_RE = re.compile(r"[+-]?\d+")
+# The fast path: a text (before its first ``$``) that is whitespace, draw tokens and operators only.
+_WELL_FORMED = re.compile(r"(?:\s*(?:[A-Za-z_]+\([^()]*\)|[+*\-]))*\s*")
+_PIECE = re.compile(r"[A-Za-z_]+\([^()]*\)|[+*\-]")
+_OP_TOKENS = {o: Op(o) for o in OPERATORS}
+_DRAWS: dict = {}  # (dim, token text) -> Draw, or None for a token the slow path must explain
+_CACHE_MAX = 1 << 17
 
 
-def _parse_args(args: str, head: str, name: str, names: tuple[str, ...], text: str, pos: int):
+@P.on_change
+def _clear_caches() -> None:
+    _DRAWS.clear()
+
+
+def split_tokens(text: str) -> list[str] | None:
+    """The token texts of ``text`` up to its first ``$`` (``["c(32,32,8)", "s(8,8,8)", "+"]``), or None
+    if that part holds anything else than whitespace, ``head(args)`` tokens and operators (then only
+    :func:`parse` can say what is wrong). Heads and arguments are not checked here."""
+    end = text.find(STOP)
+    body = text if end < 0 else text[:end]
+    if not _WELL_FORMED.fullmatch(body):
+        return None
+    return _PIECE.findall(body)
+
+
+def draw_token(token: str, dim: int) -> Draw | None:
+    """The :class:`Draw` of one well-formed token text of a ``dim``-D program (cached), or None if the
+    token is not a valid ``dim``-D primitive (:func:`parse` then raises the located error)."""
+    key = (dim, token)
+    try:
+        return _DRAWS[key]
+    except KeyError:
+        pass
+    head, _, rest = token.partition("(")
+    row = P.by_name(head)
+    draw = None
+    if row is not None and row.dim == dim:
+        try:
+            draw = Draw(row.kind, _parse_args(rest[:-1], head, row, "", 0))
+        except ParseError:
+            draw = None
+    if len(_DRAWS) >= _CACHE_MAX:
+        _DRAWS.clear()
+    _DRAWS[key] = draw
+    return draw
+
+
+def _fast_tokens(text: str, dim: int) -> list[Token] | None:
+    """The tokens of ``text`` from the cached per-token objects, or None where :func:`parse`'s full
+    scan is needed (a malformed or unknown token)."""
+    pieces = split_tokens(text)
+    if pieces is None:
+        return None
+    out = []
+    for piece in pieces:
+        t = _OP_TOKENS.get(piece) or _DRAWS.get((dim, piece)) or draw_token(piece, dim)
+        if t is None:
+            return None
+        out.append(t)
+    return out
+
+
+def _known(dim: int) -> str:
+    """The primitive names of ``dim`` for an error message: ``c, s, t``; ``sp, cu, cy (or p, u, y)``."""
+    rows = P.primitives(dim)
+    short = [r.kind for r in rows if r.long]
+    return ", ".join(r.head() for r in rows) + (f" (or {', '.join(short)})" if short else "")
+
+
+def _parse_args(args: str, head: str, row: P.Primitive, text: str, pos: int):
     parts = args.split(",")
     token = f"{head}({args})"
+    name, names = row.name, row.params
     if len(parts) != len(names):
         raise ParseError(
             f"{name} takes {len(names)} parameters ({','.join(names)}), got {len(parts)}",
@@ -348,7 +405,7 @@ def _parse_args(args: str, head: str, name: str, names: tuple[str, ...], text: s
             what = "missing" if s == "" else f"non-integer {s!r}"
             raise ParseError(f"{name} parameter {pname} is {what}: parameters are integers", text, pos, token)
         v = int(s)
-        if pname in ("r", "h") and v < 0:
+        if v < 0 and pname in row.sizes:
             raise ParseError(f"{name} parameter {pname} must be >= 0, got {v}", text, pos, token)
         values.append(v)
     return tuple(values)
@@ -374,6 +431,10 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
         raise ValueError(f"dim must be 2 or 3, got {dim}")
     if not isinstance(text, str):
         raise TypeError(f"program text must be a str, got {type(text).__name__}")
+    fast = _fast_tokens(text, dim)
+    if fast is not None and (not strict or (fast and prefix_status(fast) == "complete")):
+        return Program(tuple(fast), dim)
+    # the full scan: locates the first error (or accepts what the fast path could not)
     tokens: list[Token] = []
     positions: list[int] = []
     pos = 0
@@ -389,14 +450,12 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
             positions.append(pos)
         elif kind == "head":
             head = m.group("head")
-            letter = head if head in PRIMITIVES else _FROM_LONG_3D.get(head)
-            if letter is None or PRIMITIVES[letter][1] != dim:
-                known = "c, s, t" if dim == 2 else "sp, cu, cy (or p, u, y)"
-                raise ParseError(f"unknown {dim}D primitive {head!r}; expected one of {known}",
+            row = P.by_name(head)
+            if row is None or row.dim != dim:
+                raise ParseError(f"unknown {dim}D primitive {head!r}; expected one of {_known(dim)}",
                                  text, pos, m.group(0))
-            name, _, names = PRIMITIVES[letter]
-            params = _parse_args(m.group("args"), head, name, names, text, pos)
-            tokens.append(Draw(letter, params))
+            params = _parse_args(m.group("args"), head, row, text, pos)
+            tokens.append(Draw(row.kind, params))
             positions.append(pos)
         elif kind == "bad":
             raise ParseError("malformed token", text, pos, m.group(0))

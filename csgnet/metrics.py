@@ -41,7 +41,9 @@ import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 
+import cv2
 import numpy as np
+import torch
 
 from .primitives import SIZE
 
@@ -116,8 +118,6 @@ def edges(images, chunk: int = 1024) -> np.ndarray:
 
 def _canny(images: np.ndarray, workers: int) -> np.ndarray:
     """(K, 64, 64) bool -> (K, 64, 64) uint8 0/255: ``cv2.Canny(img * 255, 1, 3)`` of each image."""
-    import cv2
-
     img = np.ascontiguousarray(images).view(np.uint8) * np.uint8(255)
     out = np.empty_like(img)
 
@@ -195,8 +195,6 @@ def _distance_maps(inv: np.ndarray, out: np.ndarray, workers: int) -> None:
         out: (U, 4097) float32; columns 0..4095 receive the flattened distance maps.
         workers: threads (OpenCV releases the GIL).
     """
-    import cv2
-
     u = inv.shape[0]
     maps = out[:, :SIZE * SIZE].reshape(u, SIZE, SIZE)  # a view: cv2 writes in place
 
@@ -351,8 +349,6 @@ def iou(pred, target, denominator: str = "union"):
         raise ValueError(f"denominator must be one of {IOU_DENOMINATORS}, got {denominator!r}")
     torch_mode = _is_torch(pred) or _is_torch(target)
     if torch_mode:
-        import torch
-
         dev = pred.device if _is_torch(pred) else target.device
         a = torch.as_tensor(pred, device=dev) != 0
         b = torch.as_tensor(target, device=dev) != 0
@@ -375,8 +371,6 @@ def iou(pred, target, denominator: str = "union"):
         raise ValueError(f"target shape {tuple(b.shape)} does not match pred shape {tuple(a.shape)}")
     dims = tuple(range(1, a.ndim))
     if torch_mode:
-        import torch
-
         inter = (a & b).sum(dim=dims).to(torch.float64)
         union = (a | b).sum(dim=dims).to(torch.float64)
     else:

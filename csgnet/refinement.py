@@ -3,45 +3,11 @@
 The structure of a program (its primitive types and operators, in order) stays fixed; the vector of
 all primitive parameters ``(x, y, r)`` per primitive, concatenated in program order, is searched with
 ``scipy.optimize.minimize(method="Powell")`` to lower the chamfer distance (or raise the IoU) between
-the program's rendering and a target image (``../specs/csg.md`` section (g)).
-
-Two modes:
-
-* ``mode="reference"``: the published procedure. The objective truncates the parameters toward zero
-  (``astype(int)``), clips **every** value (radii included) to [8, 56], renders and scores; Powell runs
-  with ``tol=1e-4``. The output truncates the final point, clips radii to [8, 32] and everything to
-  [8, 56]. The returned score is Powell's final objective value, which can differ from the score of the
-  returned program (the objective saw the radius before its final clip to [8, 32]).
-* ``mode="improved"`` (default): the objective **rounds** each parameter to the nearest integer
-  (``np.rint``: halves to even) and clips it to the search box (positions in [8, 56], radii in
-  [8, 32], each range widened to contain the input's own value), so every point Powell evaluates is
-  scored as exactly the program it stands for. The result is the best program the search evaluated
-  (Powell's final point is one of them), its ``score`` is that program's score, and a program that is
-  not strictly better than the input is never returned: the input comes back unchanged instead.
-
-Round, not truncate: the input's integers are then the centres of their cells (``[n - 0.5, n + 0.5)``
-maps to ``n``), so a step of either sign moves a parameter only once it is half a pixel long, and the
-search treats both directions alike. With truncation the start point sits on its cell's lower edge:
-any step down, however small, changes the program, while a step up needs a full pixel.
-
-``maxiter`` is Powell's iteration limit (one iteration is a line search along every direction):
-``0`` returns the input unchanged (no refinement), ``None`` runs to convergence (scipy's own caps of
-1000 iterations and 1000 evaluations per parameter apply).
-
-Invalid programs (stack underflow, shapes left over, empty) render empty and are returned unchanged,
-with the score of an empty canvas: chamfer 16 (the reference's fixed value), IoU 0.
-
-How it is fast: the objective is piecewise constant, so Powell's line searches revisit the same
-integer programs over and over (about nine calls in ten on length-13 programs). Every distinct
-program is scored once and cached. Primitives are drawn by the batched renderer
-(:func:`csgnet.renderer.draw_packed`) as 64-word bit-packed canvases; when a primitive is missing,
-its axis neighbours in the search box (the same primitive with one parameter changed by up to
-:data:`PREFETCH` pixels) are drawn in the same batch, since Powell's line searches probe them next.
-A program is then composed from the cached canvases with word-wise boolean operations, following
-the renderer's stack semantics (checked pixel for pixel against
-:func:`csgnet.renderer.render_programs` in the tests). The chamfer distance against the fixed target
-reuses the target's edges and distance map and equals :func:`csgnet.metrics.chamfer` bit for bit.
-Figures: ``docs/refinement.md`` and ``bench/bench_refine.py``.
+the program's rendering and a target image (the spec's section (g)). ``mode="reference"`` is the
+published procedure, ``mode="improved"`` (default) scores every point it evaluates as exactly the
+program it stands for and never returns a worse program; every distinct program is scored once, from
+primitives drawn by the batched renderer. The modes, the search box, invalid programs and the speed
+are described in docs/refinement.md.
 
 Example:
     >>> import csgnet
@@ -56,10 +22,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
+import cv2
 import numpy as np
+import torch
+from scipy import optimize
 
 from .lang import Draw, Program, is_valid, parse
-from .primitives import SIZE
+from .metrics import CHAMFER_PENALTY
+from .primitives import MAX_PARAMS, SIZE
+from .renderer import draw_packed
+from .vocab import codes
 
 __all__ = ["METRICS", "MODES", "RefineResult", "refine", "refine_beams"]
 
@@ -72,7 +44,6 @@ RADIUS_RANGE = (8, 32)
 """Radii searched in the improved mode; the reference clips radii to it only at the end."""
 TOL = 1e-4
 """Powell's ``tol`` (the reference's value)."""
-EMPTY_CHAMFER = 16.0
 PREFETCH = 8
 """A missing primitive is drawn together with its axis neighbours up to this many pixels away."""
 
@@ -154,8 +125,6 @@ class _Scorer:
         self.target_words = _words(target)
         self.leaves: dict[tuple, np.ndarray] = {}
         if metric == "chamfer":
-            import cv2
-
             img = target.astype(np.uint8) * np.uint8(255)
             count = int(target.sum())
             edges = cv2.Canny(img, 1, 3)
@@ -171,15 +140,13 @@ class _Scorer:
             inter = _popcount(words & self.target_words)
             union = _popcount(words | self.target_words)
             return inter / union
-        import cv2
-
         count = _popcount(words)
         if self._t_bad or count in (0, SIZE * SIZE):
-            return EMPTY_CHAMFER
+            return CHAMFER_PENALTY
         edges = cv2.Canny(_image_u8(words), 1, 3)
         idx = np.flatnonzero(edges)
         if len(idx) == 0:
-            return EMPTY_CHAMFER
+            return CHAMFER_PENALTY
         dist = cv2.distanceTransform(255 - edges, cv2.DIST_L2, 3).ravel()
         s_pt = float(dist[self._t_idx].sum(dtype=np.float64)) * 255.0  # sum(D_pred * E_target)
         s_tp = float(self._t_dist[idx].sum(dtype=np.float64)) * 255.0  # sum(D_target * E_pred)
@@ -190,17 +157,13 @@ class _Scorer:
 
     def draw(self, keys: list[tuple]) -> None:
         """Draw the primitives ``(kind, x, y, r)`` not cached yet, in one batch of the renderer."""
-        import torch
-
-        from .renderer import draw_packed
-        from .vocab import KIND_CODES
-
         keys = [k for k in dict.fromkeys(keys) if k not in self.leaves]
         if not keys:
             return
-        kinds = torch.tensor([KIND_CODES[k[0]] for k in keys], dtype=torch.int64)
-        params = torch.zeros((len(keys), 5), dtype=torch.int64)
-        params[:, :3] = torch.tensor([k[1:] for k in keys], dtype=torch.int64)
+        kind = codes().kind
+        kinds = torch.tensor([kind[k[0]] for k in keys], dtype=torch.int64)
+        params = torch.zeros((len(keys), MAX_PARAMS), dtype=torch.int64)
+        params[:, :len(keys[0]) - 1] = torch.tensor([k[1:] for k in keys], dtype=torch.int64)
         words = draw_packed(kinds, params, 2).numpy()
         for k, w in zip(keys, words):
             self.leaves[k] = w
@@ -347,9 +310,7 @@ def _run(program: Program, scorer: _Scorer, metric: str, maxiter, mode: str, bou
     if maxiter == 0:
         return RefineResult(program, initial, initial, 0, 0, len(prob.cache), metric, mode)
 
-    from scipy.optimize import minimize
-
-    res = minimize(prob.objective, prob.x0, method="Powell", tol=TOL, options={"maxiter": maxiter})
+    res = optimize.minimize(prob.objective, prob.x0, method="Powell", tol=TOL, options={"maxiter": maxiter})
     iterations, calls = int(res.nit), prob.calls
     if mode == "reference":
         v = np.trunc(res.x).astype(np.int64)

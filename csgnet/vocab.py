@@ -1,10 +1,15 @@
-"""Token <-> index tables of CSGNet, built exactly as ``../specs/csg.md`` (a) describes.
+"""Token <-> index tables of CSGNet, and the renderers' integer codes of token kinds.
 
-The vocabulary is every grammar primitive that fits in the canvas, as its (truncated, in 3D) token text,
-sorted as plain Python strings, followed by ``+ * - $``. 2D: 400 tokens (circles 0-90, squares 91-259,
-triangles 260-395, ``+`` 396, ``*`` 397, ``-`` 398, ``$`` 399). 3D: 6635 tokens (spheres 0-648, cubes
-649-1989, cylinders 1990-6630, ``+`` 6631, ``*`` 6632, ``-`` 6633, ``$`` 6634). The decoder's input
-one-hot has one more entry, START (index ``len(vocab)``).
+The vocabulary is every grammar primitive of the table (:mod:`csgnet.primitives`) that fits in the
+canvas, as its (truncated, in 3D) token text, sorted as plain Python strings, followed by ``+ * - $``
+(the spec's section (a)). 2D: 400 tokens (circles 0-90, squares 91-259, triangles 260-395, ``+`` 396,
+``*`` 397, ``-`` 398, ``$`` 399). 3D: 6635 tokens (spheres 0-648, cubes 649-1989, cylinders 1990-6630,
+``+`` 6631, ``*`` 6632, ``-`` 6633, ``$`` 6634). The decoder's input one-hot has one more entry, START
+(index ``len(vocab)``).
+
+Kind codes (:func:`codes`) number the primitives in table order, then the operators ``+ * -``, then
+the stop code (which also pads); ``KIND_CODES``, ``OP_CODES``, ``STOP_CODE`` and ``PAD_CODE`` read
+the current table.
 """
 
 from __future__ import annotations
@@ -18,69 +23,67 @@ import numpy as np
 from . import primitives as P
 from .lang import OPERATORS, STOP, Draw, Op, Program, parse
 
-__all__ = ["Vocabulary", "vocabulary", "KIND_CODES", "OP_CODES", "STOP_CODE"]
+__all__ = ["Vocabulary", "vocabulary", "Codes", "codes", "KIND_CODES", "OP_CODES", "STOP_CODE", "PAD_CODE"]
 
-GRID = tuple(range(8, 57, 8))  # positions 8, 16, ..., 56
-SIZES = tuple(range(8, 33, 4))  # radii and heights 8, 12, ..., 32
 
-# Integer codes of token kinds, shared with the renderers.
-KIND_CODES = {"c": 0, "s": 1, "t": 2, "p": 3, "u": 4, "y": 5}
-OP_CODES = {"+": 6, "*": 7, "-": 8}
-STOP_CODE = 9
-PAD_CODE = 9  # padding is a stop
+@dataclass(frozen=True)
+class Codes:
+    """The renderers' integer codes of token kinds, derived from the table of primitives.
+
+    Attributes:
+        kind: primitive letter -> code, ``0 .. n_draw - 1`` in table order.
+        op: ``+ * -`` -> the codes after the primitives.
+        stop: the code of ``$`` and of padding (after the operators).
+    """
+
+    kind: dict
+    op: dict
+    stop: int
+
+    @property
+    def n_draw(self) -> int:
+        """The number of primitive codes: a code ``k`` draws iff ``k < n_draw``."""
+        return len(self.kind)
+
+    def is_draw(self, kinds):
+        """Elementwise "draws" of codes (ints, NumPy arrays or torch tensors)."""
+        return kinds < self.n_draw
+
+    def is_op(self, kinds):
+        """Elementwise "is an operator" of codes (ints, NumPy arrays or torch tensors)."""
+        return (kinds >= self.n_draw) & (kinds < self.stop)
+
+
+@lru_cache(maxsize=None)
+def codes() -> Codes:
+    """The kind codes of the current table (recomputed when the table changes)."""
+    kind = {p.kind: i for i, p in enumerate(P.primitives())}
+    op = {o: len(kind) + i for i, o in enumerate(OPERATORS)}
+    return Codes(kind, op, len(kind) + len(op))
+
+
+def __getattr__(name):  # the code tables as module constants, always those of the current table
+    c = codes()
+    values = {"KIND_CODES": c.kind, "OP_CODES": c.op, "STOP_CODE": c.stop, "PAD_CODE": c.stop}
+    if name in values:
+        return dict(values[name]) if isinstance(values[name], dict) else values[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def write_codes(tokens, kinds: np.ndarray, params: np.ndarray) -> None:
     """Write the renderer codes of ``tokens`` (:class:`Draw`, :class:`Op`; anything else is left as it
     is) into ``kinds[i]`` and ``params[i, :n]`` (zero-padded rows of 5)."""
+    c = codes()
     for i, t in enumerate(tokens):
         if isinstance(t, Draw):
-            kinds[i] = KIND_CODES[t.kind]
+            kinds[i] = c.kind[t.kind]
             params[i, : len(t.params)] = t.params
         elif isinstance(t, Op):
-            kinds[i] = OP_CODES[t.op]
-
-
-def _fits_2d(kind: str, x: int, y: int, r: int) -> bool:
-    if kind == "c":
-        return x - r >= 0 and y - r >= 0 and x + r <= 63 and y + r <= 63
-    # the spec's square and triangle rules bound the rasteriser's own truncated extents
-    if kind == "s":
-        lo_row, hi_row, lo_col, hi_col = P.square_bounds(x, y, r)
-    else:
-        hi_row, lo_row, lo_col, hi_col = P.triangle_vertices(x, y, r)
-    return lo_row >= 0 and lo_col >= 0 and hi_row <= 63 and hi_col <= 63
-
-
-def _fits_3d(kind: str, x: int, y: int, z: int, r: int, h: int | None = None) -> bool:
-    if kind == "p":
-        return all(c - (r - 1) >= 0 and c + (r - 1) <= 63 for c in (x, y, z))
-    if kind == "u":
-        return all(c - r // 2 >= 0 and c + r // 2 <= 63 for c in (x, y, z))
-    return (all(c - (r - 1) >= 0 and c + (r - 1) <= 63 for c in (x, y))
-            and z - h // 2 >= 0 and z + h // 2 <= 63)
+            kinds[i] = c.op[t.op]
 
 
 def _primitive_texts(dim: int) -> list[str]:
-    out = []
-    if dim == 2:
-        for k in "cst":
-            for x in GRID:
-                for y in GRID:
-                    for r in SIZES:
-                        if _fits_2d(k, x, y, r):
-                            out.append(f"{k}({x},{y},{r})")
-    else:
-        for k in "puy":
-            for x in GRID:
-                for y in GRID:
-                    for z in GRID:
-                        for r in SIZES:
-                            if k == "y":
-                                out += [f"y({x},{y},{z},{r},{h})" for h in SIZES if _fits_3d(k, x, y, z, r, h)]
-                            elif _fits_3d(k, x, y, z, r):
-                                out.append(f"{k}({x},{y},{z},{r})")
-    return sorted(out)
+    return sorted(t for row in P.primitives(dim) for t in P.grammar_texts(row))
 
 
 @dataclass(frozen=True)
@@ -172,8 +175,8 @@ class Vocabulary:
 
     def table(self) -> tuple[np.ndarray, np.ndarray]:
         """Renderer table: ``kinds (V,) int64`` codes and ``params (V, 5) int64`` (zero-padded)."""
-        kinds = np.full(len(self.tokens), STOP_CODE, dtype=np.int64)
-        params = np.zeros((len(self.tokens), 5), dtype=np.int64)
+        kinds = np.full(len(self.tokens), codes().stop, dtype=np.int64)
+        params = np.zeros((len(self.tokens), P.MAX_PARAMS), dtype=np.int64)
         write_codes(self._draws, kinds, params)
         return kinds, params
 
@@ -184,3 +187,9 @@ def vocabulary(dim: int) -> Vocabulary:
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, got {dim}")
     return Vocabulary(dim, tuple(_primitive_texts(dim)) + tuple(OPERATORS) + (STOP,))
+
+
+@P.on_change
+def _table_changed() -> None:
+    codes.cache_clear()
+    vocabulary.cache_clear()

@@ -5,7 +5,7 @@ A target source is any object with a ``dim`` attribute (2 or 3) and a method
 own ``np_random`` (or, in the vector environment, the sub-environment's generator), so targets follow
 the environment's seeding. Three sources ship with the package:
 
-* :class:`SyntheticTargets`: programs drawn with :func:`csgnet.data.sample_programs` (the synthetic data
+* :class:`SyntheticTargets`: programs drawn with :func:`csgnet.synth.sample_programs` (the synthetic data
   rules), rendered by the batched renderer.
 * :class:`ArrayTargets`: a list or array of bool images ``(N, 64, 64)`` or volumes ``(N, 64, 64, 64)``;
   a silhouette set stored as an ``(N, 64, 64)`` bool array plugs in here unchanged.
@@ -25,7 +25,8 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 import torch
 
-from csgnet.data import TABLE2, sample_programs
+from csgnet.data import TABLE2
+from csgnet.synth import sample_programs
 from csgnet.primitives import SIZE
 from csgnet.renderer import encode_tokens, execute
 from csgnet.vocab import vocabulary
@@ -89,7 +90,7 @@ def _synthetic_pool(dim: int, length: int, size: int, seed: int, rules) -> tuple
 
 
 class SyntheticTargets:
-    """Targets rendered from synthetic programs (:func:`csgnet.data.sample_programs`).
+    """Targets rendered from synthetic programs (:func:`csgnet.synth.sample_programs`).
 
     Drawing a rule-abiding program costs as much as a whole episode of the vector environment or more
     (``python bench/bench_envs.py --threads 1`` prints the cost per length), so the source draws a fixed
@@ -103,7 +104,7 @@ class SyntheticTargets:
             3-7 in 3D).
         size: programs per length in the pool (default 512 in 2D, 64 in 3D).
         seed: the pool's seed (the pool is the same for every environment seed).
-        rules: :class:`csgnet.data.Rules` of the sampler (default rules if None).
+        rules: :class:`csgnet.synth.Rules` of the sampler (default rules if None).
     """
 
     def __init__(self, dim: int = 2, lengths: Sequence[int] | None = None, size: int | None = None,

@@ -9,16 +9,15 @@ import random
 import numpy as np
 
 from csgnet.lang import Draw, Op, Program
+from csgnet.primitives import primitive, primitives
 from csgnet.vocab import vocabulary
-
-N_PARAMS = {"c": 3, "s": 3, "t": 3, "p": 4, "u": 4, "y": 5}
 
 
 def random_program(rng: random.Random, dim: int, n_prims: int, vocab_only: bool = False,
                    lo: int = -12, hi: int = 76, sizes: tuple[int, int] = (0, 64)) -> Program:
     """A valid random postfix program with ``n_prims`` primitives: vocabulary primitives, or any kind
     with positions in ``[lo, hi]`` and radii (heights) in ``sizes`` (both inclusive)."""
-    kinds = "cst" if dim == 2 else "puy"
+    kinds = [p.kind for p in primitives(dim)]
     vocab = vocabulary(dim)
     toks, depth, placed = [], 0, 0
     while placed < n_prims or depth > 1:
@@ -27,7 +26,7 @@ def random_program(rng: random.Random, dim: int, n_prims: int, vocab_only: bool 
                 toks.append(vocab.decode([rng.randrange(vocab.num_primitives)]).tokens[0])
             else:
                 k = rng.choice(kinds)
-                n = N_PARAMS[k]
+                n = len(primitive(k).params)
                 n_pos = dim
                 pos = [rng.randint(lo, hi) for _ in range(n_pos)]
                 size = [rng.randint(*sizes) for _ in range(n - n_pos)]

@@ -44,6 +44,8 @@ import torch
 from ..decode import Decoded, beam_search, decode, greedy
 from ..score import best_iou_matches, score_beams, score_renders
 from ..lang import Draw, Program
+from ..primitives import primitives
+from ..refinement import refine_beams
 from ..renderer import render_programs
 
 __all__ = ["Table4Row", "table4", "table4_markdown", "nearest_silhouettes", "subset", "ITERATIONS",
@@ -52,7 +54,8 @@ __all__ = ["Table4Row", "table4", "table4_markdown", "nearest_silhouettes", "sub
 
 ITERATIONS: tuple = (0, 1, 2, 4, 10, None)
 """Refinement iteration limits of Table 4 (None: to convergence)."""
-CLASSES = {"c": "circle", "s": "square", "t": "triangle"}
+CLASSES = {p.kind: p.name for p in primitives(2)}
+"""The detection classes: the 2D primitives of the table (the paper's circle, square and triangle)."""
 PAPER_TABLE4 = {"CSGNetStack supervised, k = 10": 1.38, "CSGNetStack RL, k = 10": 1.02,
                 "CSGNetStack RL, k = 10, refined": 0.34}
 """The paper's CAD numbers quoted beside ours (CD in pixels; the paper's 2D CAD set, not ours)."""
@@ -136,8 +139,6 @@ def table4(models: Sequence[tuple[str, torch.nn.Module]], targets, train=None, b
     Returns:
         The rows, nearest neighbour first, then per model and beam width.
     """
-    from ..refinement import refine_beams
-
     tgt = _check_targets(targets, "targets")
     n = len(tgt)
     if n == 0:

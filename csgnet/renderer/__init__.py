@@ -40,15 +40,16 @@ import numpy as np
 import torch
 
 from ..lang import Program
-from ..primitives import SIZE
+from ..primitives import MAX_PARAMS, SIZE
 from .buffers import _POOL, pack, popcount, unpack
 from .plan import _execute_plan
 from .raster import _canvas_words, draw_packed
 from .stack import Execution, StackMachine, _max_depth, apply_op_
-from .tokens import PrimitiveCache, encode_programs, encode_tokens, primitive_cache
+from .tokens import PrimitiveCache, encode_programs, encode_programs_ids, encode_tokens, primitive_cache
 
 __all__ = [
     "encode_programs",
+    "encode_programs_ids",
     "encode_tokens",
     "execute",
     "render_tokens",
@@ -79,7 +80,7 @@ def execute(kinds: torch.Tensor, params: torch.Tensor, dim: int, trace_k: int | 
         token_ids: (B, T) vocabulary indices of the same programs, if they are vocabulary programs:
             primitives then come from the :class:`PrimitiveCache` instead of being drawn.
     """
-    if kinds.dim() != 2 or params.shape[:2] != kinds.shape or params.shape[-1] != 5:
+    if kinds.dim() != 2 or params.shape[:2] != kinds.shape or params.shape[-1] != MAX_PARAMS:
         raise ValueError(f"expected kinds (B, T) and params (B, T, 5), got {tuple(kinds.shape)} and {tuple(params.shape)}")
     B, T = kinds.shape
     if not trace_k:
@@ -107,8 +108,8 @@ def render_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None =
 
 def render_programs(programs: Sequence[Program | str], dim: int, device=None) -> torch.Tensor:
     """Render programs (objects or text, any integer parameters) to bool ``(B, 64, 64[, 64])``."""
-    kinds, params = encode_programs(programs, dim, device)
-    return _execute_plan(kinds, params, dim, None, as_bool=True)
+    kinds, params, ids = encode_programs_ids(programs, dim, device)
+    return _execute_plan(kinds, params, dim, ids, as_bool=True)
 
 
 def stack_trace(programs, dim: int, k: int | None = None, lengths=None, packed: bool = False) -> torch.Tensor:
@@ -129,7 +130,7 @@ def stack_trace(programs, dim: int, k: int | None = None, lengths=None, packed: 
         ids = torch.as_tensor(programs).long()
         kinds, params = encode_tokens(ids, dim, lengths)
     else:
-        kinds, params = encode_programs(programs, dim)
+        kinds, params, ids = encode_programs_ids(programs, dim)
     k = k or _max_depth(kinds)
     tr = execute(kinds, params, dim, trace_k=k, token_ids=ids).trace
     return tr if packed else unpack(tr, dim)

@@ -9,9 +9,9 @@ import numpy as np
 import torch
 
 from ..primitives import SIZE
-from ..vocab import PAD_CODE
+from ..vocab import codes
 from .buffers import _POOL, _WORKSPACE, unpack
-from .raster import _DRAW_BYTES, _DRAW_MAX, _INTER, _UNION, _UNPACK_BYTES, _blocks, _canvas_words, _slab_range, draw_packed
+from .raster import _DRAW_BYTES, _DRAW_MAX, _UNPACK_BYTES, _blocks, _canvas_words, _slab_range, draw_packed
 from .stack import Execution, apply_op_
 from .tokens import primitive_cache
 
@@ -52,12 +52,13 @@ def _plan(kinds: np.ndarray) -> _Plan:
     stopped = np.zeros(B, bool)
     ops = []
     n_op = 0
+    c = codes()
     for t in range(T):
         k = kinds[:, t]
-        stopped |= k == PAD_CODE
+        stopped |= k == c.stop
         live = ~stopped & ~broken
-        is_draw = live & (k < 6)
-        is_op = live & (k >= 6) & (k <= 8)
+        is_draw = live & c.is_draw(k)
+        is_op = live & c.is_op(k)
         bad = is_op & (sp < 2)
         broken |= bad
         is_op &= ~bad
@@ -155,6 +156,7 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
     C = _canvas_words(dim)
     n_sl, bw = _blocks(dim)
     plan = _plan(kinds.cpu().numpy())
+    op_codes = codes().op
     # primitive canvases: rows of the primitive cache, or drawn now; and their slab ranges
     if token_ids is not None:
         prow = token_ids.reshape(-1).cpu().numpy()[plan.draws]
@@ -166,7 +168,7 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
         D = len(plan.draws)
         prow = np.arange(D)
         sel = torch.from_numpy(plan.draws).to(device)
-        k_flat, p_flat = kinds.reshape(-1), params.reshape(-1, 5)
+        k_flat, p_flat = kinds.reshape(-1), params.reshape(-1, params.shape[-1])
         prims = _WORKSPACE.get("prims", D * n_sl * bw, device).view((D,) + C)
         step = max(1, min(_DRAW_MAX, _DRAW_BYTES // (n_sl * bw * 8)))  # draws per call: moderate temporaries
         for c in range(0, D, step):
@@ -186,7 +188,7 @@ def _execute_plan(kinds: torch.Tensor, params: torch.Tensor, dim: int, token_ids
         blo = _pick(plan.b_op[sl], plan.b_idx[sl], lo, d_lo)
         bhi = _pick(plan.b_op[sl], plan.b_idx[sl], hi, d_hi)
         code = plan.code[sl]
-        u, i = code == _UNION, code == _INTER
+        u, i = code == op_codes["+"], code == op_codes["*"]
         rlo = np.where(u, np.minimum(alo, blo), np.where(i, np.maximum(alo, blo), alo))
         rhi = np.where(u, np.maximum(ahi, bhi), np.where(i, np.minimum(ahi, bhi), ahi))
         empty = rlo > rhi

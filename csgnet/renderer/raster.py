@@ -2,19 +2,22 @@
 
 A 2D image is 64 int64 words (one per row, bit = column); a 3D volume is 64x64 int64 words (one per
 (x, y) column, bit = z). Every primitive is, per row or column, a union of at most four integer intervals
-of the shared geometry of :mod:`csgnet.primitives`.
+of the shared geometry of :mod:`csgnet.primitives`. A row of the table of primitives names its
+rasteriser here (``raster="circle_rows"``) or carries it as a callable; :func:`draw_packed` dispatches
+on the kind codes derived from the table.
 """
 
 from __future__ import annotations
+
+import sys
+from functools import lru_cache
 
 import numpy as np
 import torch
 
 from .. import primitives as P
 from ..primitives import SIZE
-from ..vocab import KIND_CODES, OP_CODES
-
-_UNION, _INTER, _SUB = OP_CODES["+"], OP_CODES["*"], OP_CODES["-"]
+from ..vocab import codes
 
 _PREFIX_CACHE: dict = {}
 
@@ -29,7 +32,7 @@ def _prefix(device) -> torch.Tensor:
     return _PREFIX_CACHE[key]
 
 
-def _bits(lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
+def bits(lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
     """Words with bits lo..hi (inclusive) set, clipped to 0..63; empty when hi < lo."""
     prefix = _prefix(lo.device)
     return prefix[(hi + 1).clamp(0, SIZE)] & ~prefix[lo.clamp(0, SIZE)]
@@ -53,7 +56,7 @@ def _rows(device):
     return torch.arange(SIZE, device=device, dtype=torch.int64)[None, :]
 
 
-def _circle_rows(x, y, r):
+def circle_rows(x, y, r):
     rows = _rows(x.device)
     dy = rows - y[:, None]
     s = (r * r)[:, None] - dy * dy
@@ -63,18 +66,18 @@ def _circle_rows(x, y, r):
     extra = P.circle_test(dy.to(torch.float64), (w0 + 1).to(torch.float64), rf)
     w = w0 + extra.long()
     x = x[:, None]
-    return torch.where((r > 0)[:, None], _bits(x - w, x + w), torch.zeros_like(w))
+    return torch.where((r > 0)[:, None], bits(x - w, x + w), torch.zeros_like(w))
 
 
-def _square_rows(x, y, r):
+def square_rows(x, y, r):
     r0, r1, c0, c1 = (v.to(torch.int64)[:, None] for v in
                       P.square_bounds(x.to(torch.float64), y.to(torch.float64), r.to(torch.float64)))
     rows = _rows(x.device)
     on = (rows >= r0) & (rows <= r1)
-    return torch.where(on, _bits(c0, c1), torch.zeros((), dtype=torch.int64, device=x.device))
+    return torch.where(on, bits(c0, c1), torch.zeros((), dtype=torch.int64, device=x.device))
 
 
-def _line_rows(r0, c0, r1, c1):
+def line_rows(r0, c0, r1, c1):
     """Per-row words of the Bresenham line (r0, c0) -> (r1, c1); all (P,) int64, output (P, 64)."""
     rows = _rows(r0.device)
     r0, c0, r1, c1 = r0[:, None], c0[:, None], r1[:, None], c1[:, None]
@@ -97,10 +100,10 @@ def _line_rows(r0, c0, r1, c1):
     kmax = torch.where(steep, k_steep, j_hi)
     lo = torch.where(sc > 0, c0 + kmin, c0 - kmax)
     hi = torch.where(sc > 0, c0 + kmax, c0 - kmin)
-    return torch.where(on, _bits(lo, hi), torch.zeros((), dtype=torch.int64, device=r0.device))
+    return torch.where(on, bits(lo, hi), torch.zeros((), dtype=torch.int64, device=r0.device))
 
 
-def _triangle_rows(x, y, r):
+def triangle_rows(x, y, r):
     xf, yf, rf = x.to(torch.float64), y.to(torch.float64), r.to(torch.float64)
     rb, ra, cl, cr = P.triangle_vertices(xf, yf, rf)
     rowsf = _rows(x.device).to(torch.float64)
@@ -112,9 +115,9 @@ def _triangle_rows(x, y, r):
     x_right = (cr_ - x_) * (rowsf - ra_) / (-den) + x_
     lo = torch.ceil(torch.minimum(x_left, x_right)).to(torch.int64)
     hi = torch.ceil(torch.maximum(x_left, x_right)).to(torch.int64) - 1
-    words = torch.where(cond, _bits(lo, hi), torch.zeros((), dtype=torch.int64, device=x.device))
+    words = torch.where(cond, bits(lo, hi), torch.zeros((), dtype=torch.int64, device=x.device))
     for (a, b) in P.triangle_edges(xf, yf, rf):
-        words = words | _line_rows(*(v.to(torch.int64) for v in (a[0], a[1], b[0], b[1])))
+        words = words | line_rows(*(v.to(torch.int64) for v in (a[0], a[1], b[0], b[1])))
     return words
 
 
@@ -128,38 +131,40 @@ def _offsets2(x, y):
     return dx, dy
 
 
-def _sphere_cols(x, y, z, r):
+def sphere_cols(x, y, z, r):
     dx, dy = _offsets2(x, y)
     s = P.sphere_radius2(r)[:, None, None] - dx * dx - dy * dy
     w = _isqrt(s.clamp(min=0))
     z = z[:, None, None]
-    return torch.where(s >= 0, _bits(z - w, z + w), torch.zeros((), dtype=torch.int64, device=x.device))
+    return torch.where(s >= 0, bits(z - w, z + w), torch.zeros((), dtype=torch.int64, device=x.device))
 
 
-def _cube_cols(x, y, z, r):
+def cube_cols(x, y, z, r):
     dx, dy = _offsets2(x, y)
     q = P.cube_half(r)[:, None, None]
     on = (dx.abs() <= q) & (dy.abs() <= q)
     z = z[:, None, None]
-    return torch.where(on, _bits(z - q, z + q), torch.zeros((), dtype=torch.int64, device=x.device))
+    return torch.where(on, bits(z - q, z + q), torch.zeros((), dtype=torch.int64, device=x.device))
 
 
-def _cylinder_cols(x, y, z, r, h):
+def cylinder_cols(x, y, z, r, h):
     dx, dy = _offsets2(x, y)
     on = dx * dx + dy * dy <= P.sphere_radius2(r)[:, None, None]
     hz = P.cylinder_half_height(h.to(torch.float64)).to(torch.int64)[:, None, None]
     z = z[:, None, None]
-    return torch.where(on, _bits(z - hz, z + hz), torch.zeros((), dtype=torch.int64, device=x.device))
+    return torch.where(on, bits(z - hz, z + hz), torch.zeros((), dtype=torch.int64, device=x.device))
 
 
-_DRAWERS = {
-    KIND_CODES["c"]: (_circle_rows, 3),
-    KIND_CODES["s"]: (_square_rows, 3),
-    KIND_CODES["t"]: (_triangle_rows, 3),
-    KIND_CODES["p"]: (_sphere_cols, 4),
-    KIND_CODES["u"]: (_cube_cols, 4),
-    KIND_CODES["y"]: (_cylinder_cols, 5),
-}
+@lru_cache(maxsize=None)
+def _drawers(dim: int) -> tuple[tuple[int, object, int], ...]:
+    """``(code, rasteriser, parameter count)`` of the table's primitives of ``dim``."""
+    here = sys.modules[__name__]
+    c = codes()
+    return tuple((c.kind[p.kind], p.raster if callable(p.raster) else getattr(here, p.raster), len(p.params))
+                 for p in P.primitives(dim))
+
+
+P.on_change(_drawers.cache_clear)
 
 
 def _canvas_words(dim: int) -> tuple[int, ...]:
@@ -178,9 +183,7 @@ def draw_packed(kinds: torch.Tensor, params: torch.Tensor, dim: int) -> torch.Te
         (N, 64) int64 words in 2D, (N, 64, 64) in 3D.
     """
     out = torch.zeros((kinds.shape[0],) + _canvas_words(dim), dtype=torch.int64, device=kinds.device)
-    for code, (fn, n) in _DRAWERS.items():
-        if (code < 3) != (dim == 2):
-            continue
+    for code, fn, n in _drawers(dim):
         idx = torch.nonzero(kinds == code).flatten()
         if idx.numel():
             p = params[idx]

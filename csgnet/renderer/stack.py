@@ -8,17 +8,19 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..vocab import PAD_CODE
-from .buffers import _POOL, _WORKSPACE
-from .raster import _INTER, _UNION, _SUB, _canvas_words, draw_packed
+from ..vocab import codes
+from .buffers import _WORKSPACE
+from .raster import _canvas_words, draw_packed
 from .tokens import primitive_cache
+
 
 def apply_op_(code: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """``a = a op b`` in place on packed words, for an operator kind code (``b`` is overwritten by a
     subtraction); returns ``a``."""
-    if code == _UNION:
+    op = codes().op
+    if code == op["+"]:
         a |= b
-    elif code == _INTER:
+    elif code == op["*"]:
         a &= b
     else:
         a &= b.bitwise_not_()
@@ -79,10 +81,11 @@ class StackMachine:
             token_ids: (B,) vocabulary indices; draws then come from the :class:`PrimitiveCache`.
             prims: (B, *C) packed canvases of the draws, if already computed.
         """
-        self.stopped |= kinds == PAD_CODE
+        c = codes()
+        self.stopped |= kinds == c.stop
         active = ~self.stopped & ~self.broken
-        is_draw = active & (kinds < 6)
-        is_op = active & (kinds >= 6) & (kinds <= 8)
+        is_draw = active & c.is_draw(kinds)
+        is_op = active & c.is_op(kinds)
         sp = self.sp
         bad = (is_op & (sp < 2)) | (is_draw & (sp >= self.depth))
         self.broken |= bad
@@ -98,7 +101,7 @@ class StackMachine:
             else:
                 p = draw_packed(kinds[di], params[di], self.dim)
             _copy_rows(self._flat, di * self.depth + sp[di], p.reshape(n, -1))
-        for code in (_UNION, _INTER, _SUB):
+        for code in c.op.values():
             oi = torch.nonzero(is_op & (kinds == code)).flatten()
             if oi.numel():
                 f1 = oi * self.depth + sp[oi] - 2
@@ -167,8 +170,9 @@ class Execution:
 
 
 def _max_depth(kinds: torch.Tensor) -> int:
-    delta = torch.where(kinds < 6, 1, torch.where(kinds <= 8, -1, 0))
-    stopped = torch.cumsum((kinds == PAD_CODE).long(), dim=1) > 0
+    c = codes()
+    delta = torch.where(c.is_draw(kinds), 1, torch.where(kinds < c.stop, -1, 0))
+    stopped = torch.cumsum((kinds == c.stop).long(), dim=1) > 0
     delta = torch.where(stopped, torch.zeros_like(delta), delta)
     if delta.numel() == 0:
         return 1

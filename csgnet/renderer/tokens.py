@@ -8,27 +8,92 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from ..lang import Program, parse
-from ..vocab import PAD_CODE, vocabulary, write_codes
+from .. import primitives as P
+from ..lang import Draw, Program, draw_token, parse, split_tokens
+from ..vocab import codes, vocabulary
 from .raster import _blocks, _canvas_words, _slab_range, draw_packed
 
 # ------------------------------------------------------------------------------------------------
 # encoding programs
 
+# (dim, token text) -> (code, vocabulary index or -1, *parameters zero-padded to MAX_PARAMS), or None for
+# a token that is not a valid dim-D token (parse then raises the located error)
+_ENTRIES: dict = {}
+_ENTRIES_MAX = 1 << 17
+
+
+def _entry(dim: int, text: str):
+    """The code row of one token text (see ``_ENTRIES``), computed once per text."""
+    key = (dim, text)
+    try:
+        return _ENTRIES[key]
+    except KeyError:
+        pass
+    c = codes()
+    vocab = vocabulary(dim)
+    if text in c.op:
+        entry = (c.op[text], vocab.op_index(text)) + (0,) * P.MAX_PARAMS
+    else:
+        d = draw_token(text, dim)
+        entry = None if d is None else (
+            (c.kind[d.kind], vocab._index.get(d.text(long=False), -1)) + d.params
+            + (0,) * (P.MAX_PARAMS - len(d.params)))
+    if len(_ENTRIES) >= _ENTRIES_MAX:
+        _ENTRIES.clear()
+    _ENTRIES[key] = entry
+    return entry
+
+
+def _program_entries(program: Program | str, dim: int, b: int) -> list:
+    """The code rows of one program's tokens (text: from the per-token cache, no objects built)."""
+    if isinstance(program, str):
+        pieces = split_tokens(program)
+        if pieces is not None:
+            get = _ENTRIES.get
+            rows = [get((dim, t)) or _entry(dim, t) for t in pieces]
+            if None not in rows:
+                return rows
+        program = parse(program, dim, strict=False)  # raises the located ParseError
+    if program.dim != dim:
+        raise ValueError(f"program {b} is {program.dim}D, expected {dim}D: {program.text()!r}")
+    return [_entry(dim, t.text(long=False) if isinstance(t, Draw) else t.op) for t in program.tokens]
+
+
+def _encode(programs: Sequence[Program | str], dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``kinds (B, T)``, ``params (B, T, 5)`` and, when every primitive is a vocabulary token, the
+    token indices ``(B, T)`` (``$``-padded; else None), all int64 NumPy arrays."""
+    rows = [_program_entries(p, dim, b) for b, p in enumerate(programs)]
+    lengths = np.array([len(r) for r in rows], dtype=np.int64)
+    B, T = len(rows), int(lengths.max(initial=1))
+    table = np.array([e for r in rows for e in r], dtype=np.int64).reshape(-1, 2 + P.MAX_PARAMS)
+    used = np.arange(T)[None, :] < lengths[:, None]
+    kinds = np.full((B, T), codes().stop, dtype=np.int64)
+    params = np.zeros((B, T, P.MAX_PARAMS), dtype=np.int64)
+    kinds[used], params[used] = table[:, 0], table[:, 2:]
+    ids = None
+    if (table[:, 1] >= 0).all():
+        ids = np.full((B, T), vocabulary(dim).stop, dtype=np.int64)
+        ids[used] = table[:, 1]
+    return kinds, params, ids
+
+
 def encode_programs(programs: Sequence[Program | str], dim: int, device=None) -> tuple[torch.Tensor, torch.Tensor]:
     """Programs (objects or text) -> ``kinds (B, T) int64`` and ``params (B, T, 5) int64``.
 
-    Text is parsed non-strictly, so structurally invalid programs encode (and render empty).
+    Text is parsed non-strictly, so structurally invalid programs encode (and render empty); a
+    malformed text raises the :class:`~csgnet.lang.ParseError` of :func:`~csgnet.lang.parse`.
     """
-    progs = [parse(p, dim, strict=False) if isinstance(p, str) else p for p in programs]
-    T = max([len(p) for p in progs] + [1])
-    kinds = np.full((len(progs), T), PAD_CODE, dtype=np.int64)
-    params = np.zeros((len(progs), T, 5), dtype=np.int64)
-    for b, p in enumerate(progs):
-        if p.dim != dim:
-            raise ValueError(f"program {b} is {p.dim}D, expected {dim}D: {p.text()!r}")
-        write_codes(p.tokens, kinds[b], params[b])
+    kinds, params, _ = _encode(programs, dim)
     return torch.from_numpy(kinds).to(device), torch.from_numpy(params).to(device)
+
+
+def encode_programs_ids(programs: Sequence[Program | str], dim: int, device=None):
+    """:func:`encode_programs`, plus the token indices ``(B, T) int64`` of the programs when every
+    primitive is a vocabulary token (the renderer then takes primitives from the
+    :class:`PrimitiveCache` instead of drawing them), else None."""
+    kinds, params, ids = _encode(programs, dim)
+    return (torch.from_numpy(kinds).to(device), torch.from_numpy(params).to(device),
+            None if ids is None else torch.from_numpy(ids).to(device))
 
 
 def encode_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None = None):
@@ -50,7 +115,7 @@ def encode_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None =
     params = cache.params.index_select(0, flat).view(tokens.shape + (5,))
     if lengths is not None:
         pos = torch.arange(tokens.shape[1], device=tokens.device)[None, :]
-        kinds = torch.where(pos < torch.as_tensor(lengths, device=tokens.device)[:, None], kinds, PAD_CODE)
+        kinds = torch.where(pos < torch.as_tensor(lengths, device=tokens.device)[:, None], kinds, codes().stop)
     return kinds, params
 
 
@@ -106,6 +171,12 @@ class PrimitiveCache:
 
 
 _PRIM_CACHES: dict = {}
+
+
+@P.on_change
+def _table_changed() -> None:
+    _PRIM_CACHES.clear()
+    _ENTRIES.clear()
 
 
 def primitive_cache(dim: int, device) -> PrimitiveCache:

@@ -19,7 +19,8 @@ import torch
 from shapeio.image import read_image_folder
 
 from .. import metrics
-from ..data import jitter, load_dataset
+from ..data import load_dataset
+from .augment import jitter
 from ..decode import Sampled, greedy, sample
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_programs, render_tokens

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..data import sample_programs
+from ..synth import sample_programs
 from ..vocab import vocabulary
 
 __all__ = ["ShardedBatches", "Cycle", "MixedLengthBatches", "ShuffledBatches", "distributed", "stream_loader",

@@ -26,7 +26,9 @@ import torch.nn.functional as F
 from shapeio import atomic_write
 
 from .. import metrics
-from ..data import ProgramDataset, jitter, load_dataset, sample_programs, split_sizes
+from ..data import ProgramDataset, load_dataset, split_sizes
+from ..synth import sample_programs
+from .augment import jitter
 from ..decode import greedy
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_tokens, stack_trace

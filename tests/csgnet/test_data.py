@@ -6,18 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from csgnet.data import (
-    TABLE2,
-    ProgramDataset,
-    Rules,
-    _draw_candidates,
-    check_programs,
-    generate_dataset,
-    jitter,
-    load_dataset,
-    sample_programs,
-    split_sizes,
-)
+from csgnet.data import TABLE2, ProgramDataset, generate_dataset, load_dataset, split_sizes
+from csgnet.synth import Rules, _draw_candidates, check_programs, sample_programs
+from csgnet.train.augment import jitter
 from csgnet.lang import Draw, Program
 from csgnet.renderer.reference import render_np
 from csgnet.vocab import vocabulary

@@ -143,3 +143,30 @@ def test_completable_agrees_with_exhaustive_completion():
     d = np.array([0, 1, 2, 3])
     assert [a.tolist() for a in completable(d, 3)] == [[True, True, True, False], [False, False, True, True],
                                                        [False, True, False, False]]
+
+
+FAST_PATH_TEXTS = [
+    ("c(32,32,28)c(32,32,24)-", 2), (" c( 1, 2 ,3 ) s(4,5,6)\t+ $ junk(", 2), ("c(-4,70,0)t(+3,2,1)*", 2),
+    ("sp(32,32,32,8)u(16,16,16,12)+", 3), ("y(1,2,3,4,5)$", 3), ("c(1,2,3)c(4,5,6)", 2), ("+", 2), ("", 2),
+    ("   ", 2), ("c(1,2,3)-", 2), ("c(1,$,3)", 2), ("c(1,2,-3)", 2), ("c(1,2)", 2), ("q(1,2,3)", 2),
+    ("sp(1,2,3,4)", 2), ("c(1,2,3)", 3), ("c(1,2,3)x", 2), ("c(1,2,3))", 2), ("c(a,2,3)", 2), ("C(1,2,3)", 2),
+    ("c(1,2,3)c(1,2,3)c(1,2,3)++", 2), ("c(1,2,3)++", 2), ("$c(1,2,3)", 2), ("cy(1,2,3,4,-1)", 3),
+]
+
+
+@pytest.mark.parametrize("strict", [True, False])
+def test_fast_path_agrees_with_the_full_scan(monkeypatch, strict):
+    """parse() takes cached per-token objects when a text is well formed; the result (or the error,
+    text and position) is what the full scan gives."""
+    from csgnet import lang
+
+    def outcome(text, dim):
+        try:
+            return parse(text, dim, strict)
+        except ParseError as e:
+            return (str(e), e.position, e.token)
+
+    fast = [outcome(t, d) for t, d in FAST_PATH_TEXTS]
+    fast_again = [outcome(t, d) for t, d in FAST_PATH_TEXTS]  # from the per-token cache
+    monkeypatch.setattr(lang, "_fast_tokens", lambda text, dim: None)
+    assert fast == fast_again == [outcome(t, d) for t, d in FAST_PATH_TEXTS]

@@ -9,12 +9,13 @@ import torch
 
 import csgnet
 from csg_testutil import random_program, skimage_2d
-from csgnet.lang import Draw, Program, parse
+from csgnet.lang import Draw, ParseError, Program, parse
 from csgnet.renderer.reference import bresenham, draw_np, render_np
 from csgnet.renderer import (StackMachine, encode_programs, encode_tokens, execute, pack, render_programs, render_tokens,
                               stack_trace, unpack)
 from csgnet.data import ProgramDataset
-from csgnet.vocab import GRID, KIND_CODES, PAD_CODE, SIZES, vocabulary
+from csgnet.primitives import GRID, SIZES
+from csgnet.vocab import KIND_CODES, PAD_CODE, vocabulary
 
 skdraw = pytest.importorskip("skimage.draw")
 
@@ -344,3 +345,26 @@ def test_stack_machine_reset_starts_rows_afresh():
     m.step(kinds[[1, 0]], token_ids=ids[[1, 0]])       # row 0 ignores it (stopped), row 1 draws anew
     want = csgnet.render(["c(32,32,16)", "c(32,32,16)"])
     assert torch.equal(unpack(m.result(), 2), torch.from_numpy(want)) and m.valid.all()
+
+
+def test_programs_as_text_render_like_objects_and_fail_like_parse():
+    """The text path (per-token cache, primitives from the cache when every one is a vocabulary token)
+    renders what the parsed objects render; a malformed text raises parse()'s error."""
+    rng = random.Random(11)
+    vocab_progs = [random_program(rng, 2, 4, vocab_only=True) for _ in range(20)]
+    any_progs = [random_program(rng, 2, 4) for _ in range(20)]
+    for progs in (vocab_progs, vocab_progs + any_progs):
+        texts = [p.text() for p in progs]
+        want = render_programs(progs, 2).numpy()
+        assert (render_programs(texts, 2).numpy() == want).all()
+        assert (want == np.stack([render_np(p) for p in progs])).all()
+    k1, p1 = encode_programs([p.text() for p in any_progs], 2)
+    k2, p2 = encode_programs(any_progs, 2)
+    assert torch.equal(k1, k2) and torch.equal(p1, p2)
+    assert (render_programs(["sp(32,32,32,8) u(20,20,20,12)-"], 3).numpy()
+            == render_np(parse("sp(32,32,32,8)u(20,20,20,12)-", 3))).all()
+    with pytest.raises(ParseError) as e:
+        render_programs(["c(8,8,8)", "c(8,8,8)q(1,2,3)+"], 2)
+    with pytest.raises(ParseError) as e2:
+        parse("c(8,8,8)q(1,2,3)+", strict=False)
+    assert str(e.value) == str(e2.value) and e.value.position == 8
