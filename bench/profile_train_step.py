@@ -1,0 +1,116 @@
+"""Where one supervised training step's time goes, per model: data, target render, jitter, stack trace,
+forward, backward, optimiser.
+
+    python bench/profile_train_step.py --threads 1
+    python bench/profile_train_step.py --threads 2 --models csgnet2d_small csgnetstack2d_small
+
+Each phase of :meth:`csgnet.train.supervised.CSGNetModule._loss` plus the optimiser step is timed on its own
+(median over ``--steps`` steps after one warm-up), on one mixed-length batch drawn from the training stream
+(``MixedLengthBatches``, programs sampled on the fly). "data" is the time to draw that batch. The table shows
+milliseconds per phase, the model's share (forward + backward + optimiser) of the step, and samples/s.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from csgnet.renderer import render_tokens, stack_trace
+from csgnet.train.augment import jitter
+from csgnet.train.streams import MixedLengthBatches
+from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule
+
+# name -> (dim, stack, size, model overrides, batch): the shipped small configs and the paper sizes
+MODELS = {
+    "csgnet2d_small": (2, False, "small", {}, 96),
+    "csgnetstack2d_small": (2, True, "small", {"input_pool": 2, "channels": [8, 16, 32]}, 96),
+    "csgnet2d_paper": (2, False, "paper", {}, 100),
+    "csgnetstack2d_paper": (2, True, "paper", {}, 100),
+    "csgnet3d_small": (3, False, "small", {}, 48),
+    "csgnetstack3d_small": (3, True, "small", {}, 48),
+    "csgnet3d_paper": (3, False, "paper", {}, 48),
+}
+PHASES = ("data", "render", "jitter", "stack", "forward", "backward", "optimiser")
+
+
+def profile(name: str, steps: int, device: str) -> dict[str, float]:
+    """Median seconds per phase of one training step of model ``name``."""
+    dim, stack, size, over, batch = MODELS[name]
+    m = CSGNetModule(dim=dim, stack=stack, size=size, model=over).to(device)
+    opt = torch.optim.Adam(m.parameters(), lr=1e-3)
+    lengths = DEFAULT_LENGTHS[dim]
+    stream = iter(MixedLengthBatches(dim, lengths, batch, steps + 1, max(lengths), tables=None, seed=0))
+    rng = torch.Generator().manual_seed(0)
+    cfg = m.config
+    times = {p: [] for p in PHASES}
+    for i in range(steps + 1):
+        t = {}
+        t0 = time.perf_counter()
+        tok, lens = next(stream)
+        tok, lens = tok.to(device), lens.to(device)
+        t["data"] = time.perf_counter()
+        T = int(lens.max()) + 1
+        tok = tok[:, :T]
+        target = render_tokens(tok, dim, lens)
+        t["render"] = time.perf_counter()
+        if m.augment:
+            target = jitter(target, rng)
+        t["jitter"] = time.perf_counter()
+        st = stack_trace(tok[:, :-1], dim, k=cfg.stack_k, lengths=lens) if stack else None
+        t["stack"] = time.perf_counter()
+        tokens_in = torch.cat([torch.full_like(tok[:, :1], m.model.start), tok[:, :-1]], dim=1)
+        logits = m.model(target, tokens_in, st)
+        nll = F.cross_entropy(logits.transpose(1, 2), tok, reduction="none")
+        steps_mask = torch.arange(tok.shape[1], device=tok.device)[None] <= lens[:, None]
+        loss = ((nll * steps_mask).sum(1) / (lens + 1)).mean()
+        t["forward"] = time.perf_counter()
+        opt.zero_grad()
+        loss.backward()
+        t["backward"] = time.perf_counter()
+        opt.step()
+        if device == "cuda":
+            torch.cuda.synchronize()
+        t["optimiser"] = time.perf_counter()
+        if i:
+            prev = t0
+            for p in PHASES:
+                times[p].append(t[p] - prev)
+                prev = t[p]
+    out = {p: float(np.median(v)) for p, v in times.items()}
+    out["batch"] = batch
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--steps", type=int, default=5)
+    ap.add_argument("--models", nargs="*", default=[n for n in MODELS if "paper" not in n or n == "csgnet2d_paper"],
+                    choices=sorted(MODELS))
+    args = ap.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
+          f"{torch.__version__}, threads {torch.get_num_threads()}, device {args.device}, "
+          f"load average {os.getloadavg()[0]:.2f}")
+    print("| model | batch | " + " | ".join(f"{p} ms" for p in PHASES) + " | model share | samples/s |")
+    print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|")
+    for name in args.models:
+        r = profile(name, args.steps, args.device)
+        total = sum(r[p] for p in PHASES)
+        model = r["forward"] + r["backward"] + r["optimiser"]
+        print(f"| {name} | {r['batch']} | " + " | ".join(f"{1000 * r[p]:.1f}" for p in PHASES)
+              + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} |", flush=True)
+    print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
