@@ -69,7 +69,7 @@ def main(argv=None):
         print(f"  {len(above) - 6} more: {above[-1][0]:.2g} to {above[6][0]:.2g}")
 
     if args.stability:
-        from shapeprog.metrics import stability
+        from shapeprog.physics import stability
 
         rng = random.Random(args.seed)
         sample = rng.sample(range(len(progs)), args.stability)
