@@ -22,7 +22,7 @@ import torch
 from shapeio import atomic_write
 from shapeprog.geometry import CUBOID_TRIANGLES, mesh_arrays
 from shapeprog.picture import part_colors
-from shapeprog.sampling import check_corners
+from shapeprog.geometry import check_corners
 
 __all__ = [
     "write_obj",

@@ -24,8 +24,9 @@ from typing import List, Optional, Tuple
 import numpy as np
 import torch
 
+from shapeprog.geometry import check_corners
 from shapeprog.physics import contact_graph, rooted_parts, rootedness, stability
-from shapeprog.sampling import check_corners, lattice_voxelize
+from shapeprog.sampling import lattice_voxelize
 
 __all__ = [
     "nearest_neighbors",

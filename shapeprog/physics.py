@@ -20,8 +20,7 @@ from typing import List, Tuple
 import numpy as np
 import torch
 
-from shapeprog.geometry import CORNER_SIGNS
-from shapeprog.sampling import numpy_corners
+from shapeprog.geometry import CORNER_SIGNS, numpy_corners
 
 __all__ = ["box_distances", "contact_graph", "rooted_parts", "rootedness", "stability"]
 

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from shapeprog.geometry import mesh_arrays
-from shapeprog.sampling import check_corners
+from shapeprog.geometry import check_corners
 
 __all__ = ["render_png", "part_colors", "camera", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
 

@@ -59,7 +59,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import numpy_corners
+from .geometry import numpy_corners
 
 __all__ = ["VIEWS", "SPLITS", "Silhouettes", "silhouette", "silhouettes", "split_ids", "build", "write"]
 
