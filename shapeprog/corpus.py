@@ -22,6 +22,7 @@ import tarfile
 import warnings
 from importlib import resources
 
+from .io import _obj_vertices
 from .lang import ParseError, Program, parse
 
 __all__ = ["CATEGORIES", "SPLITS", "CorpusWarning", "example_points", "example_text", "ids", "load", "read"]
@@ -105,6 +106,4 @@ def example_text(name: str = "ex-0.txt") -> str:
 
 def example_points(name: str = "comp_pc.obj"):
     """The example point cloud as a (N, 3) float32 numpy array (10,000 points of a table)."""
-    from .io import _obj_vertices  # numpy, torch: loaded on first use only
-
     return _obj_vertices(example_text(name).splitlines(), name)
