@@ -130,6 +130,18 @@ def _rotate(ax, R):
 
 
 def rule_first(pos, dims, ax, src, g):
+    """First record: translate each cuboid so that its local point ``src`` lands on ``g``.
+
+    Args:
+        pos: (n, 3) float, cuboid centres.
+        dims: (n, 3) float, extents along the cuboids' axes.
+        ax: (n, 3, 3) float, rows are the unit right/up/front vectors.
+        src: (n, 3) float local source points on the moved cuboids.
+        g: (n, 3) float global target points.
+
+    Returns:
+        (pos, dims, ax) after the move; ``dims`` and ``ax`` are the given tensors.
+    """
     return pos + (g - point(pos, dims, ax, src)), dims, ax
 
 
