@@ -33,14 +33,17 @@ import time
 
 import torch
 
+from shapeprog import corpus, execute, execute_batch, parse
+from shapeprog.execute import ExecutionPlan, program_parameters
+from shapeprog.metrics import chamfer
+from shapeprog.sampling import sample_surface
+
 REF_PROGRAMS_PER_S = 78.0
 REF_MEDIAN_MS = 9.9
 REF_STEP_MS = 32.9
 
 
 def sample_ids(n: int = 400, seed: int = 0):
-    from shapeprog import corpus
-
     rng = random.Random(seed)
     allids = {c: corpus.ids(c, "all") for c in corpus.CATEGORIES}
     total = sum(len(v) for v in allids.values())
@@ -80,11 +83,6 @@ def main(argv=None) -> None:
     if args.threads:
         torch.set_num_threads(args.threads)
     device = torch.device(args.device)
-
-    from shapeprog import corpus, execute, execute_batch, parse
-    from shapeprog.execute import ExecutionPlan, program_parameters
-    from shapeprog.metrics import chamfer
-    from shapeprog.sampling import sample_surface
 
     clock = Clock(device)
     ids = sample_ids()

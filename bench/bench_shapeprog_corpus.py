@@ -23,6 +23,10 @@ import time
 
 import torch
 
+import shapeprog
+from shapeprog import corpus
+from shapeprog.physics import stability
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -30,9 +34,6 @@ def main(argv=None):
     ap.add_argument("--stability", type=int, default=0, help="also test N random corpus shapes for stability")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
-
-    import shapeprog
-    from shapeprog import corpus
 
     print(f"# command: python {' '.join(sys.argv)}")
     print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, torch {torch.__version__}, threads {torch.get_num_threads()}")
@@ -69,8 +70,6 @@ def main(argv=None):
         print(f"  {len(above) - 6} more: {above[-1][0]:.2g} to {above[6][0]:.2g}")
 
     if args.stability:
-        from shapeprog.metrics import stability
-
         rng = random.Random(args.seed)
         sample = rng.sample(range(len(progs)), args.stability)
         for inertia in ("identity", "box"):

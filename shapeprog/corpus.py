@@ -22,6 +22,8 @@ import tarfile
 import warnings
 from importlib import resources
 
+from shapeio.points import obj_vertices
+
 from .lang import ParseError, Program, parse
 
 __all__ = ["CATEGORIES", "SPLITS", "CorpusWarning", "example_points", "example_text", "ids", "load", "read"]
@@ -105,6 +107,4 @@ def example_text(name: str = "ex-0.txt") -> str:
 
 def example_points(name: str = "comp_pc.obj"):
     """The example point cloud as a (N, 3) float32 numpy array (10,000 points of a table)."""
-    from shapeio.points import obj_vertices as _obj_vertices  # numpy: loaded on first use only
-
-    return _obj_vertices(example_text(name).splitlines(), name)
+    return obj_vertices(example_text(name).splitlines(), name)

@@ -34,6 +34,8 @@ import torch
 
 from .execute import ExecutionPlan, parameter_names, program_parameters
 from .lang import Cuboid, Program, replace_numbers, to_text
+from .metrics import chamfer
+from .sampling import sample_surface
 
 __all__ = ["FitResult", "fit"]
 
@@ -114,9 +116,6 @@ def fit(
     Returns:
         A :class:`FitResult`.
     """
-    from .metrics import chamfer
-    from .sampling import sample_surface
-
     if not isinstance(points, torch.Tensor):
         points = torch.as_tensor(points)
     if points.dim() != 2 or points.shape[1] != 3 or points.shape[0] < 1:

@@ -1,4 +1,4 @@
-"""Cuboid frames, corners and triangle meshes (pure torch, differentiable).
+"""Cuboid frames, corners and triangle meshes (pure torch, differentiable), and the corner validator.
 
 A cuboid is given by its centre ``(3,)``, its extents ``dims (3,)`` along its own
 right/up/front axes, and ``axes (3, 3)`` whose **rows** are the unit right, up and
@@ -8,6 +8,9 @@ Corner order (ShapeAssembly, spec section (c)): with half extents ``h`` and sign
 ``s = (sx, sy, sz)``, corner ``i`` has ``i = 4*[sx<0] + 2*[sy<0] + [sz<0]`` and lies
 at ``centre + sum_k s_k * h_k * axes[k]``.
 
+:func:`check_corners` validates ``corners: (L, 8, 3) float`` for every module that takes them;
+:func:`numpy_corners` also converts them to a float64 NumPy array.
+
 Example:
     >>> import torch
     >>> c = cuboid_corners(torch.zeros(1, 3), torch.ones(1, 3), torch.eye(3)[None])
@@ -16,9 +19,11 @@ Example:
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
 
-__all__ = ["CORNER_SIGNS", "CUBOID_TRIANGLES", "cuboid_corners", "mesh_arrays"]
+__all__ = ["CORNER_SIGNS", "CUBOID_TRIANGLES", "check_corners", "cuboid_corners", "mesh_arrays",
+           "numpy_corners"]
 
 #: (8, 3) signs of the corners along right/up/front, in the spec's order.
 CORNER_SIGNS = torch.tensor(
@@ -86,3 +91,45 @@ def mesh_arrays(corners: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     offs = 8 * torch.arange(n, device=corners.device, dtype=torch.int64)
     faces = CUBOID_TRIANGLES.to(corners.device)[None] + offs[:, None, None]
     return corners.reshape(-1, 3), faces.reshape(-1, 3)
+
+
+def check_corners(corners, name: str = "corners", where=None, arrays: bool = False):
+    """Validate ``corners: (L, 8, 3) float`` and return it unchanged (the one corner validator).
+
+    Args:
+        corners: a ``torch.Tensor`` (or, with ``arrays=True``, a NumPy array).
+        name: the argument name used in messages.
+        where: optional prefix of the messages (e.g. the file being written).
+        arrays: accept NumPy arrays as well as tensors.
+
+    Raises:
+        TypeError: if it is not a tensor (or array) or not floating point.
+        ValueError: if the shape is not ``(L, 8, 3)`` or a value is NaN or infinite.
+    """
+    pre = "" if where is None else f"{where}: "
+    if isinstance(corners, torch.Tensor):
+        floating, isfinite = corners.is_floating_point(), torch.isfinite
+    elif arrays and isinstance(corners, np.ndarray):
+        floating, isfinite = np.issubdtype(corners.dtype, np.floating), np.isfinite
+    else:
+        raise TypeError(f"{pre}`{name}` must be a torch.Tensor of shape (L, 8, 3), got {type(corners).__name__}")
+    if corners.ndim != 3 or tuple(corners.shape[1:]) != (8, 3):
+        raise ValueError(f"{pre}`{name}` must have shape (L, 8, 3), got {tuple(corners.shape)}")
+    if not floating:
+        raise TypeError(f"{pre}`{name}` must be floating point, got {corners.dtype}")
+    finite = isfinite(corners)
+    if not finite.all():
+        bad = [i for i, row in enumerate((~finite).reshape(corners.shape[0], -1).any(1).tolist()) if row]
+        raise ValueError(f"{pre}`{name}` contains NaN or infinite values (cuboids {bad[:10]})")
+    return corners
+
+
+def numpy_corners(corners) -> np.ndarray:
+    """Validated ``(L, 8, 3)`` float64 NumPy corners of at least one cuboid, from a floating-point
+    tensor or any array-like (cast to float64); errors as :func:`check_corners`, and for ``L = 0``."""
+    if isinstance(corners, torch.Tensor):
+        corners = check_corners(corners).detach().cpu().numpy()
+    corners = check_corners(np.asarray(corners, dtype=np.float64), arrays=True)
+    if corners.shape[0] == 0:
+        raise ValueError("`corners` holds no cuboid (L = 0)")
+    return corners

@@ -26,7 +26,7 @@ from shapeio.mesh import write_mesh, write_parts
 from shapeio.points import write_points
 from shapeprog.geometry import CUBOID_TRIANGLES, mesh_arrays
 from shapeprog.picture import part_colors
-from shapeprog.sampling import check_corners
+from shapeprog.geometry import check_corners
 
 __all__ = [
     "write_obj",

@@ -16,7 +16,7 @@ import torch
 
 from shapeio.image import write_png
 from shapeprog.geometry import mesh_arrays
-from shapeprog.sampling import check_corners
+from shapeprog.geometry import check_corners
 
 __all__ = ["render_png", "part_colors", "camera", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
 

@@ -16,57 +16,14 @@ from __future__ import annotations
 
 from typing import Optional, Sequence, Tuple, Union
 
-import numpy as np
 import torch
 
-from shapeprog.geometry import CORNER_SIGNS, CUBOID_TRIANGLES
+from shapeprog.geometry import CORNER_SIGNS, CUBOID_TRIANGLES, check_corners
 
 __all__ = ["sample_surface", "triangle_areas", "voxelize", "lattice_voxelize", "inside_cuboids"]
 
 #: Largest triangle area accepted by :func:`sample_surface` (the reference asserts the same bound).
 MAX_TRIANGLE_AREA = 1e6
-
-
-def check_corners(corners, name: str = "corners", where=None, arrays: bool = False):
-    """Validate ``corners: (L, 8, 3) float`` and return it unchanged (the one corner validator).
-
-    Args:
-        corners: a ``torch.Tensor`` (or, with ``arrays=True``, a NumPy array).
-        name: the argument name used in messages.
-        where: optional prefix of the messages (e.g. the file being written).
-        arrays: accept NumPy arrays as well as tensors.
-
-    Raises:
-        TypeError: if it is not a tensor (or array) or not floating point.
-        ValueError: if the shape is not ``(L, 8, 3)`` or a value is NaN or infinite.
-    """
-    pre = "" if where is None else f"{where}: "
-    if isinstance(corners, torch.Tensor):
-        floating, isfinite = corners.is_floating_point(), torch.isfinite
-    elif arrays and isinstance(corners, np.ndarray):
-        floating, isfinite = np.issubdtype(corners.dtype, np.floating), np.isfinite
-    else:
-        raise TypeError(f"{pre}`{name}` must be a torch.Tensor of shape (L, 8, 3), got {type(corners).__name__}")
-    if corners.ndim != 3 or tuple(corners.shape[1:]) != (8, 3):
-        raise ValueError(f"{pre}`{name}` must have shape (L, 8, 3), got {tuple(corners.shape)}")
-    if not floating:
-        raise TypeError(f"{pre}`{name}` must be floating point, got {corners.dtype}")
-    finite = isfinite(corners)
-    if not finite.all():
-        bad = [i for i, row in enumerate((~finite).reshape(corners.shape[0], -1).any(1).tolist()) if row]
-        raise ValueError(f"{pre}`{name}` contains NaN or infinite values (cuboids {bad[:10]})")
-    return corners
-
-
-def numpy_corners(corners) -> np.ndarray:
-    """Validated ``(L, 8, 3)`` float64 NumPy corners of at least one cuboid, from a floating-point
-    tensor or any array-like (cast to float64); errors as :func:`check_corners`, and for ``L = 0``."""
-    if isinstance(corners, torch.Tensor):
-        corners = check_corners(corners).detach().cpu().numpy()
-    corners = check_corners(np.asarray(corners, dtype=np.float64), arrays=True)
-    if corners.shape[0] == 0:
-        raise ValueError("`corners` holds no cuboid (L = 0)")
-    return corners
 
 
 def _triangles(corners: torch.Tensor) -> torch.Tensor:

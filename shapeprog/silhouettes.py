@@ -1,48 +1,13 @@
 """Front and side silhouettes of the PartNet corpus: a real-shape set of 64x64 binary masks.
 
-Every corpus program (chair, table, storage) is executed and its leaf cuboids are projected
-orthographically, in the ShapeAssembly frame (+x right, +y up, +z front):
-
-* ``front``: seen from +z (in front of the shape); image column = +x, image row = -y.
-* ``side``: seen from +x (the shape's right side); image column = -z (the shape's front on the
-  left), image row = -y.
-
-Rows grow downward, as in every 2D canvas of this project (``img[row, col]``).
-
-Fit: per image, the bounding box of all projected corners is centred on the canvas and scaled
-uniformly so that its longer side spans ``size - 2 * margin`` pixels (56 of 64 with the default
-margin of 4). Pixel ``(row, col)`` is the unit square centred on the integer point ``(row, col)``;
-the fitted box spans ``[margin - 0.5, size - margin - 0.5]`` along its longer side.
-
-Rasterisation is exact point sampling: a pixel is on iff its centre lies in the projection of at
-least one cuboid. The projection of a cuboid with centre ``c`` and half-axis vectors ``g1, g2, g3``
-is the zonotope ``{c + sum t_k g_k : |t_k| <= 1}`` (the convex hull of the 8 projected corners, a
-parallelogram or hexagon), and a point ``p`` lies in it iff ``|n . (p - c)| <= sum_k |n . g_k|``
-for the normal ``n`` of every edge direction (the perpendiculars of the ``g_k``), with a
-tolerance of 1e-9 pixel so that centres exactly on an edge count as inside.
-
-One exception keeps thin parts visible: point sampling would drop a cuboid thinner than a pixel
-(a table top seen edge-on, a thin chair back from the side) whenever it falls between pixel
-centres, and a few flat shapes would vanish entirely. Where a projection is narrower than one
-pixel across a tested direction (the edge normals, the generator directions and the two image
-axes), its slab along that direction is widened to one pixel, centred; such a part draws as a
-line one pixel wide (two where its centre line falls exactly halfway between pixel centres).
-Projections at least a pixel wide in every direction are unchanged.
-
-Splits: the corpus's train and val lists. The test split is carved out of val per category: the
-shapes at odd positions (1, 3, 5, ...) of the category's val file, in file order, are test; the
-even positions stay val. Both views of a shape share its split. Sizes (shapes): train 10,536,
-val 693, test 693; two images per shape.
-
-The dataset is built by ``python -m shapeprog silhouettes --out PATH`` (deterministic: float64
-execution, no randomness) and shipped as ``csgnet/data/silhouettes.npz``, read by
-``csgnet.shapes2d.load_silhouettes``. File layout (NumPy ``.npz``, no pickles):
-
-* ``{split}_images``: ``(N, size, size // 8)`` uint8, ``np.packbits`` of the bool masks along the
-  last (column) axis (big-endian bit order, NumPy's default);
-* ``{split}_ids``: ``(N,)`` str, ``"category/id"`` (e.g. ``"chair/173"``);
-* ``{split}_views``: ``(N,)`` str, ``"front"`` or ``"side"``;
-* ``size``, ``margin``: ints; ``version``: 1.
+Every corpus program is executed in float64 and its leaf cuboids are projected orthographically
+in the ShapeAssembly frame: ``front`` is seen from +z, ``side`` from +x; images are
+``img[row, col]`` with rows growing downward. Each image is fitted to the canvas and rasterised
+exactly (a pixel is on iff its centre lies in a projected cuboid; parts thinner than a pixel are
+widened to one). Splits: the corpus's train and val lists, with test carved out of val.
+``python -m shapeprog silhouettes --out PATH`` builds the set shipped as
+``csgnet/data/silhouettes.npz``; the file layout (a pickle-free ``.npz`` with packed-bit images, ids
+and views per split), the views, fit, rasterisation and splits are in ``docs/silhouettes.md``.
 
 Example:
     >>> import torch
@@ -57,11 +22,16 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import torch
+from tqdm import tqdm
 
 from shapeio.silhouettes import SPLITS, write_silhouettes
 from shapeio.silhouettes import SilhouetteSplit as Silhouettes
 
-from .sampling import numpy_corners
+from . import corpus
+from .execute import execute_batch
+from .geometry import numpy_corners
+from .lang import ParseError, parse
 
 __all__ = ["VIEWS", "SPLITS", "Silhouettes", "silhouette", "silhouettes", "split_ids", "build", "write"]
 
@@ -150,8 +120,6 @@ def silhouettes(corners, views=VIEWS, size: int = SIZE, margin: int = MARGIN) ->
 
 def split_ids(category: str) -> dict[str, list[int]]:
     """The shape ids of ``category`` per split: train, val and test (odd positions of val)."""
-    from . import corpus
-
     val = corpus.ids(category, "val")
     return {"train": corpus.ids(category, "train"), "val": val[0::2], "test": val[1::2]}
 
@@ -177,13 +145,6 @@ def build(categories=("chair", "table", "storage"), size: int = SIZE, margin: in
         ValueError: a ``size`` / ``margin`` that :func:`silhouette` rejects, before any program runs.
     """
     _check_frame(size, margin)
-    import torch
-    from tqdm import tqdm
-
-    from . import corpus
-    from .execute import execute_batch
-    from .lang import ParseError, parse
-
     jobs: list[tuple[str, str, int]] = []  # (split, category, id)
     for cat in categories:
         for split, ids in split_ids(cat).items():

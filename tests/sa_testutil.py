@@ -17,6 +17,12 @@ def boxes(centers, dims, axes=None, dtype=torch.float64):
     return cuboid_corners(c, d, a)
 
 
+def rot_y(angle, dtype=torch.float64):
+    """The ``(3, 3)`` axes (rows) of a frame turned by ``angle`` radians about y."""
+    c, s = math.cos(angle), math.sin(angle)
+    return torch.tensor([[c, 0, -s], [0, 1, 0], [s, 0, c]], dtype=dtype)
+
+
 def rotation(axis, angle, dtype=torch.float64):
     """Rotation matrix ``(3, 3)`` about ``axis`` by ``angle`` radians (Rodrigues), independent of the executor."""
     k = torch.as_tensor(axis, dtype=dtype)

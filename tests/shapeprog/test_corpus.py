@@ -1,6 +1,7 @@
 """Corpus access: ids, splits, text, loading with per-file errors."""
 import random
 import warnings
+from importlib.resources import files
 
 import pytest
 import torch
@@ -52,8 +53,6 @@ def test_load_parses_programs():
 
 def test_licence_notice_ships_with_the_data():
     """The vendored archives sit next to a notice carrying the licence text verbatim."""
-    from importlib.resources import files
-
     data = files("shapeprog") / "data"
     assert (data / "shapeassembly_partnet.tar.xz").is_file() and (data / "examples.tar.xz").is_file()
     notice = (data / "NOTICE.md").read_text(encoding="utf-8")

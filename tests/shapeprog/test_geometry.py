@@ -1,9 +1,11 @@
+"""Tests for shapeprog.geometry: corner order, meshes, the corner validators."""
 import math
 
+import numpy as np
 import pytest
 import torch
 
-from shapeprog.geometry import CUBOID_TRIANGLES, cuboid_corners, mesh_arrays
+from shapeprog.geometry import CUBOID_TRIANGLES, check_corners, cuboid_corners, mesh_arrays, numpy_corners
 
 
 def _rot(angle):
@@ -52,3 +54,28 @@ def test_gradcheck_corners():
         torch.randn(2, 3, 3, dtype=torch.float64, requires_grad=True),
     )
     assert torch.autograd.gradcheck(cuboid_corners, args)
+
+
+def test_check_corners_names_the_argument_and_the_place():
+    ok = cuboid_corners(torch.zeros(2, 3), torch.ones(2, 3), torch.eye(3).expand(2, 3, 3))
+    assert check_corners(ok) is ok
+    with pytest.raises(ValueError, match=r"^`pred` must have shape \(L, 8, 3\), got \(2, 4, 3\)"):
+        check_corners(torch.zeros(2, 4, 3), "pred")
+    bad = ok.clone()
+    bad[1, 3, 0] = float("nan")
+    with pytest.raises(ValueError, match=r"^out\.obj: `corners` contains NaN or infinite values \(cuboids \[1\]\)"):
+        check_corners(bad, where="out.obj")
+    with pytest.raises(TypeError, match="floating point"):
+        check_corners(torch.zeros(1, 8, 3, dtype=torch.int64))
+    with pytest.raises(TypeError, match="torch.Tensor"):
+        check_corners(ok.numpy())
+    assert check_corners(ok.numpy(), arrays=True) is not None
+
+
+def test_numpy_corners_casts_to_float64_and_rejects_empty():
+    ok = cuboid_corners(torch.zeros(1, 3), torch.ones(1, 3), torch.eye(3)[None])
+    arr = numpy_corners(ok)
+    assert isinstance(arr, np.ndarray) and arr.dtype == np.float64 and arr.shape == (1, 8, 3)
+    assert numpy_corners(arr.tolist()).tolist() == arr.tolist()
+    with pytest.raises(ValueError, match=r"L = 0"):
+        numpy_corners(torch.zeros(0, 8, 3))
