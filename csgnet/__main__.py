@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shlex
 import sys
 from pathlib import Path
@@ -60,7 +61,11 @@ def cmd_render(args) -> int:
     img = render(program, args.dim)[0]
     print(f"{program.text()}  ({len(program)} tokens, {int(img.sum())} {'pixels' if args.dim == 2 else 'voxels'} on)")
     for out in args.output:
-        path = _write_render(program, args.dim, Path(out))
+        try:
+            path = _write_render(program, args.dim, Path(out))
+        except (OSError, ValueError) as e:
+            print(f"error: {_located(out, e)}", file=sys.stderr)
+            return 2
         print(f"wrote {path}")
     return 0
 
@@ -111,12 +116,101 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _output_stems(inputs, out: Path) -> list[Path]:
+    """One output stem per input under ``out``: the input's stem, or ``stem_2``, ``stem_3``, ... when
+    an earlier input (or another input's own stem) already has that name, compared case-insensitively."""
+    natural = [Path(src).stem for src in inputs]
+    taken: set = set()
+    stems = []
+    for i, stem in enumerate(natural):
+        others = {n.casefold() for j, n in enumerate(natural) if j != i}
+        name, k = stem, 2
+        while name.casefold() in taken or (name != stem and name.casefold() in others):
+            name, k = f"{stem}_{k}", k + 1
+        taken.add(name.casefold())
+        stems.append(out / name)
+    return stems
+
+
+def _located(src, err: Exception) -> str:
+    """``FILE: reason`` for an error about ``src`` (messages that already start with a path are kept)."""
+    msg = str(err)
+    return msg if msg.startswith(str(src)) else f"{src}: {msg}"
+
+
+def _parse_model(models: dict, dim: int, weights):
+    """The ``dim``-D model (loaded once; a failure is kept and raised again for every input)."""
+    from .inference import load_model, load_pretrained
+
+    if dim not in models:
+        try:
+            model = load_model(weights) if weights else load_pretrained(dim)
+            if model.config.dim != dim:
+                raise ValueError(f"{weights}: a {model.config.dim}D model, given for {dim}D inputs "
+                                 f"(--weights-{dim}d)")
+            models[dim] = model
+        except (ValueError, OSError) as e:
+            models[dim] = e
+    if isinstance(models[dim], Exception):
+        raise models[dim]
+    return models[dim]
+
+
+def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
+    """Infer, optionally refine, report and write one input's program (``parse``)."""
+    from .inference import infer
+
+    dim = shape.ndim
+    res = infer(model, shape[None], beam=args.beam, select=args.select, constrained=not args.unconstrained)[0]
+    line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
+    if dim == 2:
+        line += f", chamfer {res.chamfer:.3f} px"
+    if not res.valid:
+        line += " (invalid program: renders empty)"
+    print(line)
+    program = res.program if res.valid else None
+    if args.refine:
+        if dim != 2:
+            print("  refinement is for 2D programs; skipped")
+        elif program is not None:
+            from .refinement import MAX_IOU_DROP, refine_guarded
+
+            valid = [b for b in res.beams if _is_valid(b)]
+            ref = refine_guarded(program, valid, shape, rule=args.refine_rule, maxiter=args.refine_iters)
+            program = ref.program
+            (i0, c0), (i1, c1) = ref.before, ref.after
+            print(f"  refined ({len(valid)} beams, rule {ref.rule!r}): {ref.result.text}\n"
+                  f"  before: IoU {100 * i0:.2f}%, chamfer {c0:.3f} px; after: IoU {100 * i1:.2f}%, "
+                  f"chamfer {c1:.3f} px")
+            if ref.kept_start:
+                print(f"  refinement lowered IoU by more than {100 * MAX_IOU_DROP:g} points: "
+                      f"wrote the unrefined program {program.text()}")
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    txt = atomic_write(stem.with_suffix(".txt"), (res.text if program is None else program.text()) + "\n")
+    img = np.zeros((64,) * dim, dtype=bool) if program is None else render(program, dim)[0]
+    if dim == 2:
+        compare = stem.with_name(stem.name + "_compare.png")
+        written = [export.save_png(img, stem.with_suffix(".png")), compare]
+        _save_sheet(_contact_sheet([shape, img], cols=2), compare)
+    else:
+        written = [export.save_obj(img, stem.with_suffix(".obj"))]
+    if program is not None:
+        written.append(export.save_scad(program, stem.with_suffix(".scad")))
+    print("  wrote " + ", ".join(str(w) for w in written + [txt]))
+
+
 def cmd_parse(args) -> int:
-    """Infer a program for each input shape with a trained model."""
-    from .inference import InputError, infer, load_model, load_pretrained, load_shape
+    """Infer a program for each input shape with a trained model; a bad input is reported and skipped."""
+    from shapeio import InputError
+
+    from .inference import load_shape
 
     out = Path(args.out)
-    outputs = [out / f"{Path(src).stem}{end}" for src in args.inputs
+    if out.exists() and not out.is_dir():
+        print(f"error: {out}: --out must be a folder, and this is a file", file=sys.stderr)
+        return 2
+    stems = _output_stems(args.inputs, out)
+    outputs = [stem.with_name(stem.name + end) for stem in stems
                for end in (".txt", ".png", "_compare.png", ".obj", ".scad")]
     try:
         refuse_overwrite(outputs, args.inputs)
@@ -126,51 +220,14 @@ def cmd_parse(args) -> int:
     models: dict = {}
     weights = {2: args.weights_2d, 3: args.weights_3d}
     status = 0
-    for src in args.inputs:
+    for src, stem in zip(args.inputs, stems):
         try:
             shape = load_shape(src)
-        except InputError as e:
-            print(f"error: {e}", file=sys.stderr)
+            model = _parse_model(models, shape.ndim, weights[shape.ndim])
+            _parse_one(src, shape, stem, model, args)
+        except (InputError, ParseError, ValueError, OSError) as e:
+            print(f"error: {_located(src, e)}", file=sys.stderr)
             status = 2
-            continue
-        dim = shape.ndim
-        if dim not in models:
-            models[dim] = load_model(weights[dim]) if weights[dim] else load_pretrained(dim)
-        model = models[dim]
-        res = infer(model, shape[None], beam=args.beam, select=args.select, constrained=not args.unconstrained)[0]
-        line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
-        if dim == 2:
-            line += f", chamfer {res.chamfer:.3f} px"
-        if not res.valid:
-            line += " (invalid program: renders empty)"
-        print(line)
-        program = res.program if res.valid else None
-        if args.refine:
-            if dim != 2:
-                print("  refinement is for 2D programs; skipped")
-            elif program is not None:
-                from .refinement import refine_beams
-
-                valid = [b for b in res.beams if _is_valid(b)]
-                ref = refine_beams(valid, shape, maxiter=args.refine_iters)
-                program = ref.program
-                print(f"  refined ({len(valid)} beams): {ref.text}\n  chamfer {res.chamfer:.3f} -> {ref.score:.3f} px")
-        stem = out / Path(src).stem
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write(stem.with_suffix(".txt"), (res.text if program is None else program.text()) + "\n")
-        img = np.zeros((64,) * dim, dtype=bool) if program is None else render(program, dim)[0]
-        if dim == 2:
-            export.save_png(img, stem.with_suffix(".png"))
-            compare = stem.with_name(stem.name + "_compare.png")
-            _save_sheet(_contact_sheet([shape, img], cols=2), compare)
-            written = [stem.with_suffix(".png"), compare]
-        else:
-            export.save_obj(img, stem.with_suffix(".obj"))
-            written = [stem.with_suffix(".obj")]
-        if program is not None:
-            export.save_scad(program, stem.with_suffix(".scad"))
-            written.append(stem.with_suffix(".scad"))
-        print("  wrote " + ", ".join(str(w) for w in written + [stem.with_suffix(".txt")]))
     return status
 
 
@@ -208,7 +265,18 @@ def cmd_evaluate(args) -> int:
 def cmd_export_weights(args) -> int:
     from .train.supervised import export_weights
 
-    path = export_weights(args.checkpoint, args.out, half=not args.float32)
+    if not Path(args.checkpoint).is_file():
+        print(f"error: {args.checkpoint}: no such checkpoint file", file=sys.stderr)
+        return 2
+    try:
+        path = export_weights(args.checkpoint, args.out, half=not args.float32)
+    except OSError as e:
+        print(f"error: {_located(args.out, e)}", file=sys.stderr)
+        return 2
+    except Exception as e:  # torch.load and the checkpoint's layout fail in many ways on a foreign file
+        print(f"error: {args.checkpoint}: not a Lightning training checkpoint of csgnet "
+              f"({type(e).__name__}); `export-weights` reads the .ckpt files that training writes", file=sys.stderr)
+        return 2
     print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
     return 0
 
@@ -311,65 +379,103 @@ def _save_sheet(sheet, path: Path, scale: int = 3) -> None:
     write_png(path, sheet, scale=scale, mkdir=True)
 
 
+def _beam_width(text: str) -> int:
+    from .decode import MAX_BEAM  # csgnet.decode imports torch: loaded only when --beam is given
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MAX_BEAM:
+        raise argparse.ArgumentTypeError(f"must be an integer from 1 to {MAX_BEAM}, got {text!r}")
+    return value
+
+
+def _non_negative(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return value
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m csgnet", description="CSG programs: render, generate datasets, parse shapes, evaluate parsers.")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
     r = sub.add_parser("render", help="render one program to .png (2D), .obj (3D), .npy or .scad")
     r.add_argument("program", help='program text, e.g. "c(32,32,28)s(32,32,20)-"')
-    r.add_argument("-o", "--output", action="append", required=True, help="output file (repeatable)")
+    r.add_argument("-o", "--output", action="append", required=True,
+                   help="output file, repeatable: .png (2D image), .obj (3D mesh), .npy (bool grid), .scad (OpenSCAD)")
     r.add_argument("--dim", type=int, choices=(2, 3), default=None, help="2 or 3 (default: guessed from the text)")
     r.set_defaults(func=cmd_render)
 
     g = sub.add_parser("generate", help="generate a synthetic dataset (train/val/test per length)")
-    g.add_argument("--dim", type=int, choices=(2, 3), default=2)
+    g.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D programs (default 2)")
     g.add_argument("--scale", type=float, default=0.001, help="fraction of the paper's Table 2 split sizes")
-    g.add_argument("--seed", type=int, default=0)
-    g.add_argument("--workers", type=int, default=1)
-    g.add_argument("--lengths", type=int, nargs="*", default=None)
-    g.add_argument("--out", required=True)
-    g.add_argument("--quiet", action="store_true")
+    g.add_argument("--seed", type=int, default=0, help="random seed; the files do not depend on --workers")
+    g.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    g.add_argument("--lengths", type=int, nargs="*", default=None,
+                   help="program lengths (default: all, 3..13 in 2D, 3..7 in 3D)")
+    g.add_argument("--out", required=True, help="dataset folder (the DIMd/ sub-folder is written)")
+    g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=cmd_generate)
 
     d = sub.add_parser("demo", help="generate a small 2D and 3D dataset and preview some programs")
-    d.add_argument("--out", default="demo_output")
-    d.add_argument("--scale", type=float, default=0.0002)
-    d.add_argument("--seed", type=int, default=0)
-    d.add_argument("--workers", type=int, default=2)
-    d.add_argument("--per-length", type=int, default=2)
-    d.add_argument("--quiet", action="store_true")
+    d.add_argument("--out", default="demo_output", help="output folder (default demo_output/)")
+    d.add_argument("--scale", type=float, default=0.0002, help="fraction of the paper's Table 2 split sizes")
+    d.add_argument("--seed", type=int, default=0, help="random seed")
+    d.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    d.add_argument("--per-length", type=int, default=2, help="previewed programs per length")
+    d.add_argument("--quiet", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("parse", help="infer programs for shapes (PNG/JPG images, .npy grids, meshes)")
-    p.add_argument("inputs", nargs="+", help="shape files: .png/.jpg (2D), .npy (2D or 3D), .obj/.ply/.stl (3D)")
-    p.add_argument("--beam", type=int, default=10, help="beam width (1 = greedy)")
+    p = sub.add_parser("parse", help="infer programs for shapes (images, .npy grids, meshes)",
+                       description="Infer a CSG program for each input shape and write, per input, "
+                       "NAME.txt (the program), a render (NAME.png and NAME_compare.png in 2D, NAME.obj in "
+                       "3D) and NAME.scad into --out. Inputs with the same name get NAME_2, NAME_3, ...; "
+                       "a command that would write over one of its inputs is refused. A file that cannot "
+                       "be parsed is reported as 'error: FILE: reason' and the others are processed; the "
+                       "exit status is 2 if any failed.")
+    p.add_argument("inputs", nargs="+", metavar="FILE",
+                   help="shape files: images .png .jpg .jpeg .bmp .gif .tif .tiff .webp (2D, at most "
+                   "4096x4096 pixels), .npy arrays (2D or 3D, bool/int/float, at most 256^3 cells), meshes "
+                   ".obj .ply .stl .off .glb .gltf (3D, at most 5,000,000 triangles)")
+    p.add_argument("--beam", type=_beam_width, default=10, help="beam width, 1 (greedy) to 256 (default 10)")
     p.add_argument("--select", choices=("likelihood", "match"), default="likelihood",
                    help="report the most likely program, or the beam closest to the input")
     p.add_argument("--unconstrained", action="store_true", help="allow invalid programs while decoding")
-    p.add_argument("--refine", action="store_true", help="2D: Powell refinement of every valid beam")
-    p.add_argument("--refine-iters", type=int, default=None, help="Powell iterations (default: to convergence)")
-    p.add_argument("--weights-2d", default=None, help="2D weights file (default: the shipped model)")
-    p.add_argument("--weights-3d", default=None, help="3D weights file (default: the shipped model)")
-    p.add_argument("--out", default="parse_output", help="folder for renders, OpenSCAD files and texts")
+    p.add_argument("--refine", action="store_true", help="2D: Powell refinement (chamfer) of every valid beam")
+    p.add_argument("--refine-iters", type=_non_negative, default=None,
+                   help="Powell iterations, 0 or more (default: to convergence)")
+    p.add_argument("--refine-rule", choices=("guarded", "chamfer"), default="guarded",
+                   help="guarded: keep the unrefined program if refinement costs more than 5 IoU points; "
+                   "chamfer: the paper's choice, the lowest chamfer (docs/refinement.md)")
+    p.add_argument("--weights-2d", default=None, help="2D weights file or checkpoint (default: the shipped model)")
+    p.add_argument("--weights-3d", default=None, help="3D weights file or checkpoint (default: the shipped model)")
+    p.add_argument("--out", default="parse_output", help="folder for the outputs (default parse_output/)")
     p.set_defaults(func=cmd_parse)
 
     e = sub.add_parser("evaluate", help="Table 3 / Table 5 style evaluation on a synthetic test split")
-    e.add_argument("--dim", type=int, choices=(2, 3), default=2)
+    e.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D (default 2)")
     e.add_argument("--data", required=True, help="dataset folder written by `generate`")
     e.add_argument("--weights", nargs="*", default=None, help="weights files (default: the shipped model)")
-    e.add_argument("--beams", type=int, nargs="+", default=[1, 5, 10])
-    e.add_argument("--lengths", type=int, nargs="*", default=None)
+    e.add_argument("--beams", type=_beam_width, nargs="+", default=[1, 5, 10], help="beam widths (default 1 5 10)")
+    e.add_argument("--lengths", type=int, nargs="*", default=None, help="program lengths (default: all)")
     e.add_argument("--per-length", type=int, default=None, help="test programs per length (default: all)")
     e.add_argument("--nn-train", type=int, default=-1, help="training programs for the nearest neighbour "
                    "(-1: all, 0: skip)")
-    e.add_argument("--mode", choices=("improved", "reference"), default="improved")
+    e.add_argument("--mode", choices=("improved", "reference"), default="improved",
+                   help="beam search: improved, or the published reference behaviour")
     e.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
     e.add_argument("--out", default=None, help="write the markdown table here")
     e.set_defaults(func=cmd_evaluate)
 
     x = sub.add_parser("export-weights", help="write a training checkpoint's model as a small weights file")
-    x.add_argument("checkpoint")
-    x.add_argument("--out", required=True)
+    x.add_argument("checkpoint", help="a Lightning .ckpt file written by training")
+    x.add_argument("--out", required=True, help="the weights file to write (.pt)")
     x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
     x.set_defaults(func=cmd_export_weights)
 
@@ -379,7 +485,7 @@ def main(argv=None) -> int:
                     "2D models, supervised and RL-tuned)")
     t4.add_argument("--images", type=int, default=50, help="test silhouettes evaluated (0: all 1,386)")
     t4.add_argument("--seed", type=int, default=0, help="seed of the subset")
-    t4.add_argument("--beams", type=int, nargs="+", default=[1, 10])
+    t4.add_argument("--beams", type=_beam_width, nargs="+", default=[1, 10], help="beam widths (default 1 10)")
     t4.add_argument("--iterations", nargs="+", default=["0", "1", "2", "4", "10", "inf"],
                     help="refinement iteration limits ('inf': to convergence)")
     t4.add_argument("--silhouettes", default=None, help="a silhouette file (default: the shipped set)")
@@ -395,7 +501,7 @@ def main(argv=None) -> int:
     t6.add_argument("--per-length", type=int, default=100, help="test programs per length")
     t6.add_argument("--lengths", type=int, nargs="*", default=None, help="program lengths (default 3..13)")
     t6.add_argument("--seed", type=int, default=0, help="seed for sampled programs")
-    t6.add_argument("--beams", type=int, nargs="+", default=[10, 40])
+    t6.add_argument("--beams", type=_beam_width, nargs="+", default=[10, 40], help="beam widths (default 10 40)")
     t6.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
     t6.add_argument("--out", default=None, help="write the markdown table here")
     t6.set_defaults(func=cmd_table6)
@@ -404,7 +510,12 @@ def main(argv=None) -> int:
     args.argv = list(argv) if argv is not None else sys.argv[1:]
     if args.cmd == "render" and args.dim is None:
         args.dim = 3 if any(h in args.program for h in ("sp(", "cu(", "cy(", "p(", "u(", "y(")) else 2
-    return args.func(args)
+    try:
+        return args.func(args)
+    except BrokenPipeError:  # the reader went away (`... | head -1`): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ __all__ = [
     "generate_dataset",
     "load_dataset",
     "ProgramDataset",
+    "DatasetWarning",
 ]
 
 FORMAT_VERSION = 1
@@ -128,6 +129,21 @@ def generate_dataset(out_dir, dim: int = 2, scale: float = 0.001, seed: int = 0,
     totals = {L: sum(sizes[L].values()) for L in lengths_}
     plan = [(L, i) for L in lengths_ for i in range(-(-totals[L] // rules_.chunk_size))]
 
+    meta = {
+        "format": "one program per line, postfix, no '$' (2D c/s/t, 3D long form sp/cu/cy)",
+        "format_version": FORMAT_VERSION,
+        "complete": False,
+        "dim": dim,
+        "seed": seed,
+        "scale": scale,
+        "lengths": lengths_,
+        "counts": {str(L): sizes[L] for L in lengths_},
+        "rules": asdict(rules_),
+        "versions": {"numpy": np.__version__, "torch": torch.__version__.split("+")[0],
+                     "python": platform.python_version()},
+    }
+    # written first with "complete": false, so that an interrupted run leaves a dataset that says so
+    atomic_write(root / f"{dim}d" / "meta.json", json.dumps(meta, indent=2) + "\n", mkdir=True)
     bar = tqdm(total=sum(totals.values()), desc=f"{dim}D programs", unit="prog", disable=not progress)
     pool = None
     if workers > 1:
@@ -176,18 +192,7 @@ def generate_dataset(out_dir, dim: int = 2, scale: float = 0.001, seed: int = 0,
                 f.cancel()
             pool.shutdown(wait=True, cancel_futures=True)
 
-    meta = {
-        "format": "one program per line, postfix, no '$' (2D c/s/t, 3D long form sp/cu/cy)",
-        "format_version": FORMAT_VERSION,
-        "dim": dim,
-        "seed": seed,
-        "scale": scale,
-        "lengths": lengths_,
-        "counts": {str(L): sizes[L] for L in lengths_},
-        "rules": asdict(rules_),
-        "versions": {"numpy": np.__version__, "torch": torch.__version__.split("+")[0],
-                     "python": platform.python_version()},
-    }
+    meta["complete"] = True
     atomic_write(root / f"{dim}d" / "meta.json", json.dumps(meta, indent=2) + "\n", mkdir=True)
     return {L: dict(sizes[L]) for L in lengths_}
 
@@ -203,7 +208,12 @@ def load_dataset(path, dim: int, split: str, lengths: Iterable[int] | None = Non
         lengths: lengths to read (default: those in ``meta.json``, else every ``len_*`` folder).
         errors: a bad line (unparsable, or a program whose length is not the file's) is reported as
             ``file:line: reason``. ``"warn"`` (default) issues one ``UserWarning`` listing every bad line
-            and keeps the good programs; ``"raise"`` raises one ``ValueError`` listing them all.
+            and keeps the good programs; ``"raise"`` raises one ``ValueError`` listing them all. A line
+            that is not UTF-8 is a bad line too (``file:line:column: not UTF-8 text``).
+
+    Warns:
+        DatasetWarning: ``meta.json`` is missing, marks an unfinished ``generate`` run, or does not
+            list a requested length (files that another run left).
 
     Returns:
         ``{length: [Program, ...]}`` in file order.
@@ -214,22 +224,24 @@ def load_dataset(path, dim: int, split: str, lengths: Iterable[int] | None = Non
     if errors not in ("warn", "raise"):
         raise ValueError(f"errors must be 'warn' or 'raise', got {errors!r}")
     base = Path(path) / f"{dim}d"
+    meta = _read_meta(base / "meta.json")
     if lengths is None:
-        meta = base / "meta.json"
-        if meta.exists():
-            lengths = json.loads(meta.read_text())["lengths"]
+        if meta is not None and isinstance(meta.get("lengths"), list):
+            lengths = meta["lengths"]
         else:
             lengths = sorted(int(p.name[4:]) for p in base.glob("len_*") if p.name[4:].isdigit())
         if not lengths:
             raise FileNotFoundError(f"no {dim}D dataset under {str(base)!r} (expected len_XX folders)")
+    lengths = sorted(int(v) for v in lengths)
+    _check_meta(meta, base / "meta.json", lengths)
     out: dict[int, list[Program]] = {}
     bad: list[str] = []
-    for L in sorted(int(v) for v in lengths):
+    for L in lengths:
         f = _split_path(Path(path), dim, L, split)
         if not f.exists():
             raise FileNotFoundError(f"missing dataset file {str(f)!r}")
-        with open(f, encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
+        lines, errs = _text_lines(f)
+        bad += errs
         programs, errs = parse_lines(lines, dim, file=str(f), errors="collect")
         bad += [str(e) for e in errs]
         # parse_lines drops bad and blank lines; match programs back to line numbers for the length check
@@ -248,6 +260,57 @@ def load_dataset(path, dim: int, split: str, lengths: Iterable[int] | None = Non
             raise ValueError(msg)
         warnings.warn(msg + "\nthe other programs were loaded", UserWarning, stacklevel=2)
     return out
+
+
+class DatasetWarning(UserWarning):
+    """A dataset that may not be what :func:`generate_dataset` wrote in one complete run."""
+
+
+def _read_meta(path: Path) -> dict | None:
+    if not path.exists():
+        return None
+    try:
+        meta = json.loads(path.read_bytes().decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as e:
+        raise ValueError(f"{path}: not a readable meta.json ({type(e).__name__}: {e})") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{path}: not a readable meta.json (a JSON object is expected)")
+    return meta
+
+
+def _check_meta(meta: dict | None, path: Path, lengths: list[int]) -> None:
+    """Warn (:class:`DatasetWarning`) when ``meta.json`` does not vouch for the files about to be read."""
+    if meta is None:
+        problem = "is missing: the files may come from an interrupted or older `generate`"
+    elif meta.get("complete") is False:
+        problem = ("says the run that wrote it did not finish: the files may mix that run's programs "
+                   "with an earlier run's (seeds or scales)")
+    elif [L for L in lengths if L not in meta.get("lengths", [])]:
+        stale = [L for L in lengths if L not in meta.get("lengths", [])]
+        problem = f"does not list lengths {stale}: their files come from another run"
+    else:
+        return
+    warnings.warn(f"{path} {problem}; regenerate the dataset to be sure", DatasetWarning, stacklevel=3)
+
+
+def _text_lines(f: Path) -> tuple[list[str], list[str]]:
+    """The lines of a UTF-8 file, and ``file:line:column: reason`` for each line that is not UTF-8
+    (such a line is read as blank, so that the others keep their numbers)."""
+    raw = f.read_bytes()
+    try:
+        return raw.decode("utf-8").splitlines(), []
+    except UnicodeDecodeError:
+        pass
+    lines, errs = [], []
+    for no, chunk in enumerate(raw.split(b"\n"), start=1):
+        try:
+            lines.append(chunk.decode("utf-8").rstrip("\r"))
+        except UnicodeDecodeError as e:
+            errs.append(f"{f}:{no}:{e.start + 1}: not UTF-8 text (byte 0x{chunk[e.start]:02x})")
+            lines.append("")
+    if lines and lines[-1] == "" and raw.endswith(b"\n"):
+        lines.pop()
+    return lines, errs
 
 
 # ---------------------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ remaining steps cannot reduce the stack any more), so every decoded program is v
 """
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import torch
@@ -28,9 +29,11 @@ from .lang import Program, completable
 from .renderer import StackMachine, primitive_cache, unpack
 from .vocab import codes, vocabulary
 
-__all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled"]
+__all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled", "MAX_BEAM", "check_beam"]
 
 _MODES = ("improved", "reference")
+MAX_BEAM = 256
+"""Widest beam accepted: decoding costs grow with ``N × width`` rows (the paper uses at most 40)."""
 
 
 @dataclass
@@ -175,6 +178,13 @@ class _Rows:
         return torch.stack(out[::-1], dim=1)
 
 
+def check_beam(width, name: str = "beam") -> int:
+    """``width`` as an int in ``[1, MAX_BEAM]``; otherwise a ``ValueError`` naming ``name``."""
+    if isinstance(width, bool) or not isinstance(width, numbers.Integral) or not 1 <= width <= MAX_BEAM:
+        raise ValueError(f"{name} must be an integer from 1 to {MAX_BEAM}, got {width!r}")
+    return int(width)
+
+
 def _check(model, targets, max_len, mode):
     if mode not in _MODES:
         raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
@@ -200,9 +210,7 @@ def beam_search(model, targets, width: int = 10, max_len: int | None = None, mod
         :class:`Decoded` with ``k = width`` hypotheses per target, most likely first.
     """
     targets, T = _check(model, targets, max_len, mode)
-    if width < 1:
-        raise ValueError(f"width must be >= 1, got {width}")
-    N, w = targets.shape[0], int(width)
+    N, w = targets.shape[0], check_beam(width, "width")
     rows = _Rows(model, targets, w, T)
     V = model.config.vocab_size
     score = torch.full((N, w), float("-inf"), device=targets.device)
@@ -303,6 +311,7 @@ def sample(model, targets, max_len: int | None = None, generator: torch.Generato
 
 
 def decode(model, targets, beam: int = 1, **kwargs) -> Decoded:
-    """Greedy for ``beam == 1``, else :func:`beam_search`."""
+    """Greedy for ``beam == 1``, else :func:`beam_search`; ``beam`` is 1 to :data:`MAX_BEAM`."""
+    beam = check_beam(beam)
     return greedy(model, targets, **kwargs) if beam <= 1 else beam_search(model, targets, beam, **kwargs)
 

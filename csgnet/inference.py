@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from shapeio import InputError
+from shapeio.arrays import read_grid
 from shapeio.image import IMAGE_SUFFIXES, centre_on_canvas, fit_to_canvas, read_mask
 from shapeio.mesh import MESH_SUFFIXES, load_mesh
 
@@ -49,7 +50,9 @@ def load_shape(path) -> np.ndarray:
     * Meshes: loaded with trimesh, scaled so the longest side spans 56 voxels, voxelised and filled.
 
     Raises:
-        InputError: unreadable file, unknown type, empty image, a mesh with no volume.
+        InputError: unreadable file, unknown type, empty or full image or grid, a mesh with no volume or
+            a non-finite vertex, an input over the size limits (``shapeio.image.MAX_IMAGE_PIXELS``,
+            ``shapeio.arrays.MAX_GRID_CELLS``, ``shapeio.mesh.MAX_MESH_FACES``).
     """
     path = Path(path)
     name = str(path)
@@ -59,15 +62,11 @@ def load_shape(path) -> np.ndarray:
     if suffix in IMAGE_SUFFIXES:
         return fit_to_canvas(read_mask(path), MARGIN, name)
     if suffix == ".npy":
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as e:
-            raise InputError(f"{name}: cannot read the array ({e})") from None
-        if arr.ndim not in (2, 3):
-            raise InputError(f"{name}: expected a 2D image or 3D voxel grid, got shape {arr.shape}")
-        mask = arr != 0
+        mask = read_grid(path)
         if not mask.any():
             raise InputError(f"{name}: empty (no non-zero cells)")
+        if mask.all():
+            raise InputError(f"{name}: every cell is non-zero (no background); nothing to parse")
         return fit_to_canvas(mask, MARGIN, name)
     if suffix in MESH_SUFFIXES:
         return _voxelise(path)

@@ -16,6 +16,8 @@ stack underflow or an unfinished stack raise :class:`ParseError`, which names th
 its 0-based character position. Whitespace between tokens is ignored, and everything after the first
 ``$`` is dropped, as for network output. Unlike the reference, positions may be negative integers
 (``c(-4,10,12)``): such shapes are clipped to the canvas. Radii and heights must be non-negative.
+Parameters are ASCII decimal integers of magnitude at most :data:`MAX_PARAM`, and a program has at
+most :data:`MAX_TOKENS` tokens (docs/csg.md, "Limits").
 
 This module needs only the standard library and the table of :mod:`csgnet.primitives` (NumPy).
 """
@@ -43,10 +45,16 @@ __all__ = [
     "draw_token",
     "OPERATORS",
     "STOP",
+    "MAX_PARAM",
+    "MAX_TOKENS",
 ]
 
 STOP = "$"
 OPERATORS = {"+": "union", "*": "intersect", "-": "subtract"}
+MAX_PARAM = 1000
+"""Largest magnitude of a primitive parameter (the canvas is 64 cells; the grammar uses 8..56)."""
+MAX_TOKENS = 1024
+"""Most tokens in one program (the paper's programs have at most 13)."""
 
 
 class ParseError(ValueError):
@@ -108,6 +116,8 @@ class Draw:
             raise ValueError(f"{row.name} takes {len(row.params)} parameters {row.params}, got {len(self.params)}")
         if not all(isinstance(v, int) and not isinstance(v, bool) for v in self.params):
             raise ValueError(f"{row.name} parameters must be integers, got {self.params}")
+        if any(abs(v) > MAX_PARAM for v in self.params):
+            raise ValueError(f"{row.name} parameters must be within ±{MAX_PARAM}, got {self.params}")
 
     @property
     def dim(self) -> int:
@@ -168,6 +178,8 @@ class Program:
                 raise ValueError(f"{t.name} is a {t.dim}D primitive in a {self.dim}D program")
             if not isinstance(t, (Draw, Op)):
                 raise TypeError(f"program tokens must be Draw or Op, got {type(t).__name__}")
+        if len(self.tokens) > MAX_TOKENS:
+            raise ValueError(f"a program has at most {MAX_TOKENS} tokens, got {len(self.tokens)}")
 
     def __len__(self) -> int:
         return len(self.tokens)
@@ -321,7 +333,7 @@ _TOKEN_RE = re.compile(
     r"|(?P<head>[A-Za-z_]+)\((?P<args>[^()]*)\)"
     r"|(?P<bad>[A-Za-z_]+\(?[^()+*$\-]*|.)"
 )
-_INT_RE = re.compile(r"[+-]?\d+")
+_INT_RE = re.compile(r"[+-]?[0-9]+")  # ASCII digits only (\d would also take '٣')
 # The fast path: a text (before its first ``$``) that is whitespace, draw tokens and operators only.
 _WELL_FORMED = re.compile(r"(?:\s*(?:[A-Za-z_]+\([^()]*\)|[+*\-]))*\s*")
 _PIECE = re.compile(r"[A-Za-z_]+\([^()]*\)|[+*\-]")
@@ -404,7 +416,11 @@ def _parse_args(args: str, head: str, row: P.Primitive, text: str, pos: int):
         if not _INT_RE.fullmatch(s):
             what = "missing" if s == "" else f"non-integer {s!r}"
             raise ParseError(f"{name} parameter {pname} is {what}: parameters are integers", text, pos, token)
-        v = int(s)
+        v = int(s) if len(s) <= 12 else MAX_PARAM + 1  # never convert a huge digit string
+        if abs(v) > MAX_PARAM:
+            shown = s if len(s) <= 12 else s[:9] + "..."
+            raise ParseError(f"{name} parameter {pname} is {shown}: parameters are within ±{MAX_PARAM}",
+                             text, pos, token)
         if v < 0 and pname in row.sizes:
             raise ParseError(f"{name} parameter {pname} must be >= 0, got {v}", text, pos, token)
         values.append(v)
@@ -432,7 +448,8 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
     if not isinstance(text, str):
         raise TypeError(f"program text must be a str, got {type(text).__name__}")
     fast = _fast_tokens(text, dim)
-    if fast is not None and (not strict or (fast and prefix_status(fast) == "complete")):
+    if fast is not None and len(fast) <= MAX_TOKENS and (
+            not strict or (fast and prefix_status(fast) == "complete")):
         return Program(tuple(fast), dim)
     # the full scan: locates the first error (or accepts what the fast path could not)
     tokens: list[Token] = []
@@ -445,6 +462,8 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
         kind = next((g for g in ("op", "stop", "head", "bad") if m.group(g) is not None), None)
         if kind == "stop":
             break
+        if kind in ("op", "head") and len(tokens) == MAX_TOKENS:
+            raise ParseError(f"program too long: more than {MAX_TOKENS} tokens", text, pos, m.group(0))
         if kind == "op":
             tokens.append(Op(m.group("op")))
             positions.append(pos)

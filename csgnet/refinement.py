@@ -28,12 +28,13 @@ import torch
 from scipy import optimize
 
 from .lang import Draw, Program, is_valid, parse
-from .metrics import CHAMFER_PENALTY
+from .metrics import CHAMFER_PENALTY, chamfer, iou
 from .primitives import MAX_PARAMS, SIZE
-from .renderer import draw_packed
+from .renderer import draw_packed, render_programs
 from .vocab import codes
 
-__all__ = ["METRICS", "MODES", "RefineResult", "refine", "refine_beams"]
+__all__ = ["METRICS", "MODES", "RULES", "MAX_IOU_DROP", "RefineResult", "Refined", "refine", "refine_beams",
+           "refine_guarded", "program_scores"]
 
 METRICS = ("chamfer", "iou")
 MODES = ("improved", "reference")
@@ -46,6 +47,10 @@ TOL = 1e-4
 """Powell's ``tol`` (the reference's value)."""
 PREFETCH = 8
 """A missing primitive is drawn together with its axis neighbours up to this many pixels away."""
+RULES = ("guarded", "chamfer")
+"""How :func:`refine_guarded` picks between the refined and the unrefined program (docs/refinement.md)."""
+MAX_IOU_DROP = 0.05
+"""The ``"guarded"`` rule keeps the unrefined program when refinement lowers IoU by more than this."""
 
 
 @dataclass(frozen=True)
@@ -385,3 +390,65 @@ def refine_beams(programs: Sequence[Program | str], target, metric: str = "chamf
         if best is None or _better(r.score, best.score, metric):
             best = r
     return best
+
+
+# ---------------------------------------------------------------------------------------------
+# choosing what a parser writes
+
+
+@dataclass(frozen=True)
+class Refined:
+    """What :func:`refine_guarded` chose.
+
+    Attributes:
+        program: the program to use: the refined one, or ``start`` when the rule kept it.
+        result: the chamfer refinement of the candidates (:func:`refine_beams`).
+        before: ``(iou, chamfer)`` of ``start`` against the target.
+        after: ``(iou, chamfer)`` of the refined program.
+        kept_start: the rule rejected the refined program.
+        rule: ``"guarded"`` or ``"chamfer"``.
+    """
+
+    program: Program
+    result: RefineResult
+    before: tuple[float, float]
+    after: tuple[float, float]
+    kept_start: bool
+    rule: str
+
+
+def program_scores(programs: Sequence[Program | str], target) -> list[tuple[float, float]]:
+    """``(iou, chamfer)`` of each 2D program against one target: IoU ``|A∧B| / |A∨B|`` (0 when both
+    are empty) and the paper's edge chamfer in pixels (:func:`csgnet.metrics.chamfer`); an invalid
+    program renders empty."""
+    t = _check_target(target)
+    pred = render_programs([_check_program(p) for p in programs], 2).cpu().numpy()
+    ious = np.nan_to_num(np.asarray(iou(pred, t), dtype=np.float64).reshape(-1), nan=0.0)
+    cds = np.asarray(chamfer(pred, t), dtype=np.float64).reshape(-1)
+    return [(float(a), float(b)) for a, b in zip(ious, cds)]
+
+
+def refine_guarded(start: Program | str, programs: Sequence[Program | str], target, rule: str = "guarded",
+                   maxiter: int | None = None, max_iou_drop: float = MAX_IOU_DROP) -> Refined:
+    """Refine candidates by chamfer (the paper's objective) and decide what a parser should write.
+
+    Args:
+        start: the program chosen before refinement (e.g. the most likely beam).
+        programs: the candidates refined (e.g. every valid beam; ``start`` need not be among them).
+        target: (64, 64) image (non-zero = on).
+        rule: ``"guarded"`` (default): the refined program unless its IoU is more than
+            ``max_iou_drop`` below ``start``'s, then ``start``; ``"chamfer"``: the paper's choice, the
+            refined program with the lowest chamfer, whatever its IoU.
+        maxiter: Powell iterations (see :func:`refine`).
+        max_iou_drop: the IoU loss the ``"guarded"`` rule tolerates.
+
+    Returns:
+        A :class:`Refined` with the chosen program and both programs' IoU and chamfer.
+    """
+    if rule not in RULES:
+        raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+    start = _check_program(start)
+    result = refine_beams(programs, target, maxiter=maxiter)
+    before, after = program_scores([start, result.program], target)
+    kept = rule == "guarded" and after[0] < before[0] - max_iou_drop
+    return Refined(start if kept else result.program, result, before, after, kept, rule)

@@ -1,27 +1,102 @@
-"""Atomic writes, the guard that keeps outputs off inputs, and the error for unreadable user files."""
+"""Atomic writes, the guard that keeps outputs off inputs, and the error for unreadable user files.
+
+The permissions and temporary-file names of :func:`atomic_write` are described in ``docs/shapeio.md``.
+"""
 
 from __future__ import annotations
 
+import glob
 import os
+import re
+import stat
 import tempfile
+import threading
+import time
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Union
 
-__all__ = ["InputError", "atomic_write", "refuse_overwrite"]
+__all__ = ["InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "STALE_TEMP_SECONDS"]
 
 PathLike = Union[str, os.PathLike]
+
+STALE_TEMP_SECONDS = 24 * 3600
+"""A temporary file of :func:`atomic_write` older than this is stale even if its writer's process id is
+in use again."""
+_TEMP_RE = re.compile(r"\.(?P<name>.+)\.atomic-(?P<pid>\d+)-[^.]+\.tmp")
+_UMASK_LOCK = threading.Lock()
 
 
 class InputError(ValueError):
     """A user's file that cannot be read as asked; the message starts with the file's path."""
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where the system allows (Linux ``/proc``)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    with _UMASK_LOCK:  # elsewhere the only way to read it is to set it and put it back
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # a process of another user, or a system that cannot say: keep its file
+    return True
+
+
+def remove_stale_temps(folder: PathLike, name: str | None = None) -> list[Path]:
+    """Remove the temporary files that killed :func:`atomic_write` calls left in ``folder``.
+
+    A temporary file is named ``.<target>.atomic-<pid>-<random>.tmp``; it is stale when the process
+    ``<pid>`` no longer exists or when it is older than :data:`STALE_TEMP_SECONDS`. Files being written
+    by a live process are kept. :func:`atomic_write` calls this for its own target before writing.
+
+    Args:
+        folder: the folder to clean.
+        name: only the temporary files of this target file name (default: every target).
+
+    Returns:
+        The files removed.
+    """
+    pattern = f".{glob.escape(name)}.atomic-*.tmp" if name is not None else ".*.atomic-*.tmp"
+    removed = []
+    now = time.time()
+    for tmp in glob.glob(os.path.join(glob.escape(str(folder)), pattern)):
+        m = _TEMP_RE.fullmatch(os.path.basename(tmp))
+        if m is None:
+            continue
+        try:
+            old = now - os.stat(tmp).st_mtime > STALE_TEMP_SECONDS
+            if old or not _alive(int(m.group("pid"))):
+                os.unlink(tmp)
+                removed.append(Path(tmp))
+        except FileNotFoundError:  # removed by another cleanup meanwhile
+            pass
+    return removed
+
+
 def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], object]],
                  mkdir: bool = False) -> Path:
     """Write a file so that a reader never sees it half-written.
 
-    The content goes to a temporary file in the target's directory, is flushed to disk, then
-    ``os.replace``-d onto ``path``; on any error the temporary file is removed and ``path`` is untouched.
+    The content goes to a temporary file ``.<name>.atomic-<pid>-<random>.tmp`` in the target's
+    directory, is flushed to disk, then ``os.replace``-d onto ``path``; on any error the temporary file
+    is removed and ``path`` is untouched. The file gets the usual permissions: those of the file it
+    replaces, else ``0o666`` less the umask. Temporary files left by killed writes to the same target
+    are removed first (:func:`remove_stale_temps`).
 
     Args:
         path: the target file.
@@ -31,6 +106,9 @@ def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], ob
 
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        FileNotFoundError: the target's directory does not exist (and ``mkdir`` is false).
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
@@ -38,9 +116,15 @@ def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], ob
         folder.mkdir(parents=True, exist_ok=True)
     elif not folder.is_dir():
         raise FileNotFoundError(f"{path}: directory {str(folder)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    remove_stale_temps(folder, path.name)
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        mode = 0o666 & ~_umask()
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.atomic-{os.getpid()}-", suffix=".tmp", dir=folder)
     try:
         with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), mode)
             if callable(data):
                 data(f)
             else:

@@ -13,22 +13,26 @@ The rules, and which one is the default where, are in ``docs/shapeio.md``.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Sequence, Union
 
 import numpy as np
-from PIL import Image, UnidentifiedImageError
+from PIL import Image
 
 from .arrays import as_numpy
 from .files import InputError, atomic_write
 
-__all__ = ["IMAGE_SUFFIXES", "write_png", "read_gray", "binarise", "read_mask", "fit_to_canvas",
+__all__ = ["IMAGE_SUFFIXES", "MAX_IMAGE_PIXELS", "write_png", "read_gray", "binarise", "read_mask", "fit_to_canvas",
            "centre_on_canvas", "list_images", "read_masks", "read_image_folder"]
 
 PathLike = Union[str, os.PathLike]
 
 #: File types read as images (lower-case suffixes).
 IMAGE_SUFFIXES = (".bmp", ".gif", ".jpeg", ".jpg", ".png", ".tif", ".tiff", ".webp")
+#: Largest image read (width × height); a bigger file is an :class:`~shapeio.files.InputError` before
+#: its pixels are decoded.
+MAX_IMAGE_PIXELS = 4096 * 4096
 SIZE = 64  # the canvas side of the targets
 MARGIN = 4  # empty cells kept on each end of a fitted shape's longest side
 
@@ -88,24 +92,41 @@ def read_gray(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
 
     Raises:
         FileNotFoundError: no such file.
-        InputError: the file is not a readable image (the message names it).
+        InputError: the file is not a readable image, or has more than :data:`MAX_IMAGE_PIXELS`
+            pixels (the message names it).
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     kind = path.suffix[1:].upper() or "image"
     try:
-        with Image.open(path) as im:
-            im.load()
-            if im.mode == "PA" or (im.mode == "P" and "transparency" in im.info):
-                im = im.convert("RGBA")
-            alpha = np.asarray(im.getchannel("A")) if "A" in im.getbands() else None
-            if im.mode in ("I", "I;16", "I;16B", "I;16L"):
-                gray = (np.clip(np.asarray(im, dtype=np.int64), 0, 65535) >> 8).astype(np.uint8)
-            else:
-                gray = np.asarray(im.convert("L"))
-    except (UnidentifiedImageError, OSError, ValueError) as e:
-        raise InputError(f"{path}: not a readable {kind} image (cannot read it: {e})") from None
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                w, h = im.size
+                if w * h > MAX_IMAGE_PIXELS:
+                    raise InputError(f"{path}: the image is {w}x{h} pixels; at most "
+                                     f"MAX_IMAGE_PIXELS = {MAX_IMAGE_PIXELS} are read")
+                gray, alpha = _gray_alpha(im)
+    except InputError:
+        raise
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as e:
+        raise InputError(f"{path}: the image is too large to read ({e})") from None
+    except Exception as e:  # Pillow's decoders raise many types for corrupt files (SyntaxError, EOFError, ...)
+        raise InputError(f"{path}: not a readable {kind} image (cannot read it: {type(e).__name__}: {e})") from None
+    return gray, alpha
+
+
+def _gray_alpha(im) -> tuple[np.ndarray, np.ndarray | None]:
+    """The grey levels and alpha of an open Pillow image (see :func:`read_gray`)."""
+    im.load()
+    if im.mode == "PA" or (im.mode == "P" and "transparency" in im.info):
+        im = im.convert("RGBA")
+    alpha = np.asarray(im.getchannel("A")) if "A" in im.getbands() else None
+    if im.mode in ("I", "I;16", "I;16B", "I;16L"):
+        gray = (np.clip(np.asarray(im, dtype=np.int64), 0, 65535) >> 8).astype(np.uint8)
+    else:
+        gray = np.asarray(im.convert("L"))
     return gray, alpha
 
 

@@ -18,12 +18,14 @@ import numpy as np
 from .arrays import as_numpy
 from .files import InputError, atomic_write
 
-__all__ = ["MESH_SUFFIXES", "WRITE_SUFFIXES", "obj_text", "write_mesh", "write_parts", "load_mesh", "read_mesh"]
+__all__ = ["MESH_SUFFIXES", "WRITE_SUFFIXES", "MAX_MESH_FACES", "obj_text", "write_mesh", "write_parts", "load_mesh", "read_mesh"]
 
 PathLike = Union[str, os.PathLike]
 
 #: File types read as meshes (lower-case suffixes).
 MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".off", ".ply", ".stl")
+#: Most triangles in a mesh read by :func:`load_mesh`.
+MAX_MESH_FACES = 5_000_000
 #: File types :func:`write_mesh` writes.
 WRITE_SUFFIXES = (".obj", ".ply", ".glb")
 
@@ -172,18 +174,30 @@ def load_mesh(path: PathLike):
 
     Raises:
         FileNotFoundError: no such file.
-        InputError: unreadable, or no triangles (the message names the file).
+        InputError: unreadable, no triangles, more than :data:`MAX_MESH_FACES` triangles, or a NaN or
+            infinite vertex coordinate (the message names the file).
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     trimesh = _trimesh()
     try:
-        mesh = trimesh.load(path, force="mesh")
+        # unprocessed, so that faces on non-finite vertices are seen here instead of silently dropped
+        mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as e:  # trimesh raises many types for bad files
         raise InputError(f"{path}: cannot read the mesh ({type(e).__name__}: {e})") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{path}: the file holds no triangles")
+    if len(mesh.faces) > MAX_MESH_FACES:
+        raise InputError(f"{path}: the mesh has {len(mesh.faces)} triangles; at most "
+                         f"MAX_MESH_FACES = {MAX_MESH_FACES} are read")
+    bad = ~np.isfinite(np.asarray(mesh.vertices)).all(axis=1)
+    if bad.any():
+        raise InputError(f"{path}: vertex {int(np.argmax(bad)) + 1} has a NaN or infinite coordinate")
+    try:
+        mesh.process()
+    except Exception as e:
+        raise InputError(f"{path}: cannot read the mesh ({type(e).__name__}: {e})") from None
     return mesh
 
 

@@ -1,7 +1,9 @@
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from csgnet.__main__ import main
 
@@ -49,3 +51,80 @@ def test_parse_refuses_to_write_over_its_input(tmp_path, capsys):
     assert main(["parse", str(src), "--out", str(tmp_path)]) == 2
     assert "shape.png: this output would overwrite an input file" in capsys.readouterr().err
     assert src.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["shape.png"]
+
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+def test_defect2_same_named_inputs_get_distinct_outputs(tmp_path, capsys):
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        assert main(["render", "c(32,32,20)" if sub == "a" else "s(32,32,20)", "-o", str(tmp_path / sub / "x.png")]) == 0
+    (tmp_path / "x_2.npy").write_bytes((tmp_path / "a" / "x.png").read_bytes())  # a bad input named like an output
+    out = tmp_path / "out"
+    rc = main(["parse", str(tmp_path / "a" / "x.png"), str(tmp_path / "b" / "x.png"), str(tmp_path / "x_2.npy"),
+               "--beam", "1", "--out", str(out)])
+    assert rc == 2  # x_2.npy is not an array
+    names = sorted(p.name for p in out.iterdir())
+    assert {"x.txt", "x_3.txt", "x.png", "x_3.png"} <= set(names) and "x_2.txt" not in names
+
+
+def test_defect2_obj_input_in_the_output_folder_is_protected(tmp_path, capsys):
+    src = tmp_path / "table.obj"
+    src.write_bytes((EXAMPLES / "table.obj").read_bytes())
+    before = src.read_bytes()
+    assert main(["parse", str(src), "--out", str(tmp_path)]) == 2
+    assert "table.obj: this output would overwrite an input file" in capsys.readouterr().err
+    assert src.read_bytes() == before
+
+
+@pytest.mark.parametrize("option", [["--beam", "0"], ["--beam", "-5"], ["--beam", "100000"],
+                                    ["--refine-iters", "-1"]])
+def test_defect9_bad_numeric_options_are_refused(tmp_path, option, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["parse", str(EXAMPLES / "house.png"), *option, "--out", str(tmp_path)])
+    assert e.value.code == 2 and "must be an integer" in capsys.readouterr().err
+
+
+def test_defect10_render_into_a_missing_folder_is_an_error(tmp_path, capsys):
+    assert main(["render", "c(32,32,20)", "-o", str(tmp_path / "no" / "a.png")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_defect10_3d_weights_given_as_weights_2d(tmp_path, capsys):
+    from csgnet.inference import PRETRAINED, WEIGHTS
+
+    rc = main(["parse", str(EXAMPLES / "house.png"), "--weights-2d", str(WEIGHTS / PRETRAINED[3]),
+               "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "a 3D model, given for 2D inputs (--weights-2d)" in err and "Traceback" not in err
+
+
+def test_defect10_export_weights_on_a_foreign_file(tmp_path, capsys):
+    import pickle
+
+    (tmp_path / "x.ckpt").write_bytes(pickle.dumps({"a": object}, protocol=2))
+    assert main(["export-weights", str(tmp_path / "x.ckpt"), "--out", str(tmp_path / "w.pt")]) == 2
+    err = capsys.readouterr().err
+    assert "not a Lightning training checkpoint" in err and "weights_only" not in err
+
+
+def test_defect10_parse_into_a_closed_pipe_ends_quietly(tmp_path):
+    cmd = (f"{sys.executable} -m csgnet parse {EXAMPLES / 'house.png'} {EXAMPLES / 'ring.png'} --beam 1 "
+           f"--out {tmp_path} | head -c 1")
+    r = subprocess.run(["bash", "-c", f"set -o pipefail; {cmd}"], capture_output=True, text=True, timeout=300)
+    assert "Traceback" not in r.stderr and "BrokenPipe" not in r.stderr
+
+
+def test_defect6_parse_refine_reports_the_program_it_writes(tmp_path, capsys):
+    import csgnet
+    from csgnet.refinement import program_scores
+
+    assert main(["parse", str(EXAMPLES / "house.png"), "--beam", "3", "--refine", "--refine-iters", "1",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    written = csgnet.parse((tmp_path / "house.txt").read_text().strip())
+    from csgnet.inference import load_shape
+
+    (i1, c1), = program_scores([written], load_shape(EXAMPLES / "house.png"))
+    assert f"after: IoU {100 * i1:.2f}%, chamfer {c1:.3f} px" in out and "before: IoU" in out

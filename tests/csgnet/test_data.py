@@ -1,5 +1,7 @@
 import collections
 import math
+import re
+import warnings
 import shutil
 
 import numpy as np
@@ -251,3 +253,49 @@ def test_jitter_matches_the_affine_formula_and_draw_order():
         assert (out[b] == want).all()
         changed += int((out[b] != imgs[b]).sum())
     assert changed > 0
+
+
+def test_defect7_interrupted_or_mixed_generate_warns(tmp_path, monkeypatch):
+    import json
+
+    from csgnet import data
+    from csgnet.data import DatasetWarning
+
+    generate_dataset(tmp_path, dim=2, scale=0.0002, seed=0, lengths=[3, 5], progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_dataset(tmp_path, 2, "test")  # a complete run: no warning
+
+    def killed(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(data, "sample_chunk", killed)
+    with pytest.raises(KeyboardInterrupt):
+        generate_dataset(tmp_path, dim=2, scale=0.0002, seed=1, lengths=[3, 5], progress=False)
+    assert json.loads((tmp_path / "2d" / "meta.json").read_text())["complete"] is False
+    with pytest.warns(DatasetWarning, match="did not finish"):
+        load_dataset(tmp_path, 2, "test")
+    (tmp_path / "2d" / "meta.json").unlink()
+    with pytest.warns(DatasetWarning, match="meta.json is missing"):
+        load_dataset(tmp_path, 2, "test")
+
+
+def test_defect7_lengths_left_by_another_run_warn(tmp_path):
+    from csgnet.data import DatasetWarning
+
+    generate_dataset(tmp_path, dim=2, scale=0.0002, seed=0, lengths=[3, 5], progress=False)
+    generate_dataset(tmp_path, dim=2, scale=0.0002, seed=1, lengths=[3], progress=False)
+    with pytest.warns(DatasetWarning, match=r"does not list lengths \[5\]"):
+        load_dataset(tmp_path, 2, "test", lengths=[3, 5])
+
+
+def test_defect8_non_utf8_line_is_located_and_the_rest_loads(tmp_path):
+    generate_dataset(tmp_path, dim=2, scale=0.0002, seed=0, lengths=[3], progress=False)
+    f = tmp_path / "2d" / "len_03" / "test.txt"
+    lines = f.read_bytes().splitlines(keepends=True)
+    f.write_bytes(b"c(32,32,8)\xffs(8,8,8)+\n" + b"".join(lines))
+    with pytest.warns(UserWarning, match=re.escape(f"{f}:1:11: not UTF-8 text (byte 0xff)")):
+        progs = load_dataset(tmp_path, 2, "test")
+    assert len(progs[3]) == len(lines)
+    with pytest.raises(ValueError, match="not UTF-8"):
+        load_dataset(tmp_path, 2, "test", errors="raise")

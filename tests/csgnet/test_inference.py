@@ -1,4 +1,5 @@
 """Inference on users' shapes: input loading, weights, infer, the parse and evaluate commands."""
+import re
 from pathlib import Path
 
 import numpy as np
@@ -163,3 +164,74 @@ def test_evaluate_rows_and_nearest_neighbour():
     assert nn.iou[3] == pytest.approx(1.0) and nn.chamfer[3] == pytest.approx(0.0)
     md = markdown_tables([nn] + rows, 2, note="note")
     assert "| nearest neighbour | 100.00 | 100.00 | 0.000 |" in md and "Table 3" in md
+
+
+def _corrupt_files(tmp_path):
+    """One file per kind of corrupt input seen in the field, with the text its error must carry."""
+    import zlib
+
+    good = tmp_path / "good.png"
+    Image.new("L", (40, 40), 0).save(good)
+    data = good.read_bytes()
+    files = {"truncated.png": (data[: len(data) // 2], "truncated.png: not a readable PNG image"),
+             "badchunk.png": (data[:8] + b"\x00\x00\x00\x0dIHDX" + data[16:], "badchunk.png: not a readable"),
+             "header.npy": (b"\x93NUMPY\x01\x00\x10\x00{'descr': '<f8'   \n", "header.npy: not a readable .npy"),
+             "short.npy": (b"\x93NUMPY", "short.npy: not a readable .npy")}
+    # a 20000 x 20000 PNG header over a tiny compressed body: refused before decoding
+    ihdr = b"IHDR" + (20000).to_bytes(4, "big") * 2 + bytes([1, 0, 0, 0, 0])
+    idat = b"IDAT" + zlib.compress(b"\x00" * 64)
+
+    def chunk(body):
+        return (len(body) - 4).to_bytes(4, "big") + body + zlib.crc32(body).to_bytes(4, "big")
+
+    bomb = b"\x89PNG\r\n\x1a\n" + chunk(ihdr) + chunk(idat) + chunk(b"IEND")
+    files["bomb.png"] = (bomb, "bomb.png: the image is")
+    for name, (content, _) in files.items():
+        (tmp_path / name).write_bytes(content)
+    return {name: msg for name, (_, msg) in files.items()}
+
+
+def test_defect5_corrupt_images_and_arrays_are_input_errors(tmp_path):
+    for name, message in _corrupt_files(tmp_path).items():
+        with pytest.raises(InputError) as e:
+            load_shape(tmp_path / name)
+        assert message in str(e.value), (name, str(e.value))
+
+
+@pytest.mark.parametrize("array, message", [
+    (np.full((8, 8), np.nan), "NaN or infinite"),
+    (np.ones((8, 8)), "every cell is non-zero"),
+    (np.ones((8, 8), dtype=np.complex64), "complex64 values"),
+    (np.array([["a", "b"], ["c", "d"]]), "<U1 values"),
+    (np.zeros((300, 300, 300), dtype=bool), "at most MAX_GRID_CELLS"),
+])
+def test_defect5_degenerate_npy_inputs_are_refused(tmp_path, array, message):
+    np.save(tmp_path / "a.npy", array)
+    with pytest.raises(InputError, match=re.escape(message)):
+        load_shape(tmp_path / "a.npy")
+
+
+def test_defect5_mesh_with_a_nan_vertex_is_refused(tmp_path):
+    (tmp_path / "nan.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 nan\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")
+    with pytest.raises(InputError, match=r"nan\.obj: vertex 4 has a NaN"):
+        load_shape(tmp_path / "nan.obj")
+
+
+def test_defect5_a_bad_file_in_a_batch_is_reported_and_the_rest_parsed(tmp_path, capsys):
+    from csgnet.__main__ import main
+
+    names = sorted(_corrupt_files(tmp_path))
+    rc = main(["parse", *(str(tmp_path / n) for n in names), str(EXAMPLES / "house.png"), "--beam", "1",
+               "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    for n in names:
+        assert f"error: {tmp_path / n}: " in err
+    assert (tmp_path / "out" / "house.txt").is_file()
+
+
+@pytest.mark.parametrize("beam", [0, -5, 100000, 2.5, True])
+def test_defect9_beam_width_is_checked(beam):
+    model = CSGNet(preset("small", 2, False))
+    with pytest.raises(ValueError, match="beam must be an integer from 1 to 256"):
+        infer(model, np.zeros((64, 64), bool), beam=beam)

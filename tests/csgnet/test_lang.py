@@ -1,4 +1,5 @@
 import random
+import re
 
 import pytest
 
@@ -170,3 +171,33 @@ def test_fast_path_agrees_with_the_full_scan(monkeypatch, strict):
     fast_again = [outcome(t, d) for t, d in FAST_PATH_TEXTS]  # from the per-token cache
     monkeypatch.setattr(lang, "_fast_tokens", lambda text, dim: None)
     assert fast == fast_again == [outcome(t, d) for t, d in FAST_PATH_TEXTS]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("c(٣٢,32,10)", "non-integer '٣٢'"),
+    ("c(32,32,１０)", "non-integer '１０'"),
+    ("c(99999999999999999999,32,10)", "parameter x is 999999999...: parameters are within ±1000"),
+    ("s(32,-1001,10)", "parameter y is -1001"),
+])
+def test_defect9_parameters_are_ascii_integers_within_the_limit(text, message):
+    from csgnet.lang import MAX_PARAM
+
+    with pytest.raises(ParseError, match=re.escape(message)) as e:
+        parse(text)
+    assert e.value.position == 0
+    assert parse(f"c({MAX_PARAM},-{MAX_PARAM},{MAX_PARAM})").draws[0].params == (1000, -1000, 1000)
+    with pytest.raises(ValueError, match="within"):
+        Draw("c", (10**20, 32, 10))
+
+
+def test_defect9_program_length_limit_is_located():
+    from csgnet.lang import MAX_TOKENS
+
+    n = MAX_TOKENS // 2
+    ok = "c(1,1,1)" * (n + 1) + "+" * n  # MAX_TOKENS + 1 tokens
+    with pytest.raises(ParseError, match=f"more than {MAX_TOKENS} tokens") as e:
+        parse(ok)
+    assert e.value.position == len("c(1,1,1)" * (n + 1) + "+" * (n - 1))
+    assert len(parse("c(1,1,1)" * n + "+" * (n - 1))) == MAX_TOKENS - 1
+    err = ParseError("x", "t", 3).located("data.txt", 7)
+    assert str(err).startswith("data.txt:7:4: x")

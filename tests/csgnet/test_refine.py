@@ -248,3 +248,17 @@ def test_scorer_equals_metrics_bit_for_bit():
             w = pack(torch.from_numpy(im)).numpy()
             assert cd.score(w) == metrics.chamfer(im, t)
             assert io.score(w) == metrics.iou(im, t)
+
+
+def test_defect6_guarded_rule_keeps_the_program_when_chamfer_costs_iou():
+    from csgnet.refinement import MAX_IOU_DROP, program_scores, refine_guarded
+
+    target = csgnet.render("c(17,29,15)s(21,42,13)-")[0]
+    start = "c(25,43,26)"
+    paper = refine_guarded(start, [start], target, rule="chamfer")
+    assert paper.after[1] < paper.before[1]  # chamfer improves ...
+    assert paper.after[0] < paper.before[0] - MAX_IOU_DROP  # ... while IoU drops a lot
+    assert paper.program == paper.result.program and not paper.kept_start
+    guarded = refine_guarded(start, [start], target)
+    assert guarded.kept_start and guarded.program == csgnet.parse(start)
+    assert program_scores([guarded.program], target)[0] == guarded.before

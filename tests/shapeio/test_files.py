@@ -35,3 +35,40 @@ def test_refuse_overwrite_compares_resolved_paths(tmp_path, monkeypatch):
     refuse_overwrite(["out/a.png", None], ["a.png", None])  # different files: fine
     with pytest.raises(FileExistsError, match=r"\./a\.png: this output would overwrite an input file"):
         refuse_overwrite(["b.txt", "./a.png"], [tmp_path / "a.png"])
+
+
+def test_defect10_written_files_respect_the_umask_and_keep_their_mode(tmp_path):
+    old = os.umask(0o022)
+    try:
+        new = atomic_write(tmp_path / "new.txt", "x")
+        assert new.stat().st_mode & 0o777 == 0o644
+        kept = tmp_path / "kept.txt"
+        kept.write_text("old")
+        kept.chmod(0o640)
+        atomic_write(kept, "new")
+        assert kept.stat().st_mode & 0o777 == 0o640
+        os.umask(0o077)
+        assert atomic_write(tmp_path / "private.txt", "x").stat().st_mode & 0o777 == 0o600
+    finally:
+        os.umask(old)
+
+
+def test_defect10_stale_temp_of_a_killed_write_is_removed(tmp_path):
+    import subprocess
+    import sys
+
+    from shapeio import remove_stale_temps
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True, check=True)
+    pid = int(dead.stdout)
+    stale = tmp_path / f".a.txt.atomic-{pid}-xyz.tmp"
+    stale.write_text("partial")
+    live = tmp_path / f".b.txt.atomic-{os.getpid()}-xyz.tmp"  # a write in progress in this process
+    live.write_text("partial")
+    atomic_write(tmp_path / "a.txt", "done")  # a later write to the same target cleans up
+    assert not stale.exists() and live.exists()
+    other = tmp_path / f".c.txt.atomic-{pid}-abc.tmp"
+    other.write_text("partial")
+    assert remove_stale_temps(tmp_path) == [other]
+    assert sorted(os.listdir(tmp_path)) == [live.name, "a.txt"]
