@@ -10,6 +10,7 @@ import numpy as np
 
 from csgnet.lang import Draw, Op, Program
 from csgnet.primitives import primitive, primitives
+from csgnet.renderer.reference import render_np
 from csgnet.vocab import vocabulary
 
 
@@ -82,3 +83,30 @@ def reference_chamfer(a: np.ndarray, b: np.ndarray) -> float:
     d2 = cv2.distanceTransform(~e2, cv2.DIST_L2, 3).astype(np.float64)
     E1, E2 = e1.astype(np.float64), e2.astype(np.float64)
     return float((np.sum(d1 * E2) / (np.sum(E2) + 1) + np.sum(d2 * E1) / (np.sum(E1) + 1)) / 2.0)
+
+
+# --- the synthetic-data rules, checked independently on NumPy renders ------------------------------
+
+def render_node(node) -> np.ndarray:
+    """The NumPy render of a CSG tree node (a draw or a subtree)."""
+    prog = Program((node,), node.dim) if isinstance(node, Draw) else Program.from_tree(node)
+    return render_np(prog)
+
+
+def rules_hold(program: Program, min_pixels: int, min_change: float = 0.1) -> bool:
+    """Rule (b) ("operands" reading) at every node and rule (c), from NumPy renders of every subtree."""
+    def ok(node) -> bool:
+        if isinstance(node, Draw):
+            return True
+        if not (ok(node.left) and ok(node.right)):
+            return False
+        A, B = render_node(node.left), render_node(node.right)
+        a, b, ab = int(A.sum()), int(B.sum()), int((A & B).sum())
+        tau = min_change * (a + b)
+        if node.op == "+":
+            return a - ab >= tau and b - ab >= tau
+        if node.op == "*":
+            return a - ab >= tau and b - ab >= tau and ab >= tau
+        return ab >= tau and a - ab >= tau
+
+    return ok(program.tree()) and int(render_np(program).sum()) >= min_pixels

@@ -1,18 +1,14 @@
-import collections
-import math
+"""Dataset files (csgnet.data): generation to disk, split sizes, determinism over workers, loading with
+located errors and warnings, and the padded token dataset."""
 import re
-import warnings
 import shutil
+import warnings
 
-import numpy as np
 import pytest
 import torch
 
+from csg_testutil import rules_hold
 from csgnet.data import TABLE2, ProgramDataset, generate_dataset, load_dataset, split_sizes
-from csgnet.synth import Rules, _draw_candidates, check_programs, sample_programs
-from csgnet.train.augment import jitter
-from csgnet.lang import Draw, Program
-from csgnet.renderer.reference import render_np
 from csgnet.vocab import vocabulary
 
 SCALE = 0.001
@@ -35,29 +31,6 @@ def ds3(tmp_path_factory):
 
 
 # --- an independent check of the rules on the NumPy renderer --------------------------------------
-
-def _on(node) -> np.ndarray:
-    prog = Program((node,), node.dim) if isinstance(node, Draw) else Program.from_tree(node)
-    return render_np(prog)
-
-
-def _rules_hold(program: Program, min_pixels: int, min_change: float = 0.1) -> bool:
-    """Rule (b) ("operands" reading) at every node and rule (c), from NumPy renders of every subtree."""
-    def ok(node) -> bool:
-        if isinstance(node, Draw):
-            return True
-        if not (ok(node.left) and ok(node.right)):
-            return False
-        A, B = _on(node.left), _on(node.right)
-        a, b, ab = int(A.sum()), int(B.sum()), int((A & B).sum())
-        tau = min_change * (a + b)
-        if node.op == "+":
-            return a - ab >= tau and b - ab >= tau
-        if node.op == "*":
-            return a - ab >= tau and b - ab >= tau and ab >= tau
-        return ab >= tau and a - ab >= tau
-
-    return ok(program.tree()) and int(render_np(program).sum()) >= min_pixels
 
 
 # --- sizes, lengths, duplicates, vocabulary ----------------------------------------------------------
@@ -96,33 +69,13 @@ def test_every_operation_passes_the_change_rule_and_min_pixels(ds2, ds3):
     out, _ = ds2
     progs = load_dataset(out, 2, "train")
     sample = progs[3][:10] + progs[5][:10] + progs[13][:15]
-    assert all(_rules_hold(p, 100) for p in sample)
+    assert all(rules_hold(p, 100) for p in sample)
     out3, _ = ds3
     progs3 = load_dataset(out3, 3, "val")
     assert len(progs3[3]) == 1 and len(progs3[7]) == 4
     assert all(len(p) == 3 for p in progs3[3]) and all(len(p) == 7 for p in progs3[7])
-    assert all(_rules_hold(p, 1000) for p in progs3[3] + progs3[7][:2])
+    assert all(rules_hold(p, 1000) for p in progs3[3] + progs3[7][:2])
     assert all(p.text().startswith(("sp(", "cu(", "cy(")) for p in progs3[7])
-
-
-def test_batched_check_equals_numpy_check_on_random_candidates():
-    rules = Rules().resolved(2)
-    cand = _draw_candidates(2, 5, rules, 150, np.random.default_rng(7))
-    got = check_programs(cand, 2, rules)
-    vocab = vocabulary(2)
-    want = np.array([_rules_hold(vocab.decode(row), 100) for row in cand])
-    assert 0 < want.sum() < len(want)  # both outcomes occur
-    assert (got == want).all()
-
-
-def test_literal_sum_rule_is_available():
-    vocab = vocabulary(2)
-    # two disjoint circles: their union changes nothing on the stack total, so "sum" rejects it
-    disjoint = np.array([vocab.encode("c(16,16,8)c(48,48,8)+")])
-    assert check_programs(disjoint, 2, Rules(change_rule="sum"))[0] == False  # noqa: E712
-    assert check_programs(disjoint, 2, Rules())[0] == True  # noqa: E712
-    inside = np.array([vocab.encode("c(32,32,28)c(32,32,8)+")])  # the union adds nothing
-    assert check_programs(inside, 2, Rules())[0] == False  # noqa: E712
 
 
 # --- determinism ------------------------------------------------------------------------------------
@@ -145,38 +98,6 @@ def test_unknown_rule_is_rejected(tmp_path):
 
 
 # --- distributions ----------------------------------------------------------------------------------
-
-def _frequencies(rows: np.ndarray, dim: int) -> collections.Counter:
-    vocab = vocabulary(dim)
-    return collections.Counter(vocab.tokens[i][0] for i in rows.ravel())
-
-
-def test_primitive_types_uniform_when_nothing_is_rejected():
-    rules = Rules(min_change=0.0, min_pixels=0)
-    rows = sample_programs(2, 5, 2000, np.random.default_rng(0), rules)
-    c = _frequencies(rows, 2)
-    n = sum(c[k] for k in "cst")
-    sd = math.sqrt(n / 3 * 2 / 3)
-    for k in "cst":  # binomial, 5 standard deviations
-        assert abs(c[k] - n / 3) < 5 * sd, c
-
-
-def test_primitive_types_roughly_uniform_under_the_rules():
-    rows = sample_programs(2, 9, 600, np.random.default_rng(1))
-    c = _frequencies(rows, 2)
-    n = sum(c[k] for k in "cst")
-    for k in "cst":  # rule (b) favours larger shapes (triangles are the smallest): a documented bias
-        assert 0.25 < c[k] / n < 0.42, c
-
-
-def test_subtract_and_intersect_boosted():
-    rng_a, rng_b = np.random.default_rng(2), np.random.default_rng(2)
-    plain = _frequencies(sample_programs(2, 7, 800, rng_a, Rules(op_weights=(1, 1, 1))), 2)
-    boosted = _frequencies(sample_programs(2, 7, 800, rng_b), 2)
-    n = 800 * 3
-    assert boosted["*"] / n > plain["*"] / n + 0.05
-    assert boosted["-"] / n > plain["-"] / n + 0.02
-    assert plain["+"] > plain["*"]  # rule (b) favours unions, which is why the boost exists
 
 
 # --- loading ----------------------------------------------------------------------------------------
@@ -215,44 +136,6 @@ def test_program_dataset_pads_with_stop():
     assert batch[0].shape == (2, 4) and batch[1].tolist() == [3, 1]
     with pytest.raises(ValueError, match="max_len"):
         ProgramDataset(["c(32,32,8)s(32,32,8)+"], dim=2, max_len=1)
-
-
-def _images(seed=0, n=6):
-    vocab = vocabulary(2)
-    rows = sample_programs(2, 5, n, np.random.default_rng(seed))
-    return np.stack([render_np(vocab.decode(r)) for r in rows])
-
-
-def test_jitter_identity_and_shapes():
-    imgs = _images()
-    same = jitter(imgs, np.random.default_rng(0), shift=0.0, zoom=0.0)
-    assert same.dtype == bool and same.shape == imgs.shape and (same == imgs).all()
-    t = torch.from_numpy(imgs)
-    out = jitter(t, torch.Generator().manual_seed(0))
-    assert isinstance(out, torch.Tensor) and out.dtype == torch.bool and out.shape == (6, 64, 64)
-    again = jitter(t, torch.Generator().manual_seed(0))
-    assert torch.equal(out, again)
-    with pytest.raises(ValueError, match=r"\(B, 64, 64\)"):
-        jitter(imgs[0], np.random.default_rng(0))
-
-
-def test_jitter_matches_the_affine_formula_and_draw_order():
-    imgs = _images(1, 4)
-    out = jitter(imgs, np.random.default_rng(5))
-    u = np.random.default_rng(5).random((4, 4))  # per image: t_row, t_col, z_row, z_col
-    rows, cols = np.meshgrid(np.arange(64), np.arange(64), indexing="ij")
-    changed = 0
-    for b in range(4):
-        t_row, t_col = -3 + 6 * u[b, 0], -3 + 6 * u[b, 1]
-        z_row, z_col = (1 - 2 / 64) + (4 / 64) * u[b, 2], (1 - 2 / 64) + (4 / 64) * u[b, 3]
-        sr = z_row * (rows - 32.5) + t_row + 32.5
-        sc = z_col * (cols - 32.5) + t_col + 32.5
-        ir = np.clip(np.floor(sr + 0.5), 0, 63).astype(int)
-        ic = np.clip(np.floor(sc + 0.5), 0, 63).astype(int)
-        want = imgs[b][ir, ic]
-        assert (out[b] == want).all()
-        changed += int((out[b] != imgs[b]).sum())
-    assert changed > 0
 
 
 def test_defect7_interrupted_or_mixed_generate_warns(tmp_path, monkeypatch):

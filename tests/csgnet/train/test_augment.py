@@ -1,0 +1,47 @@
+"""The 2D training augmentation (csgnet.train.augment.jitter)."""
+import numpy as np
+import pytest
+import torch
+
+from csgnet.renderer.reference import render_np
+from csgnet.synth import sample_programs
+from csgnet.train.augment import jitter
+from csgnet.vocab import vocabulary
+
+
+def _images(seed=0, n=6):
+    vocab = vocabulary(2)
+    rows = sample_programs(2, 5, n, np.random.default_rng(seed))
+    return np.stack([render_np(vocab.decode(r)) for r in rows])
+
+
+def test_jitter_identity_and_shapes():
+    imgs = _images()
+    same = jitter(imgs, np.random.default_rng(0), shift=0.0, zoom=0.0)
+    assert same.dtype == bool and same.shape == imgs.shape and (same == imgs).all()
+    t = torch.from_numpy(imgs)
+    out = jitter(t, torch.Generator().manual_seed(0))
+    assert isinstance(out, torch.Tensor) and out.dtype == torch.bool and out.shape == (6, 64, 64)
+    again = jitter(t, torch.Generator().manual_seed(0))
+    assert torch.equal(out, again)
+    with pytest.raises(ValueError, match=r"\(B, 64, 64\)"):
+        jitter(imgs[0], np.random.default_rng(0))
+
+
+def test_jitter_matches_the_affine_formula_and_draw_order():
+    imgs = _images(1, 4)
+    out = jitter(imgs, np.random.default_rng(5))
+    u = np.random.default_rng(5).random((4, 4))  # per image: t_row, t_col, z_row, z_col
+    rows, cols = np.meshgrid(np.arange(64), np.arange(64), indexing="ij")
+    changed = 0
+    for b in range(4):
+        t_row, t_col = -3 + 6 * u[b, 0], -3 + 6 * u[b, 1]
+        z_row, z_col = (1 - 2 / 64) + (4 / 64) * u[b, 2], (1 - 2 / 64) + (4 / 64) * u[b, 3]
+        sr = z_row * (rows - 32.5) + t_row + 32.5
+        sc = z_col * (cols - 32.5) + t_col + 32.5
+        ir = np.clip(np.floor(sr + 0.5), 0, 63).astype(int)
+        ic = np.clip(np.floor(sc + 0.5), 0, 63).astype(int)
+        want = imgs[b][ir, ic]
+        assert (out[b] == want).all()
+        changed += int((out[b] != imgs[b]).sum())
+    assert changed > 0
