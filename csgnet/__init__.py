@@ -48,7 +48,7 @@ def render(programs, dim: int = 2, device=None) -> np.ndarray:
         ``(N, 64, 64)`` bool in 2D, ``(N, 64, 64, 64)`` in 3D (``N = 1`` for a single program).
         Invalid programs render all False.
     """
-    import torch
+    import torch  # lazy: `import csgnet` (the language) loads neither torch nor the renderer
 
     from . import renderer as _r
 

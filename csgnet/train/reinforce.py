@@ -22,6 +22,7 @@ from .. import metrics
 from ..data import load_dataset
 from .augment import jitter
 from ..decode import Sampled, greedy, sample
+from ..inference import load_model
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_programs, render_tokens
 from ..shapes2d import load_cad_h5, load_silhouettes
@@ -93,8 +94,6 @@ def load_initial(path, overrides: dict | None = None) -> tuple[CSGNet, dict]:
         ``(model, report)`` where ``report`` lists the ``loaded``, ``skipped`` (shape mismatch) and
         ``missing`` tensor names.
     """
-    from ..inference import load_model
-
     src = load_model(path)
     config = src.config
     if overrides:
