@@ -10,10 +10,11 @@ Example:
 from __future__ import annotations
 
 from . import corpus  # cheap: reads nothing until asked
-from .lang import ParseError, parse, to_text
+from .errors import ExecutionError, ParseError
+from .lang import parse, to_text
 from .execute import execute, execute_batch  # the function shadows the module name
 from .fit import fit
 
-__all__ = ["ParseError", "parse", "to_text", "print_program", "execute", "execute_batch", "fit", "corpus"]
+__all__ = ["ExecutionError", "ParseError", "parse", "to_text", "print_program", "execute", "execute_batch", "fit", "corpus"]
 
 print_program = to_text

@@ -5,9 +5,11 @@
     python -m shapeprog fit table/33075 --points cloud.obj --steps 400 -o fitted.txt
     python -m shapeprog silhouettes --out silhouettes.npz
 
-A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or a
-file path. The mesh format follows the ``-o`` suffix: .obj (the reference layout), .ply or
-.glb (parts coloured by the program line that created them).
+A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
+path of a UTF-8 ShapeAssembly file (corpus format with ``Assembly`` blocks, or the flat format).
+The mesh format follows the suffix: .obj (the reference layout), .ply or .glb (parts coloured by
+the program line that created them). Errors name the file, line and column; exit status 2 for a
+program that does not parse or execute, 1 for a file that cannot be read or written.
 """
 from __future__ import annotations
 
@@ -19,26 +21,60 @@ from pathlib import Path
 
 import torch
 
-from shapeio import atomic_write, refuse_overwrite
+from shapeio import InputError, atomic_write, refuse_overwrite
 
 from . import corpus, io
+from .errors import ExecutionError, ParseError
 from .execute import execute
 from .fit import fit
-from .lang import ParseError, parse
+from .lang import parse
+from .limits import decode
 from .metrics import adaptive_threshold, chamfer, fscore
 from .picture import render_png
 from .sampling import sample_surface
 from .silhouettes import build, write
 
 
-def _load_program(spec: str):
-    path = Path(spec)
-    if path.is_file():
-        return parse(path.read_text(), file=str(path)), str(path)
-    cat, _, ident = spec.partition("/")
-    if cat in corpus.CATEGORIES and ident.isdigit():
-        return parse(corpus.read(cat, int(ident)), file=f"{cat}/{ident}.txt"), spec
-    raise SystemExit(f"error: {spec!r} is neither a file nor a corpus id like 'chair/173'")
+MESH_FORMATS = (".obj", ".ply", ".glb")
+
+
+class _Program:
+    """A loaded program, the name printed for it and the file name its errors carry."""
+
+    def __init__(self, spec: str):
+        path = Path(spec)
+        cat, _, ident = spec.partition("/")
+        if path.is_file():
+            self.name = self.file = str(path)
+            text = decode(path.read_bytes(), self.file)
+        elif cat in corpus.CATEGORIES and ident.isascii() and ident.isdigit():
+            self.name, self.file = spec, f"{cat}/{int(ident)}.txt"
+            try:
+                text = corpus.read(cat, int(ident))
+            except KeyError:
+                raise SystemExit(f"error: no program {cat}/{int(ident)} in the corpus") from None
+        else:
+            raise SystemExit(f"error: {spec!r} is neither a file nor a corpus id like 'chair/173'")
+        self.program = parse(text, file=self.file)
+
+    def execute(self, program=None, **kwargs):
+        """Execute this program (or ``program``, e.g. a fitted version); errors carry the file name."""
+        try:
+            return execute(self.program if program is None else program, **kwargs)
+        except ExecutionError as e:
+            raise ExecutionError(e.reason, e.line, file=self.file) from None
+
+
+def _check_outputs(meshes=(), others=()) -> None:
+    """Stop before any work when an output's folder is missing or a mesh suffix is unknown."""
+    for path in [p for p in (*meshes, *others) if p]:
+        folder = Path(path).parent
+        if not folder.is_dir():
+            raise SystemExit(f"error: {path}: folder {str(folder)!r} does not exist")
+    for path in [p for p in meshes if p]:
+        if Path(path).suffix.lower() not in MESH_FORMATS:
+            raise SystemExit(f"error: {path}: unknown mesh format {Path(path).suffix!r} "
+                             f"(use {', '.join(MESH_FORMATS)})")
 
 
 def _refuse_overwrite(outputs, inputs) -> None:
@@ -55,10 +91,8 @@ def _write_mesh(path: str, shape) -> None:
         io.write_obj(path, shape.corners)
     elif suffix == ".ply":
         io.write_ply(path, shape.corners, labels=shape.line.numpy())
-    elif suffix == ".glb":
-        io.write_glb(path, shape.corners, labels=shape.line.numpy())
     else:
-        raise SystemExit(f"error: unknown mesh format {suffix!r} (use .obj, .ply or .glb)")
+        io.write_glb(path, shape.corners, labels=shape.line.numpy())
 
 
 def _png(path: str, shape, size: int) -> None:
@@ -66,11 +100,12 @@ def _png(path: str, shape, size: int) -> None:
 
 
 def _cmd_run(args) -> int:
-    prog, name = _load_program(args.program)
+    _check_outputs([args.output], [args.png])
+    prog = _Program(args.program)
     _refuse_overwrite([args.output, args.png], [args.program])
     with torch.no_grad():
-        shape = execute(prog, dtype=torch.float64 if args.float64 else torch.float32)
-    print(f"{name}: {len(prog.blocks)} blocks, {len(shape)} leaf cuboids")
+        shape = prog.execute(dtype=torch.float64 if args.float64 else torch.float32)
+    print(f"{prog.name}: {len(prog.program.blocks)} blocks, {len(shape)} leaf cuboids")
     if args.output:
         _write_mesh(args.output, shape)
         print(f"wrote {args.output}")
@@ -81,24 +116,30 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_fit(args) -> int:
-    prog, name = _load_program(args.program)
+    _check_outputs([args.mesh], [args.output])
+    prog = _Program(args.program)
     _refuse_overwrite([args.output, args.mesh], [args.program, None if args.points == "example" else args.points])
     if args.points == "example":
         pts = torch.as_tensor(corpus.example_points())
     else:
-        pts = io.read_points(args.points)  # (N, 3) float32
+        try:
+            pts = io.read_points(args.points)  # (N, 3) float32
+        except ValueError as e:  # the message names the file (and line)
+            print(f"error: {e}", file=sys.stderr)
+            return 1
     g = torch.Generator().manual_seed(args.seed)
     thr = float(adaptive_threshold(pts))  # the target's F-score threshold, the same before and after
 
     def score(p):
         with torch.no_grad():
-            x, _ = sample_surface(execute(p).corners, 10000, generator=torch.Generator().manual_seed(args.seed))
+            shape = prog.execute(p)
+            x, _ = sample_surface(shape.corners, 10000, generator=torch.Generator().manual_seed(args.seed))
             return float(chamfer(x, pts)), fscore(x, pts, threshold=thr)
 
-    cd0, f0 = score(prog)
-    res = fit(prog, pts, steps=args.steps, lr=args.lr, reg=args.reg, decimals=args.decimals, generator=g)
+    cd0, f0 = score(prog.program)
+    res = fit(prog.program, pts, steps=args.steps, lr=args.lr, reg=args.reg, decimals=args.decimals, generator=g)
     cd1, f1 = score(res.program)
-    print(f"{name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score {f0:.1f} -> {f1:.1f}, "
+    print(f"{prog.name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score {f0:.1f} -> {f1:.1f}, "
           f"{args.steps} steps in {res.seconds:.1f} s")
     if args.output:
         atomic_write(args.output, res.text)
@@ -107,11 +148,12 @@ def _cmd_fit(args) -> int:
         sys.stdout.write(res.text)
     if args.mesh:
         with torch.no_grad():
-            _write_mesh(args.mesh, execute(res.program))
+            _write_mesh(args.mesh, prog.execute(res.program))
     return 0
 
 
 def _cmd_silhouettes(args) -> int:
+    _check_outputs(others=[args.out])
     t0 = time.perf_counter()
     try:
         data = build(size=args.size, margin=args.margin, limit=args.limit, progress=not args.quiet)
@@ -123,34 +165,49 @@ def _cmd_silhouettes(args) -> int:
     return 0
 
 
+def _int_at_least(low: int):
+    """An argparse type: an int that is at least ``low``."""
+    def convert(text: str) -> int:
+        value = int(text)
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        return value
+    return convert
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="shapeprog", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run", help="execute a program and export its cuboids")
-    r.add_argument("program", help="corpus id (chair/173) or program file")
-    r.add_argument("-o", "--output", help="mesh file (.obj, .ply, .glb)")
-    r.add_argument("--png", help="picture file (.png)")
-    r.add_argument("--size", type=int, default=512, help="picture size in pixels")
-    r.add_argument("--float64", action="store_true", help="execute in float64 (default float32)")
+    program_help = "corpus id (chair/173, table/33075, storage/46436) or a UTF-8 program file (corpus or flat format)"
+    r = sub.add_parser("run", help="execute a program and export its cuboids",
+                       description="Execute a program; print its block and cuboid counts; export a mesh and a picture.")
+    r.add_argument("program", help=program_help)
+    r.add_argument("-o", "--output", help="mesh file: .obj (reference layout), .ply or .glb (parts coloured by line)")
+    r.add_argument("--png", help="picture file (.png), parts coloured by the program line that created them")
+    r.add_argument("--size", type=_int_at_least(8), default=512, help="picture width and height in pixels (>= 8)")
+    r.add_argument("--float64", action="store_true", help="execute in float64 (default float32, the reference)")
     r.set_defaults(func=_cmd_run)
-    f = sub.add_parser("fit", help="fit a program's parameters to a point cloud")
-    f.add_argument("program", help="corpus id (table/33075) or program file")
+    f = sub.add_parser("fit", help="fit a program's parameters to a point cloud",
+                       description="Fit a program's continuous numbers to a point cloud; print chamfer and F-score "
+                                   "before and after; write the fitted program.")
+    f.add_argument("program", help=program_help)
     f.add_argument("--points", default="example",
-                   help="point cloud file (.obj 'v' lines or .ply) or 'example' (comp_pc.obj)")
-    f.add_argument("--steps", type=int, default=400)
-    f.add_argument("--lr", type=float, default=1e-3)
-    f.add_argument("--reg", type=float, default=1e-3)
-    f.add_argument("--decimals", type=int, default=3)
-    f.add_argument("--seed", type=int, default=0)
-    f.add_argument("-o", "--output", help="fitted program file (default: print)")
-    f.add_argument("--mesh", help="also write the fitted shape (.obj, .ply, .glb)")
+                   help="point cloud file (.obj 'v x y z' lines or .ply) or 'example' (the vendored comp_pc.obj)")
+    f.add_argument("--steps", type=_int_at_least(0), default=400, help="optimisation steps")
+    f.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
+    f.add_argument("--reg", type=float, default=1e-3, help="weight of the pull towards the starting numbers")
+    f.add_argument("--decimals", type=_int_at_least(0), default=3, help="decimals of the written numbers (the corpus uses 3)")
+    f.add_argument("--seed", type=int, default=0, help="seed of the surface sampling")
+    f.add_argument("-o", "--output", help="fitted program file (ShapeAssembly text; default: print it)")
+    f.add_argument("--mesh", help="also write the fitted shape: .obj, .ply or .glb")
     f.set_defaults(func=_cmd_fit)
-    s = sub.add_parser("silhouettes", help="render front and side silhouettes of the corpus to an .npz")
-    s.add_argument("--out", required=True, help="output file (.npz)")
+    s = sub.add_parser("silhouettes", help="render front and side silhouettes of the corpus to an .npz",
+                       description="Render front and side silhouettes of every corpus program (train and val).")
+    s.add_argument("--out", required=True, help="output file (.npz, compressed NumPy arrays)")
     s.add_argument("--size", type=int, default=64, help="image side in pixels")
     s.add_argument("--margin", type=int, default=4, help="free pixels on each side of the longer extent")
-    s.add_argument("--limit", type=int, help="only the first N shapes per category and split")
+    s.add_argument("--limit", type=_int_at_least(1), help="only the first N shapes per category and split")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_silhouettes)
     args = ap.parse_args(argv)
@@ -158,9 +215,12 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("default")
             return args.func(args)
-    except ParseError as e:
+    except (ParseError, ExecutionError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except (OSError, InputError) as e:  # unreadable inputs, unwritable outputs: the message names the file
+        print(f"error: {e}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -111,7 +111,10 @@ def _min_rotation(nb, nc, act):
     if not all_turn and bool(degenerate.any()):
         for i in degenerate.nonzero().flatten().tolist():
             v = nbh[i]
-            k = int((v != 0).nonzero()[0])
+            nonzero = (v != 0).nonzero()
+            if nonzero.numel() == 0:  # nb overflowed to a zero unit vector: no turn
+                continue
+            k = int(nonzero[0])
             rot90 = _rodrigues(torch.eye(3, dtype=nb.dtype, device=nb.device)[k:k + 1],
                                torch.full((1,), math.pi / 2, dtype=nb.dtype, device=nb.device))[0]
             ax = rot90 @ v

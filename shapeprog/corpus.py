@@ -24,7 +24,9 @@ from importlib import resources
 
 from shapeio.points import obj_vertices
 
-from .lang import ParseError, Program, parse
+from .errors import ParseError
+from .lang import Program, parse
+from .limits import decode
 
 __all__ = ["CATEGORIES", "SPLITS", "CorpusWarning", "example_points", "example_text", "ids", "load", "read"]
 
@@ -59,18 +61,29 @@ def ids(category: str, split: str = "train") -> list[int]:
     arc = _archive("shapeassembly_partnet.tar.xz")
     if split == "all":
         return ids(category, "train") + ids(category, "val")
-    text = arc[f"data_splits/{category}/{split}.txt"].decode()
-    return [int(x) for x in text.split()]
+    name = f"data_splits/{category}/{split}.txt"
+    out = []
+    for n, line in enumerate(decode(arc[name], name).splitlines(), 1):
+        for x in line.split():
+            if not (x.isascii() and x.isdigit()):
+                raise ParseError(f"not a program id: {x[:20]!r}", name, n, line.index(x) + 1, x)
+            out.append(int(x))
+    return out
 
 
 def read(category: str, id: int | str) -> str:
-    """The text of program ``category/id`` (e.g. ``read("chair", 173)``)."""
+    """The text of program ``category/id`` (e.g. ``read("chair", 173)``).
+
+    Raises:
+        KeyError: no such program.
+        ParseError: the stored file is not UTF-8 (at the bad byte's line and column).
+    """
     _check_category(category)
     key = f"data/{category}/{int(id)}.txt"
     arc = _archive("shapeassembly_partnet.tar.xz")
     if key not in arc:
         raise KeyError(f"no program {category}/{id} in the corpus")
-    return arc[key].decode()
+    return decode(arc[key], f"{category}/{int(id)}.txt")
 
 
 def load(category: str, split: str = "train", strict: bool = False) -> list[tuple[int, Program]]:
@@ -102,7 +115,7 @@ def example_text(name: str = "ex-0.txt") -> str:
     arc = _archive("examples.tar.xz")
     if name not in arc:
         raise KeyError(f"no example {name!r}; available: {', '.join(sorted(arc))}")
-    return arc[name].decode()
+    return decode(arc[name], name)
 
 
 def example_points(name: str = "comp_pc.obj"):

@@ -22,6 +22,7 @@ import torch
 
 from .attach import point, rule_aligned, rule_first, rule_general, rule_second, to_local
 from .compile import ALIGNED, FIRST, SECOND, compile_program
+from .errors import ExecutionError
 from .geometry import cuboid_corners, mesh_arrays
 from .lang import NUM_FIELDS, Program, numbers
 from .schedule import GroupPlan, plan_levels, plan_steps
@@ -233,6 +234,7 @@ class ExecutionPlan:
         dd = wd.reshape(-1, 3)[rows]
         aa = wa.reshape(-1, 3, 3)[rows]
         corners = cuboid_corners(centers, dd, aa)
+        self._check_finite(centers, dd, aa, corners)
         out = []
         parts = [x.split(self._counts) for x in (centers, dd, aa, corners)]
         for i, (c, d, a, k) in enumerate(zip(*parts)):
@@ -240,6 +242,21 @@ class ExecutionPlan:
             out.append(ExecutedShape(centers=c, dims=d, axes=a, corners=k, node=self._nodes[i],
                                      line=self._lines[i], root_dims=flat[base:base + 3].clone()))
         return out
+
+
+    def _check_finite(self, centers, dims, axes, corners) -> None:
+        """Raise :class:`ExecutionError` at the first leaf (L rows) with a non-finite value."""
+        with torch.no_grad():
+            ok = torch.cat([centers, dims, axes.flatten(1), corners.flatten(1)], 1).isfinite().all(1)
+            if bool(ok.all()):
+                return
+            row = int((~ok).nonzero()[0])
+        for i, n in enumerate(self._counts):
+            if row < n:
+                line = int(self._lines[i][row]) + 1
+                raise ExecutionError("execution gives a non-finite cuboid (created by this line)", line,
+                                     None if len(self.programs) == 1 else i)
+            row -= n
 
 
 # ----------------------------------------------------------------------------- run
@@ -344,5 +361,9 @@ def execute(program: Program, dtype: torch.dtype = torch.float32, device=None,
 
     Returns:
         The :class:`ExecutedShape` of the leaf cuboids.
+
+    Raises:
+        ExecutionError: a cuboid comes out with a non-finite value (e.g. a zero bbox extent, or
+            ``params`` out of range); it names the line that created the first such cuboid.
     """
     return execute_batch([program], dtype, device, None if params is None else [params])[0]

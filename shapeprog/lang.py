@@ -47,6 +47,9 @@ import warnings
 from dataclasses import dataclass
 from typing import Iterator, Union
 
+from . import limits
+from .errors import ParseError, ParseWarning
+
 __all__ = [
     "AXES",
     "FACES",
@@ -69,26 +72,6 @@ __all__ = [
 #: Face names; index k of the local axis they are normal to is FACE_AXIS[face].
 FACES = ("right", "left", "top", "bot", "front", "back")
 AXES = ("X", "Y", "Z")
-
-
-class ParseError(ValueError):
-    """A program text that is not ShapeAssembly.
-
-    Attributes:
-        file: the file name given to :func:`parse` (or ``"<string>"``).
-        line: 1-based line number.
-        column: 1-based column of the offending token (a TAB counts as one column).
-        token: the offending token text ('' at the end of a line).
-        reason: the message without the location.
-    """
-
-    def __init__(self, reason: str, file: str, line: int, column: int, token: str):
-        self.reason, self.file, self.line, self.column, self.token = reason, file, line, column, token
-        super().__init__(f"{file}:{line}:{column}: {reason}")
-
-
-class ParseWarning(UserWarning):
-    """A tolerated irregularity in a program text (e.g. a stray trailing comma)."""
 
 
 # ----------------------------------------------------------------------------- AST
@@ -268,7 +251,7 @@ def statement_lines(program: Program) -> list[list[int]]:
 # ---------------------------------------------------------------------------- parser
 
 _TOKEN = re.compile(
-    r"\s*(?:(?P<num>[+-]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][+-]?\d+)?)|(?P<name>[A-Za-z_][A-Za-z_0-9]*)"
+    r"\s*(?:(?P<num>[+-]?(?:[0-9]+\.[0-9]*|\.[0-9]+|[0-9]+)(?:[eE][+-]?[0-9]+)?)|(?P<name>[A-Za-z_][A-Za-z_0-9]*)"
     r"|(?P<punct>[(),={}])|(?P<bad>\S))"
 )
 _HEADER = re.compile(r"^Assembly\s+(Program_\d+)\s*\{\s*$")
@@ -367,11 +350,11 @@ def _parse_statement(ln: _Line) -> tuple[Statement, list[tuple[str, str, int]]]:
         if want == "num":
             if kind != "num":
                 raise ln.error(f"expected a number, got {text!r}", tok)
-            vals.append(float(text))
+            vals.append(limits.number(text, ln.file, ln.lineno, col))
         elif want == "int":
-            if kind != "num" or not re.fullmatch(r"\d+", text) or int(text) < 1:
+            if kind != "num":
                 raise ln.error(f"expected a positive integer count, got {text!r}", tok)
-            vals.append(int(text))
+            vals.append(limits.count(text, ln.file, ln.lineno, col))
         elif want == "bool":
             if text not in ("True", "False"):
                 raise ln.error(f"expected True or False, got {text!r}", tok)
@@ -395,25 +378,37 @@ def _parse_statement(ln: _Line) -> tuple[Statement, list[tuple[str, str, int]]]:
     return cls(*vals), names
 
 
-def _check_block(
-    stmts: list[tuple[Statement, _Line, list]], header: _Line | None, file: str
-) -> None:
-    """Semantic checks of one block: bbox first, names known, bbox never moved."""
+def _check_block(stmts: list[tuple[Statement, _Line, list]], header: _Line | None, file: str) -> list:
+    """Semantic checks of one block: bbox first, names known, bbox never moved.
+
+    Returns:
+        One row per statement for :func:`shapeprog.limits.check_tree`: its location, per cuboid slot
+        it creates (bbox excluded) the sub-program block placed there (None: a leaf), and the number
+        of attach operations it executes to. Slots, macro names and operations follow the executor's
+        compile step (:mod:`shapeprog.compile`).
+    """
     if not stmts:
         where = header or _Line("", file, 1)
         raise where.error("empty block")
     s0, ln0, _ = stmts[0]
     if not (isinstance(s0, Cuboid) and s0.name == "bbox"):
         raise ln0.error("a block must start with 'bbox = Cuboid(...)'", ln0.toks[0])
-    known = {"bbox"}
-    count = 1  # cuboids in the block including bbox (for macro names cube<N>)
-    for s, ln, names in stmts:
+    known = {"bbox": 0}  # name -> slot (macro names are cube<number of slots - 1>)
+    source: list[int | None] = [None]  # per slot: the slot it is a macro copy of
+    maker = [0]  # per slot: the statement that created it
+    moves = [0]  # per slot: attach operations that move it (a macro copy repeats its source's)
+    ops = [0] * len(stmts)  # per statement: attach operations
+    lines: list[str | None] = []  # per Cuboid line: its sub-program name or None
+    for si, (s, ln, names) in enumerate(stmts):
         if isinstance(s, Cuboid):
             if not re.fullmatch(r"bbox|cube\d+|Program_\d+", s.name):
                 raise ln.error(f"bad cuboid name {s.name!r} (expected bbox, cube<k> or Program_<k>)", names[0])
+            lines.append(s.name if s.name.startswith("Program_") else None)
             if s.name not in known:
-                known.add(s.name)
-                count += 1
+                known[s.name] = len(source)
+                source.append(None)
+                maker.append(si)
+                moves.append(0)
             continue
         for tok in names:
             if tok[1] not in known:
@@ -425,10 +420,32 @@ def _check_block(
             raise ln.error(f"{s.a!r} cannot be squeezed against itself", names[0])
         if isinstance(s, Attach) and s.a == s.b:
             raise ln.error(f"{s.a!r} cannot be attached to itself", names[1])
+        if isinstance(s, (Attach, Squeeze)):
+            ops[si] = 1 if isinstance(s, Attach) else 2
+            moves[known[s.a]] += ops[si]
         new = 1 if isinstance(s, Reflect) else s.n if isinstance(s, Translate) else 0
         for _ in range(new):
-            known.add(f"cube{count - 1}")
-            count += 1
+            name = f"cube{len(source) - 1}"
+            if name in known:  # a collision re-uses the cuboid (as the executor does)
+                source[known[name]] = known[s.a]
+            else:
+                known[name] = len(source)
+                source.append(known[s.a])
+                maker.append(si)
+                moves.append(0)
+            copied = moves[known[s.a]]
+            moves[known[name]] += copied
+            ops[si] += copied
+
+    def child(k: int) -> str | None:  # as shapeprog.compile._child_of
+        if k < len(lines):
+            return lines[k]
+        return None if source[k] is None else child(source[k])
+
+    rows = [((ln.lineno, ln.toks[0][2], ln.toks[0][1]), [], n) for (_, ln, _), n in zip(stmts, ops)]
+    for k in range(1, len(source)):
+        rows[maker[k]][1].append(child(k))
+    return rows
 
 
 def parse(text: str, file: str = "<string>") -> Program:
@@ -444,17 +461,20 @@ def parse(text: str, file: str = "<string>") -> Program:
     Raises:
         ParseError: with ``file:line:column: reason``; e.g. an unknown command, a wrong
             argument count, an unknown cuboid, face or axis, a missing sub-program block,
-            or a statement that moves bbox.
+            a statement that moves bbox, or a text beyond one of the limits of
+            :mod:`shapeprog.limits`.
     """
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
     lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+    limits.check_lines(lines, file)
     first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
     if first is None:
         raise ParseError("empty program", file, 1, 1, "")
     flat = not lines[first].lstrip().startswith("Assembly")
     blocks: list[tuple[_Line | None, str, list]] = []
+    rows: dict = {}  # per block: (header location, rows of _check_block) for limits.check_tree
     cur = None
     for i, raw in enumerate(lines):
         lineno = i + 1
@@ -476,11 +496,13 @@ def parse(text: str, file: str = "<string>") -> Program:
                 raise ln.error("expected 'Assembly Program_<k> {'", ln.toks[0] if ln.toks else None)
             if any(b[1] == m.group(1) for b in blocks):
                 raise ln.error(f"duplicate block {m.group(1)!r}", ln.toks[1])
+            if len(blocks) == limits.MAX_BLOCKS:
+                raise ln.error(f"more than {limits.MAX_BLOCKS} blocks (MAX_BLOCKS)", ln.toks[1])
             cur = (ln, m.group(1), [])
             blocks.append(cur)
             continue
         if raw.strip() == "}":
-            _check_block(cur[2], cur[0], file)
+            rows[cur[1]] = ((cur[0].lineno, cur[0].toks[1][2], cur[1]), _check_block(cur[2], cur[0], file))
             cur = None
             continue
         if ln.toks and ln.toks[0][1] == "Assembly":
@@ -488,7 +510,7 @@ def parse(text: str, file: str = "<string>") -> Program:
         s, names = _parse_statement(ln)
         cur[2].append((s, ln, names))
     if flat:
-        _check_block(cur[2], None, file)
+        rows["Program_0"] = ((first + 1, 1, ""), _check_block(cur[2], None, file))
     elif cur is not None:
         raise ParseError("missing '}' at end of file", file, len(lines), len(lines[-1]) + 1, "")
     # hierarchy: every Program_m Cuboid must have a block; every non-root block one parent.
@@ -516,6 +538,7 @@ def parse(text: str, file: str = "<string>") -> Program:
                 raise hl.error(f"block {name!r} is part of a cycle", hl.toks[1])
             seen.add(n)
             n = parent[n]
+    limits.check_tree(rows, parent, file)
     return Program(tuple(Block(name, tuple(s for s, _, _ in stmts)) for _, name, stmts in blocks), flat)
 
 

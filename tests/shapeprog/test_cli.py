@@ -45,3 +45,50 @@ def test_outputs_never_overwrite_inputs(tmp_path):
     with pytest.raises(SystemExit, match=r"p\.txt: this output would overwrite an input file"):
         main(["run", str(prog), "--png", str(prog)])
     assert prog.read_text() == "bbox = Cuboid(1.0, 1.0, 1.0, True)\n"
+
+
+def test_defect10_missing_corpus_id_and_missing_output_folder(tmp_path):
+    with pytest.raises(SystemExit, match=r"^error: no program chair/999999999 in the corpus$"):
+        main(["run", "chair/999999999"])
+    missing = tmp_path / "no" / "x.obj"
+    with pytest.raises(SystemExit, match=r"x\.obj: folder .* does not exist"):
+        main(["run", "chair/173", "-o", str(missing)])
+    with pytest.raises(SystemExit, match=r"unknown mesh format '\.stl'"):
+        main(["run", "chair/173", "-o", str(tmp_path / "x.stl")])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_defect8_non_utf8_program_file_and_defect3_non_finite_execution(tmp_path, capsys):
+    bad = tmp_path / "bad.txt"
+    bad.write_bytes(b"bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.5, 0.5, 0.5, True)\xff\n")
+    assert main(["run", str(bad)]) == 2
+    assert f"error: {bad}:2:36: not UTF-8 text" in capsys.readouterr().err
+    huge = tmp_path / "huge.txt"
+    huge.write_text("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(1e308, 0.5, 0.5, True)\n")
+    assert main(["run", str(huge), "-o", str(tmp_path / "huge.obj")]) == 2
+    assert f"error: {huge}:2:16: number 1e308 is out of range" in capsys.readouterr().err
+    zero = tmp_path / "zero.txt"
+    zero.write_text("bbox = Cuboid(0.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.5, 0.5, 0.5, True)\n"
+                    "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n")
+    assert main(["run", str(zero), "-o", str(tmp_path / "zero.obj")]) == 2
+    assert f"error: {zero}:2: execution gives a non-finite cuboid" in capsys.readouterr().err
+    assert not (tmp_path / "zero.obj").exists() and not (tmp_path / "huge.obj").exists()
+
+
+def test_unreadable_point_cloud_is_an_error_naming_it(tmp_path, capsys):
+    assert main(["fit", "chair/173", "--points", str(tmp_path / "none.obj"), "--steps", "0"]) == 1
+    assert f"{tmp_path / 'none.obj'}: no such file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("cmd,options", [
+    ("run", ["program", "--output", ".obj", ".ply", ".glb", "--png", "--size", "--float64"]),
+    ("fit", ["program", "--points", ".obj", ".ply", "example", "--steps", "--lr", "--reg", "--decimals", "--seed",
+             "--output", "--mesh", ".glb"]),
+    ("silhouettes", ["--out", ".npz", "--size", "--margin", "--limit", "--quiet"]),
+])
+def test_help_lists_every_option_and_format(cmd, options, capsys):
+    with pytest.raises(SystemExit):
+        main([cmd, "--help"])
+    out = capsys.readouterr().out
+    for option in options:
+        assert option in out

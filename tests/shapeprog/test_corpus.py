@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from shapeprog import corpus
+from shapeprog.errors import ParseError
 from shapeprog.execute import execute_batch
 from shapeprog.lang import Program, parse
 
@@ -42,6 +43,23 @@ def test_load_reports_bad_files_by_name_and_keeps_the_rest(monkeypatch):
     assert len(progs) == 115 and bad not in [i for i, _ in progs]
     with pytest.raises(ValueError, match="Cubiod"):
         corpus.load("storage", "val", strict=True)
+
+
+def test_defect8_non_utf8_entry_is_reported_by_name_and_skipped(monkeypatch):
+    arc = dict(corpus._archive("shapeassembly_partnet.tar.xz"))
+    bad = corpus.ids("storage", "val")[5]
+    arc[f"data/storage/{bad}.txt"] = arc[f"data/storage/{bad}.txt"].replace(b"Cuboid", b"Cub\xffid", 1)
+    monkeypatch.setattr(corpus, "_archive", lambda name: arc)
+    with pytest.raises(ParseError, match=rf"^storage/{bad}\.txt:2:\d+: not UTF-8 text"):
+        corpus.read("storage", bad)
+    with pytest.warns(corpus.CorpusWarning, match=rf"storage/{bad}\.txt:2:\d+: not UTF-8"):
+        progs = corpus.load("storage", "val")
+    assert len(progs) == 115 and bad not in [i for i, _ in progs]
+    with pytest.raises(ValueError, match="not UTF-8"):
+        corpus.load("storage", "val", strict=True)
+    arc["data_splits/storage/val.txt"] = b"46436\n12x\n"
+    with pytest.raises(ParseError, match=r"^data_splits/storage/val\.txt:2:1: not a program id: '12x'"):
+        corpus.ids("storage", "val")
 
 
 def test_load_parses_programs():

@@ -4,6 +4,7 @@ import math
 import pytest
 import torch
 
+from shapeprog.errors import ExecutionError
 from shapeprog.execute import ExecutionPlan, execute, execute_batch, parameter_names, program_parameters
 from shapeprog.lang import parse
 
@@ -387,3 +388,35 @@ def test_params_shape_is_checked():
     prog = parse(HIER)
     with pytest.raises(ValueError, match=r"shape \(\d+,\)"):
         execute(prog, params=torch.zeros(3))
+
+
+def test_defect4_far_attach_then_second_attach_gives_no_index_error():
+    """``attach(cube1, bbox, 1e25, ...)`` then a second attach: the text is refused by the parser's
+    number limit; the same values given as parameters end in a located ExecutionError."""
+    p = flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.5, 0.1, 0.5, False)",
+             "cube1 = Cuboid(0.5, 0.1, 0.5, False)", "attach(cube1, bbox, 1.0, 0.0, 0.5, 0.5, 0.0, 0.5)",
+             "attach(cube1, cube0, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)")
+    x = program_parameters(p)
+    x[9] = 1e25  # attach.x1 of line 4
+    try:
+        s = execute(p, params=x)
+    except ExecutionError as e:
+        assert e.line in (2, 3) and str(e).startswith(f"line {e.line}: ")
+    else:
+        assert bool(s.corners.isfinite().all())
+
+
+def test_defect3_non_finite_execution_raises_execution_error_naming_the_line():
+    p = flat("bbox = Cuboid(0.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.5, 0.5, 0.5, True)",
+             "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)")  # a zero bbox extent
+    with pytest.raises(ExecutionError, match=r"^line 2: execution gives a non-finite cuboid"):
+        execute(p)
+    good = flat("bbox = Cuboid(1.0, 1.0, 1.0, True)", "cube0 = Cuboid(0.5, 0.5, 0.5, True)",
+                "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)")
+    with pytest.raises(ExecutionError, match=r"^program 1, line 2: ") as ei:
+        execute_batch([good, p])
+    assert (ei.value.index, ei.value.line) == (1, 2)
+    x = program_parameters(good)
+    x[3] = float("nan")
+    with pytest.raises(ExecutionError, match="^line 2: "):
+        execute(good, params=x)

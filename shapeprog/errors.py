@@ -1,0 +1,50 @@
+"""The errors of the ShapeAssembly layer: a text that is not a valid program, and an execution that
+cannot give finite cuboids. Standard library only.
+
+Example:
+    >>> str(ParseError("unknown command 'cubiod'", "chair_12.txt", 2, 9, "cubiod"))
+    "chair_12.txt:2:9: unknown command 'cubiod'"
+    >>> str(ExecutionError("a corner is not finite", line=4))
+    'line 4: a corner is not finite'
+"""
+from __future__ import annotations
+
+__all__ = ["ExecutionError", "ParseError", "ParseWarning"]
+
+
+class ParseError(ValueError):
+    """A program text that is not ShapeAssembly (or exceeds one of the language's limits).
+
+    Attributes:
+        file: the file name given to :func:`shapeprog.lang.parse` (or ``"<string>"``).
+        line: 1-based line number.
+        column: 1-based column of the offending token (a TAB counts as one column).
+        token: the offending token text ('' at the end of a line).
+        reason: the message without the location.
+    """
+
+    def __init__(self, reason: str, file: str, line: int, column: int, token: str):
+        self.reason, self.file, self.line, self.column, self.token = reason, file, line, column, token
+        super().__init__(f"{file}:{line}:{column}: {reason}")
+
+
+class ParseWarning(UserWarning):
+    """A tolerated irregularity in a program text (e.g. a stray trailing comma)."""
+
+
+class ExecutionError(ValueError):
+    """A program (or parameter vector) whose execution gives a non-finite value.
+
+    Attributes:
+        reason: the message without the location.
+        line: 1-based file line of the statement that created the first affected cuboid.
+        index: position of the program in the executed batch (None for a single program).
+        file: the program's file name when the caller knows it (None otherwise).
+    """
+
+    def __init__(self, reason: str, line: int, index: int | None = None, file: str | None = None):
+        self.reason, self.line, self.index, self.file = reason, line, index, file
+        where = f"line {line}" if index is None else f"program {index}, line {line}"
+        if file is not None:
+            where = f"{file}:{line}"
+        super().__init__(f"{where}: {reason}")

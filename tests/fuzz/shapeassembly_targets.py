@@ -1,0 +1,119 @@
+"""Fuzz target for the ShapeAssembly parser and executor: a seeded mutator over corpus programs and a check.
+
+``mutate(rng, seed_text)`` returns a variant of a real program (token, number, line and byte edits that
+aim at the language's limits); ``check(text)`` parses and executes it and raises AssertionError on a
+finding: an exception other than the project's own (ParseError, ExecutionError), a parse or an
+execution slower than its bound, or a non-finite value in an executed shape.
+"""
+from __future__ import annotations
+
+import random
+import re
+import time
+
+import torch
+
+from shapeprog import corpus
+from shapeprog.errors import ExecutionError, ParseError
+from shapeprog.execute import execute
+from shapeprog.lang import parse, to_text
+from shapeprog.limits import MAX_ABS_NUMBER, MAX_TRANSLATE_COPIES, decode
+
+__all__ = ["EXEC_SECONDS", "PARSE_SECONDS", "check", "mutate", "seeds"]
+
+#: Time bounds of one parse and one execution (on a loaded 2-core machine).
+PARSE_SECONDS = 1.0
+EXEC_SECONDS = 5.0
+
+_NUMBERS = ["0", "0.0", "-0.0", "1", "1.0", "0.5", "1e-30", "-1e-30", "1e308", "1e999", "-1e999", "nan", "inf",
+            str(MAX_ABS_NUMBER), str(-MAX_ABS_NUMBER), "1000.0001", "9" * 400, "1e25", "3.4e38", ".5", "5.",
+            str(MAX_TRANSLATE_COPIES), str(MAX_TRANSLATE_COPIES + 1), "100000000"]
+_TOKENS = ["(", ")", ",", "=", "{", "}", "bbox", "cube0", "cube1", "cube3", "Program_1", "Program_0", "Cuboid",
+           "attach", "squeeze", "reflect", "translate", "X", "Y", "Z", "top", "bot", "True", "False", "Assembly"]
+_IN_RANGE = ["0.0", "1.0", "0.5", "1e-30", "-1e-30", "1000.0", "-1000.0", "999.999", "1e-45", "0.001", "-0.5", "2.0"]
+_NUMBER = re.compile(r"(?<![\w.])-?\d+\.\d+(?:e-?\d+)?")
+_LINES = ["reflect(cube0, X)", "translate(cube0, Y, 200, 0.9)", "translate(cube1, X, 256, 0.5)",
+          "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)", "cube2 = Cuboid(0.0, 0.0, 0.0, False)",
+          "squeeze(cube0, bbox, cube1, top, 0.5, 0.5)", "bbox = Cuboid(0.0, 1.0, 1.0, True)",
+          "Program_1 = Cuboid(0.5, 0.5, 0.5, False)", "}", "Assembly Program_1 {"]
+
+
+def seeds(n: int = 64, seed: int = 0) -> list[str]:
+    """``n`` corpus programs (every category), chosen with ``seed``, plus the flat example file."""
+    rng = random.Random(seed)
+    texts = [corpus.example_text("ex-0.txt")]
+    for cat in corpus.CATEGORIES:
+        ids = corpus.ids(cat, "all")
+        texts += [corpus.read(cat, i) for i in rng.sample(ids, n // len(corpus.CATEGORIES))]
+    return texts
+
+
+def mutate(rng: random.Random, seed_text: str) -> str:
+    """One to four random edits of ``seed_text``: numbers, tokens, whole lines, duplicated lines, bytes.
+
+    Half of the variants change only numbers, to values inside the language's range, so that they
+    still parse and reach the executor.
+    """
+    if rng.random() < 0.5:
+        spans = [m.span() for m in _NUMBER.finditer(seed_text)]
+        for a, b in sorted(rng.sample(spans, min(len(spans), rng.randint(1, 6))), reverse=True):
+            value = rng.choice(_IN_RANGE) if rng.random() < 0.7 else repr(rng.uniform(-3, 3))
+            seed_text = seed_text[:a] + value + seed_text[b:]
+        return seed_text
+    lines = seed_text.split("\n")
+    for _ in range(rng.randint(1, 4)):
+        i = rng.randrange(len(lines))
+        kind = rng.randrange(7)
+        words = lines[i].replace("(", " ( ").replace(")", " ) ").replace(",", " , ").split()
+        if kind == 0 and words:  # replace a token by a number
+            words[rng.randrange(len(words))] = rng.choice(_NUMBERS)
+            lines[i] = "\t" + " ".join(words)
+        elif kind == 1 and words:  # replace a token by a keyword or punctuation
+            words[rng.randrange(len(words))] = rng.choice(_TOKENS)
+            lines[i] = "\t" + " ".join(words)
+        elif kind == 2:  # insert a line
+            lines.insert(i, "\t" + rng.choice(_LINES))
+        elif kind == 3:  # delete a line
+            del lines[i]
+            if not lines:
+                lines = [""]
+        elif kind == 4:  # duplicate a stretch of lines
+            j = rng.randrange(i, min(len(lines), i + 8) + 1)
+            lines[j:j] = lines[i:j] * rng.randint(1, 40)
+        elif kind == 5:  # swap two lines
+            j = rng.randrange(len(lines))
+            lines[i], lines[j] = lines[j], lines[i]
+        else:  # a character edit
+            text = lines[i]
+            k = rng.randrange(len(text) + 1)
+            lines[i] = text[:k] + rng.choice(["\xff", "\x00", "\u0663", "\r", " ", "-", "e", "9", ".", ""]) + text[k + 1:]
+    return "\n".join(lines)
+
+
+def check(text: str) -> None:
+    """Parse and execute ``text``; AssertionError on a finding (see the module docstring)."""
+    data = text.encode("utf-8", "surrogatepass")
+    t0 = time.perf_counter()
+    try:
+        program = parse(decode(data, "fuzz.txt"), "fuzz.txt")
+    except ParseError:
+        program = None
+    except Exception as e:  # noqa: BLE001 - any other type is the finding
+        raise AssertionError(f"parse raised {type(e).__name__}: {e}") from e
+    took = time.perf_counter() - t0
+    assert took < PARSE_SECONDS, f"parse took {took:.2f} s"
+    if program is None:
+        return
+    t0 = time.perf_counter()
+    try:
+        with torch.no_grad():
+            shape = execute(program)
+    except ExecutionError:
+        return
+    except Exception as e:  # noqa: BLE001
+        raise AssertionError(f"execute raised {type(e).__name__}: {e}") from e
+    took = time.perf_counter() - t0
+    assert took < EXEC_SECONDS, f"execution took {took:.2f} s"
+    for name in ("centers", "dims", "axes", "corners", "root_dims"):
+        assert bool(getattr(shape, name).isfinite().all()), f"execution returned a non-finite {name}"
+    assert parse(to_text(program)) == program, "to_text does not round-trip"
