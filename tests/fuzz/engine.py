@@ -30,6 +30,8 @@ class Target:
         run: feeds one input; returns the numbers the execution produced (checked to be finite).
         allowed: the error types that may escape ``run`` (the project's own).
         bound_s: the longest one input may take.
+        mutator: ``(data, rng, seeds) -> bytes``, a structured mutator of the target's own (default: the
+            byte mutator :func:`mutate`).
     """
 
     name: str
@@ -37,6 +39,7 @@ class Target:
     run: Callable[[bytes], Iterable[float]]
     allowed: tuple[type[BaseException], ...]
     bound_s: float = 2.0
+    mutator: Callable[[bytes, random.Random, Sequence[bytes]], bytes] | None = None
 
 
 @dataclass(frozen=True)
@@ -99,7 +102,7 @@ def fuzz(target: Target, seconds: float | None = None, inputs: int | None = None
         elapsed = time.perf_counter() - start
         if (seconds is not None and elapsed >= seconds) or (inputs is not None and stats.inputs >= inputs):
             break
-        data = queue.pop() if queue else mutate(rng.choice(target.seeds), rng, target.seeds)
+        data = queue.pop() if queue else (target.mutator or mutate)(rng.choice(target.seeds), rng, target.seeds)
         t0 = time.perf_counter()
         try:
             values = list(target.run(data))

@@ -10,6 +10,7 @@ import importlib
 
 MODULES = [
     "fuzz.csg_targets",
+    "fuzz.shapeassembly_targets",
 ]
 
 

@@ -7,19 +7,25 @@ execution slower than its bound, or a non-finite value in an executed shape.
 """
 from __future__ import annotations
 
+import math
 import random
 import re
 import time
+import warnings
 
 import torch
 
 from shapeprog import corpus
-from shapeprog.errors import ExecutionError, ParseError
+from shapeprog.errors import ExecutionError, ParseError, ParseWarning
 from shapeprog.execute import execute
 from shapeprog.lang import parse, to_text
 from shapeprog.limits import MAX_ABS_NUMBER, MAX_TRANSLATE_COPIES, decode
 
-__all__ = ["EXEC_SECONDS", "PARSE_SECONDS", "check", "mutate", "seeds"]
+from fuzz.engine import Target
+
+__all__ = ["EXEC_SECONDS", "PARSE_SECONDS", "TARGETS", "check", "mutate", "run", "seeds"]
+
+_SHAPE_FIELDS = ("centers", "dims", "axes", "corners", "root_dims")
 
 #: Time bounds of one parse and one execution (on a loaded 2-core machine).
 PARSE_SECONDS = 1.0
@@ -90,30 +96,37 @@ def mutate(rng: random.Random, seed_text: str) -> str:
     return "\n".join(lines)
 
 
-def check(text: str) -> None:
-    """Parse and execute ``text``; AssertionError on a finding (see the module docstring)."""
-    data = text.encode("utf-8", "surrogatepass")
-    t0 = time.perf_counter()
-    try:
+def run(data: bytes) -> list[float]:
+    """Parse and execute one input (bytes, decoded as the CLI decodes files); the numbers of the executed
+    shape. Only ParseError and ExecutionError may escape; the printed program must parse back to itself."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)  # a stray comma is a warning, not a finding
         program = parse(decode(data, "fuzz.txt"), "fuzz.txt")
-    except ParseError:
-        program = None
-    except Exception as e:  # noqa: BLE001 - any other type is the finding
-        raise AssertionError(f"parse raised {type(e).__name__}: {e}") from e
-    took = time.perf_counter() - t0
-    assert took < PARSE_SECONDS, f"parse took {took:.2f} s"
-    if program is None:
-        return
+    with torch.no_grad():
+        shape = execute(program)
+    assert parse(to_text(program)) == program, "to_text does not round-trip"
+    return torch.cat([getattr(shape, n).reshape(-1) for n in _SHAPE_FIELDS]).tolist()
+
+
+def check(text: str) -> None:
+    """:func:`run` on ``text``; AssertionError on a finding (see the module docstring)."""
     t0 = time.perf_counter()
     try:
-        with torch.no_grad():
-            shape = execute(program)
-    except ExecutionError:
-        return
-    except Exception as e:  # noqa: BLE001
-        raise AssertionError(f"execute raised {type(e).__name__}: {e}") from e
+        values = run(text.encode("utf-8", "surrogatepass"))
+    except (ParseError, ExecutionError):
+        values = []
+    except AssertionError:
+        raise
+    except Exception as e:  # noqa: BLE001 - any other type is the finding
+        raise AssertionError(f"{type(e).__name__}: {e}") from e
     took = time.perf_counter() - t0
-    assert took < EXEC_SECONDS, f"execution took {took:.2f} s"
-    for name in ("centers", "dims", "axes", "corners", "root_dims"):
-        assert bool(getattr(shape, name).isfinite().all()), f"execution returned a non-finite {name}"
-    assert parse(to_text(program)) == program, "to_text does not round-trip"
+    assert took < PARSE_SECONDS + EXEC_SECONDS, f"parsing and execution took {took:.2f} s"
+    assert all(math.isfinite(v) for v in values), "execution returned a non-finite number"
+
+
+def _mutate_bytes(data: bytes, rng: random.Random, _seeds) -> bytes:
+    return mutate(rng, data.decode("utf-8", "surrogatepass")).encode("utf-8", "surrogatepass")
+
+
+TARGETS = [Target("shapeassembly/text", [t.encode() for t in seeds(n=24)], run, (ParseError, ExecutionError),
+                  PARSE_SECONDS + EXEC_SECONDS, _mutate_bytes)]

@@ -1,34 +1,12 @@
-"""A bounded fuzz run of the ShapeAssembly parser and executor (``tests/fuzz/shapeassembly_targets.py``).
-
-Seeded, so a failure reproduces: only ParseError and ExecutionError escape, parsing and execution stay
-within their time bounds, and no executed shape holds a non-finite number. Longer runs use the same
-target with other seeds.
-"""
+"""The ShapeAssembly fuzz target (``tests/fuzz/shapeassembly_targets.py``; the bounded run itself is
+``tests/fuzz/test_fuzz.py``, which runs every registered target): its mutations reach the parser's errors,
+the executor's errors and successful executions, and its check reports foreign exceptions."""
 import random
-import time
 import warnings
 
 import pytest
 
 from fuzz import shapeassembly_targets as target
-
-INPUTS = 300  # about 2 s on a 2-core machine
-
-
-def test_fuzz_parser_and_executor_only_raise_own_errors_in_bounded_time():
-    seeds = target.seeds()
-    rng = random.Random(20240611)
-    t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a stray-comma ParseWarning is allowed
-        for n in range(INPUTS):
-            text = target.mutate(rng, rng.choice(seeds))
-            try:
-                target.check(text)
-            except AssertionError as e:
-                raise AssertionError(f"input {n} (seed 20240611): {e}\n--- input ---\n{text}") from None
-    assert time.perf_counter() - t0 < 30
-
 
 def test_mutations_reach_the_executor_and_both_error_types():
     seeds = target.seeds(n=12)
@@ -56,5 +34,5 @@ def test_check_reports_foreign_exceptions(monkeypatch):
         raise KeyError("cube9")
 
     monkeypatch.setattr(target, "parse", broken)
-    with pytest.raises(AssertionError, match="parse raised KeyError"):
+    with pytest.raises(AssertionError, match="KeyError"):
         target.check("bbox = Cuboid(1.0, 1.0, 1.0, True)\n")
