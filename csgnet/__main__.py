@@ -27,6 +27,7 @@ from shapeio.image import write_png
 
 from . import export, render
 from .lang import ParseError, is_valid, parse
+from .primitives import primitives
 from .shapes2d import load_silhouettes
 from .vocab import vocabulary
 
@@ -263,19 +264,18 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_export_weights(args) -> int:
-    from .train.supervised import export_weights
+    from .inference import export_weights
 
     if not Path(args.checkpoint).is_file():
         print(f"error: {args.checkpoint}: no such checkpoint file", file=sys.stderr)
         return 2
     try:
         path = export_weights(args.checkpoint, args.out, half=not args.float32)
+    except ValueError as e:  # read_checkpoint names the file and what is wrong with it
+        print(f"error: {e}; `export-weights` reads the .ckpt files that training writes", file=sys.stderr)
+        return 2
     except OSError as e:
         print(f"error: {_located(args.out, e)}", file=sys.stderr)
-        return 2
-    except Exception as e:  # torch.load and the checkpoint's layout fail in many ways on a foreign file
-        print(f"error: {args.checkpoint}: not a Lightning training checkpoint of csgnet "
-              f"({type(e).__name__}); `export-weights` reads the .ckpt files that training writes", file=sys.stderr)
         return 2
     print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
     return 0
@@ -509,7 +509,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     args.argv = list(argv) if argv is not None else sys.argv[1:]
     if args.cmd == "render" and args.dim is None:
-        args.dim = 3 if any(h in args.program for h in ("sp(", "cu(", "cy(", "p(", "u(", "y(")) else 2
+        args.dim = 3 if any(h + "(" in args.program for p in primitives(3) for h in (p.kind, p.long) if h) else 2
     try:
         return args.func(args)
     except BrokenPipeError:  # the reader went away (`... | head -1`): stop quietly

@@ -3,7 +3,7 @@
 * :func:`load_shape` reads a PNG/JPG (binarised and fitted into 64×64, aspect kept), a ``.npy`` grid
   (2D or 3D) or a mesh (``.obj``, ``.ply``, ``.stl``, ... voxelised to 64³ with trimesh).
 * :func:`load_pretrained` returns a shipped model (``csgnet/weights/``); :func:`load_model` reads any
-  weights file written by :func:`csgnet.train.supervised.export_weights` or a Lightning checkpoint.
+  weights file written by :func:`export_weights` or a Lightning checkpoint.
 * :func:`infer` decodes a batch of shapes with beam search and returns, per shape, the chosen program
   with its log-probability and its IoU / chamfer to the input.
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from shapeio import InputError
+from shapeio import InputError, atomic_write
 from shapeio.arrays import read_grid
 from shapeio.image import IMAGE_SUFFIXES, centre_on_canvas, fit_to_canvas, read_mask
 from shapeio.mesh import MESH_SUFFIXES, load_mesh
@@ -25,7 +25,8 @@ from .lang import Program, parse
 from .models import CSGNet, ModelConfig, preset
 from .score import score_beams
 
-__all__ = ["InputError", "load_shape", "fit_to_canvas", "load_model", "load_pretrained", "infer", "Inference",
+__all__ = ["InputError", "load_shape", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
+           "load_pretrained", "infer", "Inference",
            "WEIGHTS", "PRETRAINED"]
 
 WEIGHTS = Path(__file__).parent / "weights"
@@ -100,10 +101,18 @@ def _voxelise(path: Path) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------
 # models
 
-def load_model(path, device=None) -> CSGNet:
-    """A model from a weights file (``{"config", "state_dict"}``) or a Lightning checkpoint, in eval mode.
+def read_checkpoint(path) -> tuple[ModelConfig, dict, dict]:
+    """The model of a weights file (``{"config", "state_dict"}``) or of a Lightning training checkpoint.
 
     Files are read with ``torch.load(weights_only=True)``.
+
+    Returns:
+        ``(config, state_dict, meta)``: the model's configuration, its tensors (as stored) and, for a
+        training checkpoint, its ``epoch`` and ``global_step``.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file, for anything that is not one of the two layouts.
     """
     path = Path(path)
     if not path.is_file():
@@ -111,19 +120,44 @@ def load_model(path, device=None) -> CSGNet:
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:
-        raise ValueError(f"{path}: not a readable weights file ({type(e).__name__}: {e})") from None
-    if "config" in payload:
-        config = ModelConfig.from_dict(payload["config"])
-        state = payload["state_dict"]
-    elif "hyper_parameters" in payload and "state_dict" in payload:
-        hp = payload["hyper_parameters"]
-        config = preset(hp.get("size", "small"), hp.get("dim", 2), hp.get("stack", False), **(hp.get("model") or {}))
-        state = {k[len("model."):]: v for k, v in payload["state_dict"].items() if k.startswith("model.")}
-    else:
-        raise ValueError(f"{path}: neither a weights file nor a Lightning checkpoint (keys {sorted(payload)[:6]})")
+        # torch's own message suggests unsafe loading; the type of the failure is what a user needs
+        raise ValueError(f"{path}: not a Lightning training checkpoint or weights file of csgnet "
+                         f"(unreadable: {type(e).__name__})") from None
+    if not isinstance(payload, dict):
+        raise ValueError(f"{path}: neither a weights file nor a Lightning checkpoint (a {type(payload).__name__})")
+    try:
+        if "config" in payload:
+            return ModelConfig.from_dict(payload["config"]), payload["state_dict"], payload.get("meta", {})
+        if "hyper_parameters" in payload and "state_dict" in payload:
+            hp = payload["hyper_parameters"]
+            config = preset(hp.get("size", "small"), hp.get("dim", 2), hp.get("stack", False), **(hp.get("model") or {}))
+            state = {k[len("model."):]: v for k, v in payload["state_dict"].items() if k.startswith("model.")}
+            meta = {"epoch": int(payload.get("epoch", -1)), "global_step": int(payload.get("global_step", -1))}
+            return config, state, meta
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{path}: not a csgnet weights file or checkpoint ({type(e).__name__}: {e})") from None
+    raise ValueError(f"{path}: neither a weights file nor a Lightning checkpoint (keys {sorted(payload)[:6]})")
+
+
+def load_model(path, device=None) -> CSGNet:
+    """A model from a weights file or a Lightning checkpoint (:func:`read_checkpoint`), in eval mode."""
+    config, state, _ = read_checkpoint(path)
     model = CSGNet(config)
     model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
     return model.to(device or "cpu").eval()
+
+
+def export_weights(checkpoint, out, half: bool = True) -> Path:
+    """Write the model of a training checkpoint (or weights file) as a small weights file
+    ``{"config", "state_dict", "meta"}``, atomically.
+
+    ``half`` stores float16 tensors (loaded back as float32 by :func:`load_model`).
+    """
+    config, state, meta = read_checkpoint(checkpoint)
+    if half:
+        state = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
+    payload = {"config": config.to_dict(), "state_dict": state, "meta": meta}
+    return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
 
 
 def load_pretrained(dim: int = 2, device=None) -> CSGNet:

@@ -23,7 +23,7 @@ from csgnet import metrics
 from csgnet.lang import completable
 from csgnet.primitives import SIZE
 from csgnet.renderer import StackMachine, pack, popcount, primitive_cache, unpack
-from csgnet.vocab import PAD_CODE, vocabulary
+from csgnet.vocab import codes, vocabulary
 
 from ._checks import can_render, check_dim, check_int, check_render_mode
 from .targets import Target, as_target_source
@@ -186,7 +186,7 @@ class _Episodes:
         self.depth[rows] += is_draw.astype(np.int64) - is_op
         self.invalid[rows] |= ~legal
 
-        kinds = torch.full((self.n,), PAD_CODE, dtype=torch.int64, device=self.device)
+        kinds = torch.full((self.n,), codes().stop, dtype=torch.int64, device=self.device)
         ids = torch.zeros(self.n, dtype=torch.int64, device=self.device)
         if len(wr):
             wr_t = torch.as_tensor(wr, device=self.device)

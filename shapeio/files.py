@@ -57,12 +57,15 @@ def _alive(pid: int) -> bool:
     return True
 
 
+_CLEANED: set[str] = set()  # folders already cleaned of stale temporary files by this process
+
+
 def remove_stale_temps(folder: PathLike, name: str | None = None) -> list[Path]:
     """Remove the temporary files that killed :func:`atomic_write` calls left in ``folder``.
 
     A temporary file is named ``.<target>.atomic-<pid>-<random>.tmp``; it is stale when the process
     ``<pid>`` no longer exists or when it is older than :data:`STALE_TEMP_SECONDS`. Files being written
-    by a live process are kept. :func:`atomic_write` calls this for its own target before writing.
+    by a live process are kept. :func:`atomic_write` calls this at its first write into a folder.
 
     Args:
         folder: the folder to clean.
@@ -95,8 +98,9 @@ def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], ob
     The content goes to a temporary file ``.<name>.atomic-<pid>-<random>.tmp`` in the target's
     directory, is flushed to disk, then ``os.replace``-d onto ``path``; on any error the temporary file
     is removed and ``path`` is untouched. The file gets the usual permissions: those of the file it
-    replaces, else ``0o666`` less the umask. Temporary files left by killed writes to the same target
-    are removed first (:func:`remove_stale_temps`).
+    replaces, else ``0o666`` less the umask. The first write into a folder in a process removes the
+    temporary files that killed writes left there (:func:`remove_stale_temps`), so a folder is listed
+    once per process, not once per write.
 
     Args:
         path: the target file.
@@ -116,7 +120,10 @@ def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], ob
         folder.mkdir(parents=True, exist_ok=True)
     elif not folder.is_dir():
         raise FileNotFoundError(f"{path}: directory {str(folder)!r} does not exist")
-    remove_stale_temps(folder, path.name)
+    key = os.path.realpath(folder)
+    if key not in _CLEANED:
+        remove_stale_temps(folder)
+        _CLEANED.add(key)
     try:
         mode = stat.S_IMODE(os.stat(path).st_mode)
     except OSError:

@@ -50,12 +50,18 @@ from ..renderer import render_programs
 
 __all__ = ["Table4Row", "table4", "table4_markdown", "nearest_silhouettes", "subset", "ITERATIONS",
            "Table6Row", "table6", "table6_markdown", "beam_detections", "primitive_boxes", "box_iou",
-           "average_precision", "detection_ap", "CLASSES", "PAPER_TABLE4", "PAPER_TABLE6"]
+           "average_precision", "detection_ap", "detection_classes", "PAPER_TABLE4", "PAPER_TABLE6"]
 
 ITERATIONS: tuple = (0, 1, 2, 4, 10, None)
 """Refinement iteration limits of Table 4 (None: to convergence)."""
-CLASSES = {p.kind: p.name for p in primitives(2)}
-"""The detection classes: the 2D primitives of the table (the paper's circle, square and triangle)."""
+
+
+def detection_classes() -> dict[str, str]:
+    """The detection classes, kind letter -> name: the 2D primitives of the current table (the paper's
+    circle, square and triangle)."""
+    return {p.kind: p.name for p in primitives(2)}
+
+
 PAPER_TABLE4 = {"CSGNetStack supervised, k = 10": 1.38, "CSGNetStack RL, k = 10": 1.02,
                 "CSGNetStack RL, k = 10, refined": 0.34}
 """The paper's CAD numbers quoted beside ours (CD in pixels; the paper's 2D CAD set, not ours)."""
@@ -310,7 +316,7 @@ def detection_ap(detections: Sequence[dict], truths: Sequence[Sequence[Draw]], i
     allp = [d for det in detections for d in det] + [d for gt in truths for d in gt]
     boxes = primitive_boxes(allp, cache)
     out = {}
-    for kind, name in CLASSES.items():
+    for kind, name in detection_classes().items():
         dets = [(i, float(s), boxes[d]) for i, det in enumerate(detections) for d, s in det.items() if d.kind == kind]
         gts = {}
         for i, gt in enumerate(truths):
@@ -384,10 +390,11 @@ def table6(model, programs: Sequence[Program], beams: Sequence[int] = (10, 40), 
 
 def table6_markdown(rows: Sequence[Table6Row], note: str = "") -> str:
     """Table 6 as markdown, the paper's mAP beside ours."""
-    lines = ["| k | " + " | ".join(f"AP {n} %" for n in CLASSES.values()) + " | mAP % | paper mAP % | images/s |",
-             "|---|" + "---|" * len(CLASSES) + "---|---|---|"]
+    names = list(detection_classes().values())
+    lines = ["| k | " + " | ".join(f"AP {n} %" for n in names) + " | mAP % | paper mAP % | images/s |",
+             "|---|" + "---|" * len(names) + "---|---|---|"]
     for r in rows:
-        cells = " | ".join(f"{100 * r.ap[n]:.1f}" for n in CLASSES.values())
+        cells = " | ".join(f"{100 * r.ap[n]:.1f}" for n in names)
         paper = f"{PAPER_TABLE6[r.k]:.1f}" if r.k in PAPER_TABLE6 else "–"
         lines.append(f"| {r.k} | {cells} | {100 * r.map:.1f} | {paper} | {r.images_per_second:.1f} |")
     n = rows[0].images if rows else 0

@@ -1,7 +1,6 @@
 """Training of the CSGNet models with PyTorch Lightning: the only part of :mod:`csgnet` that imports it.
 
-* :mod:`csgnet.train.supervised`: supervised training (``CSGNetModule``, ``CSGDataModule``) and
-  ``export_weights``;
+* :mod:`csgnet.train.supervised`: supervised training (``CSGNetModule``, ``CSGDataModule``);
 * :mod:`csgnet.train.reinforce`: REINFORCE fine-tuning on target images (``ReinforceModule``,
   ``TargetDataModule``);
 * :mod:`csgnet.train.streams`: batch streams split over ranks and DataLoader workers;

@@ -85,7 +85,7 @@ def load_initial(path, overrides: dict | None = None) -> tuple[CSGNet, dict]:
     """A model initialised from supervised weights, loading the tensors whose names and shapes match.
 
     Args:
-        path: a weights file (:func:`csgnet.train.supervised.export_weights`) or a Lightning checkpoint of
+        path: a weights file (:func:`csgnet.inference.export_weights`) or a Lightning checkpoint of
             :class:`csgnet.train.supervised.CSGNetModule` (or of :class:`ReinforceModule`).
         overrides: :class:`~csgnet.models.ModelConfig` fields to change (e.g. ``{"dropout": 0.2}``);
             tensors whose shape changes as a result are left at their initial values.
@@ -182,7 +182,7 @@ class ReinforceModule(L.LightningModule):
         if self.config.dim != 2:
             raise ValueError(f"REINFORCE fine-tuning is for 2D models (the reward is the 2D chamfer distance); "
                              f"got a {self.config.dim}D model")
-        # the full configuration, in the form csgnet.inference.load_model / training.export_weights read
+        # the full configuration, in the form csgnet.inference.read_checkpoint reads
         full = self.config.to_dict()
         self.hparams.update(dim=full.pop("dim"), stack=full.pop("stack"), size=size or "small", model=full)
         self.register_buffer("baseline", torch.zeros((), dtype=torch.float64))

@@ -8,7 +8,6 @@
   reduce-on-plateau ×0.2 after more than 8 epochs without improvement of the validation chamfer (2D) or
   IoU (3D), validation by greedy decoding with IoU and chamfer per program length, and image grids of
   targets beside predicted renders in TensorBoard.
-* :func:`export_weights` turns a training checkpoint into a small weights file.
 
 The batch stream is :class:`csgnet.train.streams.MixedLengthBatches`. ``python train.py fit --config
 configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI (``docs/csgnet_models.md``).
@@ -36,7 +35,7 @@ from ..vocab import vocabulary
 from .logs import EpochValues, log_means, log_pairs
 from .streams import MixedLengthBatches, distributed, set_stream_epoch, stream_loader
 
-__all__ = ["CSGDataModule", "CSGNetModule", "export_weights", "DEFAULT_LENGTHS"]
+__all__ = ["CSGDataModule", "CSGNetModule", "DEFAULT_LENGTHS"]
 
 DEFAULT_LENGTHS = {2: [3, 5, 7, 9, 11, 13], 3: [3, 5, 7]}
 
@@ -230,19 +229,3 @@ class CSGNetModule(L.LightningModule):
         sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode=mode, factor=self.hparams.plateau_factor,
                                                            patience=self.hparams.plateau_patience)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": self.monitor, "interval": "epoch"}}
-
-
-def export_weights(checkpoint: str | os.PathLike, out: str | os.PathLike, half: bool = True) -> Path:
-    """Write the model of a training checkpoint as a small weights file ``{"config", "state_dict"}``.
-
-    ``half`` stores float16 tensors (loaded back as float32 by :func:`csgnet.load_pretrained`).
-    """
-    ckpt = torch.load(checkpoint, map_location="cpu", weights_only=True)
-    hp = ckpt.get("hyper_parameters", {})
-    config = preset(hp.get("size", "small"), hp.get("dim", 2), hp.get("stack", False), **(hp.get("model") or {}))
-    state = {k[len("model."):]: v for k, v in ckpt["state_dict"].items() if k.startswith("model.")}
-    if half:
-        state = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
-    payload = {"config": config.to_dict(), "state_dict": state,
-               "meta": {"epoch": int(ckpt.get("epoch", -1)), "global_step": int(ckpt.get("global_step", -1))}}
-    return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)

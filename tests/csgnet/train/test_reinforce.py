@@ -196,7 +196,7 @@ def test_fit_logs_checkpoints_resumes_and_exports(tmp_path):
     from lightning.pytorch.loggers import TensorBoardLogger
 
     from csgnet.inference import load_model
-    from csgnet.train.supervised import export_weights
+    from csgnet.inference import export_weights
 
     save_weights(tmp_path / "w.pt", stack=True)
     targets = csgnet.render(SHAPES)

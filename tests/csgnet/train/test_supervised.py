@@ -8,7 +8,8 @@ import torch.nn.functional as F
 
 from csgnet.train.checkpoint import AtomicCheckpointIO
 from csgnet.train.streams import MixedLengthBatches
-from csgnet.train.supervised import CSGDataModule, CSGNetModule, export_weights
+from csgnet.inference import export_weights
+from csgnet.train.supervised import CSGDataModule, CSGNetModule
 from csgnet.vocab import vocabulary
 
 ROOT = Path(__file__).resolve().parents[3]
