@@ -1,32 +1,11 @@
 """Export CSG results: canvases to PNG, voxel volumes to OBJ meshes, programs to OpenSCAD source.
 
-Coordinates
------------
-A 2D canvas is ``img[row, col]`` with ``row = y`` and ``col = x`` (spec section (b)); a 3D volume is
-``vol[x, y, z]``. In every exported geometry **pixel and voxel centres sit at integer coordinates**: the
-pixel ``img[row, col]`` is the unit square ``[col - 0.5, col + 0.5] x [row - 0.5, row + 0.5]`` and the
-voxel ``vol[i, j, k]`` is the unit cube centred at ``(i, j, k)``. The rendered shape is the union of the
-squares (cubes) of its on pixels (voxels).
+Entry points: :func:`save_png`, :func:`voxels_to_mesh` and :func:`save_obj`, :func:`to_scad` and
+:func:`save_scad`. In every exported geometry pixel and voxel centres sit at integer coordinates; a 2D
+OpenSCAD model is mirrored so that the CAD view looks like the PNG, and every model is intersected with
+the canvas. Files are written atomically (a temporary file in the target directory, then ``os.replace``).
 
-OpenSCAD (:func:`to_scad`)
---------------------------
-Each primitive's form is the ``scad`` entry of its row in the table of :mod:`csgnet.primitives`.
-
-* 2D: SCAD's x is the column and SCAD's y is the row. Image rows grow downward, SCAD's y grows upward,
-  so the whole model is wrapped in ``mirror([0, 1, 0])``: the CAD view then looks like the PNG (the
-  triangle's apex points up on screen in both). Squares are exact: the rectangle of the inclusive pixel
-  bounds from :func:`csgnet.primitives.square_bounds`, grown by half a pixel. Circles are
-  ``circle(r)`` with a high ``$fn`` (the raster holds the pixels whose centres are strictly inside).
-  Triangles are the polygon through :func:`csgnet.primitives.triangle_vertices` (the raster also holds
-  the Bresenham outline, so it is up to about half a pixel larger).
-* 3D: ``sphere(r - 1)`` and ``cylinder(r = r - 1)`` (the raster holds the voxels whose centres are
-  within ``r - 1``), the cube and the cylinder's height are exact in voxel units (edge ``2q + 1`` with
-  ``q = (r - 1) // 2``, height ``2 * int((h - 1) / 2) + 1``), the cylinder's axis is z.
-* Booleans follow :meth:`csgnet.lang.Program.tree`: ``+`` -> ``union()``, ``*`` -> ``intersection()``,
-  ``-`` -> ``difference()`` with the earlier operand first (earlier minus later).
-* The model is intersected with the canvas (``[-0.5, 63.5]`` per axis), as the renderer clips.
-
-Files are written atomically: a temporary file in the target directory, then ``os.replace``.
+See docs/csg.md ("Export") for the coordinates and the OpenSCAD form of each primitive.
 """
 
 from __future__ import annotations

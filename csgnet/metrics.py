@@ -1,38 +1,12 @@
 """CSGNet's evaluation metrics, computed exactly as the reference computes them (spec section (h)).
 
-* :func:`chamfer`: the 2D edge chamfer distance in pixels (``train_utils.chamfer`` of the reference):
-  Canny edges of the 0/255 images, the 3x3 chamfer distance transform of each edge map, and the
-  symmetric mean edge-to-edge distance. Pairs with an empty or full image, or an empty edge map,
-  get the fixed value 16 (:data:`CHAMFER_PENALTY`).
-* :func:`iou` with ``denominator="union"`` (``|A and B| / |A or B|``, NaN when both are empty: the 2D
-  synthetic validation and the 2D CAD beam search) or ``denominator="union+1"``
-  (``|A and B| / (|A or B| + 1)``: the RL IoU reward, ``test_cad.py`` and all 3D evaluation).
-* :func:`iou_3d`: the 3D evaluation IoU, ``"union+1"`` on ``(N, 64, 64, 64)`` volumes (never NaN).
-* :func:`reward`: the RL reward ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma``.
+:func:`chamfer` is the 2D edge chamfer distance in pixels (the fixed value 16, :data:`CHAMFER_PENALTY`,
+for pairs with an empty or full image or an empty edge map); :func:`iou` names its denominator
+(``"union"`` or ``"union+1"``); :func:`iou_3d` is the 3D evaluation IoU (``"union+1"``, never NaN);
+:func:`reward` is the RL reward ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma``.
 
-How :func:`chamfer` is fast and still exact
--------------------------------------------
-The reference loops over pairs and calls ``cv2.Canny`` and ``cv2.distanceTransform`` twice per pair,
-then forms four float64 copies of 64x64 arrays per pair. Here:
-
-1. **Distinct images only.** Every distinct image (over predictions and targets) is processed once
-   (targets are usually shared by many beams or samples), and only images in a pair that can still
-   avoid the penalty get edges; only images in a pair whose two edge maps are non-empty get a
-   distance map (the reference skips the rest too).
-2. **Edges and distances** are the reference's own calls, ``cv2.Canny(img, 1, 3)`` and
-   ``cv2.distanceTransform(255 - E, DIST_L2, 3)``, one per image, written straight into preallocated
-   arrays, optionally on several threads (OpenCV releases the GIL). Both cost about 2.5 ns per
-   pixel whatever the image size (a one-off measurement while developing, not printed by a script),
-   so tiling images into one large call saves nothing; the 3x3 transform cannot be tiled anyway (its float sums depend on the path order, and distances would
-   leak between tiles).
-3. **Combination.** ``sum(D1 * E2)`` is ``255 * (D1 . [E2 > 0])``: each pair gathers the distances
-   of one image at the other's edge pixels (a few hundred values, not 4096) and sums the float32
-   distances in float64. That sum is exact (values < 2^7 with 24-bit mantissas, 4096 terms fit in
-   53 bits), so the result does not depend on summation order and equals the reference's float64
-   sums bit for bit.
-
-``tests/csgnet/test_metrics.py`` checks bit equality against the per-pair computation on random
-rendered programs, border-touching shapes included; ``bench/bench_csg_chamfer.py`` measures the speed.
+See docs/csg.md ("Metrics") for which evaluation uses which IoU and how :func:`chamfer` is fast and
+still equals the reference's per-pair computation bit for bit.
 """
 
 from __future__ import annotations

@@ -1,17 +1,10 @@
 """Fit a program's continuous parameters to a point cloud (the reference's ``example_fit``).
 
-Adam minimises ``chamfer(surface samples of execute(program, params), target cloud)
-+ reg * ||params - params0||^2`` over every continuous number of the program (Cuboid dims,
-attach coordinates, squeeze u,v, translate d), through the one differentiable executor.
-The structure (statements, names, aligned flags, counts, axes, faces) is fixed.
+:func:`fit` runs Adam on ``chamfer(surface samples of execute(program, params), target cloud)
++ reg * ||params - params0||^2`` over every continuous number of the program, through the one
+differentiable executor; the structure is fixed. It returns a :class:`FitResult`.
 
-Differences from the reference script (documented in docs/shapeassembly.md):
-  * the penalty is L2 (the reference uses 0.001 x L1);
-  * after each step values are projected to their valid ranges (dims >= 0.01, attach
-    coordinates, squeeze u,v and translate d in [0, 1]);
-  * a sub-program's ``bbox = Cuboid(...)`` line shares the dims of its ``Program_m`` line in the
-    parent (the corpus invariant that they are equal is kept);
-  * the result is written with 3 decimals (the corpus's precision; the reference wrote 2).
+See docs/shapeassembly.md ("Fitting") for the differences from the reference script.
 
 Example:
     >>> import torch, shapeprog

@@ -1,34 +1,12 @@
 """ShapeAssembly: the language (AST, parser, printer). Standard library only.
 
-A program is a tree of blocks. The corpus format (one file per shape) is::
+:func:`parse` reads the corpus format (``Assembly Program_<m> { ... }`` blocks) or the flat single-block
+format into a :class:`Program`, whose :class:`Block` objects hold the statements (:class:`Cuboid`,
+:class:`Attach`, :class:`Squeeze`, :class:`Reflect`, :class:`Translate`); errors are :class:`ParseError`
+naming ``file:line:col``. :func:`to_text` prints the format that was parsed, numbers with ``repr``, so
+``to_text(parse(text)) == text`` byte for byte for every corpus file.
 
-    Assembly Program_0 {
-    \tbbox = Cuboid(0.893, 1.558, 1.019, True)
-    \tProgram_1 = Cuboid(0.89, 0.528, 1.017, True)
-    \tattach(Program_1, bbox, 0.5, 0.0, 0.5, 0.499, 0.001, 0.5)
-    }
-    Assembly Program_1 {
-    \tbbox = Cuboid(0.89, 0.528, 1.017, True)
-    ...
-    }
-
-A cuboid named ``Program_<m>`` is a non-leaf part whose contents are the block
-``Assembly Program_<m>``. The *flat* format (``examples/ex-0.txt``) is a single block
-without the ``Assembly`` wrapper and without indentation.
-
-Statements (one per line)::
-
-    NAME = Cuboid(l, h, w, aligned)          l, h, w: extents along local x, y (up), z
-    attach(A, B, x1, y1, z1, x2, y2, z2)     point (x1,y1,z1) of A goes to (x2,y2,z2) of B
-    squeeze(A, B, C, face, u, v)             face in right|left|top|bot|front|back
-    reflect(A, axis)                         axis in X|Y|Z
-    translate(A, axis, n, d)                 n copies spanning d (fraction of the bbox)
-
-Numbers are printed with Python's ``repr`` (the corpus numbers are exactly that form,
-so ``to_text(parse(text)) == text`` byte for byte for every corpus file).
-
-Decision on the stray trailing comma (``squeeze(...),`` in ``ex-0.txt``): it is accepted
-with a :class:`ParseWarning` naming ``file:line``; it is not reproduced when printing.
+See docs/shapeassembly.md ("Language") for the formats, the statements and the parsing rules.
 
 Example:
     >>> p = parse("bbox = Cuboid(1.0, 1.0, 1.0, True)\\ncube0 = Cuboid(0.5, 0.1, 0.5, True)\\n"

@@ -1,36 +1,12 @@
 """The paper's Table 4 (real 2D shapes) and Table 6 (primitive detection) protocols, on this project's data.
 
-**Table 4** (:func:`table4`): shape parsing of real 2D shapes, the chamfer distance (CD, pixels, spec
-section (h)) between each target and its parse, averaged over the targets, before and after visually
-guided refinement. The paper uses 64x64 views of CAD chairs, desks and lamps; here the targets are the
-test split of the shipped PartNet silhouettes (:func:`csgnet.shapes2d.load_silhouettes`), a different
-set, so the numbers are not comparable with the paper's, only between the rows of one table. Rows:
+:func:`table4`: the chamfer distance between test PartNet silhouettes and their parses (nearest
+neighbour; each model at k = 1 and k = 10) after 0 to unlimited refinement iterations, with times.
+:func:`table6`: the k programs of a beam search read as primitive detections on synthetic 2D test
+programs; AP per primitive type, mAP and images per second. :func:`table4_markdown` and
+:func:`table6_markdown` print the rows; :func:`subset` draws a subset of images.
 
-* **nearest neighbour**: the training silhouette with the highest IoU ``|A∧B| / |A∨B|`` with the target
-  (one matrix product over the whole training split; ties: the first). IoU rather than the chamfer
-  distance because a chamfer search would need 21,072 chamfer distances per target; the row's CD is the
-  chamfer distance of that neighbour. It has no program, so no refinement.
-* **each model at k = 1** (greedy decoding) and **k = 10** (beam search; the beam with the lowest CD
-  against the target: the paper's best-of-k protocol, an oracle that looks at the target).
-* CD after **0, 1, 2, 4, 10 and unlimited** Powell iterations of refinement
-  (:func:`csgnet.refinement.refine_beams`, improved mode): every beam is refined with that iteration
-  limit and the best result is kept. Refinement never returns a worse program, so each column is at most
-  the one before it.
-* time per image: decoding (greedy or beam search, rendering and scoring every beam) and refinement
-  (the largest iteration limit asked for).
-
-**Table 6** (:func:`table6`): primitive detection on synthetic 2D test programs. For each target, the k
-programs of a beam search are read as detections: every distinct primitive (type and parameters) that
-appears in at least one of the k beam programs is a detection, with score = the fraction of the k beam
-programs that contain it (each beam counted once, valid or not: its tokens before ``$``). The ground
-truth is the set of distinct primitives of the target program. A primitive's box is the pixel bounding
-box of its own rasterisation on the 64x64 canvas (inclusive rows and columns; the box IoU counts
-pixels: ``|A∩B| / |A∪B|`` of the two pixel rectangles). Per primitive type (circle, square, triangle),
-detections of all targets are sorted by score (ties keep target order), each is a true positive if it
-overlaps a not yet matched ground-truth box of the same type in the same target with IoU ≥ 0.5 (the
-highest-IoU one), else a false positive; AP is the area under the precision-recall curve with the
-precision made monotone (all-point interpolation, as PASCAL VOC since 2010). mAP is the mean over the
-three types. Images per second count beam search plus reading out the detections.
+See docs/reinforce.md ("Table 4" and "Table 6") for the exact protocols.
 """
 from __future__ import annotations
 

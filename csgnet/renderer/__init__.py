@@ -1,35 +1,14 @@
 """The batched stack renderer of CSG programs, in PyTorch (CPU or GPU).
 
-Programs arrive as token-index tensors ``(B, T)`` of mixed lengths (``$`` or any index after it pads), or
-as :class:`~csgnet.lang.Program` objects with arbitrary integer parameters. The result is exact to the
-pixel and voxel against the per-program NumPy path (:mod:`csgnet.renderer.reference`), because both evaluate the
-shared geometry of :mod:`csgnet.primitives`.
+:func:`render_tokens` renders token-index tensors ``(B, T)`` (``$`` or any index after it pads),
+:func:`render_programs` :class:`~csgnet.lang.Program` objects or texts with arbitrary integer parameters;
+:func:`execute` runs encoded programs (optionally with a trace), :func:`stack_trace` gives the stack
+trace CSGNetStack trains on, :class:`StackMachine` steps a batch one token at a time (for decoders).
+Canvases are bit-packed int64 words; the result is exact to the pixel and voxel against the
+per-program NumPy path (:mod:`csgnet.renderer.reference`). Parts outside the canvas are clipped (3D
+never wraps around); invalid programs render all False.
 
-How it is fast: canvases are bit-packed. A 2D image is 64 int64 words (one per row, bit = column); a 3D
-volume is 64x64 int64 words (one per (x, y) column, bit = z). Every primitive is, per row (2D) or per
-column (3D), a union of at most four integer intervals computed in closed form (circle half-widths,
-square bounds, the triangle's scan-line fill and its Bresenham outline; sphere, cube and cylinder z
-extents), and the boolean operators are word-wise ``| & ~``.
-
-Two ways through a batch:
-
-* :func:`execute` without a trace (and :func:`render_tokens`, :func:`render_programs`) plans first:
-  it simulates every program's stack on references, on the CPU, and turns the operations that a
-  valid result depends on into a table ordered by tree height; each group of table rows is a few
-  batched row gathers and one word-wise operation (see :func:`_execute_plan`). Values are only
-  computed on the range of x-slab blocks where they can be non-zero, and bool output unpacks only
-  the non-empty blocks of each result.
-* :class:`StackMachine` steps the whole batch through the programs one token position at a time; it
-  gives the stack traces and serves decoders that execute predicted prefixes incrementally.
-
-Large CPU results come from recycled memory (:class:`_BufferPool`): fresh multi-megabyte arrays cost
-more in page faults than the rendering itself.
-
-Clipping: everything outside the 64-pixel (or voxel) canvas is dropped; 3D shapes are clipped too,
-never wrapped around (the reference had no clipping).
-
-Invalid programs (an operator without two operands, shapes left over, empty) render all False. In a
-stack trace, a program is all zeros from the token where it underflows, and frozen after its ``$``.
+See docs/csg.md ("Rasterisation", "The batched renderer", "Stack semantics and traces") for details.
 """
 
 from __future__ import annotations
