@@ -1,16 +1,14 @@
-"""Fuzz target for the ShapeAssembly parser and executor: a seeded mutator over corpus programs and a check.
+"""Fuzz target for the ShapeAssembly parser and executor: a seeded mutator over corpus programs.
 
 ``mutate(rng, seed_text)`` returns a variant of a real program (token, number, line and byte edits that
-aim at the language's limits); ``check(text)`` parses and executes it and raises AssertionError on a
-finding: an exception other than the project's own (ParseError, ExecutionError), a parse or an
-execution slower than its bound, or a non-finite value in an executed shape.
+aim at the language's limits); ``run(data)`` parses and executes it and returns the executed shape's
+numbers. The fuzz engine (``tests/fuzz/engine.py``) counts as findings any exception other than the
+project's own (ParseError, ExecutionError), an input slower than :data:`BOUND_S`, and a non-finite number.
 """
 from __future__ import annotations
 
-import math
 import random
 import re
-import time
 import warnings
 
 import torch
@@ -23,13 +21,12 @@ from shapeprog.limits import MAX_ABS_NUMBER, MAX_TRANSLATE_COPIES, decode
 
 from fuzz.engine import Target
 
-__all__ = ["EXEC_SECONDS", "PARSE_SECONDS", "TARGETS", "check", "mutate", "run", "seeds"]
+__all__ = ["BOUND_S", "TARGETS", "mutate", "run", "seeds"]
 
 _SHAPE_FIELDS = ("centers", "dims", "axes", "corners", "root_dims")
 
-#: Time bounds of one parse and one execution (on a loaded 2-core machine).
-PARSE_SECONDS = 1.0
-EXEC_SECONDS = 5.0
+#: The longest one parse and execution may take (on a loaded 2-core machine).
+BOUND_S = 6.0
 
 _NUMBERS = ["0", "0.0", "-0.0", "1", "1.0", "0.5", "1e-30", "-1e-30", "1e308", "1e999", "-1e999", "nan", "inf",
             str(MAX_ABS_NUMBER), str(-MAX_ABS_NUMBER), "1000.0001", "9" * 400, "1e25", "3.4e38", ".5", "5.",
@@ -108,25 +105,9 @@ def run(data: bytes) -> list[float]:
     return torch.cat([getattr(shape, n).reshape(-1) for n in _SHAPE_FIELDS]).tolist()
 
 
-def check(text: str) -> None:
-    """:func:`run` on ``text``; AssertionError on a finding (see the module docstring)."""
-    t0 = time.perf_counter()
-    try:
-        values = run(text.encode("utf-8", "surrogatepass"))
-    except (ParseError, ExecutionError):
-        values = []
-    except AssertionError:
-        raise
-    except Exception as e:  # noqa: BLE001 - any other type is the finding
-        raise AssertionError(f"{type(e).__name__}: {e}") from e
-    took = time.perf_counter() - t0
-    assert took < PARSE_SECONDS + EXEC_SECONDS, f"parsing and execution took {took:.2f} s"
-    assert all(math.isfinite(v) for v in values), "execution returned a non-finite number"
-
-
 def _mutate_bytes(data: bytes, rng: random.Random, _seeds) -> bytes:
     return mutate(rng, data.decode("utf-8", "surrogatepass")).encode("utf-8", "surrogatepass")
 
 
 TARGETS = [Target("shapeassembly/text", [t.encode() for t in seeds(n=24)], run, (ParseError, ExecutionError),
-                  PARSE_SECONDS + EXEC_SECONDS, _mutate_bytes)]
+                  BOUND_S, _mutate_bytes)]
