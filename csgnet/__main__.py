@@ -89,15 +89,16 @@ def cmd_demo(args) -> int:
     for dim in (2, 3):
         counts = generate_dataset(data_dir, dim=dim, scale=args.scale, seed=args.seed, workers=args.workers,
                                   progress=not args.quiet)
-        total = sum(n for per_len in counts.values() for n in (per_len.values() if isinstance(per_len, dict) else [per_len]))
+        total = sum(n for per_len in counts.values() for n in per_len.values())
         print(f"{dim}D: generated {total} programs under {data_dir / f'{dim}d'}")
         progs = load_dataset(data_dir, dim, "test")
         preview = out / f"preview_{dim}d"
         preview.mkdir(parents=True, exist_ok=True)
-        lines = []
+        lines, images = [], []
         for length, plist in sorted(progs.items()):
             for i, p in enumerate(plist[: args.per_length]):
                 img = render(p, dim)[0]
+                images.append(img)
                 stem = preview / f"len{length:02d}_{i}"
                 if dim == 2:
                     export.save_png(img, stem.with_suffix(".png"))
@@ -106,8 +107,7 @@ def cmd_demo(args) -> int:
                 export.save_scad(p, stem.with_suffix(".scad"))
                 lines.append(f"{stem.name}\t{p.text()}\t{int(img.sum())}")
                 print(f"  {stem.name}: {p.text()}")
-        (preview / "programs.tsv").write_text("name\tprogram\ton\n" + "\n".join(lines) + "\n")
-        images = [render(line.split("\t")[1], dim)[0] for line in lines]
+        atomic_write(preview / "programs.tsv", "name\tprogram\ton\n" + "\n".join(lines) + "\n")
         if dim == 3:  # three orthographic silhouettes (along x, y, z) side by side
             images = [np.concatenate([v.any(axis=a) for a in range(3)], axis=1) for v in images]
         sheet_path = out / f"preview_{dim}d.png"

@@ -26,7 +26,7 @@ from shapeio import atomic_write
 
 from . import primitives as P
 from .lang import OPERATORS, STOP, Program, parse_lines
-from .synth import Rules, sample_chunk, worker_init
+from .synth import Rules, _check_dim, sample_chunk, worker_init
 from .vocab import vocabulary
 
 __all__ = [
@@ -48,11 +48,6 @@ TABLE2 = {
         9: (250_000, 20_000, 50_000), 11: (350_000, 20_000, 100_000), 13: (350_000, 20_000, 100_000)},
     3: {3: (100_000, 10_000, 20_000), 5: (200_000, 20_000, 40_000), 7: (400_000, 40_000, 80_000)},
 }
-
-def _check_dim(dim: int) -> None:
-    if dim not in (2, 3):
-        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
-
 
 def _lengths(dim: int, lengths: Iterable[int] | None) -> list[int]:
     _check_dim(dim)

@@ -17,7 +17,7 @@ import torch
 
 from shapeio import InputError, atomic_write
 from shapeio.arrays import read_grid
-from shapeio.image import IMAGE_SUFFIXES, centre_on_canvas, fit_to_canvas, read_mask
+from shapeio.image import IMAGE_SUFFIXES, MARGIN, centre_on_canvas, fit_to_canvas, read_mask
 from shapeio.mesh import MESH_SUFFIXES, load_mesh
 
 from .decode import decode
@@ -33,7 +33,6 @@ WEIGHTS = Path(__file__).parent / "weights"
 # the shipped model per dimension (trained with the command recorded in docs/benchmarks.md)
 PRETRAINED = {2: "csgnet2d.pt", 3: "csgnet3d.pt"}
 
-MARGIN = 4  # background voxels/pixels kept around a fitted shape (the vocabulary reaches 8..56)
 
 
 # ------------------------------------------------------------------------------------------------

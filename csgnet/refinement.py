@@ -28,9 +28,10 @@ import torch
 from scipy import optimize
 
 from .lang import Draw, Program, is_valid, parse
-from .metrics import CHAMFER_PENALTY, chamfer, iou
+from .metrics import CHAMFER_PENALTY
 from .primitives import MAX_PARAMS, SIZE
 from .renderer import draw_packed, render_programs
+from .score import score_renders
 from .vocab import codes
 
 __all__ = ["METRICS", "MODES", "RULES", "MAX_IOU_DROP", "RefineResult", "Refined", "refine", "refine_beams",
@@ -421,10 +422,9 @@ def program_scores(programs: Sequence[Program | str], target) -> list[tuple[floa
     """``(iou, chamfer)`` of each 2D program against one target: IoU ``|A∧B| / |A∨B|`` (0 when both
     are empty) and the paper's edge chamfer in pixels (:func:`csgnet.metrics.chamfer`); an invalid
     program renders empty."""
-    t = _check_target(target)
-    pred = render_programs([_check_program(p) for p in programs], 2).cpu().numpy()
-    ious = np.nan_to_num(np.asarray(iou(pred, t), dtype=np.float64).reshape(-1), nan=0.0)
-    cds = np.asarray(chamfer(pred, t), dtype=np.float64).reshape(-1)
+    t = torch.from_numpy(_check_target(target))
+    pred = render_programs([_check_program(p) for p in programs], 2).cpu()
+    ious, cds = score_renders(pred, t.expand(len(pred), *t.shape), 2)
     return [(float(a), float(b)) for a, b in zip(ious, cds)]
 
 

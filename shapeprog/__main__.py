@@ -22,6 +22,7 @@ from pathlib import Path
 import torch
 
 from shapeio import InputError, atomic_write, refuse_overwrite
+from shapeio.mesh import WRITE_SUFFIXES
 
 from . import corpus, io
 from .errors import ExecutionError, ParseError
@@ -35,7 +36,6 @@ from .sampling import sample_surface
 from .silhouettes import build, write
 
 
-MESH_FORMATS = (".obj", ".ply", ".glb")
 
 
 class _Program:
@@ -72,9 +72,9 @@ def _check_outputs(meshes=(), others=()) -> None:
         if not folder.is_dir():
             raise SystemExit(f"error: {path}: folder {str(folder)!r} does not exist")
     for path in [p for p in meshes if p]:
-        if Path(path).suffix.lower() not in MESH_FORMATS:
+        if Path(path).suffix.lower() not in WRITE_SUFFIXES:
             raise SystemExit(f"error: {path}: unknown mesh format {Path(path).suffix!r} "
-                             f"(use {', '.join(MESH_FORMATS)})")
+                             f"(use {', '.join(WRITE_SUFFIXES)})")
 
 
 def _refuse_overwrite(outputs, inputs) -> None:

@@ -93,7 +93,7 @@ class MixedLengthBatches(ShardedBatches):
 
     Programs come from per-length token tables (``tables[L]``: ``(N_L, max_len + 1)``), reshuffled
     whenever a length's table is used up (short-program sets cycle more often, as in the reference), or
-    are sampled on the fly with :func:`csgnet.data.sample_programs` when ``tables`` is None.
+    are sampled on the fly with :func:`csgnet.synth.sample_programs` when ``tables`` is None.
 
     Yields:
         ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded.

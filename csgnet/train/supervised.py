@@ -14,7 +14,6 @@ configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI (``docs/c
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import lightning as L
@@ -22,15 +21,13 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from shapeio import atomic_write
-
-from .. import metrics
 from ..data import ProgramDataset, load_dataset, split_sizes
 from ..synth import sample_programs
 from .augment import jitter
 from ..decode import greedy
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_tokens, stack_trace
+from ..score import score_renders
 from ..vocab import vocabulary
 from .logs import EpochValues, log_means, log_pairs
 from .streams import MixedLengthBatches, distributed, set_stream_epoch, stream_loader
@@ -195,15 +192,9 @@ class CSGNetModule(L.LightningModule):
         loss, _, target = self._loss(tokens, lengths, self.augment)
         dec = greedy(self.model, target)
         pred = render_tokens(dec.tokens[:, 0], self.config.dim, dec.lengths[:, 0])
-        if self.config.dim == 2:
-            iou = metrics.iou(pred.cpu(), target.cpu(), denominator="union")
-            cd = metrics.chamfer(pred.cpu(), target.cpu())
-        else:
-            iou = metrics.iou_3d(pred.cpu(), target.cpu())
-            cd = np.full(len(iou), np.nan)
-        self._val.add(target, pred, length=lengths.cpu().numpy(), iou=np.asarray(iou, dtype=np.float64),
-                      chamfer=np.asarray(cd, dtype=np.float64), valid=dec.valid[:, 0].cpu().numpy(),
-                      loss=float(loss) * len(lengths))
+        iou, cd = score_renders(pred, target, self.config.dim)
+        self._val.add(target, pred, length=lengths.cpu().numpy(), iou=iou, chamfer=cd,
+                      valid=dec.valid[:, 0].cpu().numpy(), loss=float(loss) * len(lengths))
 
     def on_validation_epoch_end(self):
         if not self._val:
