@@ -46,7 +46,12 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
     opt = torch.optim.Adam(m.parameters(), lr=1e-3)
     lengths = DEFAULT_LENGTHS[dim]
     stream = iter(MixedLengthBatches(dim, lengths, batch, steps + 1, max(lengths), tables=None, seed=0))
-    rng = torch.Generator().manual_seed(0)
+    rng = np.random.default_rng(0)
+
+    def sync():  # CUDA runs asynchronously: each phase is timed to its end
+        if device == "cuda":
+            torch.cuda.synchronize()
+
     cfg = m.config
     times = {p: [] for p in PHASES}
     for i in range(steps + 1):
@@ -54,28 +59,34 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
         t0 = time.perf_counter()
         tok, lens = next(stream)
         tok, lens = tok.to(device), lens.to(device)
+        sync()
         t["data"] = time.perf_counter()
         T = int(lens.max()) + 1
         tok = tok[:, :T]
         target = render_tokens(tok, dim, lens)
+        sync()
         t["render"] = time.perf_counter()
         if m.augment:
             target = jitter(target, rng)
+        sync()
         t["jitter"] = time.perf_counter()
         st = stack_trace(tok[:, :-1], dim, k=cfg.stack_k, lengths=lens) if stack else None
+        sync()
         t["stack"] = time.perf_counter()
         tokens_in = torch.cat([torch.full_like(tok[:, :1], m.model.start), tok[:, :-1]], dim=1)
         logits = m.model(target, tokens_in, st)
         nll = F.cross_entropy(logits.transpose(1, 2), tok, reduction="none")
         steps_mask = torch.arange(tok.shape[1], device=tok.device)[None] <= lens[:, None]
-        loss = ((nll * steps_mask).sum(1) / (lens + 1)).mean()
+        per_prog = (nll * steps_mask).sum(1)  # the module's loss (CSGNetModule._loss), phase by phase
+        loss = (per_prog / (lens + 1) if m.loss_norm == "per_step" else per_prog).mean()
+        sync()
         t["forward"] = time.perf_counter()
         opt.zero_grad()
         loss.backward()
+        sync()
         t["backward"] = time.perf_counter()
         opt.step()
-        if device == "cuda":
-            torch.cuda.synchronize()
+        sync()
         t["optimiser"] = time.perf_counter()
         if i:
             prev = t0
