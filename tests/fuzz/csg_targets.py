@@ -4,7 +4,9 @@ execution produced (IoU and chamfer of the render against a fixed target)."""
 
 from __future__ import annotations
 
+import atexit
 import io
+import shutil
 import tempfile
 import warnings
 from pathlib import Path
@@ -23,7 +25,8 @@ from fuzz.engine import Target
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 _TARGET_2D = csgnet.render("c(32,32,20)s(32,32,12)-")[0]
 _TARGET_3D = csgnet.render("sp(32,32,32,20)", 3)[0]
-_TMP = Path(tempfile.mkdtemp(prefix="csg-fuzz-"))
+_TMP = Path(tempfile.mkdtemp(prefix="csg-fuzz-"))  # the inputs under test are written here
+atexit.register(shutil.rmtree, _TMP, ignore_errors=True)
 
 TEXTS_2D = ["c(32,32,28)c(32,32,24)-s(32,32,28)s(32,32,20)-+t(32,32,20)+", "c(32,32,16)s(24,40,12)+",
             "t(32,24,20)s(32,44,12)+c(16,16,8)*", "s(-4,70,12)", "c(32, 32, 8) $ junk"]
