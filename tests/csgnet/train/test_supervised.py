@@ -94,6 +94,17 @@ def test_export_weights_round_trip(tmp_path):
     assert all(torch.equal(direct.state_dict()[k], v) for k, v in m.model.state_dict().items())
 
 
+def test_init_starts_from_exported_weights_and_refuses_another_configuration(tmp_path):
+    m = CSGNetModule(dim=2, stack=True, model=TINY)
+    torch.save({"hyper_parameters": dict(m.hparams), "state_dict": m.state_dict()}, tmp_path / "m.ckpt")
+    w = export_weights(tmp_path / "m.ckpt", tmp_path / "w.pt", half=False)
+    torch.manual_seed(123)  # a different initialisation, overwritten by init
+    again = CSGNetModule(dim=2, stack=True, model=TINY, init=str(w))
+    assert all(torch.equal(again.model.state_dict()[k], v) for k, v in m.model.state_dict().items())
+    with pytest.raises(ValueError, match="configuration differs"):
+        CSGNetModule(dim=2, stack=False, model=TINY, init=str(w))
+
+
 def test_missing_dataset_names_the_generate_command(tmp_path):
     dm = CSGDataModule(dim=2, data_dir=str(tmp_path / "nothing"))
     with pytest.raises(FileNotFoundError, match="csgnet generate"):
