@@ -163,7 +163,8 @@ def bench_3d(args, iters) -> None:
     if args.baseline:
         n = min(args.baseline, len(targets))
         print(f"\nBaseline: plain Powell loop (render_programs + metrics.iou_3d per call), first {n} volumes")
-        print("| maxiter | plain loop wall / CPU s/volume | csgnet.refine wall / CPU s/volume | ratio (CPU) | same scores |")
+        print("| maxiter | plain loop wall / CPU s/volume | csgnet.refine wall / CPU s/volume | ratio (CPU) | "
+              "same scores |")
         print("|---|---|---|---|---|")
         for it in (1, None):
             base, wb, cb = _timed(lambda: [_plain_powell_3d(s, t, it) for s, t in zip(starts[:n], targets[:n])], n)
