@@ -110,6 +110,38 @@ def _timed(fn, n: int):
     return out, (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
 
 
+def _prefetch_run(name: str, value: int, starts, targets) -> tuple[float, float]:
+    """Wall and CPU seconds per item of refining every start to convergence with
+    ``csgnet.refinement.<name> = value`` (``PREFETCH`` or ``PREFETCH_3D``; restored afterwards)."""
+    import csgnet
+    from csgnet import refinement
+
+    default = getattr(refinement, name)
+    setattr(refinement, name, value)
+    try:
+        _, wall, cpu = _timed(lambda: [csgnet.refine(s, t) for s, t in zip(starts, targets)], len(targets))
+    finally:
+        setattr(refinement, name, default)
+    return wall, cpu
+
+
+def _baseline(pairs, metric: str, unit: str, plain, ours, same) -> None:
+    """The baseline table (nothing if ``pairs`` is empty): for maxiter 1 and unlimited, the plain loop
+    ``plain(start, target, maxiter)`` against ``ours = (label, fn(start, target, maxiter))`` over the
+    ``(start, target)`` pairs, seconds per item, the CPU ratio and whether ``same = (label, fn(plain_out,
+    our_result))`` holds for every pair."""
+    if not pairs:
+        return
+    print(f"\nBaseline: plain Powell loop (render_programs + {metric} per call), first {len(pairs)} {unit}s")
+    print(f"| maxiter | plain loop wall / CPU s/{unit} | {ours[0]} wall / CPU s/{unit} | ratio (CPU) | {same[0]} |")
+    print("|---|---|---|---|---|")
+    for it in (1, None):
+        base, wb, cb = _timed(lambda: [plain(s, t, it) for s, t in pairs], len(pairs))
+        res, wo, co = _timed(lambda: [ours[1](s, t, it) for s, t in pairs], len(pairs))
+        print(f"| {it if it is not None else 'unlimited'} | {wb:.3f} / {cb:.3f} | {wo:.3f} / {co:.3f} | "
+              f"{cb / co:.0f}x | {all(same[1](b, o) for b, o in zip(base, res))} |", flush=True)
+
+
 def _plain_powell_3d(program, target, maxiter):
     """The improved mode's 3D search as a plain loop: one render and one ``iou_3d`` per objective call."""
     from scipy.optimize import minimize
@@ -131,7 +163,6 @@ def _plain_powell_3d(program, target, maxiter):
 def bench_3d(args, iters) -> None:
     """The ``--dim 3`` tables (see the module docstring)."""
     import csgnet
-    from csgnet import refinement
 
     starts, targets = _synthetic(args.images, args.length, args.shift, args.seed, dim=3)
     print(f"# targets: {len(targets)} synthetic 3D length-{args.length} programs, starts shifted by "
@@ -147,31 +178,16 @@ def bench_3d(args, iters) -> None:
               f"{np.mean([r.evaluations for r in results]):.0f} | {np.mean([r.rendered for r in results]):.0f} |",
               flush=True)
 
-    default = refinement.PREFETCH_3D
     print(f"\nPrimitive drawing, unlimited iterations, all {len(targets)} volumes")
-    print("| objective | wall s/volume | CPU s/volume |")
-    print("|---|---|---|")
+    print("| objective | wall s/volume | CPU s/volume |\n|---|---|---|")
     for label, prefetch in (("one primitive drawn per miss (default)", 0), ("axis neighbours within 2 voxels", 2),
                             ("axis neighbours within 8 voxels (the 2D default)", 8)):
-        refinement.PREFETCH_3D = prefetch
-        try:
-            _, wall, cpu = _timed(lambda: [csgnet.refine(s, t) for s, t in zip(starts, targets)], len(targets))
-        finally:
-            refinement.PREFETCH_3D = default
+        wall, cpu = _prefetch_run("PREFETCH_3D", prefetch, starts, targets)
         print(f"| {label} | {wall:.3f} | {cpu:.3f} |", flush=True)
 
-    if args.baseline:
-        n = min(args.baseline, len(targets))
-        print(f"\nBaseline: plain Powell loop (render_programs + metrics.iou_3d per call), first {n} volumes")
-        print("| maxiter | plain loop wall / CPU s/volume | csgnet.refine wall / CPU s/volume | ratio (CPU) | "
-              "same scores |")
-        print("|---|---|---|---|---|")
-        for it in (1, None):
-            base, wb, cb = _timed(lambda: [_plain_powell_3d(s, t, it) for s, t in zip(starts[:n], targets[:n])], n)
-            ours, wo, co = _timed(lambda: [csgnet.refine(s, t, maxiter=it) for s, t in zip(starts[:n], targets[:n])], n)
-            same = all(b == o.score for b, o in zip(base, ours))
-            print(f"| {it if it is not None else 'unlimited'} | {wb:.3f} / {cb:.3f} | {wo:.3f} / {co:.3f} | "
-                  f"{cb / co:.0f}x | {same} |", flush=True)
+    _baseline(list(zip(starts, targets))[:args.baseline], "metrics.iou_3d", "volume", _plain_powell_3d,
+              ("csgnet.refine", lambda s, t, it: csgnet.refine(s, t, maxiter=it)),
+              ("same scores", lambda b, o: b == o.score))
 
 
 def main(argv=None):
@@ -243,31 +259,16 @@ def main(argv=None):
     print(f"\nPrimitive drawing, improved mode, unlimited iterations, all {len(targets)} images")
     print("| objective | wall s/image | CPU s/image | ratio (CPU) |")
     print("|---|---|---|---|")
-    rows = []
-    for label, prefetch in (("cached, one primitive drawn per miss", 0),
-                            (f"cached, axis neighbours within {default} px drawn with a miss (default)", default)):
-        refinement.PREFETCH = prefetch
-        try:
-            _, wall, cpu = timed(lambda: [csgnet.refine(s, t) for s, t in zip(starts, targets)])
-        finally:
-            refinement.PREFETCH = default
-        rows.append((label, wall, cpu))
+    rows = [(label, *_prefetch_run("PREFETCH", prefetch, starts, targets))
+            for label, prefetch in (("cached, one primitive drawn per miss", 0),
+                                    (f"cached, axis neighbours within {default} px drawn with a miss (default)",
+                                     default))]
     for label, wall, cpu in rows:
         print(f"| {label} | {wall:.3f} | {cpu:.3f} | {rows[0][2] / cpu:.2f}x |", flush=True)
 
-    if args.baseline:
-        n = min(args.baseline, len(targets))
-        print(f"\nBaseline: plain Powell loop (render_programs + metrics.chamfer per call), first {n} images")
-        print("| maxiter | plain loop wall / CPU s/image | csgnet.refine(mode='reference') wall / CPU s/image | "
-              "ratio (CPU) | same programs and scores |")
-        print("|---|---|---|---|---|")
-        for it in (1, None):
-            base, wb, cb = timed(lambda: [_plain_powell(s, t, it) for s, t in zip(starts[:n], targets[:n])], n)
-            ours, wo, co = timed(lambda: [csgnet.refine(s, t, maxiter=it, mode="reference")
-                                          for s, t in zip(starts[:n], targets[:n])], n)
-            same = all(b[0] == o.program and b[1] == o.score for b, o in zip(base, ours))
-            print(f"| {it if it is not None else 'unlimited'} | {wb:.3f} / {cb:.3f} | {wo:.3f} / {co:.3f} | "
-                  f"{cb / co:.0f}x | {same} |", flush=True)
+    _baseline(list(zip(starts, targets))[:args.baseline], "metrics.chamfer", "image", _plain_powell,
+              ("csgnet.refine(mode='reference')", lambda s, t, it: csgnet.refine(s, t, maxiter=it, mode="reference")),
+              ("same programs and scores", lambda b, o: b[0] == o.program and b[1] == o.score))
 
 
 if __name__ == "__main__":
