@@ -22,9 +22,17 @@ truncation and clipping. ``csgnet.refine(mode="reference")`` runs the same searc
 return the same programs (checked) and the ratio of their times is the speed-up of the cached,
 batched objective.
 
+``--dim 3``: 3D refinement by IoU (``|A∧B| / (|A∨B| + 1)``, the improved mode) on the volumes of
+random synthetic 3D programs (``--length``, default 5) with shifted starts as above: IoU before and
+after, seconds, calls and renders per volume for each ``maxiter``; then drawing a missing primitive
+alone (the 3D default) against drawing it with its axis neighbours; then the same search as a plain
+loop (``render_programs`` and ``metrics.iou_3d`` per objective call, no cache), which must return
+programs of the same scores.
+
 Usage::
 
     python bench/bench_refine.py --threads 1 [--images 40] [--baseline 3] [--targets synthetic]
+    python bench/bench_refine.py --threads 1 --dim 3 [--images 20] [--length 5] [--baseline 3]
 """
 
 from __future__ import annotations
@@ -39,15 +47,15 @@ import numpy as np
 import torch
 
 
-def _synthetic(n: int, length: int, shift: int, seed: int):
+def _synthetic(n: int, length: int, shift: int, seed: int, dim: int = 2):
     from csgnet.synth import sample_programs
     from csgnet.renderer import render_programs
     from csgnet.vocab import vocabulary
 
     rng = np.random.default_rng(seed)
-    vocab = vocabulary(2)
-    progs = [vocab.decode(t) for t in sample_programs(2, length, n, rng)]
-    targets = render_programs(progs, 2).numpy()
+    vocab = vocabulary(dim)
+    progs = [vocab.decode(t) for t in sample_programs(dim, length, n, rng)]
+    targets = render_programs(progs, dim).numpy()
     starts = []
     for p in progs:
         params = np.array([v for d in p.draws for v in d.params])
@@ -95,12 +103,100 @@ def _plain_powell(program, target, maxiter):
     return build(np.clip(v, 8, 56)), float(res.fun)
 
 
+def _timed(fn, n: int):
+    """``fn()``, with its wall-clock and CPU (process) seconds per image over ``n`` images."""
+    w0, c0 = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
+
+
+def _prefetch_run(name: str, value: int, starts, targets) -> tuple[float, float]:
+    """Wall and CPU seconds per item of refining every start to convergence with
+    ``csgnet.refinement.<name> = value`` (``PREFETCH`` or ``PREFETCH_3D``; restored afterwards)."""
+    import csgnet
+    from csgnet import refinement
+
+    default = getattr(refinement, name)
+    setattr(refinement, name, value)
+    try:
+        _, wall, cpu = _timed(lambda: [csgnet.refine(s, t) for s, t in zip(starts, targets)], len(targets))
+    finally:
+        setattr(refinement, name, default)
+    return wall, cpu
+
+
+def _baseline(pairs, metric: str, unit: str, plain, ours, same) -> None:
+    """The baseline table (nothing if ``pairs`` is empty): for maxiter 1 and unlimited, the plain loop
+    ``plain(start, target, maxiter)`` against ``ours = (label, fn(start, target, maxiter))`` over the
+    ``(start, target)`` pairs, seconds per item, the CPU ratio and whether ``same = (label, fn(plain_out,
+    our_result))`` holds for every pair."""
+    if not pairs:
+        return
+    print(f"\nBaseline: plain Powell loop (render_programs + {metric} per call), first {len(pairs)} {unit}s")
+    print(f"| maxiter | plain loop wall / CPU s/{unit} | {ours[0]} wall / CPU s/{unit} | ratio (CPU) | {same[0]} |")
+    print("|---|---|---|---|---|")
+    for it in (1, None):
+        base, wb, cb = _timed(lambda: [plain(s, t, it) for s, t in pairs], len(pairs))
+        res, wo, co = _timed(lambda: [ours[1](s, t, it) for s, t in pairs], len(pairs))
+        print(f"| {it if it is not None else 'unlimited'} | {wb:.3f} / {cb:.3f} | {wo:.3f} / {co:.3f} | "
+              f"{cb / co:.0f}x | {all(same[1](b, o) for b, o in zip(base, res))} |", flush=True)
+
+
+def _plain_powell_3d(program, target, maxiter):
+    """The improved mode's 3D search as a plain loop: one render and one ``iou_3d`` per objective call."""
+    from scipy.optimize import minimize
+
+    from csgnet import metrics, refinement
+    from csgnet.renderer import render_programs
+
+    lo, hi = refinement._box(program, "improved", None)
+
+    def objective(x):
+        v = np.clip(np.rint(x), lo, hi).astype(np.int64)
+        return -metrics.iou_3d(render_programs([program.with_params(v)], 3)[0].numpy(), target)
+
+    x0 = np.array([v for d in program.draws for v in d.params], dtype=np.float64)
+    res = minimize(objective, x0, method="Powell", tol=refinement.TOL, options={"maxiter": maxiter})
+    return max(-float(res.fun), -objective(x0))
+
+
+def bench_3d(args, iters) -> None:
+    """The ``--dim 3`` tables (see the module docstring)."""
+    import csgnet
+
+    starts, targets = _synthetic(args.images, args.length, args.shift, args.seed, dim=3)
+    print(f"# targets: {len(targets)} synthetic 3D length-{args.length} programs, starts shifted by "
+          f"up to {args.shift} voxels per parameter")
+    csgnet.refine(starts[0], targets[0], maxiter=1)  # warm-up
+    print("| maxiter | IoU before | IoU after | wall s/volume | CPU s/volume | evaluations/volume | renders/volume |")
+    print("|---|---|---|---|---|---|---|")
+    for it in iters:
+        results, wall, cpu = _timed(lambda: [csgnet.refine(s, t, maxiter=it) for s, t in zip(starts, targets)],
+                                    len(targets))
+        print(f"| {it if it is not None else 'unlimited'} | {np.mean([r.initial_score for r in results]):.4f} | "
+              f"{np.mean([r.score for r in results]):.4f} | {wall:.3f} | {cpu:.3f} | "
+              f"{np.mean([r.evaluations for r in results]):.0f} | {np.mean([r.rendered for r in results]):.0f} |",
+              flush=True)
+
+    print(f"\nPrimitive drawing, unlimited iterations, all {len(targets)} volumes")
+    print("| objective | wall s/volume | CPU s/volume |\n|---|---|---|")
+    for label, prefetch in (("one primitive drawn per miss (default)", 0), ("axis neighbours within 2 voxels", 2),
+                            ("axis neighbours within 8 voxels (the 2D default)", 8)):
+        wall, cpu = _prefetch_run("PREFETCH_3D", prefetch, starts, targets)
+        print(f"| {label} | {wall:.3f} | {cpu:.3f} |", flush=True)
+
+    _baseline(list(zip(starts, targets))[:args.baseline], "metrics.iou_3d", "volume", _plain_powell_3d,
+              ("csgnet.refine", lambda s, t, it: csgnet.refine(s, t, maxiter=it)),
+              ("same scores", lambda b, o: b == o.score))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--images", type=int, default=40)
     ap.add_argument("--baseline", type=int, default=3, help="images for the plain-loop baseline (0: none)")
     ap.add_argument("--targets", choices=("synthetic", "silhouettes"), default="synthetic")
-    ap.add_argument("--length", type=int, default=13, help="synthetic program length")
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D (chamfer) or 3D (IoU) refinement")
+    ap.add_argument("--length", type=int, default=None, help="synthetic program length (default 13 in 2D, 5 in 3D)")
     ap.add_argument("--shift", type=int, default=3, help="synthetic: parameter perturbation of the start")
     ap.add_argument("--pool", type=int, default=2000, help="silhouettes: random programs to pick starts from")
     ap.add_argument("--maxiter", default="1,2,4,10,none", help="comma-separated; 'none' = unlimited")
@@ -120,6 +216,11 @@ def main(argv=None):
     print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
           f"torch {torch.__version__}, OpenCV {cv2.__version__}, threads {args.threads}, "
           f"load average {os.getloadavg()[0]:.1f}")
+    iters = [None if s.strip().lower() == "none" else int(s) for s in args.maxiter.split(",")]
+    if args.length is None:
+        args.length = 13 if args.dim == 2 else 5
+    if args.dim == 3:
+        return bench_3d(args, iters)
     if args.targets == "synthetic":
         starts, targets = _synthetic(args.images, args.length, args.shift, args.seed)
         print(f"# targets: {len(targets)} synthetic length-{args.length} programs, starts shifted by "
@@ -133,13 +234,9 @@ def main(argv=None):
     def true_score(prog, target):
         return metrics.chamfer(render_programs([prog], 2)[0].numpy(), target)
 
-    iters = [None if s.strip().lower() == "none" else int(s) for s in args.maxiter.split(",")]
 
     def timed(fn, n=len(targets)):
-        """``fn()``, with its wall-clock and CPU (process) seconds per image over ``n`` images."""
-        w0, c0 = time.perf_counter(), time.process_time()
-        out = fn()
-        return out, (time.perf_counter() - w0) / n, (time.process_time() - c0) / n
+        return _timed(fn, n)
 
     print("| maxiter | mode | chamfer before | chamfer after (program) | reported | wall s/image | "
           "CPU s/image | evaluations/image | renders/image |")
@@ -162,31 +259,16 @@ def main(argv=None):
     print(f"\nPrimitive drawing, improved mode, unlimited iterations, all {len(targets)} images")
     print("| objective | wall s/image | CPU s/image | ratio (CPU) |")
     print("|---|---|---|---|")
-    rows = []
-    for label, prefetch in (("cached, one primitive drawn per miss", 0),
-                            (f"cached, axis neighbours within {default} px drawn with a miss (default)", default)):
-        refinement.PREFETCH = prefetch
-        try:
-            _, wall, cpu = timed(lambda: [csgnet.refine(s, t) for s, t in zip(starts, targets)])
-        finally:
-            refinement.PREFETCH = default
-        rows.append((label, wall, cpu))
+    rows = [(label, *_prefetch_run("PREFETCH", prefetch, starts, targets))
+            for label, prefetch in (("cached, one primitive drawn per miss", 0),
+                                    (f"cached, axis neighbours within {default} px drawn with a miss (default)",
+                                     default))]
     for label, wall, cpu in rows:
         print(f"| {label} | {wall:.3f} | {cpu:.3f} | {rows[0][2] / cpu:.2f}x |", flush=True)
 
-    if args.baseline:
-        n = min(args.baseline, len(targets))
-        print(f"\nBaseline: plain Powell loop (render_programs + metrics.chamfer per call), first {n} images")
-        print("| maxiter | plain loop wall / CPU s/image | csgnet.refine(mode='reference') wall / CPU s/image | "
-              "ratio (CPU) | same programs and scores |")
-        print("|---|---|---|---|---|")
-        for it in (1, None):
-            base, wb, cb = timed(lambda: [_plain_powell(s, t, it) for s, t in zip(starts[:n], targets[:n])], n)
-            ours, wo, co = timed(lambda: [csgnet.refine(s, t, maxiter=it, mode="reference")
-                                          for s, t in zip(starts[:n], targets[:n])], n)
-            same = all(b[0] == o.program and b[1] == o.score for b, o in zip(base, ours))
-            print(f"| {it if it is not None else 'unlimited'} | {wb:.3f} / {cb:.3f} | {wo:.3f} / {co:.3f} | "
-                  f"{cb / co:.0f}x | {same} |", flush=True)
+    _baseline(list(zip(starts, targets))[:args.baseline], "metrics.chamfer", "image", _plain_powell,
+              ("csgnet.refine(mode='reference')", lambda s, t, it: csgnet.refine(s, t, maxiter=it, mode="reference")),
+              ("same programs and scores", lambda b, o: b[0] == o.program and b[1] == o.score))
 
 
 if __name__ == "__main__":

@@ -1,13 +1,14 @@
-"""Visually guided refinement of 2D CSG programs: Powell search over primitive parameters.
+"""Visually guided refinement of CSG programs: Powell search over primitive parameters, 2D and 3D.
 
 The structure of a program (its primitive types and operators, in order) stays fixed; the vector of
-all primitive parameters ``(x, y, r)`` per primitive, concatenated in program order, is searched with
-``scipy.optimize.minimize(method="Powell")`` to lower the chamfer distance (or raise the IoU) between
-the program's rendering and a target image (the spec's section (g)). ``mode="reference"`` is the
-published procedure, ``mode="improved"`` (default) scores every point it evaluates as exactly the
-program it stands for and never returns a worse program; every distinct program is scored once, from
-primitives drawn by the batched renderer. The modes, the search box, invalid programs and the speed
-are described in docs/refinement.md.
+all primitive parameters (``(x, y, r)`` per 2D primitive, ``(x, y, z, r[, h])`` per 3D one),
+concatenated in program order, is searched with ``scipy.optimize.minimize(method="Powell")`` to lower
+the chamfer distance (2D) or raise the IoU (2D or 3D) between the program's rendering and a target
+image or volume (the spec's section (g)). ``mode="reference"`` is the published 2D procedure,
+``mode="improved"`` (default) scores every point it evaluates as exactly the program it stands for
+and never returns a worse program; every distinct program is scored once, from primitives drawn by
+the batched renderer. The modes, the search box, invalid programs and the speed are described in
+docs/refinement.md.
 
 Example:
     >>> import csgnet
@@ -29,7 +30,7 @@ from scipy import optimize
 
 from .lang import Draw, Program, is_valid, parse
 from .metrics import CHAMFER_PENALTY
-from .primitives import MAX_PARAMS, SIZE
+from .primitives import MAX_PARAMS, SIZE, primitive
 from .renderer import draw_packed, render_programs
 from .score import score_renders
 from .vocab import codes
@@ -38,16 +39,20 @@ __all__ = ["METRICS", "MODES", "RULES", "MAX_IOU_DROP", "RefineResult", "Refined
            "refine_guarded", "program_scores"]
 
 METRICS = ("chamfer", "iou")
+"""Objectives: the edge chamfer distance (2D only) and IoU (2D ``/|A∨B|``, 3D ``/(|A∨B| + 1)``)."""
 MODES = ("improved", "reference")
+"""The improved mode (2D and 3D) and the published procedure (2D only)."""
 
 POSITION_RANGE = (8, 56)
-"""Positions searched (both modes) and, in the reference mode, every value inside the objective."""
+"""Reference mode: positions searched and every value inside the objective (the grammar's positions)."""
 RADIUS_RANGE = (8, 32)
-"""Radii searched in the improved mode; the reference clips radii to it only at the end."""
+"""Reference mode: the range radii are clipped to at the end (the grammar's sizes)."""
 TOL = 1e-4
 """Powell's ``tol`` (the reference's value)."""
 PREFETCH = 8
-"""A missing primitive is drawn together with its axis neighbours up to this many pixels away."""
+"""2D: a missing primitive is drawn together with its axis neighbours up to this many pixels away."""
+PREFETCH_3D = 0
+"""3D: the same; 0, drawing only the missing primitive, is the fastest in 3D (docs/refinement.md)."""
 RULES = ("guarded", "chamfer")
 """How :func:`refine_guarded` picks between the refined and the unrefined program (docs/refinement.md)."""
 MAX_IOU_DROP = 0.05
@@ -61,7 +66,8 @@ class RefineResult:
     Attributes:
         program: the refined program (the input itself when nothing better was found, in the
             improved mode).
-        score: the metric (chamfer distance in pixels, lower is better; or IoU, higher is better).
+        score: the metric (chamfer distance in pixels, lower is better; or IoU, higher is better:
+            ``|A∧B| / |A∨B|`` in 2D, ``|A∧B| / (|A∨B| + 1)`` in 3D, as :mod:`csgnet.metrics`).
             Improved mode: the score of ``program``. Reference mode: Powell's final objective value,
             as the published code returns it.
         initial_score: the score of the input program.
@@ -101,8 +107,9 @@ def _better(a: float, b: float, metric: str) -> bool:
 
 
 def _words(img: np.ndarray) -> np.ndarray:
-    """(64, 64) bool -> (64,) int64 words (bit c of word r = pixel [r, c]), as the renderer packs."""
-    return np.packbits(img, axis=-1, bitorder="little").view(np.int64)[:, 0].copy()
+    """(64, 64) bool -> (64,) int64 words (bit c of word r = pixel [r, c]), (64, 64, 64) bool ->
+    (64, 64) int64 words (bit k of word [i, j] = voxel [i, j, k]), as the renderer packs."""
+    return np.packbits(img, axis=-1, bitorder="little").view(np.int64)[..., 0].copy()
 
 
 def _popcount(words: np.ndarray) -> int:
@@ -117,18 +124,22 @@ def _image_u8(words: np.ndarray) -> np.ndarray:
 
 
 class _Scorer:
-    """Scores packed candidate canvases against one target and caches drawn primitives.
+    """Scores packed candidate canvases (2D) or volumes (3D) against one target and caches drawn primitives.
 
     The chamfer distance is the reference's (:func:`csgnet.metrics.chamfer`): the target's Canny edges
     and distance map are computed once; per candidate one ``cv2.Canny``, one distance transform and two
     gathers remain. The sums add float32 distances in float64, which is exact, so the value equals
-    :func:`csgnet.metrics.chamfer` bit for bit. IoU is ``|A and B| / |A or B|`` on the packed words
-    (the target is never empty, so it is never NaN).
+    :func:`csgnet.metrics.chamfer` bit for bit. IoU is ``|A and B| / |A or B|`` (2D; the target is
+    never empty, so it is never NaN) or ``|A and B| / (|A or B| + 1)`` (3D, :func:`csgnet.metrics.iou_3d`)
+    by popcounts of the packed words; a quotient of two integers below 2^53, so equal to
+    :mod:`csgnet.metrics`' float64 division bit for bit. The chamfer distance is 2D only.
     """
 
     def __init__(self, target: np.ndarray, metric: str):
         self.metric = metric
+        self.dim = target.ndim
         self.target_words = _words(target)
+        self._plus = 1 if self.dim == 3 else 0
         self.leaves: dict[tuple, np.ndarray] = {}
         if metric == "chamfer":
             img = target.astype(np.uint8) * np.uint8(255)
@@ -141,11 +152,11 @@ class _Scorer:
             self._t_esum = len(self._t_idx) * 255.0
 
     def score(self, words: np.ndarray) -> float:
-        """The metric of one packed canvas (64,) int64 against the target."""
+        """The metric of one packed canvas (64,) or volume (64, 64) int64 against the target."""
         if self.metric == "iou":
             inter = _popcount(words & self.target_words)
             union = _popcount(words | self.target_words)
-            return inter / union
+            return inter / (union + self._plus)
         count = _popcount(words)
         if self._t_bad or count in (0, SIZE * SIZE):
             return CHAMFER_PENALTY
@@ -159,18 +170,17 @@ class _Scorer:
         return (s_pt / (self._t_esum + 1) + s_tp / (len(idx) * 255.0 + 1)) / 2.0
 
     def empty_score(self) -> float:
-        return self.score(np.zeros(SIZE, np.int64))
+        return self.score(np.zeros_like(self.target_words))
 
     def draw(self, keys: list[tuple]) -> None:
-        """Draw the primitives ``(kind, x, y, r)`` not cached yet, in one batch of the renderer."""
+        """Draw the primitives ``(kind, *params)`` not cached yet, in one batch of the renderer."""
         keys = [k for k in dict.fromkeys(keys) if k not in self.leaves]
         if not keys:
             return
         kind = codes().kind
         kinds = torch.tensor([kind[k[0]] for k in keys], dtype=torch.int64)
-        params = torch.zeros((len(keys), MAX_PARAMS), dtype=torch.int64)
-        params[:, :len(keys[0]) - 1] = torch.tensor([k[1:] for k in keys], dtype=torch.int64)
-        words = draw_packed(kinds, params, 2).numpy()
+        params = torch.tensor([k[1:] + (0,) * (MAX_PARAMS + 1 - len(k)) for k in keys], dtype=torch.int64)
+        words = draw_packed(kinds, params, self.dim).numpy()
         for k, w in zip(keys, words):
             self.leaves[k] = w
 
@@ -191,6 +201,7 @@ class _Problem:
         self.scorer = scorer
         self.draws = program.draws
         self.kinds = [d.kind for d in self.draws]
+        self.offsets = np.cumsum([0] + [len(d.params) for d in self.draws]).tolist()  # draw i: [o_i, o_i+1)
         self.x0 = np.array([v for d in self.draws for v in d.params], dtype=np.float64)
         self.lo, self.hi = lo, hi
         self.to_int = np.rint if to_int == "round" else np.trunc
@@ -199,18 +210,20 @@ class _Problem:
         self.calls = 0
 
     def values(self, x: np.ndarray) -> np.ndarray:
-        """Search point -> the integer parameters it stands for (3P,) int64."""
+        """Search point -> the integer parameters it stands for (sum of the draws' parameters,) int64."""
         return np.clip(self.to_int(x), self.lo, self.hi).astype(np.int64)
 
     def leaf(self, i: int, v: np.ndarray) -> np.ndarray:
-        key = (self.kinds[i], int(v[0]), int(v[1]), int(v[2]))
+        """The packed drawing of draw ``i`` with the integer parameters ``v``."""
+        key = (self.kinds[i],) + tuple(v.tolist())
         w = self.scorer.leaves.get(key)
         if w is None:
             # draw this primitive's axis neighbours in the box with it (Powell's line searches probe them)
             keys = [key]
-            for j in range(3):
-                lo, hi = int(self.lo[3 * i + j]), int(self.hi[3 * i + j])
-                lo, hi = max(lo, key[1 + j] - PREFETCH), min(hi, key[1 + j] + PREFETCH)
+            o, near = self.offsets[i], PREFETCH if self.scorer.dim == 2 else PREFETCH_3D
+            for j in range(len(v) if near else 0):
+                lo, hi = int(self.lo[o + j]), int(self.hi[o + j])
+                lo, hi = max(lo, key[1 + j] - near), min(hi, key[1 + j] + near)
                 for u in range(lo, hi + 1):
                     k = list(key)
                     k[1 + j] = u
@@ -220,12 +233,12 @@ class _Problem:
         return w
 
     def compose(self, v: np.ndarray) -> np.ndarray:
-        """The packed canvas (64,) int64 of the program with integer parameters ``v`` (3P,)."""
+        """The packed canvas (64,) or volume (64, 64) int64 of the program with integer parameters ``v``."""
         stack: list[np.ndarray] = []
-        i = 0
+        i, o = 0, self.offsets
         for t in self.program.tokens:
             if isinstance(t, Draw):
-                stack.append(self.leaf(i, v[3 * i:3 * i + 3]))
+                stack.append(self.leaf(i, v[o[i]:o[i + 1]]))
                 i += 1
             else:
                 b = stack.pop()
@@ -256,51 +269,75 @@ class _Problem:
 
 
 def _check_target(target) -> np.ndarray:
+    """A (64, 64) image or (64, 64, 64) volume, NumPy or torch -> bool of the same shape, not empty."""
     if type(target).__module__.startswith("torch"):
         target = target.detach().cpu().numpy()
     t = np.asarray(target)
-    if t.shape != (SIZE, SIZE):
-        raise ValueError(f"target must be one image of shape ({SIZE}, {SIZE}), got {t.shape}")
+    if t.shape not in ((SIZE,) * 2, (SIZE,) * 3):
+        raise ValueError(f"target must be one ({SIZE}, {SIZE}, {SIZE}) volume or one image of shape "
+                         f"({SIZE}, {SIZE}), got {t.shape}")
     t = t != 0
     if not t.any():
-        raise ValueError("target image is empty (all False): there is nothing to refine against")
+        what = "image" if t.ndim == 2 else "volume"
+        raise ValueError(f"target {what} is empty (all False): there is nothing to refine against")
     return t
 
 
-def _check_program(program) -> Program:
+def _check_program(program, dim: int) -> Program:
+    """A ``dim``-D program (text is parsed leniently) for a ``dim``-D target."""
     if isinstance(program, str):
-        program = parse(program, 2, strict=False)  # malformed text raises ParseError (a ValueError)
+        program = parse(program, dim, strict=False)  # malformed text raises ParseError (a ValueError)
     if not isinstance(program, Program):
         raise TypeError(f"program must be a csgnet.lang.Program or program text, got {type(program).__name__}")
-    if program.dim != 2:
-        raise ValueError(f"refinement works on 2D programs, got a {program.dim}D program: {program.text()!r}")
+    if program.dim != dim:
+        raise ValueError(f"a {dim}D target needs {dim}D programs, got a {program.dim}D program: "
+                         f"{program.text()!r}")
     return program
 
 
-def _check_args(metric: str, maxiter, mode: str) -> None:
+def _check_args(metric: str | None, maxiter, mode: str, dim: int) -> str:
+    """Check the arguments for a ``dim``-D target; returns the metric (None: chamfer in 2D, IoU in 3D)."""
+    if metric is None:
+        metric = "chamfer" if dim == 2 else "iou"
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if dim == 3 and metric == "chamfer":
+        raise ValueError("metric 'chamfer' is defined for 2D images only; 3D refinement uses metric='iou'")
+    if dim == 3 and mode == "reference":
+        raise ValueError("mode 'reference' is the published 2D procedure; 3D refinement uses mode='improved'")
     if maxiter is not None and (isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer))
                                 or maxiter < 0):
         raise ValueError(f"maxiter must be a non-negative integer or None (run to convergence), got {maxiter!r}")
+    return metric
 
 
 def _box(program: Program, mode: str, bounds) -> tuple[np.ndarray, np.ndarray]:
-    n = len(program.draws)
-    if mode == "reference":
-        lo = np.full(3 * n, POSITION_RANGE[0], np.int64)
-        hi = np.full(3 * n, POSITION_RANGE[1], np.int64)
-        return lo, hi
-    pos, rad = bounds if bounds is not None else (POSITION_RANGE, RADIUS_RANGE)
-    for name, (a, b) in (("position", pos), ("radius", rad)):
-        if int(a) != a or int(b) != b or a > b:
-            raise ValueError(f"{name} bounds must be integers (lo, hi) with lo <= hi, got {(a, b)}")
-    lo = np.tile(np.array([pos[0], pos[0], rad[0]], np.int64), n)
-    hi = np.tile(np.array([pos[1], pos[1], rad[1]], np.int64), n)
+    """The search box ``(lo, hi)``, one int64 bound pair per parameter in program order.
+
+    Improved mode: per parameter the grammar range of its table row (positions 8..56, sizes 8..32), or
+    ``bounds = ((pos_lo, pos_hi), (size_lo, size_hi))`` by the parameter's kind, widened to contain the
+    input's value. Reference mode (2D): [8, 56] for every parameter.
+    """
     x0 = np.array([v for d in program.draws for v in d.params], np.int64)
-    return np.minimum(lo, x0), np.maximum(hi, x0)  # the input is always inside its box
+    if mode == "reference":
+        return np.full(len(x0), POSITION_RANGE[0], np.int64), np.full(len(x0), POSITION_RANGE[1], np.int64)
+    if bounds is not None:
+        for name, (a, b) in zip(("position", "size"), bounds):
+            if int(a) != a or int(b) != b or a > b:
+                raise ValueError(f"{name} bounds must be integers (lo, hi) with lo <= hi, got {(a, b)}")
+    lo, hi = [], []
+    for d in program.draws:
+        row = primitive(d.kind)
+        for name, grammar in zip(row.params, row.ranges):
+            if bounds is None:
+                a, b = min(grammar), max(grammar)
+            else:
+                a, b = bounds[1] if name in row.sizes else bounds[0]
+            lo.append(a)
+            hi.append(b)
+    return np.minimum(np.array(lo, np.int64), x0), np.maximum(np.array(hi, np.int64), x0)  # input inside
 
 
 def _run(program: Program, scorer: _Scorer, metric: str, maxiter, mode: str, bounds) -> RefineResult:
@@ -337,36 +374,40 @@ def _run(program: Program, scorer: _Scorer, metric: str, maxiter, mode: str, bou
     return RefineResult(prob.program_of(v), best, initial, iterations, calls, len(prob.cache), metric, mode)
 
 
-def refine(program: Program | str, target, metric: str = "chamfer", maxiter: int | None = None,
+def refine(program: Program | str, target, metric: str | None = None, maxiter: int | None = None,
            mode: str = "improved", bounds=None) -> RefineResult:
-    """Refine the primitive parameters of a 2D program toward a target image (structure fixed).
+    """Refine the primitive parameters of a 2D or 3D program toward a target (structure fixed).
 
     Args:
-        program: a 2D :class:`~csgnet.lang.Program` or its text (parsed leniently: a structurally
-            invalid program is returned unchanged with the score of an empty canvas; malformed text
-            raises :class:`~csgnet.lang.ParseError`).
-        target: (64, 64) image, NumPy or torch (non-zero = on); must not be empty.
-        metric: ``"chamfer"`` (the reference's edge chamfer distance, minimised) or ``"iou"``
-            (``|A and B| / |A or B|``, maximised).
+        program: a :class:`~csgnet.lang.Program` of the target's dimension or its text (parsed
+            leniently: a structurally invalid program is returned unchanged with the score of an
+            empty canvas; malformed text raises :class:`~csgnet.lang.ParseError`).
+        target: (64, 64) image or (64, 64, 64) volume, NumPy or torch (non-zero = on); must not be
+            empty.
+        metric: ``"chamfer"`` (2D: the reference's edge chamfer distance, minimised) or ``"iou"``
+            (maximised: ``|A and B| / |A or B|`` in 2D, ``|A and B| / (|A or B| + 1)`` in 3D);
+            None (default): chamfer in 2D, IoU in 3D.
         maxiter: Powell iterations: 0 (no refinement), 1, 2, ..., or None (to convergence).
-        mode: ``"improved"`` (default) or ``"reference"`` (the published procedure); see the module
-            docstring.
-        bounds: improved mode only: ``((pos_lo, pos_hi), (r_lo, r_hi))``, the search box (default
-            ``((8, 56), (8, 32))``), widened per parameter to contain the input's value.
+        mode: ``"improved"`` (default) or ``"reference"`` (the published 2D procedure); see the
+            module docstring.
+        bounds: improved mode only: ``((pos_lo, pos_hi), (size_lo, size_hi))``, the search box of
+            positions and of sizes (radii, heights); default: the grammar's ``((8, 56), (8, 32))``.
+            Widened per parameter to contain the input's value.
 
     Returns:
         A :class:`RefineResult` (``.program``, ``.text``, ``.score``, ``.initial_score``,
         ``.iterations``, ``.evaluations``).
 
     Raises:
-        ValueError: a bad target shape, an empty target, a 3D program, or a bad argument.
+        ValueError: a bad target shape, an empty target, a program of the other dimension, chamfer
+            or the reference mode for a 3D target, or a bad argument.
     """
-    _check_args(metric, maxiter, mode)
     t = _check_target(target)
-    return _run(_check_program(program), _Scorer(t, metric), metric, maxiter, mode, bounds)
+    metric = _check_args(metric, maxiter, mode, t.ndim)
+    return _run(_check_program(program, t.ndim), _Scorer(t, metric), metric, maxiter, mode, bounds)
 
 
-def refine_beams(programs: Sequence[Program | str], target, metric: str = "chamfer",
+def refine_beams(programs: Sequence[Program | str], target, metric: str | None = None,
                  maxiter: int | None = None, mode: str = "improved", bounds=None) -> RefineResult:
     """Refine every candidate program (e.g. a beam) toward one target and keep the best.
 
@@ -374,17 +415,18 @@ def refine_beams(programs: Sequence[Program | str], target, metric: str = "chamf
     candidates keep the score of an empty canvas. Ties go to the earlier candidate.
 
     Args:
-        programs: one or more 2D programs or program texts.
+        programs: one or more programs or program texts of the target's dimension.
         target, metric, maxiter, mode, bounds: as for :func:`refine`.
 
     Returns:
         The :class:`RefineResult` with the best ``score`` (lowest chamfer / highest IoU).
     """
-    _check_args(metric, maxiter, mode)
-    progs = [_check_program(p) for p in programs]
+    t = _check_target(target)
+    metric = _check_args(metric, maxiter, mode, t.ndim)
+    progs = [_check_program(p, t.ndim) for p in programs]
     if not progs:
         raise ValueError("refine_beams needs at least one program")
-    scorer = _Scorer(_check_target(target), metric)
+    scorer = _Scorer(t, metric)
     best = None
     for p in progs:
         r = _run(p, scorer, metric, maxiter, mode, bounds)
@@ -403,8 +445,8 @@ class Refined:
 
     Attributes:
         program: the program to use: the refined one, or ``start`` when the rule kept it.
-        result: the chamfer refinement of the candidates (:func:`refine_beams`).
-        before: ``(iou, chamfer)`` of ``start`` against the target.
+        result: the refinement of the candidates (:func:`refine_beams`; chamfer in 2D, IoU in 3D).
+        before: ``(iou, chamfer)`` of ``start`` against the target (chamfer NaN in 3D).
         after: ``(iou, chamfer)`` of the refined program.
         kept_start: the rule rejected the refined program.
         rule: ``"guarded"`` or ``"chamfer"``.
@@ -419,26 +461,31 @@ class Refined:
 
 
 def program_scores(programs: Sequence[Program | str], target) -> list[tuple[float, float]]:
-    """``(iou, chamfer)`` of each 2D program against one target: IoU ``|A∧B| / |A∨B|`` (0 when both
-    are empty) and the paper's edge chamfer in pixels (:func:`csgnet.metrics.chamfer`); an invalid
-    program renders empty."""
-    t = torch.from_numpy(_check_target(target))
-    pred = render_programs([_check_program(p) for p in programs], 2).cpu()
-    ious, cds = score_renders(pred, t.expand(len(pred), *t.shape), 2)
+    """``(iou, chamfer)`` of each program against one target, as :func:`csgnet.score.score_renders`:
+    2D: IoU ``|A∧B| / |A∨B|`` (0 when both are empty) and the paper's edge chamfer in pixels
+    (:func:`csgnet.metrics.chamfer`); 3D: IoU ``|A∧B| / (|A∨B| + 1)`` and chamfer NaN (not defined).
+    An invalid program renders empty."""
+    t = _check_target(target)
+    pred = render_programs([_check_program(p, t.ndim) for p in programs], t.ndim).cpu()
+    t = torch.from_numpy(t)
+    ious, cds = score_renders(pred, t.expand(len(pred), *t.shape), t.ndim)
     return [(float(a), float(b)) for a, b in zip(ious, cds)]
 
 
 def refine_guarded(start: Program | str, programs: Sequence[Program | str], target, rule: str = "guarded",
                    maxiter: int | None = None, max_iou_drop: float = MAX_IOU_DROP) -> Refined:
-    """Refine candidates by chamfer (the paper's objective) and decide what a parser should write.
+    """Refine candidates and decide what a parser should write.
+
+    2D candidates are refined by chamfer (the paper's objective), 3D ones by IoU (the only 3D metric;
+    a refined program then never has a lower IoU than the best candidate it started from).
 
     Args:
         start: the program chosen before refinement (e.g. the most likely beam).
         programs: the candidates refined (e.g. every valid beam; ``start`` need not be among them).
-        target: (64, 64) image (non-zero = on).
+        target: (64, 64) image or (64, 64, 64) volume (non-zero = on).
         rule: ``"guarded"`` (default): the refined program unless its IoU is more than
             ``max_iou_drop`` below ``start``'s, then ``start``; ``"chamfer"``: the paper's choice, the
-            refined program with the lowest chamfer, whatever its IoU.
+            refined program with the best score (lowest chamfer in 2D), whatever its IoU.
         maxiter: Powell iterations (see :func:`refine`).
         max_iou_drop: the IoU loss the ``"guarded"`` rule tolerates.
 
@@ -447,7 +494,8 @@ def refine_guarded(start: Program | str, programs: Sequence[Program | str], targ
     """
     if rule not in RULES:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
-    start = _check_program(start)
+    dim = _check_target(target).ndim
+    start = _check_program(start, dim)
     result = refine_beams(programs, target, maxiter=maxiter)
     before, after = program_scores([start, result.program], target)
     kept = rule == "guarded" and after[0] < before[0] - max_iou_drop

@@ -128,3 +128,22 @@ def test_defect6_parse_refine_reports_the_program_it_writes(tmp_path, capsys):
 
     (i1, c1), = program_scores([written], load_shape(EXAMPLES / "house.png"))
     assert f"after: IoU {100 * i1:.2f}%, chamfer {c1:.3f} px" in out and "before: IoU" in out
+
+
+def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
+    import re
+
+    import csgnet
+    from csgnet.inference import load_shape
+    from csgnet.refinement import program_scores
+
+    assert main(["parse", str(EXAMPLES / "table.obj"), "--beam", "3", "--refine", "--refine-iters", "1",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "refined by IoU (3 beams)" in out and "skipped" not in out
+    before, after = (float(v) for v in re.search(r"before: IoU ([\d.]+)%; after: IoU ([\d.]+)%", out).groups())
+    assert after >= before
+    written = csgnet.parse((tmp_path / "table.txt").read_text().strip(), dim=3)
+    (iou, _), = program_scores([written], load_shape(EXAMPLES / "table.obj"))
+    assert f"after: IoU {100 * iou:.2f}%" in out
+    assert (tmp_path / "table.obj").exists() and (tmp_path / "table.scad").exists()

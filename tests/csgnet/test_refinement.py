@@ -1,4 +1,4 @@
-"""Tests of csgnet.refinement: Powell refinement of 2D program parameters (spec section (g))."""
+"""Tests of csgnet.refinement: Powell refinement of 2D and 3D program parameters (spec section (g))."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from scipy.optimize import OptimizeResult
 import csgnet
 from csgnet import metrics, refinement
 from csgnet.lang import Draw, Op, Program, parse
+from csgnet.primitives import SIZES, primitive
 from csgnet.renderer import pack, render_programs
 from csg_testutil import random_program
 
@@ -22,7 +23,7 @@ def rendered(program) -> np.ndarray:
 
 def perturbed(program: Program, rng: random.Random, step: int = 3) -> Program:
     return Program(tuple(Draw(t.kind, tuple(v + rng.randint(-step, step) for v in t.params))
-                         if isinstance(t, Draw) else t for t in program.tokens), 2)
+                         if isinstance(t, Draw) else t for t in program.tokens), program.dim)
 
 
 def grid_program(rng: random.Random, n_prims: int) -> Program:
@@ -262,3 +263,115 @@ def test_defect6_guarded_rule_keeps_the_program_when_chamfer_costs_iou():
     guarded = refine_guarded(start, [start], target)
     assert guarded.kept_start and guarded.program == csgnet.parse(start)
     assert program_scores([guarded.program], target)[0] == guarded.before
+
+
+# ---------------------------------------------------------------------------------------------
+# 3D: IoU |A∧B| / (|A∨B| + 1) over (x, y, z, r[, h]) per primitive
+
+
+def volume(program) -> np.ndarray:
+    return render_programs([program], 3)[0].numpy()
+
+
+def in_box(start: Program, result: Program) -> bool:
+    """Every returned parameter lies in its grammar range (positions 8..56, sizes 8..32), widened to
+    contain the start's value."""
+    for a, b in zip(start.draws, result.draws):
+        for name, grammar, v0, v in zip(primitive(a.kind).params, primitive(a.kind).ranges, a.params, b.params):
+            lo, hi = min(min(grammar), v0), max(max(grammar), v0)
+            if not lo <= v <= hi:
+                return False
+    return True
+
+
+def test_3d_iou_scorer_equals_iou_3d_bit_for_bit():
+    rng = random.Random(20)
+    vols = [volume(random_program(rng, 3, rng.randint(1, 4))) for _ in range(12)]
+    vols += [np.zeros((64,) * 3, bool), np.ones((64,) * 3, bool)]
+    for t in [v for v in vols if v.any()][:6]:
+        scorer = refinement._Scorer(t, "iou")
+        for v in vols:
+            assert scorer.score(pack(torch.from_numpy(v)).numpy()) == metrics.iou_3d(v, t)
+
+
+def test_3d_composition_equals_the_renderer():
+    rng = random.Random(21)
+    scorer = refinement._Scorer(volume(parse("sp(32,32,32,16)", 3)), "iou")
+    for _ in range(15):
+        p = random_program(rng, 3, rng.randint(1, 5))
+        lo, hi = refinement._box(p, "improved", None)
+        v = np.array([x for d in p.draws for x in d.params], np.int64)
+        composed = refinement._Problem(p, scorer, lo, hi, "round").compose(v)
+        assert np.array_equal(composed, pack(torch.from_numpy(volume(p))).numpy()), p.text()
+
+
+@pytest.mark.parametrize("seed, near", [(22, True), (23, False)])
+def test_3d_never_worsens_iou_and_keeps_parameters_in_range(seed, near):
+    """Starts near their target (a perturbed copy) or anywhere (another random program, parameters
+    also outside the grammar's ranges): the returned score is the returned program's IoU, never below
+    the start's, and every parameter stays inside the search box."""
+    rng = random.Random(seed)
+    for _ in range(5):
+        truth = random_program(rng, 3, rng.randint(1, 3), lo=14, hi=50, sizes=(10, 26))
+        target = volume(truth)
+        if not target.any():
+            continue
+        start = perturbed(truth, rng) if near else random_program(rng, 3, rng.randint(1, 3))
+        res = csgnet.refine(start, target, maxiter=2)
+        assert res.metric == "iou" and res.mode == "improved"
+        assert res.initial_score == metrics.iou_3d(volume(start), target)
+        assert res.score == metrics.iou_3d(volume(res.program), target) >= res.initial_score
+        assert in_box(start, res.program), (start.text(), res.text)
+        if not res.improved:
+            assert res.program is start
+
+
+@pytest.mark.parametrize("target_text, start_text, exact", [
+    ("sp(32,32,32,16)", "sp(30,34,31,13)", True),
+    ("sp(32,32,32,24)cu(32,32,32,20)-", "sp(33,30,32,22)cu(31,33,30,22)-", True),
+    ("cy(32,32,32,16,24)sp(32,32,44,12)+", "cy(30,33,34,14,20)sp(33,31,41,13)+", False),
+])
+def test_3d_perturbed_program_is_pulled_back_to_its_target(target_text, start_text, exact):
+    target = volume(parse(target_text, 3))
+    res = csgnet.refine(start_text, target)
+    assert res.initial_score < 0.7 and res.score > 0.9
+    if exact:  # the same volume (cube sizes 19 and 20 draw alike), so IoU = |A| / (|A| + 1)
+        assert np.array_equal(volume(res.program), target)
+
+
+def test_3d_search_box_sizes_include_the_cylinder_height():
+    prog = parse("cy(70,32,-3,40,4)sp(32,32,32,16)+", 3)
+    lo, hi = refinement._box(prog, "improved", None)
+    assert lo.tolist() == [8, 8, -3, 8, 4, 8, 8, 8, 8] and hi.tolist() == [70, 56, 56, 40, 32, 56, 56, 56, 32]
+    lo, hi = refinement._box(prog, "improved", ((10, 50), (12, 20)))
+    assert lo.tolist() == [10, 10, -3, 12, 4, 10, 10, 10, 12] and hi.tolist() == [70, 50, 50, 40, 20, 50, 50, 50, 20]
+    assert primitive("y").sizes == ("r", "h") and primitive("y").ranges[4] == SIZES
+
+
+def test_3d_refine_beams_and_guarded_rule_never_lower_iou():
+    rng = random.Random(24)
+    truth = parse("sp(28,32,30,16)cu(40,32,32,12)+", 3)
+    target = volume(truth)
+    beams = [perturbed(truth, rng, 4) for _ in range(3)] + [Program((Op("+"),), 3)]
+    best = csgnet.refine_beams(beams, torch.from_numpy(target), maxiter=1)
+    assert best.score == max(csgnet.refine(b, target, maxiter=1).score for b in beams)
+    ref = refinement.refine_guarded(beams[1], beams, target, maxiter=1)
+    assert not ref.kept_start and ref.program == best.program
+    assert ref.after[0] == best.score >= ref.before[0] == metrics.iou_3d(volume(beams[1]), target)
+    assert np.isnan(ref.before[1]) and np.isnan(ref.after[1])  # no 3D chamfer
+
+
+def test_3d_bad_input_errors():
+    target = volume(parse("sp(32,32,32,16)", 3))
+    with pytest.raises(ValueError, match="'chamfer' is defined for 2D images only"):
+        csgnet.refine("sp(30,32,32,16)", target, metric="chamfer")
+    with pytest.raises(ValueError, match="'reference' is the published 2D procedure"):
+        csgnet.refine("sp(30,32,32,16)", target, mode="reference")
+    with pytest.raises(ValueError, match="3D target needs 3D programs, got a 2D program"):
+        csgnet.refine(parse("c(32,32,16)"), target)
+    with pytest.raises(csgnet.ParseError):
+        csgnet.refine("c(32,32,16)", target)  # text is read as 3D
+    with pytest.raises(ValueError, match="target volume is empty"):
+        csgnet.refine("sp(30,32,32,16)", np.zeros((64,) * 3, bool))
+    with pytest.raises(ValueError, match=r"\(64, 64, 64\) volume or one image of shape \(64, 64\), got \(64, 64, 2\)"):
+        csgnet.refine("sp(30,32,32,16)", np.zeros((64, 64, 2), bool))
