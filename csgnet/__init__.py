@@ -10,7 +10,7 @@ Entry points:
   bool images / volumes (:mod:`csgnet.inference`); models in :mod:`csgnet.models`, decoding in
   :mod:`csgnet.decode`, Lightning training in :mod:`csgnet.train.supervised`, tables in :mod:`csgnet.paper.tables`.
 * :func:`refine` / :func:`refine_beams`: Powell refinement of a program's parameters toward a target
-  image (:mod:`csgnet.refinement`).
+  image (chamfer or IoU) or volume (IoU) (:mod:`csgnet.refinement`).
 """
 
 from __future__ import annotations
