@@ -275,13 +275,13 @@ def _read_meta(path: Path) -> dict | None:
 
 def _check_meta(meta: dict | None, path: Path, lengths: list[int]) -> None:
     """Warn (:class:`DatasetWarning`) when ``meta.json`` does not vouch for the files about to be read."""
+    stale = [] if meta is None else [L for L in lengths if L not in meta.get("lengths", [])]
     if meta is None:
         problem = "is missing: the files may come from an interrupted or older `generate`"
     elif meta.get("complete") is False:
         problem = ("says the run that wrote it did not finish: the files may mix that run's programs "
                    "with an earlier run's (seeds or scales)")
-    elif [L for L in lengths if L not in meta.get("lengths", [])]:
-        stale = [L for L in lengths if L not in meta.get("lengths", [])]
+    elif stale:
         problem = f"does not list lengths {stale}: their files come from another run"
     else:
         return
