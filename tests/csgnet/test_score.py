@@ -57,3 +57,17 @@ def test_best_iou_matches_equals_brute_force_over_chunks(plus):
     union = q.sum(1)[:, None] + c.sum(1)[None] - inter + plus
     want = torch.where(union > 0, inter / union.clamp(min=1e-9), torch.zeros_like(inter)).argmax(1)
     assert torch.equal(got, want)
+
+
+def test_best_iou_matches_hand_computed_case_and_ties_go_to_the_lowest_index():
+    q = torch.zeros(1, 4, 4, dtype=torch.bool)
+    q[0, 0, :4] = True  # 4 pixels
+    c = torch.zeros(4, 4, 4, dtype=torch.bool)
+    c[0, 0, :2] = True  # IoU 2/4
+    c[1, 0, :4] = True
+    c[1, 1, :4] = True  # IoU 4/8, ties with 0
+    c[2, 0, :3] = True  # IoU 3/4: the best
+    c[3, 3, :] = True  # disjoint: 0
+    assert best_iou_matches(q, [(0, c[:2]), (2, c[2:])]).tolist() == [2]
+    assert best_iou_matches(q, [(0, c[:2])]).tolist() == [0]
+    assert best_iou_matches(q, [(0, c[3:])], plus=1.0).tolist() == [0]  # all zero: the first candidate
