@@ -30,7 +30,7 @@ from .logs import EpochValues, log_means, log_pairs
 from .streams import ShuffledBatches, distributed, set_stream_epoch, stream_loader
 
 __all__ = ["ReinforceModule", "TargetDataModule", "load_targets", "load_initial", "episode_rewards",
-           "update_baseline", "policy_loss", "SOURCES"]
+           "update_baseline", "policy_loss", "greedy_scores", "log_greedy_validation", "SOURCES"]
 
 SOURCES = ("silhouettes", "cad", "folder", "npz", "synthetic")
 
@@ -271,22 +271,13 @@ class ReinforceModule(L.LightningModule):
 
     def validation_step(self, batch, batch_idx):
         targets = _images(batch)
-        dec = greedy(self.model, targets, max_len=self.hparams.max_len, constrained=self.hparams.constrained)
-        pred = render_tokens(dec.tokens[:, 0], 2, dec.lengths[:, 0])
-        r, cd = episode_rewards(pred, targets, dec.valid[:, 0], self.hparams.gamma, self.hparams.invalid_reward,
-                                self.hparams.reward_workers)
-        iou = np.nan_to_num(np.asarray(metrics.iou(pred.cpu(), targets.cpu(), denominator="union"), np.float64))
-        self._val.add(targets, pred, reward=r, chamfer=cd, iou=iou, valid=dec.valid[:, 0].cpu().numpy(),
-                      length=dec.lengths[:, 0].cpu().numpy())
+        hp = self.hparams
+        pred, values = greedy_scores(self.model, targets, hp.max_len, hp.constrained, hp.gamma, hp.invalid_reward,
+                                     hp.reward_workers)
+        self._val.add(targets, pred, **values)
 
     def on_validation_epoch_end(self):
-        if not self._val:
-            return
-        v = self._val.arrays()
-        log_means(self, {f"val/{k}": v[k].mean() for k in ("reward", "chamfer", "iou", "valid", "length")},
-                  prog_bar=("val/reward", "val/chamfer"))
-        if self._val.grid is not None:
-            log_pairs(self, "val/targets_vs_greedy", *self._val.grid)
+        log_greedy_validation(self, self._val)
 
     def configure_optimizers(self):
         opt = torch.optim.SGD(self.model.parameters(), lr=self.hparams.lr, momentum=self.hparams.momentum)
@@ -294,6 +285,36 @@ class ReinforceModule(L.LightningModule):
                                                            patience=self.hparams.plateau_patience)
         return {"optimizer": opt,
                 "lr_scheduler": {"scheduler": sched, "monitor": "val/reward", "interval": "epoch", "strict": False}}
+
+
+def greedy_scores(model: CSGNet, targets: torch.Tensor, max_len: int = 13, constrained: bool = False,
+                  gamma: float = 20.0, invalid: str = "zero", workers: int | None = None
+                  ) -> tuple[torch.Tensor, dict[str, np.ndarray]]:
+    """The validation of the fine-tuning methods: greedy decodes of ``targets`` ``(B, 64, 64)`` bool,
+    rendered and scored.
+
+    Returns:
+        ``(renders (B, 64, 64) bool, values)`` with ``values`` the ``(B,)`` arrays ``reward``,
+        ``chamfer``, ``iou`` (union denominator), ``valid`` and ``length`` (program tokens).
+    """
+    dec = greedy(model, targets, max_len=max_len, constrained=constrained)
+    pred = render_tokens(dec.tokens[:, 0], 2, dec.lengths[:, 0])
+    r, cd = episode_rewards(pred, targets, dec.valid[:, 0], gamma, invalid, workers)
+    iou = np.nan_to_num(np.asarray(metrics.iou(pred.cpu(), targets.cpu(), denominator="union"), np.float64))
+    return pred, dict(reward=r, chamfer=cd, iou=iou, valid=dec.valid[:, 0].cpu().numpy(),
+                      length=dec.lengths[:, 0].cpu().numpy())
+
+
+def log_greedy_validation(module: L.LightningModule, val: EpochValues) -> None:
+    """Log the means of a validation epoch of :func:`greedy_scores` values as ``val/<name>`` (and the
+    ``val/targets_vs_greedy`` image grid); nothing for an empty epoch."""
+    if not val:
+        return
+    v = val.arrays()
+    log_means(module, {f"val/{k}": v[k].mean() for k in ("reward", "chamfer", "iou", "valid", "length")},
+              prog_bar=("val/reward", "val/chamfer"))
+    if val.grid is not None:
+        log_pairs(module, "val/targets_vs_greedy", *val.grid)
 
 
 def _images(batch) -> torch.Tensor:

@@ -33,9 +33,56 @@ from ..vocab import vocabulary
 from .logs import EpochValues, log_means, log_pairs
 from .streams import MixedLengthBatches, distributed, set_stream_epoch, stream_loader
 
-__all__ = ["CSGDataModule", "CSGNetModule", "DEFAULT_LENGTHS"]
+__all__ = ["CSGDataModule", "CSGNetModule", "DEFAULT_LENGTHS", "teacher_inputs", "teacher_forced_loss"]
 
 DEFAULT_LENGTHS = {2: [3, 5, 7, 9, 11, 13], 3: [3, 5, 7]}
+
+
+def teacher_inputs(model: CSGNet, tokens: torch.Tensor, lengths: torch.Tensor):
+    """The teacher-forcing inputs of a batch of ``$``-padded programs.
+
+    Args:
+        model: the CSGNet / CSGNetStack trained (its start token and stack depth).
+        tokens: ``(B, T') int64`` token indices, ``$``-padded, ``T' > max(lengths)``.
+        lengths: ``(B,) int64`` program tokens before the ``$``.
+
+    Returns:
+        ``(tokens_out (B, T) int64, tokens_in (B, T) int64, stack)`` with ``T = max(lengths) + 1`` (the
+        ``k + 1`` steps of the longest program): the targets, the inputs (START then the targets shifted
+        by one) and, for CSGNetStack, the stack trace of the program's prefixes (else None).
+    """
+    cfg = model.config
+    T = int(lengths.max()) + 1  # k + 1 targets for the longest program
+    tokens = tokens[:, :T]
+    start = torch.full_like(tokens[:, :1], model.start)
+    tokens_in = torch.cat([start, tokens[:, :-1]], dim=1)
+    stack = stack_trace(tokens[:, :-1], cfg.dim, k=cfg.stack_k, lengths=lengths) if cfg.stack else None
+    return tokens, tokens_in, stack
+
+
+def teacher_forced_loss(model: CSGNet, target: torch.Tensor, tokens_out: torch.Tensor, tokens_in: torch.Tensor,
+                        stack, lengths: torch.Tensor, loss_norm: str = "per_step"):
+    """The supervised loss of programs given the images they should draw (:func:`teacher_inputs`).
+
+    Args:
+        target: ``(B, 64, 64[, 64])`` bool images, the encoder's input.
+        tokens_out, tokens_in, stack: from :func:`teacher_inputs`.
+        lengths: ``(B,) int64`` program tokens.
+        loss_norm: ``"per_step"`` (a program's summed NLL over its ``k + 1`` steps divided by ``k + 1``)
+            or ``"sum"``.
+
+    Returns:
+        ``(loss, exact)``: the mean per-program loss (differentiable) and the fraction of programs
+        whose every step the arg-max predicts.
+    """
+    logits = model(target, tokens_in, stack)
+    nll = F.cross_entropy(logits.transpose(1, 2), tokens_out, reduction="none")
+    steps = torch.arange(tokens_out.shape[1], device=tokens_out.device)[None] <= lengths[:, None]
+    per_prog = (nll * steps).sum(1)
+    if loss_norm == "per_step":
+        per_prog = per_prog / (lengths + 1)
+    acc = ((logits.argmax(-1) == tokens_out) | ~steps).all(1).float().mean()
+    return per_prog.mean(), acc
 
 
 class CSGDataModule(L.LightningDataModule):
@@ -163,27 +210,16 @@ class CSGNetModule(L.LightningModule):
 
     # ------------------------------------------------------------------------------------------
     def _inputs(self, tokens: torch.Tensor, lengths: torch.Tensor, augment: bool):
-        cfg = self.config
-        T = int(lengths.max()) + 1  # k + 1 targets for the longest program
-        tokens = tokens[:, :T]
-        target = render_tokens(tokens, cfg.dim, lengths)
+        tokens, tokens_in, stack = teacher_inputs(self.model, tokens, lengths)
+        target = render_tokens(tokens, self.config.dim, lengths)
         if augment:
             target = jitter(target, self._rng)
-        start = torch.full_like(tokens[:, :1], self.model.start)
-        tokens_in = torch.cat([start, tokens[:, :-1]], dim=1)
-        stack = stack_trace(tokens[:, :-1], cfg.dim, k=cfg.stack_k, lengths=lengths) if cfg.stack else None
         return target, tokens, tokens_in, stack
 
     def _loss(self, tokens, lengths, augment):
         target, tokens_out, tokens_in, stack = self._inputs(tokens, lengths, augment)
-        logits = self.model(target, tokens_in, stack)
-        nll = F.cross_entropy(logits.transpose(1, 2), tokens_out, reduction="none")
-        steps = torch.arange(tokens_out.shape[1], device=tokens.device)[None] <= lengths[:, None]
-        per_prog = (nll * steps).sum(1)
-        if self.loss_norm == "per_step":
-            per_prog = per_prog / (lengths + 1)
-        acc = ((logits.argmax(-1) == tokens_out) | ~steps).all(1).float().mean()
-        return per_prog.mean(), acc, target
+        loss, acc = teacher_forced_loss(self.model, target, tokens_out, tokens_in, stack, lengths, self.loss_norm)
+        return loss, acc, target
 
     def training_step(self, batch, batch_idx):
         tokens, lengths = batch

@@ -112,7 +112,7 @@ def test_missing_dataset_names_the_generate_command(tmp_path):
 
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs" / "csgnet").glob("*.yaml")
-                                           if not p.name.startswith("rl_")))  # rl_*: test_reinforce.py
+                                           if not p.name.startswith(("rl_", "st_"))))  # rl_*, st_*: their own tests
 def test_configs_parse_and_build(config, monkeypatch, train_main):
     monkeypatch.chdir(ROOT)
     cli = train_main(["--config", f"configs/csgnet/{config}", "--trainer.logger", "false"], run=False)
