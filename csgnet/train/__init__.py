@@ -3,6 +3,7 @@
 * :mod:`csgnet.train.supervised`: supervised training (``CSGNetModule``, ``CSGDataModule``);
 * :mod:`csgnet.train.reinforce`: REINFORCE fine-tuning on target images (``ReinforceModule``,
   ``TargetDataModule``);
+* :mod:`csgnet.train.selftrain`: self-training on pseudo-labels (``SelfTrainModule``, ``SelfTrainDataModule``);
 * :mod:`csgnet.train.streams`: batch streams split over ranks and DataLoader workers;
 * :mod:`csgnet.train.logs`: validation values averaged over ranks, TensorBoard image grids;
 * :mod:`csgnet.train.checkpoint`: ``AtomicCheckpointIO``, checkpoints written atomically.

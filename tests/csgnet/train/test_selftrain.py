@@ -2,7 +2,6 @@
 from pathlib import Path
 
 import lightning as L
-import numpy as np
 import pytest
 import torch
 
