@@ -40,3 +40,26 @@ def test_fit_resume_and_validate_through_the_one_cli(tmp_path, train_main):
     val = train_main(["validate", "--config", str(config), "--trainer.logger", "false",
                       "--ckpt_path", str(tmp_path / "ckpt" / "last.ckpt")])
     assert "val/iou" in val.trainer.callback_metrics
+
+
+def test_the_configs_last_checkpoint_is_the_last_epoch_even_without_improvement(tmp_path, train_main):
+    # the checkpoint callbacks of a shipped config, pointed at tmp_path; with lr 0 the validation chamfer
+    # never improves after the first epoch, so only the second callback keeps last.ckpt current
+    root = Path(__file__).resolve().parents[3]
+    shipped = yaml.safe_load((root / "configs" / "csgnet" / "csgnet2d_small.yaml").read_text())
+    callbacks = [c for c in shipped["trainer"]["callbacks"] if c["class_path"].endswith("ModelCheckpoint")]
+    assert len(callbacks) == 2
+    for c in callbacks:
+        c["init_args"]["dirpath"] = str(tmp_path / "ckpt")
+    config = yaml.safe_load(_config(tmp_path).read_text())
+    config["trainer"].update(callbacks=callbacks, max_steps=-1, max_epochs=3, logger=False)
+    config["model"]["init_args"]["lr"] = 0.0
+    path = tmp_path / "no_improvement.yaml"
+    path.write_text(yaml.safe_dump(config))
+    train_main(["fit", "--config", str(path)])
+    import torch
+
+    best = sorted(p.name for p in (tmp_path / "ckpt").glob("best-*.ckpt"))
+    assert best == ["best-epoch=000.ckpt"]
+    last = torch.load(tmp_path / "ckpt" / "last.ckpt", map_location="cpu", weights_only=False)
+    assert last["epoch"] == 2
