@@ -26,7 +26,8 @@ from torch import nn
 
 from .vectors import CMD, CUBE1, CUBES, LINE_DIM, NUM_SLOTS, VectorNode, command_vector
 
-__all__ = ["MLP", "Decoder", "DecoderStep", "Encoder", "NodeOutput", "Sampler", "VAE", "VAEOutput", "one_hot_argmax"]
+__all__ = ["MLP", "Decoder", "DecoderStep", "Encoder", "NodeOutput", "Sampler", "VAE", "VAEOutput", "one_hot_argmax",
+           "prediction_tree"]
 
 
 class MLP(nn.Module):
@@ -270,3 +271,24 @@ class VAE(nn.Module):
         """Encode ``tree`` and decode it teacher-forced (the training pass); see :func:`~shapeprog.vae.losses.program_loss`."""
         z, mu, logvar = self.encode(tree, sample, generator)
         return VAEOutput(self.decoder.teacher_forced(tree, z), self.decoder.bbox(z), mu, logvar, z)
+
+
+def prediction_tree(output: VAEOutput, tree: VectorNode) -> VectorNode:
+    """The teacher-forced predictions of ``output`` as a tree shaped like the target ``tree``.
+
+    Node k's lines are its predicted rows ``[l1 .. lL, stop]``; a Cuboid line keeps the target's child
+    when its leaf logit is negative (the prediction says "sub-program") and becomes a leaf otherwise.
+    :func:`~shapeprog.vae.vectors.tree_to_program` writes the result as a program.
+    """
+    nodes = [n for n, _ in tree.nodes()]
+    if len(nodes) != len(output.nodes):
+        raise ValueError(f"the output has {len(output.nodes)} nodes, the tree {len(nodes)}")
+    preds = {id(n): o for n, o in zip(nodes, output.nodes)}
+
+    def build(node: VectorNode) -> VectorNode:
+        out = preds[id(node)]
+        leaf = out.leaf.tolist()
+        kids = tuple(None if c is None or leaf[j] >= 0 else build(c) for j, c in enumerate(node.children[: len(leaf)]))
+        return VectorNode(out.lines.detach(), kids, node.name)
+
+    return build(tree)

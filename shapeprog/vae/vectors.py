@@ -13,7 +13,7 @@ Example:
     >>> tree = program_to_tree(parse(text))
     >>> tuple(tree.lines.shape), tree.lines[1, DIMS].tolist(), tree.lines[2, CUBE2].argmax().item()
     ((4, 63), [0.5, 0.25, 0.5], 0)
-    >>> to_text(tree_to_program(tree, decimals=3)).splitlines()[2]
+    >>> to_text(tree_to_program(tree, decimals=3)).splitlines()[3]
     '\\tattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)'
 """
 from __future__ import annotations
@@ -290,7 +290,7 @@ def _decode_block(node: VectorNode, path: str, name_of, decimals: int | None) ->
         a = name_of(argmax(CUBE1))
         if c == _CUBOID:
             l, h, w = (num(max(v, _MIN_DIM)) for v in r[DIMS])
-            out.append(Cuboid(name_of(ncub), l, h, w, r[ALIGNED] > 0))
+            out.append(Cuboid(name_of(ncub), l, h, w, ncub == 0 or r[ALIGNED] > 0))
             ncub += 1
         elif c == _ATTACH:
             out.append(Attach(a, name_of(argmax(CUBE2)), *(num(_clamp(v, 0.0, 1.0)) for v in r[ATTACH])))
@@ -308,7 +308,8 @@ def tree_to_program(tree: VectorNode, decimals: int | None = None) -> Program:
     """The program written by a line-vector tree (targets, or decoder predictions).
 
     Commands, slots, axes and faces are the argmax of their entries, so logits work as well as
-    one-hots; aligned is ``entry 62 > 0`` (a 1/0 target or a logit); the count is rounded. The
+    one-hots; aligned is ``entry 62 > 0`` (a 1/0 target or a logit; always True for bbox, whose flag
+    the executor ignores and the model does not learn); the count is rounded. The
     preprocessing clamps are applied again (dims >= 0.01, coordinates, u, v, d in [0, 1], count >= 1).
     A stop row ends a node. The j-th Cuboid line is ``bbox`` (j = 0), ``Program_<m>`` when
     ``children[j]`` is a node, else ``cube<j-1>``; blocks are numbered breadth first. A slot with no
