@@ -10,31 +10,14 @@ from shapeprog.vae.losses import LINE_TERMS, LOSS_WEIGHTS, kl_loss, leaf_loss, l
 from shapeprog.vae.model import VAE
 from shapeprog.vae.vectors import program_to_tree
 
-TEXT = """Assembly Program_0 {
-\tbbox = Cuboid(1.2, 1.0, 0.8, True)
-\tProgram_1 = Cuboid(0.3, 0.6, 0.7, False)
-\tcube1 = Cuboid(1.2, 0.1, 0.8, True)
-\tattach(Program_1, bbox, 0.5, 0.0, 0.5, 0.2, 0.0, 0.5)
-\tsqueeze(cube1, bbox, Program_1, top, 0.5, 0.5)
-\treflect(Program_1, X)
-}
-Assembly Program_1 {
-\tbbox = Cuboid(0.3, 0.6, 0.7, True)
-\tcube0 = Cuboid(0.05, 0.6, 0.05, True)
-\tattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.1)
-\ttranslate(cube0, Z, 2, 0.8)
-}
-"""
-
-
 def test_weights_of_the_spec():
     assert LOSS_WEIGHTS == {"cmd": 1, "cub_prm": 50, "xyz_prm": 50, "uv_prm": 50, "sym_prm": 50, "cub": 1,
                             "sym_cub": 1, "sq_cub": 1, "axis": 1, "face": 1, "align": 1, "leaf": 1, "bb": 50,
                             "kl": 0.1}
 
 
-def test_perfect_prediction_costs_only_the_softmax_floor():
-    tree = program_to_tree(parse(TEXT))
+def test_perfect_prediction_costs_only_the_softmax_floor(two_levels):
+    tree = program_to_tree(parse(two_levels))
     tar = tree.target_seq()
     pred = tar * 100.0  # one-hots become confident logits; the continuous entries are copied back
     for part in (slice(40, 49), slice(52, 54), slice(60, 62)):
@@ -45,8 +28,8 @@ def test_perfect_prediction_costs_only_the_softmax_floor():
     assert all(v.item() == pytest.approx(0.0, abs=1e-6) for v in terms.values())
 
 
-def test_each_term_against_a_hand_computation():
-    tree = program_to_tree(parse(TEXT))
+def test_each_term_against_a_hand_computation(two_levels):
+    tree = program_to_tree(parse(two_levels))
     tar = tree.target_seq()  # rows: bbox, Program_1, cube1, attach, squeeze, reflect, stop
     torch.manual_seed(0)
     pred = torch.randn_like(tar)
@@ -79,9 +62,9 @@ def test_kl_has_no_half_and_leaf_is_a_mean():
     assert leaf_loss(logits, target).item() == pytest.approx(expected)
 
 
-def test_program_loss_sums_nodes_and_weights_terms():
+def test_program_loss_sums_nodes_and_weights_terms(two_levels):
     torch.manual_seed(0)
-    tree = program_to_tree(parse(TEXT))
+    tree = program_to_tree(parse(two_levels))
     vae = VAE(16)
     out = vae(tree, sample=False)
     total, terms = program_loss(out, tree)

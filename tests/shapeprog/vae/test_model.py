@@ -7,21 +7,6 @@ from shapeprog.vae.losses import program_loss
 from shapeprog.vae.model import VAE, Decoder, Encoder, one_hot_argmax, prediction_tree
 from shapeprog.vae.vectors import VectorNode, program_to_tree, tree_to_program
 
-TWO_LEVELS = """Assembly Program_0 {
-\tbbox = Cuboid(1.2, 1.0, 0.8, True)
-\tProgram_1 = Cuboid(0.3, 0.6, 0.7, True)
-\tcube1 = Cuboid(1.2, 0.1, 0.8, True)
-\tattach(Program_1, bbox, 0.5, 0.0, 0.5, 0.2, 0.0, 0.5)
-\tsqueeze(cube1, bbox, Program_1, top, 0.5, 0.5)
-\treflect(Program_1, X)
-}
-Assembly Program_1 {
-\tbbox = Cuboid(0.3, 0.6, 0.7, True)
-\tcube0 = Cuboid(0.05, 0.6, 0.05, False)
-\tattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.1)
-\ttranslate(cube0, Z, 2, 0.8)
-}
-"""
 FLAT = """bbox = Cuboid(0.9, 1.5, 0.9, True)
 cube0 = Cuboid(0.9, 0.2, 0.9, True)
 cube1 = Cuboid(0.1, 1.3, 0.1, True)
@@ -48,9 +33,9 @@ def test_state_dict_keys_follow_the_reference_modules():
                      "squeeze_net", "sym_net", "next_net", "leaf_net"}
 
 
-def test_forward_shapes_and_sampling():
+def test_forward_shapes_and_sampling(two_levels):
     torch.manual_seed(0)
-    tree = program_to_tree(parse(TWO_LEVELS))
+    tree = program_to_tree(parse(two_levels))
     vae = VAE(16)
     out = vae(tree, sample=False)
     assert [tuple(n.lines.shape) for n in out.nodes] == [(7, 63), (5, 63)]
@@ -62,10 +47,10 @@ def test_forward_shapes_and_sampling():
     assert torch.equal(z1, z2) and not torch.equal(z1, mu) and logvar.shape == (16,)
 
 
-def test_encoder_is_bottom_up_child_code_replaces_the_cuboid_line():
+def test_encoder_is_bottom_up_child_code_replaces_the_cuboid_line(two_levels):
     torch.manual_seed(0)
     enc = Encoder(16)
-    tree = program_to_tree(parse(TWO_LEVELS))
+    tree = program_to_tree(parse(two_levels))
     child = tree.children[1]
     # the child's code stands in for its Cuboid line: changing the line's own numbers changes nothing
     other = tree.lines.clone()
@@ -103,12 +88,12 @@ def test_one_hot_argmax():
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_dtype_and_device(dtype):
+def test_dtype_and_device(dtype, two_levels):
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     for device in devices:
         torch.manual_seed(0)
         vae = VAE(16).to(device=device, dtype=dtype)
-        tree = program_to_tree(parse(TWO_LEVELS), dtype=dtype, device=device)
+        tree = program_to_tree(parse(two_levels), dtype=dtype, device=device)
         total, _ = program_loss(vae(tree), tree)
         total.backward()
         assert total.dtype == dtype and total.device.type == device and torch.isfinite(total)
@@ -129,11 +114,11 @@ def _reconstructs(vae, tree, program, tol):
     return max(abs(a - b) for a, b in zip(numbers(pred), numbers(program))) <= tol
 
 
-def test_tiny_overfit_reconstructs_programs_teacher_forced():
+def test_tiny_overfit_reconstructs_programs_teacher_forced(two_levels):
     """Two programs (three nodes, every statement kind) are reconstructed: every command, cuboid, face, axis,
     count, aligned flag and sub-program choice exact, every number within 0.01, in a few hundred steps."""
     torch.manual_seed(0)
-    trees = [program_to_tree(parse(t)) for t in (TWO_LEVELS, FLAT)]
+    trees = [program_to_tree(parse(t)) for t in (two_levels, FLAT)]
     progs = [tree_to_program(t) for t in trees]  # the targets, in the corpus format
     vae = VAE(64)
     opt = torch.optim.Adam(vae.parameters(), lr=1e-2)

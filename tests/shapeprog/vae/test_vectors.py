@@ -12,33 +12,16 @@ from shapeprog.lang import Attach, Block, Cuboid, Program, parse, to_text
 from shapeprog.vae.vectors import (ALIGNED, ATTACH, AXIS, COUNT, CUBE1, CUBE2, CUBE3, DIMS, DIST, FACE, UV,
                                    VectorNode, l1_mask, program_to_tree, tree_to_program)
 
-TWO_LEVELS = """Assembly Program_0 {
-\tbbox = Cuboid(1.2, 1.0, 0.8, True)
-\tProgram_1 = Cuboid(0.3, 0.6, 0.7, True)
-\tcube1 = Cuboid(1.2, 0.1, 0.8, False)
-\tattach(Program_1, bbox, 0.5, 0.0, 0.5, 0.2, 0.0, 0.5)
-\tsqueeze(cube1, bbox, Program_1, top, 0.5, 0.25)
-\treflect(Program_1, X)
-}
-Assembly Program_1 {
-\tbbox = Cuboid(0.3, 0.6, 0.7, True)
-\tcube0 = Cuboid(0.05, 0.6, 0.05, True)
-\tattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.1)
-\ttranslate(cube0, Z, 2, 0.8)
-}
-"""
-
-
 def _onehot(row, part):
     return row[part].nonzero().flatten().tolist()
 
 
-def test_layout_of_every_statement_in_code_order():
-    tree = program_to_tree(parse(TWO_LEVELS), dtype=torch.float64)
+def test_layout_of_every_statement_in_code_order(two_levels):
+    tree = program_to_tree(parse(two_levels), dtype=torch.float64)
     x = tree.lines
     assert x.shape == (6, 63) and x.dtype == torch.float64
     assert x[:, :7].argmax(1).tolist() == [1, 1, 1, 2, 5, 3]  # Cuboid, attach, squeeze=5, reflect=3
-    assert x[0, DIMS].tolist() == [1.2, 1.0, 0.8] and x[0, ALIGNED] == 1 and x[2, ALIGNED] == 0
+    assert x[0, DIMS].tolist() == [1.2, 1.0, 0.8] and x[0, ALIGNED] == 1 and x[1, ALIGNED] == 0
     # Program_1 is the first non-bbox Cuboid line: slot 1 (cube0) in every reference
     assert _onehot(x[3], CUBE1) == [1] and _onehot(x[3], CUBE2) == [0]
     assert x[3, ATTACH].tolist() == [0.5, 0.0, 0.5, 0.2, 0.0, 0.5]
@@ -53,11 +36,11 @@ def test_layout_of_every_statement_in_code_order():
     assert tree.cuboid_rows.tolist() == [0, 1, 2]
     # only the rows' own nonzero entries are set
     # Cuboid 5 (4 when not aligned), attach 1 + 2 + 4 nonzero coordinates, squeeze 1 + 3 + 1 + 2, reflect 3
-    assert int((x != 0).sum()) == 5 + 5 + 4 + 7 + 7 + 3
+    assert int((x != 0).sum()) == 5 + 4 + 5 + 7 + 7 + 3
 
 
-def test_sequences_and_l1_mask():
-    tree = program_to_tree(parse(TWO_LEVELS)).children[1]
+def test_sequences_and_l1_mask(two_levels):
+    tree = program_to_tree(parse(two_levels)).children[1]
     inp, tar = tree.input_seq(), tree.target_seq()
     assert inp.shape == tar.shape == (5, 63)
     assert inp[0, :7].argmax() == 0 and torch.equal(inp[1:], tree.lines)
@@ -78,9 +61,9 @@ def test_clamps():
     assert "cube0 = Cuboid(0.01, 0.01, 0.5, True)" in text and "attach(cube0, bbox, 0.0, 1.0, 0.5, 0.5, 1.0, 0.0)" in text
 
 
-def test_tree_to_program_names_slots_and_numbers_blocks_breadth_first():
-    tree = program_to_tree(parse(TWO_LEVELS))
-    assert to_text(tree_to_program(tree, decimals=3)) == TWO_LEVELS
+def test_tree_to_program_names_slots_and_numbers_blocks_breadth_first(two_levels):
+    tree = program_to_tree(parse(two_levels))
+    assert to_text(tree_to_program(tree, decimals=3)) == two_levels
     # logits work as well as one-hots: scale and shift every row
     noisy = VectorNode(tree.lines * 3 - 1, tree.children, tree.name)
     text = to_text(tree_to_program(noisy, decimals=3))
@@ -122,8 +105,8 @@ def test_corpus_round_trip_sample():
         assert torch.allclose(a.corners, b.corners, atol=1e-4, rtol=0)
 
 
-def test_to_moves_every_tensor():
-    tree = program_to_tree(parse(TWO_LEVELS)).to(dtype=torch.float64)
+def test_to_moves_every_tensor(two_levels):
+    tree = program_to_tree(parse(two_levels)).to(dtype=torch.float64)
     assert {n.lines.dtype for n, _ in tree.nodes()} == {torch.float64}
 
 
@@ -160,10 +143,10 @@ def test_unknown_cuboid_and_duplicate_declaration_are_located_errors():
         program_to_tree(p)
 
 
-def test_tree_to_program_rejects_bad_trees():
+def test_tree_to_program_rejects_bad_trees(two_levels):
     with pytest.raises(ValueError, match=r"root: lines must be \(L, 63\) with L >= 1, got \(2, 62\)"):
         tree_to_program(VectorNode(torch.zeros(2, 62), ()))
-    tree = program_to_tree(parse(TWO_LEVELS))
+    tree = program_to_tree(parse(two_levels))
     bad = tree.children[1].lines.clone()
     bad[0, :7] = 0
     bad[0, 2] = 1
