@@ -30,7 +30,8 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=200, help="programs per execute_batch call")
     args = ap.parse_args(argv)
     print(f"# command: python {' '.join(sys.argv)}")
-    print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, torch {torch.__version__}, threads {torch.get_num_threads()}")
+    print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
+          f"threads {torch.get_num_threads()}")
     names = [(c, i) for c in corpus.CATEGORIES for i in corpus.ids(c, "all")]
     texts = [corpus.read(c, i) for c, i in names]
     progs = [shapeprog.parse(t, file=f"{c}/{i}.txt") for t, (c, i) in zip(texts, names)]

@@ -268,7 +268,8 @@ class VAE(nn.Module):
         return mu + eps * torch.exp(0.5 * logvar), mu, logvar
 
     def forward(self, tree: VectorNode, sample: bool = True, generator: torch.Generator | None = None) -> VAEOutput:
-        """Encode ``tree`` and decode it teacher-forced (the training pass); see :func:`~shapeprog.vae.losses.program_loss`."""
+        """Encode ``tree`` and decode it teacher-forced: the training pass, scored by
+        :func:`~shapeprog.vae.losses.program_loss`."""
         z, mu, logvar = self.encode(tree, sample, generator)
         return VAEOutput(self.decoder.teacher_forced(tree, z), self.decoder.bbox(z), mu, logvar, z)
 

@@ -58,7 +58,8 @@ def test_clamps():
     assert x[1, DIMS].tolist() == pytest.approx([0.01, 0.01, 0.5])
     assert x[2, ATTACH].tolist() == [0.0, 1.0, 0.5, 0.5, 1.0, 0.0]
     text = to_text(tree_to_program(program_to_tree(p), decimals=3))
-    assert "cube0 = Cuboid(0.01, 0.01, 0.5, True)" in text and "attach(cube0, bbox, 0.0, 1.0, 0.5, 0.5, 1.0, 0.0)" in text
+    assert "cube0 = Cuboid(0.01, 0.01, 0.5, True)" in text
+    assert "attach(cube0, bbox, 0.0, 1.0, 0.5, 0.5, 1.0, 0.0)" in text
 
 
 def test_tree_to_program_names_slots_and_numbers_blocks_breadth_first(two_levels):
