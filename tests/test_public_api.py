@@ -19,7 +19,7 @@ import shapeprog
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
-PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "envs", "shapeio"]
+PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -52,6 +52,8 @@ PUBLIC = {
                         "primitive_cache", "render_programs", "render_tokens", "stack_trace", "unpack"},
     "shapeprog": {"ExecutionError", "ParseError", "corpus", "execute", "execute_batch", "fit", "parse",
                   "print_program", "to_text"},
+    "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoder", "Encoder", "VectorNode", "program_loss", "program_to_tree",
+                      "tree_to_program"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }
