@@ -384,7 +384,7 @@ def _fast_tokens(text: str, dim: int) -> list[Token] | None:
     """The tokens of ``text`` from the cached per-token objects, or None where :func:`parse`'s full
     scan is needed (a malformed or unknown token)."""
     pieces = split_tokens(text)
-    if pieces is None:
+    if pieces is None or len(pieces) > MAX_TOKENS:  # too long: the full scan stops at the limit and says where
         return None
     out = []
     for piece in pieces:
@@ -448,7 +448,7 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
     if not isinstance(text, str):
         raise TypeError(f"program text must be a str, got {type(text).__name__}")
     fast = _fast_tokens(text, dim)
-    if fast is not None and len(fast) <= MAX_TOKENS and (
+    if fast is not None and (
             not strict or (fast and prefix_status(fast) == "complete")):
         return Program(tuple(fast), dim)
     # the full scan: locates the first error (or accepts what the fast path could not)

@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from .. import primitives as P
-from ..lang import Draw, Program, draw_token, parse, split_tokens
+from ..lang import MAX_TOKENS, Draw, Program, draw_token, parse, split_tokens
 from ..vocab import codes, vocabulary
 from .raster import _blocks, _canvas_words, _slab_range, draw_packed
 
@@ -48,7 +48,7 @@ def _program_entries(program: Program | str, dim: int, b: int) -> list:
     """The code rows of one program's tokens (text: from the per-token cache, no objects built)."""
     if isinstance(program, str):
         pieces = split_tokens(program)
-        if pieces is not None:
+        if pieces is not None and len(pieces) <= MAX_TOKENS:  # else parse raises the located error
             get = _ENTRIES.get
             rows = [get((dim, t)) or _entry(dim, t) for t in pieces]
             if None not in rows:

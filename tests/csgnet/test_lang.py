@@ -201,3 +201,14 @@ def test_defect9_program_length_limit_is_located():
     assert len(parse("c(1,1,1)" * n + "+" * (n - 1))) == MAX_TOKENS - 1
     err = ParseError("x", "t", 3).located("data.txt", 7)
     assert str(err).startswith("data.txt:7:4: x")
+
+
+def test_rendering_a_text_holds_it_to_the_token_limit_as_parse_does():
+    import csgnet
+    from csgnet.lang import MAX_TOKENS
+
+    text = "c(32,32,8)" + "c(32,32,8)+" * (MAX_TOKENS // 2)
+    with pytest.raises(ParseError, match="too long"):
+        csgnet.parse(text)
+    with pytest.raises(ParseError, match="too long"):
+        csgnet.render([text])
