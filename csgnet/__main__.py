@@ -381,15 +381,16 @@ def _save_sheet(sheet, path: Path, scale: int = 3) -> None:
 
 
 def _beam_width(text: str) -> int:
-    from .decode import MAX_BEAM  # csgnet.decode imports torch: loaded only when --beam is given
+    from .decode import check_beam  # csgnet.decode imports torch: loaded only when --beam is given
 
     try:
         value = int(text)
     except ValueError:
-        value = 0
-    if not 1 <= value <= MAX_BEAM:
-        raise argparse.ArgumentTypeError(f"must be an integer from 1 to {MAX_BEAM}, got {text!r}")
-    return value
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    try:
+        return check_beam(value, "the beam width")
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _non_negative(text: str) -> int:
