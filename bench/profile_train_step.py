@@ -4,7 +4,9 @@ forward, backward, optimiser.
     python bench/profile_train_step.py --threads 1
     python bench/profile_train_step.py --threads 2 --models csgnet2d_small csgnetstack2d_small
 
-Each phase of :meth:`csgnet.train.supervised.CSGNetModule._loss` plus the optimiser step is timed on its own
+Each phase of a supervised step (the pieces of :meth:`csgnet.train.supervised.CSGNetModule._loss`: the
+target render, jitter, stack trace, then :func:`~csgnet.train.supervised.teacher_forced_loss`) plus the
+optimiser step is timed on its own
 (median over ``--steps`` steps after one warm-up), on one mixed-length batch drawn from the training stream
 (``MixedLengthBatches``, programs sampled on the fly). "data" is the time to draw that batch. The table shows
 milliseconds per phase, the model's share (forward + backward + optimiser) of the step, and samples/s.
@@ -19,12 +21,11 @@ import time
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from csgnet.renderer import render_tokens, stack_trace
 from csgnet.train.augment import jitter
 from csgnet.train.streams import MixedLengthBatches
-from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule
+from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule, teacher_forced_loss
 
 # name -> (dim, stack, size, model overrides, batch): the shipped small configs and the paper sizes
 MODELS = {
@@ -74,11 +75,7 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
         sync()
         t["stack"] = time.perf_counter()
         tokens_in = torch.cat([torch.full_like(tok[:, :1], m.model.start), tok[:, :-1]], dim=1)
-        logits = m.model(target, tokens_in, st)
-        nll = F.cross_entropy(logits.transpose(1, 2), tok, reduction="none")
-        steps_mask = torch.arange(tok.shape[1], device=tok.device)[None] <= lens[:, None]
-        per_prog = (nll * steps_mask).sum(1)  # the module's loss (CSGNetModule._loss), phase by phase
-        loss = (per_prog / (lens + 1) if m.loss_norm == "per_step" else per_prog).mean()
+        loss, _ = teacher_forced_loss(m.model, target, tok, tokens_in, st, lens, m.loss_norm)
         sync()
         t["forward"] = time.perf_counter()
         opt.zero_grad()
