@@ -81,7 +81,7 @@ def cmd_generate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """The main job until the neural parsers ship: a small synthetic dataset and previews."""
+    """A small synthetic 2D and 3D dataset and previews of some of its programs (PNG, OBJ, OpenSCAD, a TSV)."""
     from .data import generate_dataset, load_dataset
 
     out = Path(args.out)
