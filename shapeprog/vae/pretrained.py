@@ -1,0 +1,125 @@
+"""Weights files of the ShapeAssembly VAE: export from a training checkpoint, load, and the shipped models.
+
+A weights file is ``{"format", "version", "category", "hidden_dim", "state_dict", "meta"}`` read with
+``torch.load(weights_only=True)``; :func:`read_weights` also reads a Lightning training checkpoint of
+:class:`shapeprog.vae.train.VAEModule` (its ``hyper_parameters`` name the category and size). A file of
+another format, version or category is refused with a message naming the file.
+
+Example:
+    >>> import tempfile, torch
+    >>> from pathlib import Path
+    >>> from shapeprog.vae import VAE
+    >>> vae = VAE(hidden_dim=16)
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = save_weights(vae, Path(d) / "vae.pt", category="chair", half=False)
+    ...     back = load_model(path, category="chair")
+    >>> bool(torch.equal(back.decoder.bbdimNet.l1.weight, vae.decoder.bbdimNet.l1.weight))
+    True
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from shapeio import atomic_write
+
+from .model import VAE
+
+__all__ = ["FORMAT", "PRETRAINED", "VERSION", "WEIGHTS", "export_weights", "load_model", "load_pretrained",
+           "read_weights", "save_weights"]
+
+FORMAT = "shapeprog-vae"
+VERSION = 1
+WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
+# category -> file shipped under shapeprog/weights (docs/benchmarks.md names the command that trained each)
+PRETRAINED = {"chair": "vae_chair.pt", "table": "vae_table.pt", "storage": "vae_storage.pt"}
+CHECKPOINT_PREFIX = "vae."  # the LightningModule's attribute holding the VAE
+
+
+def read_weights(path) -> tuple[dict, dict]:
+    """``(info, state_dict)`` of a weights file or a Lightning training checkpoint.
+
+    ``info`` holds ``category``, ``hidden_dim`` and ``meta`` (epoch, step, anything recorded at export).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file, for an unreadable file, another format or a newer version.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such weights file")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise ValueError(f"{path}: not a ShapeAssembly VAE weights file or checkpoint "
+                         f"(unreadable: {type(e).__name__})") from None
+    if not isinstance(payload, dict):
+        raise ValueError(f"{path}: not a ShapeAssembly VAE weights file (a {type(payload).__name__})")
+    if "format" in payload:
+        if payload["format"] != FORMAT:
+            raise ValueError(f"{path}: a {payload['format']!r} file, not a ShapeAssembly VAE ({FORMAT!r})")
+        if int(payload.get("version", -1)) != VERSION:
+            raise ValueError(f"{path}: weights file version {payload.get('version')!r}; this version of "
+                             f"shapeprog reads version {VERSION}")
+        info = {"category": payload["category"], "hidden_dim": int(payload["hidden_dim"]),
+                "meta": dict(payload.get("meta", {}))}
+        return info, payload["state_dict"]
+    if "hyper_parameters" in payload and "state_dict" in payload:
+        hp = payload["hyper_parameters"]
+        state = {k[len(CHECKPOINT_PREFIX):]: v for k, v in payload["state_dict"].items()
+                 if k.startswith(CHECKPOINT_PREFIX)}
+        if "category" not in hp or "hidden_dim" not in hp or not state:
+            raise ValueError(f"{path}: a Lightning checkpoint, but not of the ShapeAssembly VAE "
+                             f"(hyper-parameters {sorted(hp)[:6]})")
+        meta = {"epoch": int(payload.get("epoch", -1)), "global_step": int(payload.get("global_step", -1))}
+        return {"category": hp["category"], "hidden_dim": int(hp["hidden_dim"]), "meta": meta}, state
+    raise ValueError(f"{path}: neither a ShapeAssembly VAE weights file nor a Lightning checkpoint "
+                     f"(keys {sorted(payload)[:6]})")
+
+
+def load_model(path, category: str | None = None, device=None) -> VAE:
+    """The VAE of ``path`` (:func:`read_weights`) in eval mode, as float32.
+
+    Args:
+        category: when given, a file trained on another category is refused.
+    """
+    info, state = read_weights(path)
+    if category is not None and info["category"] != category:
+        raise ValueError(f"{path}: weights of category {info['category']!r}, not {category!r}")
+    vae = VAE(hidden_dim=info["hidden_dim"])
+    state = {k: v.float() if v.is_floating_point() else v for k, v in state.items()}
+    try:
+        vae.load_state_dict(state)
+    except RuntimeError as e:
+        raise ValueError(f"{path}: tensors do not fit a VAE of hidden size {info['hidden_dim']}: "
+                         f"{str(e).splitlines()[0]}") from None
+    vae.category = info["category"]
+    vae.meta = info["meta"]
+    return vae.to(device).eval()
+
+
+def save_weights(vae: VAE, out, category: str, meta: dict | None = None, half: bool = True) -> Path:
+    """Write ``vae`` as a weights file, atomically (``half`` stores float16 tensors)."""
+    state = {k: (v.detach().cpu().half() if half and v.is_floating_point() else v.detach().cpu())
+             for k, v in vae.state_dict().items()}
+    payload = {"format": FORMAT, "version": VERSION, "category": category,
+               "hidden_dim": int(vae.decoder.hidden_dim), "state_dict": state, "meta": dict(meta or {})}
+    return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
+
+
+def export_weights(checkpoint, out, half: bool = True, meta: dict | None = None) -> Path:
+    """Write the VAE of a training checkpoint as a small weights file (``meta`` adds to the recorded)."""
+    info, _ = read_weights(checkpoint)
+    vae = load_model(checkpoint)
+    return save_weights(vae, out, info["category"], {**info["meta"], **(meta or {})}, half)
+
+
+def load_pretrained(category: str = "chair", device=None) -> VAE:
+    """The model shipped with the package for ``category`` ('chair', 'table' or 'storage')."""
+    if category not in PRETRAINED:
+        raise ValueError(f"category must be one of {', '.join(PRETRAINED)}, got {category!r}")
+    path = WEIGHTS / PRETRAINED[category]
+    if not path.is_file():
+        raise FileNotFoundError(f"the shipped {category} VAE weights {path} are missing from this installation")
+    return load_model(path, category=category, device=device)

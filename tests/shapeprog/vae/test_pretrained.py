@@ -1,0 +1,66 @@
+"""Weights files of the VAE: round trip, the Lightning checkpoint layout, and refusals with messages."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+from shapeprog.vae import VAE
+from shapeprog.vae.pretrained import (FORMAT, VERSION, export_weights, load_model, load_pretrained, read_weights,
+                                      save_weights)
+
+
+@pytest.fixture()
+def vae():
+    torch.manual_seed(0)
+    return VAE(hidden_dim=16)
+
+
+def _same(a: VAE, b: VAE, atol: float = 0.0) -> bool:
+    sa, sb = a.state_dict(), b.state_dict()
+    return sa.keys() == sb.keys() and all(torch.allclose(sa[k], sb[k], atol=atol, rtol=0) for k in sa)
+
+
+def test_round_trip_float32_exact_and_half_close(vae, tmp_path):
+    full = load_model(save_weights(vae, tmp_path / "a.pt", "chair", half=False), category="chair")
+    assert _same(full, vae) and full.category == "chair" and not full.training
+    half = load_model(save_weights(vae, tmp_path / "b.pt", "chair", meta={"epoch": 3}))
+    assert next(half.parameters()).dtype == torch.float32
+    assert _same(half, vae, atol=1e-3) and half.meta == {"epoch": 3}
+
+
+def test_lightning_checkpoint_layout_and_export(vae, tmp_path):
+    ckpt = {"state_dict": {f"vae.{k}": v for k, v in vae.state_dict().items()},
+            "hyper_parameters": {"category": "table", "hidden_dim": 16}, "epoch": 7, "global_step": 70}
+    torch.save(ckpt, tmp_path / "last.ckpt")
+    info, state = read_weights(tmp_path / "last.ckpt")
+    assert info == {"category": "table", "hidden_dim": 16, "meta": {"epoch": 7, "global_step": 70}}
+    assert state.keys() == vae.state_dict().keys()
+    out = export_weights(tmp_path / "last.ckpt", tmp_path / "w.pt", meta={"command": "x"})
+    back = load_model(out, category="table")
+    assert _same(back, vae, atol=1e-3) and back.meta == {"epoch": 7, "global_step": 70, "command": "x"}
+
+
+def test_refusals_name_the_file(vae, tmp_path):
+    path = save_weights(vae, tmp_path / "w.pt", "chair")
+    with pytest.raises(ValueError, match=r"w\.pt.*'chair', not 'table'"):
+        load_model(path, category="table")
+    payload = torch.load(path, weights_only=True)
+    torch.save({**payload, "version": VERSION + 1}, tmp_path / "new.pt")
+    with pytest.raises(ValueError, match=r"new\.pt: weights file version"):
+        load_model(tmp_path / "new.pt")
+    torch.save({**payload, "format": "csgnet"}, tmp_path / "other.pt")
+    with pytest.raises(ValueError, match=rf"other\.pt: a 'csgnet' file, not a ShapeAssembly VAE \('{FORMAT}'\)"):
+        load_model(tmp_path / "other.pt")
+    torch.save({**payload, "hidden_dim": 32}, tmp_path / "size.pt")
+    with pytest.raises(ValueError, match=r"size\.pt: tensors do not fit a VAE of hidden size 32"):
+        load_model(tmp_path / "size.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a torch file")
+    with pytest.raises(ValueError, match=r"junk\.pt: not a ShapeAssembly VAE weights file or checkpoint"):
+        read_weights(tmp_path / "junk.pt")
+    torch.save({"hyper_parameters": {"dim": 2}, "state_dict": {"model.x": torch.zeros(1)}}, tmp_path / "csg.ckpt")
+    with pytest.raises(ValueError, match=r"csg\.ckpt: a Lightning checkpoint, but not of the ShapeAssembly VAE"):
+        read_weights(tmp_path / "csg.ckpt")
+    with pytest.raises(FileNotFoundError, match="no such weights file"):
+        read_weights(tmp_path / "missing.pt")
+    with pytest.raises(ValueError, match="category must be one of chair, table, storage"):
+        load_pretrained("lamp")
