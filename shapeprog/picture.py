@@ -18,7 +18,7 @@ from shapeio.image import write_png
 from shapeprog.geometry import mesh_arrays
 from shapeprog.geometry import check_corners
 
-__all__ = ["render_png", "part_colors", "camera", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
+__all__ = ["render_png", "render_grid", "part_colors", "camera", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
 
 #: Part palette (RGB uint8): colours are assigned by label rank, cycling.
 PALETTE = np.array(
@@ -162,3 +162,38 @@ def render_png(
     if path is not None:
         write_png(path, image)
     return image
+
+
+def render_grid(
+    shapes,
+    path: Optional[Union[str, os.PathLike]] = None,
+    cols: int = 4,
+    size: int = 192,
+) -> np.ndarray:
+    """Render several shapes side by side, row by row, as one picture (a sample sheet).
+
+    Args:
+        shapes: a sequence of ``corners`` ``(L, 8, 3)`` or ``(corners, labels)`` pairs, as
+            :func:`render_png` takes them; an empty shape leaves a white cell.
+        path: optional ``.png`` file to write (atomically).
+        cols: cells per row (the last row is padded with white).
+        size: each cell's width and height in pixels.
+
+    Returns:
+        ``(rows * size, cols * size, 3) uint8`` RGB image.
+    """
+    shapes = list(shapes)
+    if not shapes:
+        raise ValueError("render_grid needs at least one shape")
+    if isinstance(cols, bool) or not isinstance(cols, int) or cols < 1:
+        raise ValueError(f"`cols` must be an int >= 1, got {cols!r}")
+    cols = min(cols, len(shapes))
+    rows = -(-len(shapes) // cols)
+    sheet = np.full((rows * size, cols * size, 3), 255, dtype=np.uint8)
+    for i, shape in enumerate(shapes):
+        corners, labels = shape if isinstance(shape, tuple) else (shape, None)
+        r, c = divmod(i, cols)
+        sheet[r * size:(r + 1) * size, c * size:(c + 1) * size] = render_png(corners, labels=labels, size=size)
+    if path is not None:
+        write_png(path, sheet)
+    return sheet

@@ -2,9 +2,10 @@
 import numpy as np
 import pytest
 import torch
+from PIL import Image
 
 from sa_testutil import boxes
-from shapeprog.picture import PALETTE, part_colors, render_png
+from shapeprog.picture import PALETTE, part_colors, render_grid, render_png
 
 
 def chair():
@@ -72,3 +73,18 @@ def test_empty_and_errors():
         render_png(chair(), labels=[1, 2])
     with pytest.raises(ValueError, match="size"):
         render_png(chair(), size=0)
+
+
+def test_grid_cells_are_the_single_renders(tmp_path):
+    shapes = [chair(), (chair()[:2], [0, 1]), torch.zeros(0, 8, 3)]
+    sheet = render_grid(shapes, tmp_path / "grid.png", cols=2, size=64)
+    assert sheet.shape == (128, 128, 3)
+    assert np.array_equal(sheet[:64, :64], render_png(chair(), size=64))
+    assert np.array_equal(sheet[:64, 64:], render_png(chair()[:2], labels=[0, 1], size=64))
+    assert (sheet[64:, :] == 255).all()  # an empty shape and the padding cell are white
+    assert np.array_equal(np.asarray(Image.open(tmp_path / "grid.png").convert("RGB")), sheet)
+    assert render_grid([chair()], cols=8, size=32).shape == (32, 32, 3)
+    with pytest.raises(ValueError, match="at least one shape"):
+        render_grid([])
+    with pytest.raises(ValueError, match="cols"):
+        render_grid([chair()], cols=0)
