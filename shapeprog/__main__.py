@@ -1,9 +1,12 @@
-"""Command line: execute or fit ShapeAssembly programs.
+"""Command line: execute, fit, generate, interpolate and reconstruct ShapeAssembly programs.
 
     python -m shapeprog run chair/173 -o chair.obj --png chair.png
     python -m shapeprog run my_program.txt -o shape.ply
     python -m shapeprog fit table/33075 --points cloud.obj --steps 400 -o fitted.txt
     python -m shapeprog silhouettes --out silhouettes.npz
+    python -m shapeprog sample chair -n 16 --seed 0 --out samples --png grid.png
+    python -m shapeprog interpolate chair/173 chair/44017 --steps 8 --png interp.png
+    python -m shapeprog reconstruct chair/173 -o recon.txt
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
 path of a UTF-8 ShapeAssembly file (corpus format with ``Assembly`` blocks, or the flat format).
@@ -31,7 +34,7 @@ from .fit import fit
 from .lang import parse
 from .limits import decode
 from .metrics import adaptive_threshold, chamfer, fscore
-from .picture import render_png
+from .picture import render_grid, render_png
 from .sampling import sample_surface
 from .silhouettes import build, write
 
@@ -165,6 +168,120 @@ def _cmd_silhouettes(args) -> int:
     return 0
 
 
+def _load_vae(args, category: str | None):
+    """The VAE of ``--weights`` or the shipped model of ``category``; a usage error when neither is known."""
+    from .vae.pretrained import load_model, load_pretrained
+
+    try:
+        if args.weights:
+            return load_model(args.weights, category=args.category)
+        if category is None:
+            raise SystemExit("error: name the model's category with --category (or give --weights)")
+        return load_pretrained(category)
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
+
+
+def _write_decoded(folder: Path, stem: str, result) -> None:
+    """``stem.txt`` (the program) and ``stem.obj`` (its cuboids) in ``folder``."""
+    atomic_write(folder / f"{stem}.txt", result.text)
+    with torch.no_grad():
+        io.write_obj(folder / f"{stem}.obj", execute(result.program).corners)
+
+
+def _cmd_sample(args) -> int:
+    from tqdm import tqdm
+
+    from .vae import sample
+
+    _check_outputs(others=[args.png])
+    vae = _load_vae(args, args.category)
+    t0 = time.perf_counter()
+    results = sample(vae, args.n, seed=args.seed, max_tries=args.max_tries)
+    seconds = time.perf_counter() - t0
+    first = sum(r.tries == 1 for r in results)
+    within = sum(r.tries <= args.max_tries for r in results)
+    print(f"{args.n} samples of {vae.category} in {seconds:.1f} s ({args.n / seconds:.1f}/s): "
+          f"{first} valid on the first try, {within} within {args.max_tries} tries")
+    shapes = []
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+    for i, r in enumerate(tqdm(results, desc="writing", unit="shape", disable=not args.out or args.quiet)):
+        if args.out:
+            _write_decoded(Path(args.out), f"sample_{i:04d}", r)
+        if args.png:
+            with torch.no_grad():
+                shape = execute(r.program)
+            shapes.append((shape.corners, shape.line.numpy()))
+    if args.out:
+        print(f"wrote {len(results)} programs and meshes to {args.out}/")
+    if args.png:
+        render_grid(shapes, args.png, cols=args.cols, size=args.size)
+        print(f"wrote {args.png}")
+    if not args.out and not args.png:
+        for i, r in enumerate(results):
+            print(f"# sample {i}\n{r.text}")
+    return 0
+
+
+def _category_of(spec: str) -> str | None:
+    cat = spec.partition("/")[0]
+    return cat if cat in corpus.CATEGORIES and not Path(spec).is_file() else None
+
+
+def _cmd_interpolate(args) -> int:
+    from .vae import interpolate
+
+    _check_outputs(others=[args.png])
+    a, b = _Program(args.a), _Program(args.b)
+    _refuse_overwrite([args.png], [args.a, args.b])
+    vae = _load_vae(args, args.category or _category_of(args.a) or _category_of(args.b))
+    results = interpolate(vae, a.program, b.program, args.steps)
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        for i, r in enumerate(results):
+            _write_decoded(Path(args.out), f"step_{i:03d}", r)
+        print(f"wrote {len(results)} programs and meshes to {args.out}/")
+    if args.png:
+        with torch.no_grad():
+            shapes = [(s.corners, s.line.numpy()) for s in (execute(r.program) for r in results)]
+        render_grid(shapes, args.png, cols=len(shapes), size=args.size)
+        print(f"wrote {args.png}")
+    if not args.out and not args.png:
+        for i, r in enumerate(results):
+            print(f"# step {i}\n{r.text}")
+    return 0
+
+
+def _cmd_reconstruct(args) -> int:
+    from .vae import decode, encode
+
+    _check_outputs([args.mesh], [args.output, args.png])
+    prog = _Program(args.program)
+    _refuse_overwrite([args.output, args.mesh, args.png], [args.program])
+    vae = _load_vae(args, args.category or _category_of(args.program))
+    result = decode(vae, encode(vae, prog.program))
+    with torch.no_grad():
+        target, shape = prog.execute(), execute(result.program)
+        g = torch.Generator().manual_seed(args.seed)
+        x, _ = sample_surface(shape.corners, 10000, generator=g)
+        y, _ = sample_surface(target.corners, 10000, generator=g)
+    print(f"{prog.name}: reconstructed with {len(shape)} leaf cuboids (input {len(target)}), "
+          f"F-score {fscore(x, y):.1f}, chamfer {float(chamfer(x, y)):.4f}")
+    if args.output:
+        atomic_write(args.output, result.text)
+        print(f"wrote {args.output}")
+    else:
+        sys.stdout.write(result.text)
+    if args.mesh:
+        _write_mesh(args.mesh, shape)
+    if args.png:
+        render_grid([(target.corners, target.line.numpy()), (shape.corners, shape.line.numpy())], args.png,
+                    cols=2, size=args.size)
+        print(f"wrote {args.png} (input, reconstruction)")
+    return 0
+
+
 def _int_at_least(low: int):
     """An argparse type: an int that is at least ``low``."""
     def convert(text: str) -> int:
@@ -210,6 +327,45 @@ def main(argv=None) -> int:
     s.add_argument("--limit", type=_int_at_least(1), help="only the first N shapes per category and split")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_silhouettes)
+    weights_help = "VAE weights file or Lightning checkpoint (default: the shipped model of the category)"
+    g = sub.add_parser("sample", help="generate programs with the VAE",
+                       description="Sample latents from N(0, I) and decode them with semantic validity "
+                                   "(rejection sampling); write programs, meshes and a picture grid.")
+    g.add_argument("category", nargs="?", choices=corpus.CATEGORIES, help="the shipped model to use")
+    g.add_argument("-n", type=_int_at_least(1), default=16, help="number of samples (>= 1)")
+    g.add_argument("--seed", type=int, default=0, help="seed of the latents (an integer)")
+    g.add_argument("--max-tries", type=_int_at_least(1), default=10, help="draws per sample before giving up rejection")
+    g.add_argument("--out", help="folder for sample_NNNN.txt and sample_NNNN.obj")
+    g.add_argument("--png", help="picture grid of the samples (.png)")
+    g.add_argument("--cols", type=_int_at_least(1), default=4, help="grid columns")
+    g.add_argument("--size", type=_int_at_least(8), default=192, help="grid cell side in pixels")
+    g.add_argument("--weights", help=weights_help)
+    g.add_argument("--quiet", action="store_true", help="no progress bar")
+    g.set_defaults(func=_cmd_sample)
+    i = sub.add_parser("interpolate", help="decode shapes along the latent line between two programs",
+                       description="Encode two programs, interpolate their latent means linearly and decode "
+                                   "each step (both ends included).")
+    i.add_argument("a", help=program_help)
+    i.add_argument("b", help=program_help)
+    i.add_argument("--steps", type=_int_at_least(2), default=8, help="shapes along the line, ends included (>= 2)")
+    i.add_argument("--category", choices=corpus.CATEGORIES, help="model category (default: the first corpus id's)")
+    i.add_argument("--out", help="folder for step_NNN.txt and step_NNN.obj")
+    i.add_argument("--png", help="picture strip of the steps (.png)")
+    i.add_argument("--size", type=_int_at_least(8), default=160, help="cell side in pixels")
+    i.add_argument("--weights", help=weights_help)
+    i.set_defaults(func=_cmd_interpolate)
+    c = sub.add_parser("reconstruct", help="encode a program and decode it back, with the F-score to the input",
+                       description="Encode a program to its latent mean, decode it with semantic validity, and "
+                                   "print the F-score and chamfer distance to the input shape.")
+    c.add_argument("program", help=program_help)
+    c.add_argument("--category", choices=corpus.CATEGORIES, help="model category (default: the corpus id's)")
+    c.add_argument("-o", "--output", help="reconstructed program file (default: print it)")
+    c.add_argument("--mesh", help="also write the reconstructed shape: .obj, .ply or .glb")
+    c.add_argument("--png", help="picture of the input beside the reconstruction (.png)")
+    c.add_argument("--size", type=_int_at_least(8), default=256, help="cell side in pixels")
+    c.add_argument("--seed", type=int, default=0, help="seed of the surface samples of the F-score")
+    c.add_argument("--weights", help=weights_help)
+    c.set_defaults(func=_cmd_reconstruct)
     args = ap.parse_args(argv)
     try:
         with warnings.catch_warnings():
