@@ -2,13 +2,16 @@
 
 :mod:`~shapeprog.vae.vectors` turns programs into trees of 63-dim line vectors and back,
 :mod:`~shapeprog.vae.model` holds the encoder, the decoder and the VAE (plain PyTorch), and
-:mod:`~shapeprog.vae.losses` the reconstruction and KL losses. See ``docs/shapeassembly_vae.md``.
+:mod:`~shapeprog.vae.losses` the reconstruction and KL losses, and :mod:`~shapeprog.vae.decode` the
+validity-checked decoding with the model's entry points (:func:`sample`, :func:`encode`, :func:`decode`,
+:func:`interpolate`). See ``docs/shapeassembly_vae.md``.
 """
 from __future__ import annotations
 
+from .decode import Decoded, InvalidSample, decode, decode_latent, encode, interpolate, sample
 from .losses import LOSS_WEIGHTS, program_loss
 from .model import VAE, Decoder, Encoder
 from .vectors import VectorNode, program_to_tree, tree_to_program
 
-__all__ = ["LOSS_WEIGHTS", "VAE", "Decoder", "Encoder", "VectorNode", "program_loss", "program_to_tree",
-           "tree_to_program"]
+__all__ = ["LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "VectorNode", "decode",
+           "decode_latent", "encode", "interpolate", "program_loss", "program_to_tree", "sample", "tree_to_program"]
