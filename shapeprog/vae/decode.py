@@ -1,0 +1,1057 @@
+"""Decoding latents into ShapeAssembly programs with semantic validity, and the model's entry points.
+
+:func:`decode_latent` writes a program from a latent one line at a time (greedy argmax), breadth first
+over the sub-programs, and repairs or refuses every line that would not make sense: the reference's
+``run_eval_decoder`` with ``sem_valid.semValidGen`` (spec section (d), "Decoding with semantic
+validity"). Each rule is a function of the logits and of a :class:`NodeState` (the block written so far),
+so that it can be tested on its own:
+
+* :func:`allowed_commands`: the command masks of each mode (plus the 10-Cuboid-line limit);
+* :func:`clean_cuboid`, :func:`choose_attach`, :func:`clean_attach`, :func:`choose_reflect`,
+  :func:`choose_reflect_axis`, :func:`choose_translate`, :func:`clean_translate`, :func:`choose_squeeze`,
+  :func:`choose_squeeze_face`: the cuboid, coordinate, axis and face rules;
+* :func:`try_line`: executes a candidate line on a copy of the block (:class:`~shapeprog.vae.local.LocalProgram`)
+  and refuses it unless every moved or new cuboid stays inside 1.5x the bbox;
+* :func:`remove_ungrounded`: drops the Cuboid lines that nothing attached, with their slots renumbered.
+
+A refused line raises :class:`InvalidSample`; with ``reject=True`` (unconditional generation) that ends
+the sample, otherwise the decoder re-feeds its previous input and tries again. :func:`sample`,
+:func:`encode`, :func:`decode` and :func:`interpolate` are the model's entry points. Where this follows
+the reference code, where the paper, and the decisions the specification leaves open:
+``docs/shapeassembly_vae.md`` ("Decoding with semantic validity").
+
+Example:
+    >>> import torch
+    >>> import shapeprog
+    >>> from shapeprog.vae import VAE
+    >>> vae = VAE(hidden_dim=32)
+    >>> out = sample(vae, 2, seed=0)
+    >>> [isinstance(d.program, shapeprog.lang.Program) and shapeprog.parse(d.text) == d.program for d in out]
+    [True, True]
+    >>> d = decode(vae, torch.zeros(32))
+    >>> d.text.startswith("Assembly Program_0 {")
+    True
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+import torch
+
+from .. import limits
+from ..lang import AXES, FACES, Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, parse, to_text
+from .local import LocalProgram
+from .model import VAE, Decoder
+from .vectors import (ALIGNED, ATTACH, AXIS, COUNT, CUBE1, CUBE2, CUBE3, DIMS, DIST, FACE, LINE_DIM,
+                      MAX_CUBOID_LINES, NUM_SLOTS, UV, program_to_tree)
+
+__all__ = [
+    "ATTACH_MODE",
+    "CUBOID_MODE",
+    "DecodeOptions",
+    "Decoded",
+    "InvalidSample",
+    "Line",
+    "NodeState",
+    "START_MODE",
+    "SYM_MODE",
+    "allowed_commands",
+    "choose_attach",
+    "choose_reflect",
+    "choose_reflect_axis",
+    "choose_squeeze",
+    "choose_squeeze_face",
+    "choose_translate",
+    "clean_attach",
+    "clean_cuboid",
+    "clean_translate",
+    "decode",
+    "decode_latent",
+    "encode",
+    "interpolate",
+    "line_vector",
+    "remove_ungrounded",
+    "sample",
+    "try_line",
+]
+
+START, CUBOID, ATTACH_CMD, REFLECT, TRANSLATE, SQUEEZE, STOP = range(7)
+#: Decoding modes: what the last accepted line was (they select the command masks).
+START_MODE, CUBOID_MODE, ATTACH_MODE, SYM_MODE = "start", "cuboid", "attach", "sym"
+#: Commands forbidden in each mode (the reference's ``bad_inds``).
+FORBIDDEN = {
+    START_MODE: (),
+    CUBOID_MODE: (START, REFLECT, TRANSLATE),
+    ATTACH_MODE: (START, CUBOID),
+    SYM_MODE: (START, CUBOID, ATTACH_CMD, SQUEEZE),
+}
+_MIN_DIM = 0.01
+_TOP_BOT = (FACES.index("top"), FACES.index("bot"))
+
+
+class InvalidSample(Exception):
+    """A decoded line that breaks a rule of semantic validity.
+
+    Raised by the rule functions, and by :func:`decode_latent` with ``reject=True`` (the whole sample is
+    refused, as the reference's rejection sampling does).
+
+    Attributes:
+        reason: what was wrong, e.g. ``"attach: no grounded cuboid to attach to"``.
+        node: index of the program node (breadth first, root 0) being decoded, when known.
+        step: the decoder step within that node (0-based), when known.
+    """
+
+    def __init__(self, reason: str, node: int | None = None, step: int | None = None):
+        self.reason, self.node, self.step = reason, node, step
+        where = "" if node is None else f"node {node}, step {step}: "
+        super().__init__(where + reason)
+
+
+@dataclass
+class Decoded:
+    """A decoded program.
+
+    Attributes:
+        program: the decoded program (corpus format), executable by :func:`shapeprog.execute`.
+        text: ``shapeprog.to_text(program)``; ``shapeprog.parse(text) == program``.
+        skipped: lines refused and skipped (non-rejecting decoding; 0 with rejection).
+        tries: latents drawn for this sample (:func:`sample`); ``max_tries + 1`` marks a sample that
+            was refused ``max_tries`` times and then decoded without rejection from its last latent.
+    """
+
+    program: Program
+    text: str
+    skipped: int
+    tries: int = 1
+
+
+@dataclass(frozen=True)
+class DecodeOptions:
+    """The options of :func:`decode_latent` (keyword arguments; the defaults follow the reference code).
+
+    Attributes:
+        max_lines: decoder steps per node, refused lines included (reference 100).
+        max_nodes: nodes decoded per program (reference: it stops after more than 10, i.e. 11); a
+            sub-program beyond them is written as a leaf cuboid.
+        max_refeed: a refused line re-feeds the previous input; every ``max_refeed``-th refused line of a
+            node feeds the refused line instead (reference 10).
+        bbox_margin: a line is refused unless every cuboid it moves or creates has its axis-aligned box
+            strictly inside ``bbox_margin`` times the bbox's (reference code 1.5, paper 1.1).
+        bbox_attach: ``"snap"`` (reference code): the target height y2 of an attach to bbox snaps,
+            (0.1, 0.5] to 0.1 and [0.5, 0.9) to 0.9; ``"tolerance"`` (paper): the line is refused unless
+            y2 is within ``bbox_tolerance`` of the bottom (0) or the top (1).
+        bbox_tolerance: the paper's allowable error (0.05).
+        max_cuboid_lines: Cuboid lines per node, bbox included (10, the line vector's limit; the
+            reference has none).
+    """
+
+    max_lines: int = 100
+    max_nodes: int = 11
+    max_refeed: int = 10
+    bbox_margin: float = 1.5
+    bbox_attach: str = "snap"
+    bbox_tolerance: float = 0.05
+    max_cuboid_lines: int = MAX_CUBOID_LINES
+
+    def __post_init__(self):
+        for name in ("max_lines", "max_nodes", "max_refeed"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if not isinstance(self.max_cuboid_lines, int) or not 1 <= self.max_cuboid_lines <= MAX_CUBOID_LINES:
+            raise ValueError(f"max_cuboid_lines must be an integer in [1, {MAX_CUBOID_LINES}], "
+                             f"got {self.max_cuboid_lines!r}")
+        if not (isinstance(self.bbox_margin, (int, float)) and math.isfinite(self.bbox_margin)
+                and self.bbox_margin > 0):
+            raise ValueError(f"bbox_margin must be a positive number, got {self.bbox_margin!r}")
+        if self.bbox_attach not in ("snap", "tolerance"):
+            raise ValueError(f"bbox_attach must be 'snap' or 'tolerance', got {self.bbox_attach!r}")
+        if not (isinstance(self.bbox_tolerance, (int, float)) and 0 <= self.bbox_tolerance < 0.5):
+            raise ValueError(f"bbox_tolerance must be a number in [0, 0.5), got {self.bbox_tolerance!r}")
+
+
+# ----------------------------------------------------------------------------- lines and node state
+
+
+@dataclass(frozen=True)
+class Line:
+    """One decoded line in slot form (cuboids are slots: 0 bbox, j = the j-th Cuboid line).
+
+    Attributes:
+        cmd: the command index (1 Cuboid, 2 attach, 3 reflect, 4 translate, 5 squeeze, 6 stop).
+        cubes: the slots it names: (a, b) for attach, (a, b, c) for squeeze, (a,) for reflect/translate.
+        nums: Cuboid dims (3), attach coordinates (6), squeeze (u, v) or translate (d,).
+        axis: reflect/translate axis index (X, Y, Z), else -1.
+        face: squeeze face index (right, left, top, bot, front, back), else -1.
+        count: translate count.
+        aligned: the Cuboid flag.
+    """
+
+    cmd: int
+    cubes: tuple[int, ...] = ()
+    nums: tuple[float, ...] = ()
+    axis: int = -1
+    face: int = -1
+    count: int = 0
+    aligned: bool = False
+
+
+def line_vector(line: Line) -> list[float]:
+    """The 63-entry line vector of ``line`` (the decoder's next input): one-hots and clean values."""
+    v = [0.0] * LINE_DIM
+    v[line.cmd] = 1.0
+    for start, c in zip((CUBE1.start, CUBE2.start, CUBE3.start), line.cubes):
+        v[start + c] = 1.0
+    if line.cmd == CUBOID:
+        v[DIMS] = line.nums
+        v[ALIGNED] = float(line.aligned)
+    elif line.cmd == ATTACH_CMD:
+        v[ATTACH] = line.nums
+    elif line.cmd in (REFLECT, TRANSLATE):
+        v[AXIS.start + line.axis] = 1.0
+        if line.cmd == TRANSLATE:
+            v[COUNT], v[DIST] = float(line.count), line.nums[0]
+    elif line.cmd == SQUEEZE:
+        v[FACE.start + line.face] = 1.0
+        v[UV] = line.nums
+    return v
+
+
+@dataclass
+class NodeState:
+    """The block being decoded, as the validity rules read it.
+
+    Attributes:
+        bbox_dims: (3,) float, the node's bbox dims (the upper clamp of its Cuboid lines).
+        program: the local program executed so far (None before the bbox line).
+        grounded: slots that have been moved by an attach or squeeze, and bbox (0).
+        atts: per slot, the slots it was attached to or that were attached to it (with repeats).
+        mode: the last accepted line's mode (:data:`START_MODE`, ...).
+        cuboid_lines: Cuboid lines accepted, bbox included.
+        copies: per slot, the reflect/translate copies made of it.
+    """
+
+    bbox_dims: tuple[float, float, float]
+    program: LocalProgram | None = None
+    grounded: set = field(default_factory=lambda: {0})
+    atts: dict = field(default_factory=dict)
+    mode: str = START_MODE
+    cuboid_lines: int = 0
+    copies: dict = field(default_factory=dict)
+
+    @property
+    def num_cubes(self) -> int:
+        """Cuboids of the local program (bbox, Cuboid lines and macro copies): slots below are declared."""
+        return 0 if self.program is None else len(self.program)
+
+    def accept(self, line: Line, program: LocalProgram | None = None) -> None:
+        """Record an accepted line (``program``: the local program after it, from :func:`try_line`)."""
+        if program is not None:
+            self.program = program
+        c = line.cmd
+        if c == CUBOID:
+            if self.program is None:
+                self.program = LocalProgram(line.nums)
+            elif program is None:
+                self.program.add_cuboid(line.nums, line.aligned)
+            self.cuboid_lines += 1
+            self.mode = CUBOID_MODE
+        elif c in (ATTACH_CMD, SQUEEZE):
+            a, *targets = line.cubes
+            self.grounded.add(a)
+            for t in targets:
+                self.atts.setdefault(t, []).append(a)
+            self.atts.setdefault(a, []).extend(targets)
+            self.mode = ATTACH_MODE
+        elif c in (REFLECT, TRANSLATE):
+            a = line.cubes[0]
+            self.copies[a] = self.copies.get(a, 0) + (1 if c == REFLECT else line.count)
+            self.mode = SYM_MODE
+
+
+# ----------------------------------------------------------------------------- rules
+
+
+def _argmax(logits: Sequence[float], allowed: Iterable[int]) -> int | None:
+    """The allowed index with the largest logit (the first on ties), None when nothing is allowed."""
+    best = None
+    for i in allowed:
+        if best is None or logits[i] > logits[best]:
+            best = i
+    return best
+
+
+def allowed_commands(state: NodeState, max_cuboid_lines: int = MAX_CUBOID_LINES) -> list[int]:
+    """The commands the decoder may emit next: those not forbidden by the mode (the reference subtracts
+    1000 from their logits), and no Cuboid line once the node has ``max_cuboid_lines``."""
+    bad = set(FORBIDDEN[state.mode])
+    if state.cuboid_lines >= max_cuboid_lines:
+        bad.add(CUBOID)
+    return [c for c in range(7) if c not in bad]
+
+
+def clean_cuboid(dims: Sequence[float], align_logit: float, bbox_dims: Sequence[float]) -> tuple[tuple, bool]:
+    """A Cuboid line's dims clamped to [0.01, the node's bbox dims] and its aligned flag (logit > 0)."""
+    return tuple(min(max(float(d), _MIN_DIM), float(b)) for d, b in zip(dims, bbox_dims)), float(align_logit) > 0.0
+
+
+def _bad_pair(atts: dict, a: int, b: int) -> bool:
+    """Whether attaching ``a`` to ``b`` repeats a pair: a to itself, a to a cuboid it is already attached
+    to (bbox excepted), or a to bbox a third time."""
+    done = atts.get(a, ())
+    return a == b or (b != 0 and b in done) or (b == 0 and done.count(0) >= 2)
+
+
+def _pick_pair(cube: Sequence[float], state: NodeState, what: str) -> tuple[int, int]:
+    """Cube-1 and cube-2 of an attach or squeeze: cube-1 declared and not bbox, cube-2 declared and
+    grounded; a repeated pair knocks down the lower of the two logits until the pair is new."""
+    n = min(state.num_cubes, NUM_SLOTS)
+    ok1 = [i for i in range(1, n)]
+    ok2 = [i for i in range(n) if i in state.grounded]
+    l1, l2 = cube[0:NUM_SLOTS], cube[NUM_SLOTS:2 * NUM_SLOTS]
+    a, b = _argmax(l1, ok1), _argmax(l2, ok2)
+    while a is not None and b is not None and _bad_pair(state.atts, a, b):
+        if l1[a] < l2[b]:
+            ok1.remove(a)
+            a = _argmax(l1, ok1)
+        else:
+            ok2.remove(b)
+            b = _argmax(l2, ok2)
+    if a is None:
+        raise InvalidSample(f"{what}: no declared cuboid to move")
+    if b is None:
+        raise InvalidSample(f"{what}: no grounded cuboid to attach cube{a - 1} to")
+    return a, b
+
+
+def choose_attach(cube: Sequence[float], state: NodeState) -> tuple[int, int]:
+    """The slots of an attach line from the 33 cube logits (the reference's ``getSVAtt``).
+
+    Raises:
+        InvalidSample: no allowed pair is left.
+    """
+    return _pick_pair(cube, state, "attach")
+
+
+def clean_attach(coords: Sequence[float], target: int, mode: str = "snap", tolerance: float = 0.05) -> tuple:
+    """Attach coordinates clamped to [0, 1]; when the target is bbox, the height y2 either snaps
+    (``"snap"``: (0.1, 0.5] -> 0.1, [0.5, 0.9) -> 0.9) or must be within ``tolerance`` of 0 or 1
+    (``"tolerance"``).
+
+    Raises:
+        InvalidSample: ``"tolerance"`` and y2 is mid-height on bbox.
+    """
+    c = [min(max(float(x), 0.0), 1.0) for x in coords]
+    if target == 0:
+        y = c[4]
+        if mode == "snap":
+            if 0.1 < y <= 0.5:
+                c[4] = 0.1
+            elif 0.5 <= y < 0.9:
+                c[4] = 0.9
+        elif tolerance < y < 1.0 - tolerance:
+            raise InvalidSample(f"attach: target height {y:.3g} on bbox is neither its bottom nor its top")
+    return tuple(c)
+
+
+def choose_reflect(cube: Sequence[float], state: NodeState) -> int:
+    """The slot of a reflect line (``getSVRefCube``): declared, grounded, not bbox and not entirely on
+    the positive side (centre > 0 on all three axes); such a cuboid's logit is knocked down in turn.
+
+    Raises:
+        InvalidSample: no allowed cuboid is left.
+    """
+    n = min(state.num_cubes, NUM_SLOTS)
+    ok = [i for i in range(1, n) if i in state.grounded and not all(x > 0.0 for x in state.program.boxes[i].pos)]
+    a = _argmax(cube[0:NUM_SLOTS], ok)
+    if a is None:
+        raise InvalidSample("reflect: no grounded cuboid with a centre on the negative side")
+    return a
+
+
+def choose_reflect_axis(axis_logits: Sequence[float], a: int, state: NodeState) -> int:
+    """The reflect axis (``getSVRefAxis``): the most likely axis on which cuboid ``a``'s centre is <= 0
+    (copies are made from the negative side).
+
+    Raises:
+        InvalidSample: no such axis.
+    """
+    pos = state.program.boxes[a].pos
+    k = _argmax(axis_logits, [j for j in range(3) if pos[j] <= 0.0])
+    if k is None:
+        raise InvalidSample("reflect: the cuboid is on the positive side of every axis")
+    return k
+
+
+def choose_translate(cube: Sequence[float], state: NodeState) -> int:
+    """The slot of a translate line (``getSVTransCube``): declared, grounded and not bbox (the reference
+    knocks the others down by 100 rather than 1000; they are never chosen here).
+
+    Raises:
+        InvalidSample: no allowed cuboid.
+    """
+    n = min(state.num_cubes, NUM_SLOTS)
+    a = _argmax(cube[0:NUM_SLOTS], [i for i in range(1, n) if i in state.grounded])
+    if a is None:
+        raise InvalidSample("translate: no grounded cuboid")
+    return a
+
+
+def clean_translate(count: float, d: float) -> tuple[int, float]:
+    """Translate count ``max(round(count), 1)`` (at most :data:`shapeprog.limits.MAX_TRANSLATE_COPIES`)
+    and distance ``d`` clamped to [0, 1]."""
+    if not (math.isfinite(count) and math.isfinite(d)):
+        raise InvalidSample("translate: non-finite count or distance")
+    n = min(max(round(count), 1), limits.MAX_TRANSLATE_COPIES)
+    return n, min(max(float(d), 0.0), 1.0)
+
+
+def choose_squeeze(cube: Sequence[float], state: NodeState) -> tuple[int, int, int]:
+    """The slots of a squeeze line (``getSVSqueezeCube``): cube-1 declared and not bbox; cubes 2 and 3
+    declared and grounded; (cube-1, cube-2) with the attach pair rule, then (cube-1, cube-3) knocking
+    down cube-3 only.
+
+    Raises:
+        InvalidSample: no allowed triple.
+    """
+    a, b = _pick_pair(cube, state, "squeeze")
+    n = min(state.num_cubes, NUM_SLOTS)
+    ok3 = [i for i in range(n) if i in state.grounded]
+    l3 = cube[2 * NUM_SLOTS:3 * NUM_SLOTS]
+    c = _argmax(l3, ok3)
+    while c is not None and _bad_pair(state.atts, a, c):
+        ok3.remove(c)
+        c = _argmax(l3, ok3)
+    if c is None:
+        raise InvalidSample(f"squeeze: no grounded cuboid to squeeze cube{a - 1} against")
+    return a, b, c
+
+
+def choose_squeeze_face(face_logits: Sequence[float], b: int, c: int) -> int:
+    """The squeeze face (``getSVSqueezeFace``): top or bot only when either target is bbox."""
+    return _argmax(face_logits, _TOP_BOT if 0 in (b, c) else range(6))
+
+
+def try_line(state: NodeState, line: Line, margin: float = 1.5) -> LocalProgram:
+    """Execute an attach, squeeze, reflect or translate ``line`` on a copy of the node's local program.
+
+    Only the cuboids the line moves or creates are tested: every other cuboid was inside before (new
+    Cuboid lines sit at the origin, no larger than the bbox), and a line changes no other cuboid.
+
+    Returns:
+        The local program after the line.
+
+    Raises:
+        InvalidSample: the line cannot execute, or a moved or new cuboid's axis-aligned box is not
+            strictly inside ``margin`` times the bbox's (or is not finite).
+    """
+    trial = state.program.copy()
+    c = line.cmd
+    try:
+        if c == ATTACH_CMD:
+            changed = trial.attach(line.cubes[0], line.cubes[1], line.nums[:3], line.nums[3:])
+        elif c == SQUEEZE:
+            changed = trial.squeeze(*line.cubes, FACES[line.face], *line.nums)
+        elif c == REFLECT:
+            changed = trial.reflect(line.cubes[0], AXES[line.axis])
+        elif c == TRANSLATE:
+            changed = trial.translate(line.cubes[0], AXES[line.axis], line.count, line.nums[0])
+        else:
+            raise ValueError(f"command {c} is not executed on the local program")
+    except (ArithmeticError, ValueError) as e:
+        raise InvalidSample(f"the line does not execute ({e})") from None
+    if not trial.inside(changed, margin):
+        raise InvalidSample(f"the line takes a cuboid outside {margin:g}x the bbox")
+    return trial
+
+
+def remove_ungrounded(lines: Sequence[Line], grounded: set) -> tuple[list[Line], list[int]]:
+    """Drop the Cuboid lines whose slot was never grounded (bbox always stays) and renumber the slots of
+    the other lines; a line naming a dropped slot is dropped too (the reference's ``cuboid_line_clean``).
+
+    Returns:
+        (the kept lines: Cuboid lines first, then the others in order; the old slot of each kept
+        Cuboid line).
+    """
+    kept, ri = [], 0
+    for ln in lines:
+        if ln.cmd == CUBOID:
+            if ri in grounded:
+                kept.append(ri)
+            ri += 1
+    new = {old: k for k, old in enumerate(kept)}
+    out = [ln for ln in lines if ln.cmd == CUBOID]
+    out = [out[i] for i in kept]
+    for ln in lines:
+        if ln.cmd == CUBOID:
+            continue
+        if any(c not in new for c in ln.cubes):
+            continue
+        out.append(Line(ln.cmd, tuple(new[c] for c in ln.cubes), ln.nums, ln.axis, ln.face, ln.count, ln.aligned))
+    return out, kept
+
+
+# ----------------------------------------------------------------------------- the network, one step
+
+
+class _Head:
+    """A 3-layer MLP whose input is ``[x (main), extra]``: the extra part's first-layer contribution is
+    added by the caller (one-hot rows, or a term fixed for the whole node)."""
+
+    def __init__(self, mlp, main: int, conv, lrelu):
+        W1 = conv(mlp.l1.weight.detach())  # views, no copies: BLAS reads the strided blocks as they are
+        self.W1 = W1[:, :main]
+        self.X = W1[:, main:].T  # (extra, out): row i = column main + i
+        self.b1 = conv(mlp.l1.bias.detach())
+        self.W2, self.b2 = conv(mlp.l2.weight.detach()), conv(mlp.l2.bias.detach())
+        self.W3, self.b3 = conv(mlp.l3.weight.detach()), conv(mlp.l3.bias.detach())
+        self.lrelu = lrelu
+
+    def const(self, extra=None, rows: slice | None = None):
+        """The first-layer bias plus the contribution of an extra input fixed for a node (at ``rows``
+        of the extra part)."""
+        if extra is None:
+            return self.b1
+        return self.b1 + extra @ (self.X if rows is None else self.X[rows])
+
+    def __call__(self, x, pre, rows: Sequence[int] = ()):
+        y = self.W1 @ x + pre
+        for r in rows:
+            y = y + self.X[r]
+        y = self.lrelu(y)
+        y = self.lrelu(self.W2 @ y + self.b2)
+        return self.W3 @ y + self.b3
+
+
+class _Net:
+    """The decoder run one step at a time for one sequence (NumPy on CPU, torch elsewhere).
+
+    The same arithmetic as :meth:`Decoder.forward` (tested), without the batch and time dimensions, and
+    with each head run only when the line needs it. The decoding loop talks to the network through
+    these methods only (:class:`_Replay` is a stand-in with the same methods).
+    """
+
+    def __init__(self, decoder: Decoder, backend: str | None = None):
+        p = next(decoder.parameters())
+        self.device, self.dtype = p.device, p.dtype
+        self.numpy = p.device.type == "cpu" if backend is None else backend == "numpy"
+        conv = (lambda t: t.numpy()) if self.numpy else (lambda t: t)
+        if self.numpy:
+            lrelu = lambda x: np.maximum(x, 0.2 * x)  # noqa: E731
+            self.sigmoid = lambda x: 0.5 * (1.0 + np.tanh(0.5 * x))
+            self.tanh = np.tanh
+            np_dtype = p.detach().numpy().dtype
+            self.vec = lambda v: np.asarray(v, dtype=np_dtype)
+        else:
+            lrelu = lambda x: torch.maximum(x, 0.2 * x)  # noqa: E731
+            self.sigmoid, self.tanh = torch.sigmoid, torch.tanh
+            self.vec = lambda v: torch.tensor(v, dtype=self.dtype, device=self.device)
+        H = self.H = decoder.hidden_dim
+        self.decoder = decoder
+        self.inp_net = _Head(decoder.inp_net, LINE_DIM, conv, lrelu)
+        g = decoder.gru
+        self.Wih, self.Whh = conv(g.weight_ih_l0.detach()), conv(g.weight_hh_l0.detach())
+        self.bih, self.bhh = conv(g.bias_ih_l0.detach()), conv(g.bias_hh_l0.detach())
+        heads = ("cmd_net", "cube_net", "dim_net", "align_net", "att_net", "sym_net", "squeeze_net", "next_net",
+                 "leaf_net")
+        for name in heads:
+            setattr(self, name, _Head(getattr(decoder, name), H, conv, lrelu))
+
+    def latent(self, z: torch.Tensor):
+        """A latent (H,) tensor as the GRU's state in this backend."""
+        z = z.detach().to(device=self.device, dtype=self.dtype)
+        return z.cpu().numpy() if self.numpy else z
+
+    def root_bbox(self, z: torch.Tensor) -> list[float]:
+        """``bbdimNet(z)``: the root's bbox dims."""
+        return self.decoder.bbox(z.detach().to(device=self.device, dtype=self.dtype)).tolist()
+
+    def begin(self, h_start, bbox_dims: Sequence[float], depth: int) -> dict:
+        """A node's context: the first-layer terms fixed by its bbox dims, depth and start latent."""
+        hier = [0.0, 0.0, 0.0]
+        hier[min(int(depth), 2)] = 1.0
+        bb = self.vec(list(bbox_dims))
+        return {
+            "inp": self.inp_net.const(self.vec(list(bbox_dims) + hier)),
+            "dim": self.dim_net.const(bb), "align": self.align_net.const(bb),
+            "sym": self.sym_net.const(bb, slice(NUM_SLOTS, NUM_SLOTS + 3)),
+            "next": self.next_net.const(h_start), "leaf": self.leaf_net.const(h_start),
+        }
+
+    def step(self, line: Sequence[float], h, ctx: dict):
+        """One GRU step on the input ``line`` (63 floats); returns the new state (= the GRU output)."""
+        H = self.H
+        x = self.inp_net(self.vec(line), ctx["inp"])
+        gi = self.Wih @ x + self.bih
+        gh = self.Whh @ h + self.bhh
+        r = self.sigmoid(gi[:H] + gh[:H])
+        u = self.sigmoid(gi[H:2 * H] + gh[H:2 * H])
+        n = self.tanh(gi[2 * H:] + r * gh[2 * H:])
+        return n + u * (h - n)
+
+    def command(self, h, ctx) -> list[float]:
+        """The 7 command logits."""
+        return self.cmd_net(h, self.cmd_net.b1).tolist()
+
+    def cubes(self, h, ctx, cmd: int) -> list[float]:
+        """The 33 cube logits given the command."""
+        return self.cube_net(h, self.cube_net.b1, (cmd,)).tolist()
+
+    def cuboid(self, h, ctx) -> tuple[list[float], float]:
+        """A Cuboid line's dims (3) and aligned logit."""
+        return self.dim_net(h, ctx["dim"]).tolist(), float(self.align_net(h, ctx["align"])[0])
+
+    def attach(self, h, ctx, a: int, b: int) -> list[float]:
+        """The 6 attach coordinates given the two slots."""
+        return self.att_net(h, self.att_net.b1, (a, NUM_SLOTS + b)).tolist()
+
+    def sym(self, h, ctx, a: int) -> list[float]:
+        """The 3 axis logits, the count and the distance of a reflect/translate line given its slot."""
+        return self.sym_net(h, ctx["sym"], (a,)).tolist()
+
+    def squeeze(self, h, ctx, a: int, b: int, c: int) -> list[float]:
+        """The 6 face logits and (u, v) of a squeeze line given its slots."""
+        return self.squeeze_net(h, self.squeeze_net.b1, (a, NUM_SLOTS + b, 2 * NUM_SLOTS + c)).tolist()
+
+    def leaf(self, h, ctx) -> float:
+        """The leaf logit (< 0: the cuboid gets a sub-program)."""
+        return float(self.leaf_net(h, ctx["leaf"])[0])
+
+    def child(self, h, ctx):
+        """The latent of the sub-program started at this step."""
+        return self.next_net(h, ctx["next"])
+
+
+class _Replay:
+    """A stand-in for the network that replays a line-vector tree (:func:`program_to_tree`): every
+    step predicts the tree's next line (one-hot logits scaled by 10, the line's own numbers), so that
+    decoding shows what the validity rules make of a given program. ``z`` is the tree itself."""
+
+    def latent(self, tree):
+        return (tree, -1)
+
+    def root_bbox(self, tree) -> list[float]:
+        return tree.bbox_dims.tolist()
+
+    def begin(self, h_start, bbox_dims, depth) -> dict:
+        node = h_start[0]
+        rows = node.lines.tolist()
+        cub = [i for i, r in enumerate(rows) if max(range(7), key=r.__getitem__) == CUBOID]
+        kids = {row: (node.children[j] if j < len(node.children) else None) for j, row in enumerate(cub)}
+        return {"rows": rows, "kids": kids}
+
+    def step(self, line, h, ctx):
+        return (h[0], h[1] + 1)
+
+    def _row(self, h, ctx) -> list[float]:
+        rows = ctx["rows"]
+        if h[1] < len(rows):
+            return rows[h[1]]
+        stop = [0.0] * LINE_DIM
+        stop[STOP] = 1.0
+        return stop
+
+    def command(self, h, ctx):
+        return [10.0 * x for x in self._row(h, ctx)[0:7]]
+
+    def cubes(self, h, ctx, cmd):
+        return [10.0 * x for x in self._row(h, ctx)[CUBE1.start:CUBE3.stop]]
+
+    def cuboid(self, h, ctx):
+        r = self._row(h, ctx)
+        return r[DIMS], 10.0 if r[ALIGNED] > 0 else -10.0
+
+    def attach(self, h, ctx, a, b):
+        return self._row(h, ctx)[ATTACH]
+
+    def sym(self, h, ctx, a):
+        r = self._row(h, ctx)
+        return [10.0 * x for x in r[AXIS]] + [r[COUNT], r[DIST]]
+
+    def squeeze(self, h, ctx, a, b, c):
+        r = self._row(h, ctx)
+        return [10.0 * x for x in r[FACE]] + r[UV]
+
+    def leaf(self, h, ctx):
+        return -10.0 if ctx["kids"].get(h[1]) is not None else 10.0
+
+    def child(self, h, ctx):
+        return (ctx["kids"][h[1]], -1)
+
+
+def _finite(values: Sequence[float], what: str) -> list[float]:
+    values = list(values)
+    if not all(math.isfinite(v) for v in values):
+        raise InvalidSample(f"{what}: the network gives a non-finite value")
+    return values
+
+
+# ----------------------------------------------------------------------------- decoding
+
+
+class _Budget:
+    """The size limits of :mod:`shapeprog.limits`, charged as lines are accepted so that every decoded
+    text parses: text lines, attach operations, and an upper bound on the executed leaf cuboids (every
+    non-bbox slot counts as a leaf, times the number of placements of its node)."""
+
+    def __init__(self):
+        self.lines = self.attaches = self.leaves = 0
+
+    def check(self, lines: int = 0, attaches: int = 0, leaves: int = 0) -> None:
+        """Raise :class:`InvalidSample` if charging this much would break a limit."""
+        if (self.lines + lines > limits.MAX_LINES or self.attaches + attaches > limits.MAX_ATTACHES
+                or self.leaves + leaves > limits.MAX_CUBOIDS):
+            raise InvalidSample("the program would exceed the language's size limits (shapeprog.limits)")
+
+    def charge(self, lines: int = 0, attaches: int = 0, leaves: int = 0) -> None:
+        self.check(lines, attaches, leaves)
+        self.lines += lines
+        self.attaches += attaches
+        self.leaves += leaves
+
+
+class _Node:
+    """One program node while decoding: its inputs, then its lines and children."""
+
+    def __init__(self, latent, bbox_dims, depth: int, placements: int):
+        self.latent, self.bbox_dims, self.depth, self.placements = latent, tuple(bbox_dims), depth, placements
+        self.index = -1  # breadth-first decode order; -1 when never decoded
+        self.lines: list[Line] = []
+        self.kids: list[_Node | None] = []  # per accepted Cuboid line (bbox: None)
+        self.state: NodeState | None = None
+        self.skipped = 0
+
+
+def _propose(net: _Net, h, ctx: dict, state: NodeState, opts: DecodeOptions, budget: _Budget, vec: list,
+             placements: int):
+    """The line the decoder proposes at this step, with every rule applied.
+
+    ``vec`` is filled with the line vector as the line is built (the input fed after a refused line).
+
+    Returns:
+        (line, local program after it or None, leaf logit or None)
+
+    Raises:
+        InvalidSample: the line breaks a rule.
+    """
+    cmd = _argmax(net.command(h, ctx), allowed_commands(state, opts.max_cuboid_lines))
+    vec[cmd] = 1.0
+    if cmd == START:
+        return Line(START), None, None
+    if cmd == STOP:
+        if state.program is None:
+            raise InvalidSample("stop before the bbox line")
+        return Line(STOP), None, None
+    if cmd == CUBOID:
+        dims, align = net.cuboid(h, ctx)
+        dims, aligned = clean_cuboid(_finite(dims, "Cuboid"), align, state.bbox_dims)
+        vec[DIMS], vec[ALIGNED] = dims, float(aligned)
+        line = Line(CUBOID, nums=dims, aligned=aligned)
+        if state.program is None:  # the bbox line (charged with its block)
+            return line, None, None
+        budget.charge(lines=1, leaves=placements)
+        return line, None, net.leaf(h, ctx)
+    if state.program is None:
+        raise InvalidSample(f"{('attach', 'reflect', 'translate', 'squeeze')[cmd - 2]} before the bbox line")
+    cube = net.cubes(h, ctx, cmd)
+    if cmd == ATTACH_CMD:
+        a, b = choose_attach(cube, state)
+        vec[CUBE1.start + a] = vec[CUBE2.start + b] = 1.0
+        coords = _finite(net.attach(h, ctx, a, b), "attach")
+        line = Line(ATTACH_CMD, (a, b), clean_attach(coords, b, opts.bbox_attach, opts.bbox_tolerance))
+        vec[ATTACH] = line.nums
+        cost = dict(lines=1, attaches=1)
+    elif cmd == SQUEEZE:
+        a, b, c = choose_squeeze(cube, state)
+        vec[CUBE1.start + a] = vec[CUBE2.start + b] = vec[CUBE3.start + c] = 1.0
+        sq = net.squeeze(h, ctx, a, b, c)
+        face = choose_squeeze_face(sq[:6], b, c)
+        u, v = (min(max(x, 0.0), 1.0) for x in _finite(sq[6:8], "squeeze"))
+        line = Line(SQUEEZE, (a, b, c), (u, v), face=face)
+        vec[FACE.start + face] = 1.0
+        vec[UV] = line.nums
+        cost = dict(lines=1, attaches=2)
+    else:
+        a = choose_reflect(cube, state) if cmd == REFLECT else choose_translate(cube, state)
+        vec[CUBE1.start + a] = 1.0
+        sym = net.sym(h, ctx, a)
+        moves = len(state.program.boxes[a].moves)
+        if cmd == REFLECT:
+            k = choose_reflect_axis(sym[:3], a, state)
+            line = Line(REFLECT, (a,), axis=k)
+            cost = dict(lines=1, attaches=moves, leaves=placements)
+        else:
+            k = _argmax(sym[:3], range(3))
+            n, d = clean_translate(sym[3], sym[4])
+            line = Line(TRANSLATE, (a,), (d,), axis=k, count=n)
+            vec[COUNT], vec[DIST] = float(n), d
+            cost = dict(lines=1, attaches=n * moves, leaves=n * placements)
+        vec[AXIS.start + k] = 1.0
+    budget.check(**cost)  # before executing: a translate may make many copies
+    trial = try_line(state, line, opts.bbox_margin)
+    budget.charge(**cost)
+    return line, trial, None
+
+
+def _decode_node(net: _Net, node: _Node, reject: bool, opts: DecodeOptions, budget: _Budget) -> None:
+    """Decode one node's lines from its latent (``semValidGen``); fills ``node.lines``/``kids``/``state``."""
+    state = node.state = NodeState(node.bbox_dims)
+    h = node.latent
+    ctx = net.begin(h, node.bbox_dims, node.depth)
+    inp = [0.0] * LINE_DIM
+    inp[START] = 1.0
+    budget.charge(lines=3)  # the block's header, bbox line and closing brace
+    refused = 0
+    for step in range(opts.max_lines):
+        h = net.step(inp, h, ctx)
+        vec = [0.0] * LINE_DIM
+        try:
+            line, trial, leaf = _propose(net, h, ctx, state, opts, budget, vec, node.placements)
+        except InvalidSample as e:
+            if reject:
+                raise InvalidSample(e.reason, node.index, step) from None
+            node.skipped += 1
+            refused += 1
+            if refused >= opts.max_refeed:  # the reference then feeds the refused line
+                refused = 0
+                inp = vec
+            continue
+        inp = line_vector(line)
+        if line.cmd == START:
+            continue
+        if line.cmd == STOP:
+            break
+        first = state.program is None
+        state.accept(line, trial)
+        node.lines.append(line)
+        if line.cmd == CUBOID:
+            child = None
+            if not first and leaf < 0.0:
+                child = _Node(net.child(h, ctx), line.nums, node.depth + 1, 0)
+            node.kids.append(child)
+
+
+def _decode_tree(net: _Net, z: torch.Tensor, reject: bool, opts: DecodeOptions) -> tuple[_Node, int]:
+    """Decode every node breadth first (``run_eval_decoder``). Returns the root and the lines skipped."""
+    bb = [min(max(x, _MIN_DIM), limits.MAX_ABS_NUMBER) if math.isfinite(x) else 1.0 for x in net.root_bbox(z)]
+    root = _Node(net.latent(z), bb, 0, 1)
+    budget = _Budget()
+    queue, decoded, skipped = [root], 0, 0
+    while queue:
+        node = queue.pop(0)
+        if decoded == opts.max_nodes:
+            break  # the rest stay leaves
+        node.index = decoded
+        decoded += 1
+        _decode_node(net, node, reject, opts, budget)
+        skipped += node.skipped
+        st = node.state
+        for slot, kid in enumerate(node.kids):
+            if kid is not None and slot in st.grounded:  # an ungrounded cuboid is removed with its child
+                kid.placements = node.placements * (1 + st.copies.get(slot, 0))
+                queue.append(kid)
+    return root, skipped
+
+
+def _program(root: _Node) -> Program:
+    """The decoded tree as a program: ungrounded Cuboid lines removed, blocks numbered breadth first,
+    the j-th Cuboid line named ``bbox``, ``Program_<m>`` (a decoded child) or ``cube<j-1>``."""
+    blocks, queue, count = [], [(root, "Program_0")], 1
+    while queue:
+        node, name = queue.pop(0)
+        lines, kept = remove_ungrounded(node.lines, node.state.grounded)
+        if not lines:  # no bbox line was decoded: the node's own bbox dims
+            lines, kept = [Line(CUBOID, nums=node.bbox_dims, aligned=True)], [0]
+        names = []
+        for j, old in enumerate(kept):
+            kid = node.kids[old] if old < len(node.kids) else None
+            if j == 0:
+                names.append("bbox")
+            elif kid is not None and kid.index >= 0:
+                names.append(f"Program_{count}")
+                queue.append((kid, f"Program_{count}"))
+                count += 1
+            else:
+                names.append(f"cube{j - 1}")
+        stmts, j = [], 0
+        for ln in lines:
+            n = [names[c] for c in ln.cubes]
+            if ln.cmd == CUBOID:
+                stmts.append(Cuboid(names[j], *ln.nums, True if j == 0 else ln.aligned))
+                j += 1
+            elif ln.cmd == ATTACH_CMD:
+                stmts.append(Attach(n[0], n[1], *ln.nums))
+            elif ln.cmd == SQUEEZE:
+                stmts.append(Squeeze(n[0], n[1], n[2], FACES[ln.face], *ln.nums))
+            elif ln.cmd == REFLECT:
+                stmts.append(Reflect(n[0], AXES[ln.axis]))
+            else:
+                stmts.append(Translate(n[0], AXES[ln.axis], ln.count, ln.nums[0]))
+        blocks.append(Block(name, tuple(stmts)))
+    return Program(tuple(blocks))
+
+
+@contextlib.contextmanager
+def _inference(module: torch.nn.Module):
+    """Eval mode and no gradients for the duration; the module's mode is restored after."""
+    was = module.training
+    module.eval()
+    try:
+        with torch.no_grad():
+            yield
+    finally:
+        module.train(was)
+
+
+def _check_latent(z, H: int) -> torch.Tensor:
+    if not isinstance(z, torch.Tensor):
+        raise TypeError(f"z must be a torch.Tensor of shape ({H},), got {type(z).__name__}")
+    if tuple(z.shape) != (H,):
+        raise ValueError(f"z must have shape ({H},) (the model's hidden_dim), got {tuple(z.shape)}")
+    return z
+
+
+def _decode_with(net: _Net, z: torch.Tensor, reject: bool, opts: DecodeOptions) -> Decoded:
+    root, skipped = _decode_tree(net, z, reject, opts)
+    program = _program(root)
+    return Decoded(program, to_text(program), skipped)
+
+
+def decode_latent(decoder: Decoder, z: torch.Tensor, *, reject: bool = False,
+                  generator: torch.Generator | None = None, **options) -> Decoded:
+    """Decode a latent into a program, greedily (argmax), with the rules of semantic validity.
+
+    Args:
+        decoder: the model's decoder (any hidden size; its device and dtype are used).
+        z: (H,) float, the latent.
+        reject: refuse the whole sample at the first invalid line (raise :class:`InvalidSample`), as
+            unconditional generation does; otherwise skip invalid lines (re-feeding the previous input).
+        generator: accepted for stochastic decoders; greedy decoding draws no random numbers.
+        **options: the fields of :class:`DecodeOptions` (e.g. ``bbox_margin=1.1`` for the paper's rule).
+
+    Returns:
+        The :class:`Decoded` program (``tries`` = 1).
+
+    Raises:
+        InvalidSample: ``reject`` and an invalid line.
+        ValueError: ``z`` is not (H,), or a bad option.
+    """
+    opts = DecodeOptions(**options)
+    _check_latent(z, decoder.hidden_dim)
+    with _inference(decoder):
+        return _decode_with(_Net(decoder), z, reject, opts)
+
+
+# ----------------------------------------------------------------------------- entry points
+
+
+def _check_int(name: str, v, low: int) -> int:
+    if not isinstance(v, (int, np.integer)) or isinstance(v, bool):
+        raise ValueError(f"{name} must be an integer, got {v!r} ({type(v).__name__})")
+    if v < low:
+        raise ValueError(f"{name} must be at least {low}, got {v}")
+    return int(v)
+
+
+def sample(vae: VAE, n: int, seed: int = 0, max_tries: int = 10, **options) -> list[Decoded]:
+    """Unconditional generation: ``n`` programs from latents z ~ N(0, I), decoded with rejection.
+
+    Latents are drawn on the CPU from a ``torch.Generator`` seeded with ``seed`` (so a seed gives the same
+    latents on every device), in order; a refused draw is replaced by the next one, up to ``max_tries``
+    draws per sample. A sample refused ``max_tries`` times is decoded from its last latent without
+    rejection and marked ``tries = max_tries + 1``.
+
+    Args:
+        vae: the model (its decoder is used, in eval mode, on its device).
+        n: programs to generate (>= 1).
+        seed: the generator's seed (an integer).
+        max_tries: draws per sample (>= 1; the reference's paper reports 10-20% refused draws).
+        **options: :class:`DecodeOptions` fields.
+
+    Returns:
+        ``n`` :class:`Decoded` programs; the share with ``tries <= max_tries`` is the share valid within
+        ``max_tries`` draws, and with ``tries == 1`` the share valid on the first draw.
+    """
+    n = _check_int("n", n, 1)
+    seed = _check_int("seed", seed, -(2 ** 63))
+    if seed >= 2 ** 64:
+        raise ValueError(f"seed must be below 2**64, got {seed}")
+    max_tries = _check_int("max_tries", max_tries, 1)
+    opts = DecodeOptions(**options)
+    dec = vae.decoder
+    gen = torch.Generator().manual_seed(seed)
+    out = []
+    with _inference(dec):
+        net = _Net(dec)
+        for _ in range(n):
+            for t in range(1, max_tries + 1):
+                z = torch.randn(dec.hidden_dim, generator=gen)
+                try:
+                    d = _decode_with(net, z, True, opts)
+                except InvalidSample:
+                    continue
+                d.tries = t
+                break
+            else:
+                d = _decode_with(net, z, False, opts)
+                d.tries = max_tries + 1
+            out.append(d)
+    return out
+
+
+def encode(vae: VAE, program: Program | str, *, file: str = "<program>") -> torch.Tensor:
+    """The mean code μ of a program (eval mode, no gradients).
+
+    Args:
+        vae: the model.
+        program: a :class:`~shapeprog.lang.Program` or its text.
+        file: the program's name in error messages.
+
+    Returns:
+        μ: (H,) float on the model's device.
+
+    Raises:
+        ParseError: at ``file:line:column``: a text that does not parse, or a program the model cannot
+            encode (more than 10 Cuboid lines in a block, a cuboid beyond the vector's 11 slots).
+    """
+    if isinstance(program, str):
+        program = parse(program, file)
+    elif not isinstance(program, Program):
+        raise TypeError(f"program must be a shapeprog Program or its text, got {type(program).__name__}")
+    p = next(vae.parameters())
+    tree = program_to_tree(program, file=file, dtype=p.dtype, device=p.device)
+    with _inference(vae):
+        mu, _ = vae.encoder(tree)
+    return mu
+
+
+def decode(vae: VAE, z: torch.Tensor, **options) -> Decoded:
+    """Decode the latent ``z`` (H,) without rejection (invalid lines are skipped): :func:`decode_latent`."""
+    return decode_latent(vae.decoder, z, **options)
+
+
+def interpolate(vae: VAE, a, b, steps: int, **options) -> list[Decoded]:
+    """Programs along the straight line between two codes.
+
+    Args:
+        vae: the model.
+        a, b: programs (:class:`~shapeprog.lang.Program` or text, encoded to μ by :func:`encode`) or
+            latents (H,).
+        steps: results, both ends included (>= 2).
+        **options: :class:`DecodeOptions` fields.
+
+    Returns:
+        ``steps`` :class:`Decoded` programs, non-rejecting, from ``(1 - t) a + t b`` for t = 0 .. 1.
+    """
+    steps = _check_int("steps", steps, 2)
+    opts = DecodeOptions(**options)
+    H = vae.decoder.hidden_dim
+    za, zb = (_check_latent(x, H).detach() if isinstance(x, torch.Tensor) else encode(vae, x) for x in (a, b))
+    zb = zb.to(za.device, za.dtype)
+    with _inference(vae.decoder):
+        net = _Net(vae.decoder)
+        return [_decode_with(net, za + (zb - za) * (i / (steps - 1)), False, opts) for i in range(steps)]
