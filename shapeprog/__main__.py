@@ -263,11 +263,14 @@ def _cmd_reconstruct(args) -> int:
     result = decode(vae, encode(vae, prog.program))
     with torch.no_grad():
         target, shape = prog.execute(), execute(result.program)
-        g = torch.Generator().manual_seed(args.seed)
-        x, _ = sample_surface(shape.corners, 10000, generator=g)
-        y, _ = sample_surface(target.corners, 10000, generator=g)
-    print(f"{prog.name}: reconstructed with {len(shape)} leaf cuboids (input {len(target)}), "
-          f"F-score {fscore(x, y):.1f}, chamfer {float(chamfer(x, y)):.4f}")
+        if len(shape) == 0:  # nothing to sample: no point of the input is recovered
+            score = "F-score 0.0 (no leaf cuboid decoded)"
+        else:
+            g = torch.Generator().manual_seed(args.seed)
+            x, _ = sample_surface(shape.corners, 10000, generator=g)
+            y, _ = sample_surface(target.corners, 10000, generator=g)
+            score = f"F-score {fscore(x, y):.1f}, chamfer {float(chamfer(x, y)):.4f}"
+    print(f"{prog.name}: reconstructed with {len(shape)} leaf cuboids (input {len(target)}), {score}")
     if args.output:
         atomic_write(args.output, result.text)
         print(f"wrote {args.output}")

@@ -9,11 +9,11 @@ import shapeprog
 from shapeprog import corpus
 from shapeprog.errors import ParseError
 from shapeprog.vae import VAE, Decoded, Decoder, InvalidSample, decode, decode_latent, encode, interpolate, sample
-from shapeprog.vae.decode import (ATTACH_MODE, CUBOID_MODE, FORBIDDEN, START_MODE, SYM_MODE, DecodeOptions, Line,
-                                  NodeState, _Budget, _decode_tree, _decode_with, _Net, _program, _propose,
-                                  _Replay, allowed_commands, choose_attach, choose_reflect, choose_reflect_axis,
-                                  choose_squeeze, choose_squeeze_face, choose_translate, clean_attach, clean_cuboid,
-                                  clean_translate, line_vector, remove_ungrounded, try_line)
+from shapeprog.vae.decode import _Budget, _decode_tree, _decode_with, _Net, _program, _propose, _Replay
+from shapeprog.vae.validity import (ATTACH_MODE, CUBOID_MODE, FORBIDDEN, START_MODE, SYM_MODE, DecodeOptions, Line,
+                                    NodeState, allowed_commands, choose_attach, choose_reflect, choose_reflect_axis,
+                                    choose_squeeze, choose_squeeze_face, choose_translate, clean_attach, clean_cuboid,
+                                    clean_translate, line_vector, remove_ungrounded, try_line)
 from shapeprog.vae.local import run_block
 from shapeprog.vae.vectors import CUBES, LINE_DIM, NUM_SLOTS, program_to_tree
 

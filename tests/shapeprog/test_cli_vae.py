@@ -1,0 +1,55 @@
+"""Command line of the VAE: sample, interpolate, reconstruct (with a small untrained model's weights file)."""
+import pytest
+import torch
+
+from shapeprog.__main__ import main
+from shapeprog.lang import parse
+from shapeprog.vae import VAE
+from shapeprog.vae.pretrained import save_weights
+
+
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory):
+    torch.manual_seed(0)
+    return str(save_weights(VAE(hidden_dim=16), tmp_path_factory.mktemp("w") / "chair.pt", "chair"))
+
+
+def test_sample_writes_programs_meshes_and_grid(weights, tmp_path, capsys):
+    out, png = tmp_path / "samples", tmp_path / "grid.png"
+    assert main(["sample", "chair", "-n", "3", "--seed", "1", "--out", str(out), "--png", str(png),
+                 "--weights", weights, "--quiet", "--size", "32"]) == 0
+    report = capsys.readouterr().out
+    assert "3 samples of chair" in report and "valid on the first try" in report
+    for i in range(3):
+        parse((out / f"sample_{i:04d}.txt").read_text())  # the text written reads back
+        assert (out / f"sample_{i:04d}.obj").is_file()  # an untrained model writes bbox-only programs: no leaf
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    first = (out / "sample_0000.txt").read_text()
+    assert main(["sample", "chair", "-n", "3", "--seed", "1", "--out", str(out), "--weights", weights, "--quiet"]) == 0
+    assert (out / "sample_0000.txt").read_text() == first  # the same seed gives the same programs
+
+
+def test_sample_usage_errors(weights, capsys):
+    for argv in (["-n", "0"], ["--seed", "x"], ["-n", "2.5"]):
+        with pytest.raises(SystemExit) as e:
+            main(["sample", "chair", "--weights", weights, *argv])
+        assert e.value.code == 2
+    with pytest.raises(SystemExit, match=r"chair\.pt: weights of category 'chair', not 'table'"):
+        main(["sample", "table", "--weights", weights])
+    with pytest.raises(SystemExit, match="--category"):
+        main(["sample"])
+
+
+def test_interpolate_and_reconstruct(weights, tmp_path, capsys):
+    png, out = tmp_path / "interp.png", tmp_path / "steps"
+    assert main(["interpolate", "chair/173", "chair/44017", "--steps", "3", "--png", str(png), "--out", str(out),
+                 "--weights", weights, "--size", "32"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [f"step_{i:03d}.{s}" for i in range(3) for s in ("obj", "txt")]
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    recon = tmp_path / "recon.txt"
+    assert main(["reconstruct", "chair/173", "-o", str(recon), "--weights", weights]) == 0
+    report = capsys.readouterr().out
+    assert "chair/173: reconstructed with" in report and "F-score" in report
+    parse(recon.read_text())
+    with pytest.raises(SystemExit):
+        main(["interpolate", "chair/173", "chair/44017", "--steps", "1", "--weights", weights])
