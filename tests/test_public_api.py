@@ -52,8 +52,8 @@ PUBLIC = {
                         "primitive_cache", "render_programs", "render_tokens", "stack_trace", "unpack"},
     "shapeprog": {"ExecutionError", "ParseError", "corpus", "execute", "execute_batch", "fit", "parse",
                   "print_program", "to_text"},
-    "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoder", "Encoder", "VectorNode", "program_loss", "program_to_tree",
-                      "tree_to_program"},
+    "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoder", "Encoder", "TreeBatch", "VectorNode", "batch_forward",
+                      "batch_loss", "program_loss", "program_to_tree", "tree_to_program"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }
