@@ -52,9 +52,9 @@ PUBLIC = {
                         "primitive_cache", "render_programs", "render_tokens", "stack_trace", "unpack"},
     "shapeprog": {"ExecutionError", "ParseError", "corpus", "execute", "execute_batch", "fit", "parse",
                   "print_program", "to_text"},
-    "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "VectorNode", "decode",
-                      "decode_latent", "encode", "interpolate", "load_pretrained", "program_loss", "program_to_tree",
-                      "sample", "tree_to_program"},
+    "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
+                      "VectorNode", "batch_forward", "batch_loss", "decode", "decode_latent", "encode", "interpolate",
+                      "load_pretrained", "program_loss", "program_to_tree", "sample", "tree_to_program"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }

@@ -166,24 +166,56 @@ class Decoder(nn.Module):
             raise ValueError(f"inp must be (B, T, {LINE_DIM}), got {tuple(inp.shape)}")
         B, T, _ = inp.shape
         bb = bbox_dims[:, None, :].expand(B, T, 3)
-        hier = torch.zeros(B, T, 3, dtype=inp.dtype, device=inp.device)
-        hier[:, :, min(int(depth), 2)] = 1.0
-        out, h = self.gru(self.inp_net(torch.cat([inp, bb, hier], dim=2)), h)
+        out, h = self.gru(self.embed(inp, bb, depth), h)
+        nxt, leaf = self.child_heads(out, h_start.transpose(0, 1).expand(B, T, -1))
+        return DecoderStep(self.heads(out, bb, teacher), nxt, leaf, h)
+
+    def embed(self, inp: torch.Tensor, bbox_dims: torch.Tensor, depth: int) -> torch.Tensor:
+        """The GRU's input: ``inp_net`` of the line, the bbox dims and the depth one-hot.
+
+        Args:
+            inp: (*, 63) float, input line vectors.
+            bbox_dims: (*, 3) float, the bbox dims of each line's node.
+            depth: the nodes' depth (the network sees ``min(depth, 2)`` one-hot).
+
+        Returns:
+            (*, H) float.
+        """
+        hier = inp.new_zeros(*inp.shape[:-1], 3)
+        hier[..., min(int(depth), 2)] = 1.0
+        return self.inp_net(torch.cat([inp, bbox_dims, hier], dim=-1))
+
+    def heads(self, out: torch.Tensor, bbox_dims: torch.Tensor, teacher: torch.Tensor | None = None) -> torch.Tensor:
+        """The line vector predicted from GRU outputs, one head per field (no recurrence: any leading shape).
+
+        Args:
+            out: (*, H) float, GRU outputs.
+            bbox_dims: (*, 3) float, the bbox dims of each step's node.
+            teacher: (*, >= 40) float, target lines whose command and cube one-hots feed the heads; None
+                uses the argmax of the step's own predictions.
+
+        Returns:
+            (*, 63) float, as :attr:`DecoderStep.lines`.
+        """
         cmd = self.cmd_net(out)
-        cmd_oh = teacher[:, :, CMD] if teacher is not None else one_hot_argmax(cmd)
-        cube = self.cube_net(torch.cat([out, cmd_oh], dim=2))
-        cube_oh = teacher[:, :, CUBES] if teacher is not None else one_hot_argmax(cube, 3)
-        lines = torch.cat([
+        cmd_oh = teacher[..., CMD] if teacher is not None else one_hot_argmax(cmd)
+        cube = self.cube_net(torch.cat([out, cmd_oh], dim=-1))
+        cube_oh = teacher[..., CUBES] if teacher is not None else one_hot_argmax(cube, 3)
+        return torch.cat([
             cmd,
             cube,
-            self.dim_net(torch.cat([out, bb], dim=2)),
-            self.att_net(torch.cat([out, cube_oh[:, :, : 2 * NUM_SLOTS]], dim=2)),
-            self.sym_net(torch.cat([out, cube_oh[:, :, : CUBE1.stop - CUBE1.start], bb], dim=2)),
-            self.squeeze_net(torch.cat([out, cube_oh], dim=2)),
-            self.align_net(torch.cat([out, bb], dim=2)),
-        ], dim=2)
-        ctx = torch.cat([out, h_start.transpose(0, 1).expand(B, T, -1)], dim=2)
-        return DecoderStep(lines, self.next_net(ctx), self.leaf_net(ctx)[:, :, 0], h)
+            self.dim_net(torch.cat([out, bbox_dims], dim=-1)),
+            self.att_net(torch.cat([out, cube_oh[..., : 2 * NUM_SLOTS]], dim=-1)),
+            self.sym_net(torch.cat([out, cube_oh[..., : CUBE1.stop - CUBE1.start], bbox_dims], dim=-1)),
+            self.squeeze_net(torch.cat([out, cube_oh], dim=-1)),
+            self.align_net(torch.cat([out, bbox_dims], dim=-1)),
+        ], dim=-1)
+
+    def child_heads(self, out: torch.Tensor, h_start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The child latent and leaf logit of steps: ``out`` (*, H) GRU outputs and ``h_start`` (*, H), the
+        latent each step's node started from -> ``(next (*, H), leaf (*,))``, as in :class:`DecoderStep`."""
+        ctx = torch.cat([out, h_start], dim=-1)
+        return self.next_net(ctx), self.leaf_net(ctx)[..., 0]
 
     def bbox(self, z: torch.Tensor) -> torch.Tensor:
         """The root bbox dims predicted from latents: (*, H) -> (*, 3)."""

@@ -1,0 +1,467 @@
+"""Training of the ShapeAssembly VAE with PyTorch Lightning: the only module of :mod:`shapeprog.vae` that imports it.
+
+* :class:`VAEDataModule` holds the corpus programs of a category as line-vector trees (built once in
+  ``setup``), the corpus's train split less a seeded validation carve-out (the corpus's own val split is
+  the test split of every table, and is not read), and DataLoaders whose collate keeps the trees as a
+  list with their batch plan (:class:`~shapeprog.vae.batch.TreeBatch`).
+* :class:`VAEModule` trains :class:`~shapeprog.vae.model.VAE` teacher-forced with the spec's loss, Adam
+  (lr 1e-4, eps 1e-6, no decay) and ``batch_shapes`` shapes per optimizer step (1: the reference), through
+  the batched pass (:func:`~shapeprog.vae.batch.batch_forward`). It logs every loss term and the KL
+  (``train/*``, ``val/*``) and, every ``recon_every_n_epochs`` epochs when :mod:`shapeprog.vae.decode` is
+  importable, the reconstruction F-score of a fixed set of validation shapes (``val/fscore``) with image
+  grids of reconstructions and of samples.
+
+``python train.py fit --config configs/shapeassembly/vae_chair.yaml`` runs it through the repository's
+LightningCLI; settings and measurements: ``docs/shapeassembly_vae.md`` ("Training").
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import json
+import sys
+import warnings
+from pathlib import Path
+from types import ModuleType
+
+import lightning as L
+import numpy as np
+import torch
+from torch.utils.data import DataLoader
+
+from shapeio import atomic_write
+
+from .. import corpus
+from ..errors import ParseError
+from ..execute import execute
+from ..lang import parse
+from ..metrics import fscore
+from ..sampling import sample_surface
+from .batch import TreeBatch, batch_forward, batch_loss, collate_trees, encode_batch
+from .losses import LOSS_WEIGHTS
+from .model import VAE
+from .vectors import VectorNode, program_to_tree, tree_to_program
+
+__all__ = ["CATEGORIES", "CHECKPOINT_FORMAT", "VAEDataModule", "VAEModule", "decode_module", "load_trees",
+           "reconstruct", "reconstruction_fscores", "validation_split"]
+
+#: The categories a run trains on: one of the corpus's, or all three together.
+CATEGORIES = corpus.CATEGORIES + ("all",)
+#: Version of what :class:`VAEModule` adds to its checkpoints (``checkpoint["shapeprog_vae"]``).
+CHECKPOINT_FORMAT = 1
+_DECODE = "shapeprog.vae.decode"
+
+
+def _check_category(category: str) -> None:
+    if category not in CATEGORIES:
+        raise ValueError(f"unknown category {category!r}; expected one of {', '.join(CATEGORIES)}")
+
+
+def decode_module() -> ModuleType | None:
+    """:mod:`shapeprog.vae.decode` (``decode_latent``, ``sample``) if it exists, else None.
+
+    A decode module that exists but fails to import raises: only its absence is tolerated.
+    """
+    if _DECODE not in sys.modules and importlib.util.find_spec(_DECODE) is None:
+        return None
+    return importlib.import_module(_DECODE)
+
+
+# ------------------------------------------------------------------------------------------ data
+
+
+def validation_split(category: str, fraction: float = 0.05, count: int | None = None,
+                     seed: int = 42) -> tuple[list[str], list[str]]:
+    """A seeded validation carve-out of the corpus's train split.
+
+    Args:
+        category: ``chair``, ``table``, ``storage`` or ``all`` (each category carved on its own).
+        fraction: the share of each category's train split held out (rounded, at least 1).
+        count: held-out shapes per category instead of ``fraction``.
+        seed: the draw; a category's draw depends only on ``seed`` and the category.
+
+    Returns:
+        ``(train, val)``: program keys ``"chair/173"``, each in the corpus's split-file order.
+    """
+    _check_category(category)
+    if count is None and not 0.0 < fraction < 1.0:
+        raise ValueError(f"fraction must be in (0, 1), got {fraction!r}")
+    train, val = [], []
+    for cat in corpus.CATEGORIES if category == "all" else (category,):
+        ids = corpus.ids(cat, "train")
+        n = max(1, round(fraction * len(ids))) if count is None else int(count)
+        if not 0 < n < len(ids):
+            raise ValueError(f"cannot hold out {n} of the {len(ids)} {cat} training shapes")
+        rng = np.random.default_rng([int(seed), corpus.CATEGORIES.index(cat)])
+        held = set(rng.choice(len(ids), size=n, replace=False).tolist())
+        val += [f"{cat}/{i}" for k, i in enumerate(ids) if k in held]
+        train += [f"{cat}/{i}" for k, i in enumerate(ids) if k not in held]
+    return train, val
+
+
+def load_trees(keys: list[str], dtype: torch.dtype = torch.float32) -> tuple[list[str], list[VectorNode]]:
+    """The line-vector trees of corpus programs ``"category/id"``.
+
+    A program that does not parse or cannot be encoded (:func:`~shapeprog.vae.vectors.program_to_tree`) is
+    left out and named in a :class:`~shapeprog.corpus.CorpusWarning`; the rest still load.
+
+    Returns:
+        ``(keys, trees)`` of the programs loaded, in the order given.
+    """
+    kept, trees, errors = [], [], []
+    for key in keys:
+        cat, i = key.split("/")
+        name = f"{key}.txt"
+        try:
+            trees.append(program_to_tree(parse(corpus.read(cat, i), file=name), file=name, dtype=dtype))
+            kept.append(key)
+        except (ParseError, KeyError) as e:
+            errors.append(f"{name}: {e}")
+    if errors:
+        warnings.warn(f"{len(errors)} program(s) left out: " + "; ".join(errors), corpus.CorpusWarning, stacklevel=2)
+    return kept, trees
+
+
+class VAEDataModule(L.LightningDataModule):
+    """Corpus programs as line-vector trees for :class:`VAEModule`.
+
+    The corpus's train split less a seeded validation carve-out (:func:`validation_split`) is trained on;
+    the carve-out validates. The corpus's val split is the test split and is never read. ``setup`` builds
+    the trees once and writes the split (``split_file``, JSON: the settings and both lists of keys) into
+    the run's log folder (``trainer.log_dir``) on the global rank 0.
+
+    Args:
+        category: ``chair``, ``table``, ``storage`` or ``all``.
+        val_fraction: share of each category's train split held out for validation (5%).
+        val_count: held-out shapes per category instead of the fraction.
+        seed: the carve-out's draw (42, the reference's seed).
+        batch_shapes: shapes per training batch; None takes the model's ``batch_shapes`` (one knob: set it on
+            the model).
+        val_batch_shapes: shapes per validation batch (the loss does not depend on it).
+        num_workers: DataLoader workers (0: batches are built in the training process).
+        max_train_shapes: train on the first N shapes of the carved train split only (smoke runs,
+            overfitting checks); None: all.
+        split_file: name of the split file in the log folder.
+    """
+
+    def __init__(self, category: str = "chair", val_fraction: float = 0.05, val_count: int | None = None,
+                 seed: int = 42, batch_shapes: int | None = None, val_batch_shapes: int = 32, num_workers: int = 0,
+                 max_train_shapes: int | None = None, split_file: str = "split.json"):
+        super().__init__()
+        _check_category(category)
+        for name, v in (("batch_shapes", batch_shapes), ("val_batch_shapes", val_batch_shapes),
+                        ("max_train_shapes", max_train_shapes)):
+            if v is not None and int(v) < 1:
+                raise ValueError(f"{name} must be >= 1, got {v!r}")
+        self.category, self.val_fraction, self.val_count = category, float(val_fraction), val_count
+        self.seed = int(seed)
+        self.batch_shapes, self.val_batch_shapes = batch_shapes, int(val_batch_shapes)
+        self.num_workers, self.max_train_shapes, self.split_file = int(num_workers), max_train_shapes, split_file
+        self.train_keys: list[str] | None = None
+        self.val_keys: list[str] | None = None
+        self.train_trees: list[VectorNode] | None = None
+        self.val_trees: list[VectorNode] | None = None
+
+    def setup(self, stage: str | None = None) -> None:
+        if self.val_trees is None:
+            train, val = validation_split(self.category, self.val_fraction, self.val_count, self.seed)
+            if self.max_train_shapes is not None:
+                train = train[: int(self.max_train_shapes)]
+            self.train_keys, self.train_trees = load_trees(train)
+            self.val_keys, self.val_trees = load_trees(val)
+        if self.trainer is not None and stage in (None, "fit"):
+            folder = self.trainer.log_dir or self.trainer.default_root_dir  # log_dir broadcasts: every rank asks
+            if self.trainer.is_global_zero:
+                self.write_split(Path(folder) / self.split_file)
+
+    def split(self) -> dict:
+        """The split as written to the split file."""
+        return {"category": self.category, "seed": self.seed, "val_fraction": self.val_fraction,
+                "val_count": self.val_count, "max_train_shapes": self.max_train_shapes,
+                "source": "the corpus's train split (its val split is the test split)",
+                "val": self.val_keys, "train": self.train_keys}
+
+    def write_split(self, path: str | Path) -> Path:
+        """Write :meth:`split` as JSON to ``path`` (atomically; the folder is created)."""
+        if self.val_keys is None:
+            raise RuntimeError("the split is drawn in setup(); call it first")
+        return atomic_write(path, json.dumps(self.split(), indent=1) + "\n", mkdir=True)
+
+    def _train_batch(self) -> int:
+        if self.batch_shapes is not None:
+            return int(self.batch_shapes)
+        module = self.trainer.lightning_module if self.trainer is not None else None
+        return int(module.hparams.get("batch_shapes", 1)) if module is not None else 1
+
+    def train_dataloader(self) -> DataLoader:
+        return DataLoader(self.train_trees, batch_size=self._train_batch(), shuffle=True, collate_fn=collate_trees,
+                          num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
+
+    def val_dataloader(self) -> DataLoader:
+        return DataLoader(self.val_trees, batch_size=self.val_batch_shapes, shuffle=False, collate_fn=collate_trees,
+                          num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
+
+    def state_dict(self) -> dict:
+        return {"category": self.category, "seed": self.seed, "val": self.val_keys}
+
+    def load_state_dict(self, state: dict) -> None:
+        """Refuse to resume a run whose validation shapes were others (they would now be trained on)."""
+        if self.val_keys is not None and state.get("val") is not None and state["val"] != self.val_keys:
+            raise ValueError(f"the checkpoint's run validated on another carve-out ({state.get('category')}, seed "
+                             f"{state.get('seed')}, {len(state['val'])} shapes) than this one ({self.category}, seed "
+                             f"{self.seed}, {len(self.val_keys)} shapes); resume with the same data settings")
+
+
+# ------------------------------------------------------------------------------------------ reconstruction
+
+
+def reconstruct(vae: VAE, trees: list[VectorNode], decode_latent) -> list:
+    """The programs decoded from the mean codes of ``trees``: ``decode_latent(vae.decoder, mu, reject=False)``
+    (:mod:`shapeprog.vae.decode`) of each tree's mu, None where decoding raises a ``ValueError``."""
+    device, dtype = next(vae.parameters()).device, next(vae.parameters()).dtype
+    with torch.no_grad():
+        batch = TreeBatch([t.to("cpu") for t in trees]).to(device, dtype)
+        mu, _ = vae.encoder.sampler(encode_batch(vae.encoder, batch))
+        out = []
+        for z in mu:
+            try:
+                out.append(decode_latent(vae.decoder, z, reject=False).program)
+            except ValueError:
+                out.append(None)
+    return out
+
+
+def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int = 10_000,
+                           seed: int = 0) -> list[float | None]:
+    """The F-score (0-100, :func:`shapeprog.metrics.fscore`) of each tree's shape against a program's.
+
+    ``points`` surface samples of each executed shape are compared (10,000 in the paper); the target
+    program is :func:`~shapeprog.vae.vectors.tree_to_program` of the tree.
+
+    Args:
+        trees: the targets.
+        programs: one program (or None) per tree, e.g. :func:`reconstruct` of the trees.
+        points: surface samples per shape.
+        seed: the samples' draw.
+
+    Returns:
+        One F-score per tree, None where the program is None or cannot be executed or sampled (no leaf
+        cuboid, a non-finite corner).
+    """
+    gen = torch.Generator().manual_seed(int(seed))
+    out: list[float | None] = []
+    for tree, program in zip(trees, programs):
+        target, _ = sample_surface(execute(tree_to_program(tree)).corners, points, gen)
+        try:
+            if program is None:
+                raise ValueError("no program")
+            pred, _ = sample_surface(execute(program).corners, points, gen)
+        except ValueError:  # ExecutionError, no leaf cuboid, degenerate surface
+            out.append(None)
+            continue
+        out.append(fscore(pred, target))
+    return out
+
+
+def _render(program, size: int) -> np.ndarray:
+    """(size, size, 3) uint8 picture of a program's shape; white when there is none or it cannot be executed."""
+    from ..picture import render_png
+
+    try:
+        corners = None if program is None else execute(program).corners
+    except ValueError:
+        corners = None
+    if corners is None or corners.shape[0] == 0:
+        return np.full((size, size, 3), 255, dtype=np.uint8)
+    return render_png(corners, size=size)
+
+
+def _grid(images: list[np.ndarray], cols: int) -> np.ndarray:
+    """Pictures (S, S, 3) uint8 tiled ``cols`` per row with a 2-pixel grey gap: (H, W, 3) uint8."""
+    s = images[0].shape[0]
+    blank = np.full_like(images[0], 255)
+    images = images + [blank] * (-len(images) % cols)
+    gap_v = np.full((s, 2, 3), 160, dtype=np.uint8)
+    rows = []
+    for k in range(0, len(images), cols):
+        row = []
+        for im in images[k:k + cols]:
+            row += [im, gap_v]
+        rows.append(np.concatenate(row[:-1], axis=1))
+    gap_h = np.full((2, rows[0].shape[1], 3), 160, dtype=np.uint8)
+    return np.concatenate([x for r in rows for x in (r, gap_h)][:-1], axis=0)
+
+
+# ------------------------------------------------------------------------------------------ module
+
+
+class VAEModule(L.LightningModule):
+    """Teacher-forced training of the ShapeAssembly VAE (spec section (d), "Training hyper-parameters").
+
+    Args:
+        category: what the run trains on (``chair``, ``table``, ``storage`` or ``all``); stored in the
+            checkpoint and checked against the data module's.
+        hidden_dim: H of :class:`~shapeprog.vae.model.VAE` (256 in the reference).
+        lr: Adam's learning rate (1e-4); no decay.
+        eps: Adam's eps (1e-6).
+        loss_weights: weights by term name that replace those of
+            :data:`~shapeprog.vae.losses.LOSS_WEIGHTS` (the others are kept).
+        kl_weight: the KL term's weight (default: that of ``loss_weights``, else 0.1).
+        batch_shapes: shapes per optimizer step; the loss is their mean (1: the reference's one shape per
+            step). The data module's training batches take it.
+        recon_every_n_epochs: compute ``val/fscore`` and the image grids at the end of every N-th epoch
+            (epochs N-1, 2N-1, ...; 0: never); a checkpoint callback that monitors ``val/fscore`` must save
+            on those epochs (``every_n_epochs`` a multiple of N).
+        recon_shapes: validation shapes (the first ones the validation loader gives) of the F-score.
+        recon_points: surface samples per shape for the F-score (10,000 in the paper).
+        image_shapes: reconstructions and samples shown in each image grid (0: no images).
+        image_size: pixels per picture in the grids.
+        seed: the draws of the F-score's surface samples and of the sampled shapes.
+    """
+
+    def __init__(self, category: str = "chair", hidden_dim: int = 256, lr: float = 1e-4, eps: float = 1e-6,
+                 loss_weights: dict[str, float] | None = None, kl_weight: float | None = None, batch_shapes: int = 1,
+                 recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 10_000,
+                 image_shapes: int = 8, image_size: int = 128, seed: int = 42):
+        super().__init__()
+        _check_category(category)
+        if int(batch_shapes) < 1:
+            raise ValueError(f"batch_shapes must be >= 1, got {batch_shapes!r}")
+        unknown = sorted(set(loss_weights or {}) - set(LOSS_WEIGHTS))
+        if unknown:
+            raise ValueError(f"unknown loss term(s) {unknown}; the terms are {', '.join(LOSS_WEIGHTS)}")
+        self.save_hyperparameters()
+        self.weights = {**LOSS_WEIGHTS, **(loss_weights or {})}
+        if kl_weight is not None:
+            self.weights["kl"] = float(kl_weight)
+        self.vae = VAE(hidden_dim)
+        self._recon_trees: list[VectorNode] = []
+        self._window: torch.Tensor | None = None  # the training terms summed since they were last logged
+        self._window_shapes = 0
+
+    def forward(self, batch: TreeBatch, sample: bool = True):
+        """:func:`~shapeprog.vae.batch.batch_forward` of the model on ``batch``."""
+        return batch_forward(self.vae, batch, sample=sample)
+
+    # ------------------------------------------------------------------ checks
+    def setup(self, stage: str) -> None:
+        dm = self.trainer.datamodule if self.trainer is not None else None
+        other = getattr(dm, "category", None)
+        if other is not None and other != self.hparams.category:
+            raise ValueError(f"the model is set up for category {self.hparams.category!r} and the data module for "
+                             f"{other!r}; set model.init_args.category and data.init_args.category alike")
+
+    def on_fit_start(self) -> None:
+        n = self.hparams.recon_every_n_epochs
+        for cb in self.trainer.checkpoint_callbacks:
+            if getattr(cb, "monitor", None) != "val/fscore":
+                continue
+            if decode_module() is None:
+                raise RuntimeError(f"a checkpoint callback monitors val/fscore, which needs {_DECODE} (absent); "
+                                   f"monitor val/loss (mode min) instead")
+            every = getattr(cb, "_every_n_epochs", 1)
+            if not n or every % n:
+                raise ValueError(f"a checkpoint callback monitors val/fscore every {every} epoch(s) but the model "
+                                 f"computes it every {n} (model.recon_every_n_epochs); make every_n_epochs a "
+                                 f"multiple of it")
+
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        checkpoint["shapeprog_vae"] = {"format": CHECKPOINT_FORMAT, "category": self.hparams.category,
+                                       "hidden_dim": self.hparams.hidden_dim}
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        info = checkpoint.get("shapeprog_vae")
+        if info is None:
+            raise ValueError("not a checkpoint of shapeprog.vae.train.VAEModule (no 'shapeprog_vae' entry)")
+        if info.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"the checkpoint has format {info.get('format')!r}; this version reads "
+                             f"{CHECKPOINT_FORMAT}")
+        mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim}
+        theirs = {k: info.get(k) for k in mine}
+        if theirs != mine:
+            raise ValueError(f"the checkpoint is of a VAE with {theirs}, this run is {mine}")
+
+    # ------------------------------------------------------------------ steps
+    def _cast(self, batch: TreeBatch) -> TreeBatch:
+        """The batch in the model's dtype (the trees are float32; a ``64-true`` or ``16-true`` run differs)."""
+        return batch if batch.dtype == self.dtype else batch.to(self.device, self.dtype)
+
+    def training_step(self, batch: TreeBatch, batch_idx: int) -> torch.Tensor:
+        """The mean loss of the batch's shapes (z sampled). ``train/loss`` is logged every step; the terms are
+        summed over the steps in between and logged as their mean per shape at the steps the logger writes
+        (every ``log_every_n_steps``): a ``self.log`` call costs milliseconds, and fifteen of them every
+        step slowed one-shape steps by about a third."""
+        batch = self._cast(batch)
+        total, terms = batch_loss(batch_forward(self.vae, batch, sample=True), batch, self.weights)
+        loss = total.mean()
+        self.log("train/loss", loss, prog_bar=True, batch_size=batch.size)
+        sums = torch.stack([v.detach().sum() for v in terms.values()])
+        self._window = sums if self._window is None else self._window + sums
+        self._window_shapes += batch.size
+        if (self.global_step + 1) % max(1, self.trainer.log_every_n_steps) == 0:
+            for name, value in zip(terms, self._window / self._window_shapes):
+                self.log(f"train/{name}", value, batch_size=self._window_shapes)
+            self._window, self._window_shapes = None, 0
+        return loss
+
+    def validation_step(self, batch: TreeBatch, batch_idx: int) -> None:
+        """The loss with z = mu (deterministic); keeps the epoch's first ``recon_shapes`` trees."""
+        batch = self._cast(batch)
+        total, terms = batch_loss(batch_forward(self.vae, batch, sample=False), batch, self.weights)
+        self.log("val/loss", total.mean(), prog_bar=True, batch_size=batch.size, sync_dist=True)
+        for name, value in terms.items():
+            self.log(f"val/{name}", value.mean(), batch_size=batch.size, sync_dist=True)
+        room = self.hparams.recon_shapes - len(self._recon_trees)
+        if room > 0:
+            self._recon_trees += batch.trees[:room]
+
+    def on_validation_epoch_start(self) -> None:
+        self._recon_trees = []
+
+    def recon_epoch(self) -> bool:
+        """Whether this epoch's validation computes the F-score and the image grids."""
+        n = self.hparams.recon_every_n_epochs
+        return bool(n) and not self.trainer.sanity_checking and (self.current_epoch + 1) % n == 0
+
+    def on_validation_epoch_end(self) -> None:
+        """The reconstruction hook: on :meth:`recon_epoch` epochs, with :mod:`shapeprog.vae.decode` present,
+        log ``val/fscore`` (mean F-score of the kept validation shapes, a failed decode scoring 0) and
+        ``val/recon_failed`` (the share of them), and on the global rank 0 the image grids
+        ``val/reconstructions`` (target | decoded pairs) and ``val/samples`` (``decode.sample`` from N(0, I))."""
+        trees, self._recon_trees = self._recon_trees, []
+        if not trees or not self.recon_epoch():
+            return
+        decode = decode_module()
+        if decode is None:
+            return
+        programs = reconstruct(self.vae, trees, decode.decode_latent)
+        scores = reconstruction_fscores(trees, programs, self.hparams.recon_points, self.hparams.seed)
+        self.log("val/fscore", float(np.mean([s or 0.0 for s in scores])), sync_dist=True, prog_bar=True)
+        self.log("val/recon_failed", sum(s is None for s in scores) / len(scores), sync_dist=True)
+        k = self.hparams.image_shapes
+        if self.trainer.is_global_zero and k:
+            self.log_images(decode, trees[:k], programs[:k])
+
+    def log_images(self, decode: ModuleType, trees: list[VectorNode], programs: list) -> None:
+        """Add the image grids ``val/reconstructions`` (each tree's program beside its reconstruction in
+        ``programs``) and ``val/samples`` (``decode.sample`` of ``image_shapes`` shapes) to the TensorBoard
+        logger, if there is one. Sampling that fails with a ``ValueError`` or ``RuntimeError`` is reported
+        as a warning, not raised: a picture is not worth a long run."""
+        exp = getattr(self.logger, "experiment", None) if self.logger is not None else None
+        if not hasattr(exp, "add_image"):
+            return
+        size = self.hparams.image_size
+        pairs = [_render(p, size) for t, r in zip(trees, programs) for p in (tree_to_program(t), r)]
+        exp.add_image("val/reconstructions", _grid(pairs, 4), self.global_step, dataformats="HWC")
+        try:
+            samples = decode.sample(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
+        except (ValueError, RuntimeError) as e:
+            warnings.warn(f"no val/samples grid at step {self.global_step}: {e}", stacklevel=2)
+            return
+        if samples:
+            exp.add_image("val/samples", _grid([_render(d.program, size) for d in samples], 4), self.global_step,
+                          dataformats="HWC")
+
+    def configure_optimizers(self):
+        fused = self.device.type in ("cpu", "cuda")
+        return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, eps=self.hparams.eps, fused=fused)
