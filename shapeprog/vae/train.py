@@ -7,8 +7,7 @@
 * :class:`VAEModule` trains :class:`~shapeprog.vae.model.VAE` teacher-forced with the spec's loss, Adam
   (lr 1e-4, eps 1e-6, no decay) and ``batch_shapes`` shapes per optimizer step (1: the reference), through
   the batched pass (:func:`~shapeprog.vae.batch.batch_forward`). It logs every loss term and the KL
-  (``train/*``, ``val/*``) and, every ``recon_every_n_epochs`` epochs when :mod:`shapeprog.vae.decode` is
-  importable, the reconstruction F-score of a fixed set of validation shapes (``val/fscore``) with image
+  (``train/*``, ``val/*``) and, every ``recon_every_n_epochs`` epochs, the reconstruction F-score of a fixed set of validation shapes (``val/fscore``) with image
   grids of reconstructions and of samples.
 
 ``python train.py fit --config configs/shapeassembly/vae_chair.yaml`` runs it through the repository's
@@ -16,13 +15,9 @@ LightningCLI; settings and measurements: ``docs/shapeassembly_vae.md`` ("Trainin
 """
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import json
-import sys
 import warnings
 from pathlib import Path
-from types import ModuleType
 
 import lightning as L
 import numpy as np
@@ -36,35 +31,26 @@ from ..errors import ParseError
 from ..execute import execute
 from ..lang import parse
 from ..metrics import fscore
+from ..picture import render_grid
 from ..sampling import sample_surface
 from .batch import TreeBatch, batch_forward, batch_loss, collate_trees, encode_batch
+from .decode import decode_latent, sample
 from .losses import LOSS_WEIGHTS
 from .model import VAE
 from .vectors import VectorNode, program_to_tree, tree_to_program
 
-__all__ = ["CATEGORIES", "CHECKPOINT_FORMAT", "VAEDataModule", "VAEModule", "decode_module", "load_trees",
+__all__ = ["CATEGORIES", "CHECKPOINT_FORMAT", "VAEDataModule", "VAEModule", "load_trees",
            "reconstruct", "reconstruction_fscores", "validation_split"]
 
 #: The categories a run trains on: one of the corpus's, or all three together.
 CATEGORIES = corpus.CATEGORIES + ("all",)
 #: Version of what :class:`VAEModule` adds to its checkpoints (``checkpoint["shapeprog_vae"]``).
 CHECKPOINT_FORMAT = 1
-_DECODE = "shapeprog.vae.decode"
 
 
 def _check_category(category: str) -> None:
     if category not in CATEGORIES:
         raise ValueError(f"unknown category {category!r}; expected one of {', '.join(CATEGORIES)}")
-
-
-def decode_module() -> ModuleType | None:
-    """:mod:`shapeprog.vae.decode` (``decode_latent``, ``sample``) if it exists, else None.
-
-    A decode module that exists but fails to import raises: only its absence is tolerated.
-    """
-    if _DECODE not in sys.modules and importlib.util.find_spec(_DECODE) is None:
-        return None
-    return importlib.import_module(_DECODE)
 
 
 # ------------------------------------------------------------------------------------------ data
@@ -215,7 +201,7 @@ class VAEDataModule(L.LightningDataModule):
 # ------------------------------------------------------------------------------------------ reconstruction
 
 
-def reconstruct(vae: VAE, trees: list[VectorNode], decode_latent) -> list:
+def reconstruct(vae: VAE, trees: list[VectorNode]) -> list:
     """The programs decoded from the mean codes of ``trees``: ``decode_latent(vae.decoder, mu, reject=False)``
     (:mod:`shapeprog.vae.decode`) of each tree's mu, None where decoding raises a ``ValueError``."""
     device, dtype = next(vae.parameters()).device, next(vae.parameters()).dtype
@@ -263,33 +249,13 @@ def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int 
     return out
 
 
-def _render(program, size: int) -> np.ndarray:
-    """(size, size, 3) uint8 picture of a program's shape; white when there is none or it cannot be executed."""
-    from ..picture import render_png
-
+def _corners(program) -> torch.Tensor:
+    """A program's leaf cuboids ``(L, 8, 3)``; none (a white picture) when there is no program or it cannot be
+    executed."""
     try:
-        corners = None if program is None else execute(program).corners
+        return torch.zeros(0, 8, 3) if program is None else execute(program).corners
     except ValueError:
-        corners = None
-    if corners is None or corners.shape[0] == 0:
-        return np.full((size, size, 3), 255, dtype=np.uint8)
-    return render_png(corners, size=size)
-
-
-def _grid(images: list[np.ndarray], cols: int) -> np.ndarray:
-    """Pictures (S, S, 3) uint8 tiled ``cols`` per row with a 2-pixel grey gap: (H, W, 3) uint8."""
-    s = images[0].shape[0]
-    blank = np.full_like(images[0], 255)
-    images = images + [blank] * (-len(images) % cols)
-    gap_v = np.full((s, 2, 3), 160, dtype=np.uint8)
-    rows = []
-    for k in range(0, len(images), cols):
-        row = []
-        for im in images[k:k + cols]:
-            row += [im, gap_v]
-        rows.append(np.concatenate(row[:-1], axis=1))
-    gap_h = np.full((2, rows[0].shape[1], 3), 160, dtype=np.uint8)
-    return np.concatenate([x for r in rows for x in (r, gap_h)][:-1], axis=0)
+        return torch.zeros(0, 8, 3)
 
 
 # ------------------------------------------------------------------------------------------ module
@@ -356,9 +322,6 @@ class VAEModule(L.LightningModule):
         for cb in self.trainer.checkpoint_callbacks:
             if getattr(cb, "monitor", None) != "val/fscore":
                 continue
-            if decode_module() is None:
-                raise RuntimeError(f"a checkpoint callback monitors val/fscore, which needs {_DECODE} (absent); "
-                                   f"monitor val/loss (mode min) instead")
             every = getattr(cb, "_every_n_epochs", 1)
             if not n or every % n:
                 raise ValueError(f"a checkpoint callback monitors val/fscore every {every} epoch(s) but the model "
@@ -424,43 +387,40 @@ class VAEModule(L.LightningModule):
         return bool(n) and not self.trainer.sanity_checking and (self.current_epoch + 1) % n == 0
 
     def on_validation_epoch_end(self) -> None:
-        """The reconstruction hook: on :meth:`recon_epoch` epochs, with :mod:`shapeprog.vae.decode` present,
-        log ``val/fscore`` (mean F-score of the kept validation shapes, a failed decode scoring 0) and
+        """The reconstruction hook: on :meth:`recon_epoch` epochs, log ``val/fscore`` (mean F-score of the kept validation shapes, a failed decode scoring 0) and
         ``val/recon_failed`` (the share of them), and on the global rank 0 the image grids
-        ``val/reconstructions`` (target | decoded pairs) and ``val/samples`` (``decode.sample`` from N(0, I))."""
+        ``val/reconstructions`` (target | decoded pairs) and ``val/samples`` (samples from N(0, I))."""
         trees, self._recon_trees = self._recon_trees, []
         if not trees or not self.recon_epoch():
             return
-        decode = decode_module()
-        if decode is None:
-            return
-        programs = reconstruct(self.vae, trees, decode.decode_latent)
+        programs = reconstruct(self.vae, trees)
         scores = reconstruction_fscores(trees, programs, self.hparams.recon_points, self.hparams.seed)
         self.log("val/fscore", float(np.mean([s or 0.0 for s in scores])), sync_dist=True, prog_bar=True)
         self.log("val/recon_failed", sum(s is None for s in scores) / len(scores), sync_dist=True)
         k = self.hparams.image_shapes
         if self.trainer.is_global_zero and k:
-            self.log_images(decode, trees[:k], programs[:k])
+            self.log_images(trees[:k], programs[:k])
 
-    def log_images(self, decode: ModuleType, trees: list[VectorNode], programs: list) -> None:
+    def log_images(self, trees: list[VectorNode], programs: list) -> None:
         """Add the image grids ``val/reconstructions`` (each tree's program beside its reconstruction in
-        ``programs``) and ``val/samples`` (``decode.sample`` of ``image_shapes`` shapes) to the TensorBoard
-        logger, if there is one. Sampling that fails with a ``ValueError`` or ``RuntimeError`` is reported
+        ``programs``) and ``val/samples`` (:func:`~shapeprog.vae.decode.sample` of ``image_shapes`` shapes) to
+        the TensorBoard logger, if there is one. Sampling that fails with a ``ValueError`` or ``RuntimeError`` is reported
         as a warning, not raised: a picture is not worth a long run."""
         exp = getattr(self.logger, "experiment", None) if self.logger is not None else None
         if not hasattr(exp, "add_image"):
             return
         size = self.hparams.image_size
-        pairs = [_render(p, size) for t, r in zip(trees, programs) for p in (tree_to_program(t), r)]
-        exp.add_image("val/reconstructions", _grid(pairs, 4), self.global_step, dataformats="HWC")
+        pairs = [_corners(p) for t, r in zip(trees, programs) for p in (tree_to_program(t), r)]
+        exp.add_image("val/reconstructions", render_grid(pairs, cols=4, size=size), self.global_step,
+                      dataformats="HWC")
         try:
-            samples = decode.sample(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
+            samples = sample(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
         except (ValueError, RuntimeError) as e:
             warnings.warn(f"no val/samples grid at step {self.global_step}: {e}", stacklevel=2)
             return
         if samples:
-            exp.add_image("val/samples", _grid([_render(d.program, size) for d in samples], 4), self.global_step,
-                          dataformats="HWC")
+            exp.add_image("val/samples", render_grid([_corners(d.program) for d in samples], cols=4, size=size),
+                          self.global_step, dataformats="HWC")
 
     def configure_optimizers(self):
         fused = self.device.type in ("cpu", "cuda")
