@@ -7,6 +7,7 @@
     python -m shapeprog sample chair -n 16 --seed 0 --out samples --png grid.png
     python -m shapeprog interpolate chair/173 chair/44017 --steps 8 --png interp.png
     python -m shapeprog reconstruct chair/173 -o recon.txt
+    python -m shapeprog export-weights runs/vae_chair/checkpoints/last.ckpt --out vae_chair.pt
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
 path of a UTF-8 ShapeAssembly file (corpus format with ``Assembly`` blocks, or the flat format).
@@ -285,6 +286,19 @@ def _cmd_reconstruct(args) -> int:
     return 0
 
 
+def _cmd_export_weights(args) -> int:
+    from .vae.pretrained import export_weights
+
+    _check_outputs(others=[args.out])
+    _refuse_overwrite([args.out], [args.checkpoint])
+    try:
+        path = export_weights(args.checkpoint, args.out, half=not args.float32)
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
+    print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
+    return 0
+
+
 def _int_at_least(low: int):
     """An argparse type: an int that is at least ``low``."""
     def convert(text: str) -> int:
@@ -369,6 +383,13 @@ def main(argv=None) -> int:
     c.add_argument("--seed", type=int, default=0, help="seed of the surface samples of the F-score")
     c.add_argument("--weights", help=weights_help)
     c.set_defaults(func=_cmd_reconstruct)
+    x = sub.add_parser("export-weights", help="write a VAE training checkpoint as a small weights file",
+                       description="Write the VAE of a Lightning checkpoint (or weights file) as a weights file "
+                                   "that --weights and shapeprog.vae.load_pretrained read.")
+    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config configs/shapeassembly/...`")
+    x.add_argument("--out", required=True, help="the weights file to write (.pt)")
+    x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
+    x.set_defaults(func=_cmd_export_weights)
     args = ap.parse_args(argv)
     try:
         with warnings.catch_warnings():

@@ -53,3 +53,21 @@ def test_interpolate_and_reconstruct(weights, tmp_path, capsys):
     parse(recon.read_text())
     with pytest.raises(SystemExit):
         main(["interpolate", "chair/173", "chair/44017", "--steps", "1", "--weights", weights])
+
+
+def test_export_weights_from_a_checkpoint(tmp_path, capsys):
+    from shapeprog.vae.pretrained import load_model
+
+    torch.manual_seed(1)
+    vae = VAE(hidden_dim=8)
+    ckpt = {"state_dict": {f"vae.{k}": v for k, v in vae.state_dict().items()},
+            "hyper_parameters": {"category": "storage", "hidden_dim": 8}, "epoch": 4, "global_step": 40}
+    torch.save(ckpt, tmp_path / "last.ckpt")
+    assert main(["export-weights", str(tmp_path / "last.ckpt"), "--out", str(tmp_path / "w.pt")]) == 0
+    assert "wrote" in capsys.readouterr().out
+    back = load_model(tmp_path / "w.pt", category="storage")
+    assert back.meta == {"epoch": 4, "global_step": 40}
+    with pytest.raises(SystemExit, match="no such weights file"):
+        main(["export-weights", str(tmp_path / "missing.ckpt"), "--out", str(tmp_path / "x.pt")])
+    with pytest.raises(SystemExit, match="is also an input|same file|input"):
+        main(["export-weights", str(tmp_path / "w.pt"), "--out", str(tmp_path / "w.pt")])
