@@ -8,6 +8,9 @@
     python -m shapeprog interpolate chair/173 chair/44017 --steps 8 --png interp.png
     python -m shapeprog reconstruct chair/173 -o recon.txt
     python -m shapeprog export-weights runs/vae_chair/checkpoints/last.ckpt --out vae_chair.pt
+    python -m shapeprog evaluate-generation --category chair -n 1000 --out table.md
+    python -m shapeprog evaluate-generation --category chair --programs samples/ --out table.md
+    python -m shapeprog train-classifier --out shapeprog/weights/pointnet_cls.pt
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
 path of a UTF-8 ShapeAssembly file (corpus format with ``Assembly`` blocks, or the flat format).
@@ -32,10 +35,12 @@ from . import corpus, io
 from .errors import ExecutionError, ParseError
 from .execute import execute
 from .fit import fit
+from .gentable import generation_table, train_category_classifier
 from .lang import parse
 from .limits import decode
 from .metrics import adaptive_threshold, chamfer, fscore
 from .picture import render_grid, render_png
+from .pointnet import save_classifier, sha256_file
 from .sampling import sample_surface
 from .silhouettes import build, write
 
@@ -299,6 +304,98 @@ def _cmd_export_weights(args) -> int:
     return 0
 
 
+def _read_programs(folder: str) -> list:
+    """The ``*.txt`` files of ``folder`` in name order, parsed; a file that does not decode or parse is
+    kept as its text (it counts as an invalid sample) and reported on stderr."""
+    path = Path(folder)
+    if not path.is_dir():
+        raise SystemExit(f"error: {folder}: no such folder")
+    files = sorted(path.glob("*.txt"))
+    if not files:
+        raise SystemExit(f"error: {folder}: no .txt program files")
+    out = []
+    for f in files:
+        text = ""
+        try:
+            text = decode(f.read_bytes(), str(f))
+            out.append(parse(text, file=str(f)))
+        except ParseError as e:
+            print(f"warning: {e}", file=sys.stderr)
+            out.append(text)
+    return out
+
+
+def _vae_samples(args) -> tuple[list, str, str]:
+    """``-n`` programs sampled from the VAE (``--weights`` or the shipped model), the row name and a line
+    on how often sampling was refused."""
+    from .vae import sample
+
+    vae = _load_vae(args, args.category)
+    t0 = time.perf_counter()
+    results = sample(vae, args.n, seed=args.seed, max_tries=10)
+    seconds = time.perf_counter() - t0
+    draws = sum(min(r.tries, 10) for r in results)
+    first = sum(r.tries == 1 for r in results) / len(results)
+    within = sum(r.tries <= 10 for r in results) / len(results)
+    where = args.weights or f"the shipped {args.category} model"
+    meta = getattr(vae, "meta", {}) or {}
+    epoch = f", epoch {meta['epoch']}" if "epoch" in meta else ""
+    line = (f"Samples: {len(results)} from {where}{epoch} (seed {args.seed}, validity-checked decoding with "
+            f"rejection, at most 10 draws each): {100 * first:.1f} % valid on the first draw, {100 * within:.1f} % "
+            f"within 10 draws, {100 * (1 - len(results) * within / max(draws, 1)):.1f} % of {draws} draws refused; "
+            f"sampling took {seconds:.1f} s ({len(results) / seconds:.1f} samples/s). A sample refused 10 times is "
+            f"decoded without rejection and kept.\n\n")
+    return [r.program for r in results], f"VAE samples ({where})", line
+
+
+def _cmd_evaluate_generation(args) -> int:
+    _check_outputs(others=[args.out])
+    if args.programs and args.n:
+        raise SystemExit("error: give either --programs DIR or -n N (samples of the VAE), not both")
+    header, name = "", f"programs in {args.programs}" if args.programs else "generated"
+    if args.n:
+        samples, name, header = _vae_samples(args)
+    else:
+        samples = _read_programs(args.programs) if args.programs else []
+    if not samples and args.no_ground_truth:
+        raise SystemExit("error: nothing to evaluate: give --programs or -n, or leave out --no-ground-truth")
+    pool = None
+    if args.workers > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"))
+    t0 = time.perf_counter()
+    try:
+        table = generation_table(samples, args.category, ground_truth=not args.no_ground_truth, executor=pool,
+                                 stability=not args.no_stability, fool=not args.no_fool, fool_epochs=args.fool_epochs,
+                                 fool_average_last=args.fool_average_last, fool_points=args.fool_points,
+                                 candidates=args.candidates or None, seed=args.seed,
+                                 name=name,
+                                 log=None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True)))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    table = header + table
+    sys.stdout.write(table)
+    if args.out:
+        atomic_write(args.out, table)
+        print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+def _cmd_train_classifier(args) -> int:
+    _check_outputs(others=[args.out])
+    model, meta = train_category_classifier(epochs=args.epochs, per_class=args.per_class, points=args.points,
+                                            finetune_epochs=args.finetune_epochs, seed=args.seed,
+                                            log=lambda s: print(s, flush=True))
+    save_classifier(args.out, model, meta["categories"], meta)
+    per = ", ".join(f"{c} {a:.1f}" for c, a in meta["val_accuracy_per_category"].items())
+    print(f"val accuracy {meta['val_accuracy']:.2f} % ({per}); trained in {meta['train_seconds']:.0f} s")
+    print(f"wrote {args.out}, SHA-256 {sha256_file(args.out)}")
+    return 0
+
+
 def _int_at_least(low: int):
     """An argparse type: an int that is at least ``low``."""
     def convert(text: str) -> int:
@@ -390,6 +487,40 @@ def main(argv=None) -> int:
     x.add_argument("--out", required=True, help="the weights file to write (.pt)")
     x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
     x.set_defaults(func=_cmd_export_weights)
+    e = sub.add_parser("evaluate-generation", help="the generation tables (Tables 2, 4, 5) of VAE samples or a folder of programs",
+                       description="Measure generated programs with the ShapeAssembly paper's generation metrics "
+                                   "(% rooted, % stable, % fool, FD, leaf parts, generalization, coverage, variety, "
+                                   "% novel) against the corpus train split, beside the ground truth (the val split) "
+                                   "and the paper's figures; print a markdown table.")
+    e.add_argument("--category", required=True, choices=corpus.CATEGORIES, help="the category the programs belong to")
+    e.add_argument("--programs", help="folder of program files (*.txt, one program each); without it, the "
+                                      "ground-truth row alone")
+    e.add_argument("-n", type=_int_at_least(1), help="evaluate N samples of the VAE (the shipped model of the "
+                                                    "category, or --weights) instead of a folder")
+    e.add_argument("--weights", help=weights_help)
+    e.add_argument("--out", help="also write the table to this markdown file")
+    e.add_argument("--no-ground-truth", action="store_true", help="leave out the ground-truth (val split) row")
+    e.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s per shape)")
+    e.add_argument("--no-fool", action="store_true", help="skip %% fool (trains a PointNet per row)")
+    e.add_argument("--fool-epochs", type=_int_at_least(1), default=12, help="%% fool training epochs (paper: 300)")
+    e.add_argument("--fool-average-last", type=_int_at_least(1), default=4, help="%% fool: epochs averaged at the end")
+    e.add_argument("--fool-points", type=_int_at_least(16), default=512, help="%% fool: points per shape")
+    e.add_argument("--candidates", type=_int_at_least(0), default=16,
+                   help="shapes measured exactly per nearest-chamfer search (0: every pair)")
+    e.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the per-shape work")
+    e.add_argument("--seed", type=int, default=0, help="seed of the sampling and of the %% fool training")
+    e.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    e.set_defaults(func=_cmd_evaluate_generation)
+    t = sub.add_parser("train-classifier", help="train the PointNet classifier of the generation metrics",
+                       description="Train the chair / table / storage PointNet classifier on the corpus train "
+                                   "split; print its val accuracy; write its weights and their SHA-256.")
+    t.add_argument("--out", required=True, help="weights file (.pt)")
+    t.add_argument("--epochs", type=_int_at_least(1), default=10, help="epochs on point subsets")
+    t.add_argument("--per-class", type=_int_at_least(1), default=500, help="shapes per category and epoch")
+    t.add_argument("--points", type=_int_at_least(16), default=512, help="points per shape and visit")
+    t.add_argument("--finetune-epochs", type=_int_at_least(0), default=1, help="final epochs on all 2,500 points")
+    t.add_argument("--seed", type=int, default=0, help="seed of the sampling and the training")
+    t.set_defaults(func=_cmd_train_classifier)
     args = ap.parse_args(argv)
     try:
         with warnings.catch_warnings():

@@ -71,3 +71,18 @@ def test_export_weights_from_a_checkpoint(tmp_path, capsys):
         main(["export-weights", str(tmp_path / "missing.ckpt"), "--out", str(tmp_path / "x.pt")])
     with pytest.raises(SystemExit, match="is also an input|same file|input"):
         main(["export-weights", str(tmp_path / "w.pt"), "--out", str(tmp_path / "w.pt")])
+
+
+def test_evaluate_generation_of_vae_samples(weights, tmp_path, monkeypatch):
+    from shapeprog import corpus
+
+    load = corpus.load
+    monkeypatch.setattr(corpus, "load", lambda *a, **k: load(*a, **k)[:6])  # 6 reference shapes per split
+    out = tmp_path / "table.md"
+    assert main(["evaluate-generation", "--category", "chair", "-n", "2", "--weights", weights, "--no-ground-truth",
+                 "--no-stability", "--no-fool", "--quiet", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert text.startswith(f"Samples: 2 from {weights}") and "valid on the first draw" in text
+    assert "VAE samples" in text
+    with pytest.raises(SystemExit, match="not both"):
+        main(["evaluate-generation", "--category", "chair", "-n", "2", "--programs", str(tmp_path)])

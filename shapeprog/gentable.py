@@ -1,0 +1,384 @@
+"""The ShapeAssembly paper's generation tables for a set of generated programs, and the classifier they use.
+
+:func:`generation_table` measures generated programs of one category with every metric of
+:mod:`shapeprog.genmetrics` (the paper's Table 2: % rooted, % stable, % fool, FD; Table 5: leaf parts;
+Table 4: generalization, coverage, variety; and % novel programs) against the corpus train split, adds a
+ground-truth row (the corpus val split through the same metrics) and the paper's figures, and returns
+a markdown table. :func:`evaluate_generation` gives one row as numbers. :func:`train_category_classifier`
+trains the PointNet whose features the Fréchet distance uses (``python -m shapeprog train-classifier``).
+Definitions and decisions: ``docs/generation_metrics.md``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+import torch
+
+from .genmetrics import (CHAMFER_POINTS, CLASSIFIER_POINTS, FoolResult, chamfer_clouds, classifier_clouds,
+                         classifier_features, execute_samples, frechet_distance, gaussian_fit, leaf_parts,
+                         nearest_chamfer, novelty, percent_fool)
+from .lang import Program
+
+__all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_table",
+           "table_notes", "train_category_classifier"]
+
+#: The ShapeAssembly paper's figures for its model (Tables 2, 4 and 5) and the ground truth's leaf parts.
+PAPER = {
+    "chair": {"rooted": 94.5, "stable": 84.7, "fool": 25.06, "fd": 22.34, "leaf_parts": 7.9,
+              "generalization": 0.108, "coverage": 0.118, "variety": 0.104, "gt_leaf_parts": 9.7},
+    "table": {"rooted": 96.2, "stable": 85.9, "fool": 33.21, "fd": 49.07, "leaf_parts": 7.84,
+              "generalization": 0.101, "coverage": 0.108, "variety": 0.102, "gt_leaf_parts": 8.4},
+    "storage": {"rooted": 95.3, "stable": 83.7, "fool": 13.50, "fd": 31.72, "leaf_parts": 8.4,
+                "generalization": 0.125, "coverage": 0.129, "variety": 0.119, "gt_leaf_parts": 10.8},
+}
+
+_COLUMNS = ("rooted", "stable", "fool", "fd", "leaf_parts", "generalization", "coverage", "variety", "novelty")
+_HEADERS = ("% rooted", "% stable", "% fool", "FD", "leaf parts", "generalization", "coverage", "variety",
+            "% novel")
+_DIGITS = {"rooted": 1, "stable": 1, "fool": 2, "fd": 2, "leaf_parts": 2, "generalization": 3,
+           "coverage": 3, "variety": 3, "novelty": 1}
+
+
+# --------------------------------------------------------------------------------------------------
+# the category classifier
+
+
+def _corpus(category: str, split: str) -> tuple[list[Program], list[torch.Tensor]]:
+    from . import corpus  # lazy: the corpus archive is read on first use
+
+    programs = [p for _, p in corpus.load(category, split)]
+    corners, errors = execute_samples(programs)
+    if errors:
+        raise ValueError(f"{category} {split}: {len(errors)} corpus programs failed: {errors[:3]}")
+    return programs, corners
+
+
+def train_category_classifier(
+    epochs: int = 10,
+    per_class: int = 500,
+    points: int = 512,
+    finetune_epochs: int = 1,
+    finetune_lr: float = 3e-4,
+    batch_size: int = 32,
+    lr: float = 1e-3,
+    seed: int = 0,
+    categories: Sequence[str] = ("chair", "table", "storage"),
+    log=None,
+    **model_kwargs,
+) -> tuple:
+    """Train the PointNet category classifier on the corpus train split; measure it on the val split.
+
+    Every executed train shape gives one :func:`~shapeprog.genmetrics.classifier_clouds` cloud of 2,500
+    points (seed ``seed``); :func:`shapeprog.pointnet.fit_classifier` draws ``per_class`` shapes of each
+    category per epoch and a random ``points``-point subset of each cloud per visit (cheap), then
+    ``finetune_epochs`` more epochs at learning rate ``finetune_lr`` use all 2,500 points, so that the
+    head and its batch norms see the max pool of the clouds the metrics use. The accuracy is measured on
+    the val split's clouds (seed ``seed + 1``) with all 2,500 points.
+
+    Returns:
+        ``(model, meta)``; ``meta`` records the settings, the val accuracy overall and per category
+        (percent), the shape counts and the training seconds.
+    """
+    from .pointnet import accuracy, fit_classifier
+
+    t0 = time.perf_counter()
+    data = {}
+    for split, s in (("train", seed), ("val", seed + 1)):
+        clouds, labels = [], []
+        for k, cat in enumerate(categories):
+            c = classifier_clouds(_corpus(cat, split)[1], seed=s)
+            clouds.append(c)
+            labels.append(torch.full((c.shape[0],), k, dtype=torch.long))
+        data[split] = (torch.cat(clouds), torch.cat(labels))
+    if log is not None:
+        log(f"clouds ready in {time.perf_counter() - t0:.1f} s: train {len(data['train'][1])}, "
+            f"val {len(data['val'][1])}")
+    t1 = time.perf_counter()
+    model = fit_classifier(*data["train"], k=len(categories), epochs=epochs, batch_size=batch_size, lr=lr,
+                           points=points, per_class=per_class, seed=seed, log=log, **model_kwargs)
+    if finetune_epochs:
+        model = fit_classifier(*data["train"], k=len(categories), epochs=finetune_epochs, batch_size=batch_size,
+                               lr=finetune_lr, points=None, per_class=per_class, seed=seed + 1, model=model, log=log)
+    train_s = time.perf_counter() - t1
+    val_clouds, val_labels = data["val"]
+    per_cat = {cat: accuracy(model, val_clouds[val_labels == k], val_labels[val_labels == k])
+               for k, cat in enumerate(categories)}
+    meta = {
+        "categories": list(categories), "epochs": epochs, "per_class": per_class, "points": points,
+        "finetune_epochs": finetune_epochs, "finetune_lr": finetune_lr, "cloud_points": CLASSIFIER_POINTS, "batch_size": batch_size, "lr": lr, "seed": seed,
+        "train_shapes": int(len(data["train"][1])), "val_shapes": int(len(val_labels)),
+        "val_accuracy": accuracy(model, val_clouds, val_labels), "val_accuracy_per_category": per_cat,
+        "train_seconds": round(train_s, 1), "torch": str(torch.__version__), "threads": torch.get_num_threads(),
+    }
+    return model, meta
+
+
+# --------------------------------------------------------------------------------------------------
+# reference sets
+
+
+@dataclass
+class References:
+    """The corpus sets a category's generated shapes are measured against, executed and sampled once.
+
+    Attributes:
+        category: ``"chair"``, ``"table"`` or ``"storage"``.
+        train_programs, val_programs: the corpus splits' programs.
+        train_corners, val_corners: their leaf corners ``(L, 8, 3)``.
+        train_clouds: :func:`~shapeprog.genmetrics.classifier_clouds` of the train shapes (the real
+            shapes of % fool), ``(T, 2500, 3)``.
+        train_fit: Gaussian fit ``(mu, cov)`` of the train shapes' classifier features (FD).
+        train_chamfer, val_chamfer: :func:`~shapeprog.genmetrics.chamfer_clouds` of both splits.
+        seed: the sampling seed (train clouds use ``seed``, val ``seed + 1``).
+    """
+
+    category: str
+    train_programs: list
+    val_programs: list
+    train_corners: list
+    val_corners: list
+    train_clouds: torch.Tensor
+    train_fit: tuple
+    train_chamfer: torch.Tensor
+    val_chamfer: torch.Tensor
+    seed: int = 0
+
+    @classmethod
+    def build(cls, category: str, model=None, seed: int = 0, chamfer_points: int = CHAMFER_POINTS,
+              log=None) -> "References":
+        """Execute and sample the corpus train and val splits of ``category``; fit the train features."""
+        t0 = time.perf_counter()
+        train_programs, train_corners = _corpus(category, "train")
+        val_programs, val_corners = _corpus(category, "val")
+        train_clouds = classifier_clouds(train_corners, seed=seed)
+        fit = gaussian_fit(classifier_features(train_clouds, model))
+        refs = cls(category, train_programs, val_programs, train_corners, val_corners, train_clouds, fit,
+                   chamfer_clouds(train_corners, chamfer_points, seed=seed),
+                   chamfer_clouds(val_corners, chamfer_points, seed=seed + 1), seed)
+        if log is not None:
+            log(f"{category}: train {len(train_corners)} and val {len(val_corners)} shapes executed, sampled "
+                f"and the train features fitted in {time.perf_counter() - t0:.1f} s")
+        return refs
+
+
+# --------------------------------------------------------------------------------------------------
+# one row
+
+
+@dataclass
+class GenerationRow:
+    """One row of the generation table (percentages 0-100; None where a metric was not computed).
+
+    ``samples`` programs were given, ``valid`` of them parsed and executed to at least one leaf cuboid;
+    every metric is over the valid ones. ``fool_detail`` keeps the % fool breakdown, ``errors`` the
+    failures, ``seconds`` the time per metric.
+    """
+
+    name: str
+    samples: int
+    valid: int
+    rooted: Optional[float] = None
+    stable: Optional[float] = None
+    fool: Optional[float] = None
+    fd: Optional[float] = None
+    leaf_parts: Optional[float] = None
+    generalization: Optional[float] = None
+    coverage: Optional[float] = None
+    variety: Optional[float] = None
+    novelty: Optional[float] = None
+    fool_detail: Optional[FoolResult] = None
+    errors: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+
+
+def _physics_job(job) -> tuple[bool, Optional[bool]]:
+    from .physics import rootedness, stability
+
+    corners, stable = job
+    rooted = rootedness(corners)
+    return rooted, (stability(corners) if rooted else False) if stable else None
+
+
+def _map(executor, fn, jobs) -> list:
+    return list(map(fn, jobs)) if executor is None else list(executor.map(fn, jobs, chunksize=8))
+
+
+def evaluate_generation(
+    samples: Sequence,
+    references: References,
+    name: str = "generated",
+    model=None,
+    executor=None,
+    stability: bool = True,
+    fool: bool = True,
+    fool_epochs: int = 12,
+    fool_average_last: int = 4,
+    fool_points: int = 512,
+    with_coverage: bool = True,
+    candidates: Optional[int] = 16,
+    chamfer_points: int = CHAMFER_POINTS,
+    seed: int = 0,
+    log=None,
+) -> GenerationRow:
+    """Every generation metric of ``samples`` (programs or texts) against ``references``.
+
+    Args:
+        samples: generated programs (``Program`` or text).
+        references: the category's corpus sets (:meth:`References.build`).
+        name: the row's name.
+        model: the PointNet whose features give the FD (default the shipped classifier); it must be the
+            one ``references`` was built with.
+        executor: a ``concurrent.futures.Executor`` for the per-shape work (physics, chamfer search); None
+            runs everything here.
+        stability: run the pybullet stability test (about 0.5 s per shape); False leaves it None.
+        fool: train the % fool classifier; ``fool_epochs``, ``fool_average_last`` and ``fool_points``
+            are its budget (:func:`~shapeprog.genmetrics.percent_fool`).
+        with_coverage: measure coverage of the val split (False for the val split itself).
+        candidates: exact chamfer candidates per shape (:func:`~shapeprog.genmetrics.nearest_chamfer`).
+        chamfer_points: surface points per shape of the chamfer metrics.
+        seed: sampling and training seed (samples use ``seed + 2``, their chamfer clouds ``seed + 3``).
+        log: a function taking a line of progress text.
+    """
+    say = log or (lambda s: None)
+    samples = list(samples)
+    corners, errors = execute_samples(samples)
+    valid = [i for i, c in enumerate(corners) if c is not None]
+    shapes = [corners[i] for i in valid]
+    row = GenerationRow(name, len(corners), len(valid), errors=errors)
+    if len(shapes) < 2:
+        say(f"{name}: only {len(shapes)} of {len(corners)} programs executed; nothing measured")
+        return row
+
+    def timed(key, fn):
+        t0 = time.perf_counter()
+        out = fn()
+        row.seconds[key] = round(time.perf_counter() - t0, 1)
+        say(f"{name}: {key} in {row.seconds[key]} s")
+        return out
+
+    row.leaf_parts = float(np.mean([leaf_parts(c) for c in shapes]))
+    progs = [samples[i] for i in valid]
+    row.novelty = timed("novelty", lambda: novelty(progs, references.train_programs))
+    phys = timed("physics", lambda: _map(executor, _physics_job, [(c.double().numpy(), stability) for c in shapes]))
+    row.rooted = 100.0 * float(np.mean([r for r, _ in phys]))
+    if stability:
+        row.stable = 100.0 * float(np.mean([s for _, s in phys]))
+    clouds = classifier_clouds(shapes, seed=seed + 2)
+    row.fd = timed("fd", lambda: frechet_distance(classifier_features(clouds, model), references.train_fit))
+    if fool:
+        row.fool_detail = timed("fool", lambda: percent_fool(clouds, references.train_clouds, epochs=fool_epochs,
+                                                             average_last=fool_average_last, points=fool_points,
+                                                             seed=seed))
+        row.fool = row.fool_detail.percent
+    gen = chamfer_clouds(shapes, chamfer_points, seed=seed + 3)
+    kw = dict(candidates=candidates, executor=executor)
+    row.generalization = timed("generalization",
+                               lambda: float(nearest_chamfer(gen, references.train_chamfer, **kw)[0].mean()))
+    if with_coverage:
+        row.coverage = timed("coverage", lambda: float(nearest_chamfer(references.val_chamfer, gen, **kw)[0].mean()))
+    row.variety = timed("variety", lambda: float(nearest_chamfer(gen, None, **kw)[0].mean()))
+    return row
+
+
+# --------------------------------------------------------------------------------------------------
+# the table
+
+
+def _cell(value, digits: int) -> str:
+    return "—" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}f}"
+
+
+def format_table(rows: Sequence[GenerationRow], category: str, notes: Sequence[str] = (), paper: bool = True) -> str:
+    """A markdown table of ``rows`` (and the paper's rows for ``category`` when ``paper``), then ``notes``."""
+    lines = [f"Generation metrics, {category}", "",
+             "| | " + " | ".join(_HEADERS) + " |", "|---" * (len(_HEADERS) + 1) + "|"]
+    for r in rows:
+        label = f"{r.name} ({r.valid} of {r.samples} programs)" if r.valid != r.samples else f"{r.name} ({r.samples})"
+        lines.append(f"| {label} | " + " | ".join(_cell(getattr(r, c), _DIGITS[c]) for c in _COLUMNS) + " |")
+    if paper and category in PAPER:
+        p = PAPER[category]
+        lines.append("| paper: ShapeAssembly | " + " | ".join(_cell(p.get(c), _DIGITS[c]) for c in _COLUMNS) + " |")
+        lines.append("| paper: ground truth | " + " | ".join(
+            _cell(p["gt_leaf_parts"] if c == "leaf_parts" else None, _DIGITS[c]) for c in _COLUMNS) + " |")
+    if notes:
+        lines += [""] + [f"* {n}" for n in notes]
+    return "\n".join(lines) + "\n"
+
+
+def table_notes(model_meta: dict, sha: Optional[str], fool_epochs: int, fool_average_last: int, fool_points: int,
+                chamfer_points: int, candidates: Optional[int], stability: bool) -> list[str]:
+    """The notes printed under a generation table: how each column was measured."""
+    acc = model_meta.get("val_accuracy")
+    acc_text = f", {acc:.1f} % correct on the corpus val split" if isinstance(acc, (int, float)) else ""
+    which = (f"this project's PointNet (global feature, 1024-d; weights SHA-256 {sha[:12]}…, trained on the "
+             f"corpus train split{acc_text})") if sha else "the classifier the caller passed"
+    return [
+        f"FD values are comparable only within one classifier: these use {which}; the paper's FD used a "
+        "ShapeNet classifier whose weights are not public, so its FD column is not comparable with ours.",
+        f"% fool: a binary PointNet trained from scratch for {fool_epochs} epochs (the paper: 300) on generated "
+        f"vs training shapes in equal numbers, {fool_points} points per shape, 20 % of each held out; the "
+        f"percentage of held-out shapes misclassified, averaged over the last {fool_average_last} epochs "
+        "(50 = indistinguishable).",
+        f"Chamfer columns: {chamfer_points} surface points per shape, every shape scaled to unit bounding-box "
+        "diagonal; the sum of both directions' mean nearest-point distances; nearest shapes by a grid estimate "
+        + ("and exact chamfer on every pair." if candidates is None else f"and exact chamfer on its {candidates} best candidates.")
+        + " Coverage is over the val split, so the ground-truth row has none.",
+        "Rooted and stable follow the reference code (2 % contact rule; stability: 2.5 % of the height, the "
+        "code's forces)" + ("." if stability else "; stability was not run."),
+        "Ground truth: the corpus val split through the same metrics (FD, % fool, generalization against "
+        "the train split). Leaf parts: leaf cuboids per executed program (= the reference's vertices / 8).",
+    ]
+
+
+def generation_table(
+    samples: Sequence,
+    category: str,
+    ground_truth: bool = True,
+    model=None,
+    references: Optional[References] = None,
+    executor=None,
+    stability: bool = True,
+    fool: bool = True,
+    fool_epochs: int = 12,
+    fool_average_last: int = 4,
+    fool_points: int = 512,
+    candidates: Optional[int] = 16,
+    chamfer_points: int = CHAMFER_POINTS,
+    seed: int = 0,
+    name: str = "generated",
+    log=None,
+) -> str:
+    """The paper's generation tables for ``samples`` of ``category``, as markdown.
+
+    Rows: the samples, the ground truth (the corpus val split, when ``ground_truth``), and the paper's
+    ShapeAssembly and ground-truth figures. Columns: % rooted, % stable, % fool, FD (Table 2), leaf parts
+    (Table 5), generalization, coverage, variety (Table 4), % novel programs. The notes under the table
+    say how each was measured. Arguments as :func:`evaluate_generation`; ``samples`` may be empty
+    (``[]``) with ``ground_truth=True`` for the ground-truth row alone.
+    """
+    from .pointnet import PRETRAINED, load_classifier, sha256_file
+
+    if category not in PAPER:
+        raise ValueError(f"unknown category {category!r}; expected one of {', '.join(PAPER)}")
+    meta, path = {}, None
+    if model is None:
+        model, _, meta = load_classifier()
+        path = PRETRAINED
+    refs = references or References.build(category, model, seed, chamfer_points, log)
+    kw = dict(model=model, executor=executor, stability=stability, fool=fool, fool_epochs=fool_epochs,
+              fool_average_last=fool_average_last, fool_points=fool_points, candidates=candidates,
+              chamfer_points=chamfer_points, seed=seed, log=log)
+    rows = []
+    samples = list(samples)
+    if samples:
+        rows.append(evaluate_generation(samples, refs, name=name, **kw))
+    if ground_truth:
+        rows.append(evaluate_generation(refs.val_programs, refs, name="ground truth: corpus val",
+                                        with_coverage=False, **kw))
+    sha = sha256_file(path) if path is not None else None
+    notes = table_notes(meta, sha, fool_epochs, fool_average_last, fool_points, chamfer_points, candidates, stability)
+    return format_table(rows, category, notes)
