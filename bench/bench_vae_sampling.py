@@ -16,8 +16,7 @@ Usage::
 
     python bench/bench_vae_sampling.py [--hidden 256] [--n 100] [--weights PATH] [--category chair]
 
-``--weights`` takes a ``state_dict`` of :class:`shapeprog.vae.VAE` (or a dict holding one under
-``"state_dict"``/``"model"``, with ``hidden_dim`` beside it).
+``--weights`` takes a weights file or a training checkpoint (:func:`shapeprog.vae.pretrained.load_model`).
 """
 from __future__ import annotations
 
@@ -33,6 +32,7 @@ import torch
 
 from shapeprog import corpus, parse
 from shapeprog.vae import VAE, sample
+from shapeprog.vae.pretrained import load_model
 from shapeprog.vae.decode import DecodeOptions, InvalidSample, _decode_with, _Net, _Replay, decode, decode_latent
 from shapeprog.vae.vectors import program_to_tree
 
@@ -69,20 +69,10 @@ class _Timed:
         return both
 
 
-def _load(path: str, hidden: int) -> VAE:
-    obj = torch.load(path, map_location="cpu", weights_only=True)
-    if isinstance(obj, dict) and ("state_dict" in obj or "model" in obj):
-        hidden = int(obj.get("hidden_dim", obj.get("hparams", {}).get("hidden_dim", hidden)))
-        obj = obj.get("state_dict", obj.get("model"))
-    vae = VAE(hidden)
-    vae.load_state_dict(obj)
-    return vae
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hidden", type=int, default=256, help="hidden_dim of a randomly initialised model")
-    ap.add_argument("--weights", default=None, help="a VAE state_dict to load instead")
+    ap.add_argument("--weights", default=None, help="a VAE weights file or training checkpoint to load instead")
     ap.add_argument("--n", type=int, default=100, help="samples for sample() and decode()")
     ap.add_argument("--max-tries", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
@@ -93,7 +83,7 @@ def main(argv=None):
     print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
           f"threads {torch.get_num_threads()}")
     torch.manual_seed(args.seed)
-    vae = _load(args.weights, args.hidden) if args.weights else VAE(args.hidden)
+    vae = load_model(args.weights) if args.weights else VAE(args.hidden)
     H = vae.decoder.hidden_dim
     print(f"# model: hidden_dim {H}, {'weights ' + args.weights if args.weights else 'random initialisation'}")
 
