@@ -104,6 +104,15 @@ def _write_mesh(path: str, shape) -> None:
         io.write_glb(path, shape.corners, labels=shape.line.numpy())
 
 
+def _emit_text(path: str | None, text: str) -> None:
+    """Write a program to ``path`` (atomically) or, without one, print it."""
+    if path:
+        atomic_write(path, text)
+        print(f"wrote {path}")
+    else:
+        sys.stdout.write(text)
+
+
 def _png(path: str, shape, size: int) -> None:
     render_png(shape.corners, path, labels=shape.line.numpy(), size=size)
 
@@ -150,11 +159,7 @@ def _cmd_fit(args) -> int:
     cd1, f1 = score(res.program)
     print(f"{prog.name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score {f0:.1f} -> {f1:.1f}, "
           f"{args.steps} steps in {res.seconds:.1f} s")
-    if args.output:
-        atomic_write(args.output, res.text)
-        print(f"wrote {args.output}")
-    else:
-        sys.stdout.write(res.text)
+    _emit_text(args.output, res.text)
     if args.mesh:
         with torch.no_grad():
             _write_mesh(args.mesh, prog.execute(res.program))
@@ -277,11 +282,7 @@ def _cmd_reconstruct(args) -> int:
             y, _ = sample_surface(target.corners, 10000, generator=g)
             score = f"F-score {fscore(x, y):.1f}, chamfer {float(chamfer(x, y)):.4f}"
     print(f"{prog.name}: reconstructed with {len(shape)} leaf cuboids (input {len(target)}), {score}")
-    if args.output:
-        atomic_write(args.output, result.text)
-        print(f"wrote {args.output}")
-    else:
-        sys.stdout.write(result.text)
+    _emit_text(args.output, result.text)
     if args.mesh:
         _write_mesh(args.mesh, shape)
     if args.png:
