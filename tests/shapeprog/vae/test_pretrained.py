@@ -64,3 +64,18 @@ def test_refusals_name_the_file(vae, tmp_path):
         read_weights(tmp_path / "missing.pt")
     with pytest.raises(ValueError, match="category must be one of chair, table, storage"):
         load_pretrained("lamp")
+
+
+@pytest.mark.parametrize("category", ["chair", "table", "storage"])
+def test_shipped_models_sample_valid_programs(category):
+    import shapeprog
+    from shapeprog.vae import sample
+
+    vae = load_pretrained(category)
+    assert vae.category == category and vae.decoder.hidden_dim == 256 and not vae.training
+    assert {"epoch", "global_step", "command"} <= set(vae.meta)
+    out = sample(vae, 4, seed=0)
+    assert [d.text for d in out] == [d.text for d in sample(vae, 4, seed=0)]  # deterministic under a seed
+    for d in out:
+        assert shapeprog.parse(d.text) == d.program
+        assert len(shapeprog.execute(d.program)) >= 2  # a trained model writes parts, not a lone bbox
