@@ -33,7 +33,8 @@ import torch
 from shapeprog import corpus, parse
 from shapeprog.vae import VAE, sample
 from shapeprog.vae.pretrained import load_model
-from shapeprog.vae.decode import DecodeOptions, InvalidSample, _decode_with, _Net, _Replay, decode, decode_latent
+from shapeprog.vae.decode import DecodeOptions, InvalidSample, _decode_with, _Net, decode, decode_latent
+from shapeprog.vae.replay import Replay
 from shapeprog.vae.vectors import program_to_tree
 
 
@@ -41,7 +42,7 @@ class _Timed:
     """The real network running every call the decoding makes, with the replayed program's outputs."""
 
     def __init__(self, net, hidden_dim: int, generator: torch.Generator):
-        self.net, self.replay, self.H, self.gen = net, _Replay(), hidden_dim, generator
+        self.net, self.replay, self.H, self.gen = net, Replay(), hidden_dim, generator
 
     def latent(self, tree):
         return (self.net.latent(torch.randn(self.H, generator=self.gen)), self.replay.latent(tree))
@@ -137,7 +138,7 @@ def main(argv=None):
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             t0 = time.perf_counter()
             for tree in trees:
-                _decode_with(_Replay(), tree, False, opts)
+                _decode_with(Replay(), tree, False, opts)
             rules = time.perf_counter() - t0
         print(f"corpus replay ({len(trees)} {args.category} programs, network of hidden_dim {H} run at every step): "
               f"{len(trees) / wall:.1f} programs/s ({cpu / len(trees) * 1e3:.1f} ms CPU each); "

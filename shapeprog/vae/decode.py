@@ -196,63 +196,6 @@ class _Net:
         return self.next_net(h, ctx["next"])
 
 
-class _Replay:
-    """A stand-in for the network that replays a line-vector tree (:func:`program_to_tree`): every
-    step predicts the tree's next line (one-hot logits scaled by 10, the line's own numbers), so that
-    decoding shows what the validity rules make of a given program. ``z`` is the tree itself."""
-
-    def latent(self, tree):
-        return (tree, -1)
-
-    def root_bbox(self, tree) -> list[float]:
-        return tree.bbox_dims.tolist()
-
-    def begin(self, h_start, bbox_dims, depth) -> dict:
-        node = h_start[0]
-        rows = node.lines.tolist()
-        cub = [i for i, r in enumerate(rows) if max(range(7), key=r.__getitem__) == CUBOID]
-        kids = {row: (node.children[j] if j < len(node.children) else None) for j, row in enumerate(cub)}
-        return {"rows": rows, "kids": kids}
-
-    def step(self, line, h, ctx):
-        return (h[0], h[1] + 1)
-
-    def _row(self, h, ctx) -> list[float]:
-        rows = ctx["rows"]
-        if h[1] < len(rows):
-            return rows[h[1]]
-        stop = [0.0] * LINE_DIM
-        stop[STOP] = 1.0
-        return stop
-
-    def command(self, h, ctx):
-        return [10.0 * x for x in self._row(h, ctx)[0:7]]
-
-    def cubes(self, h, ctx, cmd):
-        return [10.0 * x for x in self._row(h, ctx)[CUBE1.start:CUBE3.stop]]
-
-    def cuboid(self, h, ctx):
-        r = self._row(h, ctx)
-        return r[DIMS], 10.0 if r[ALIGNED] > 0 else -10.0
-
-    def attach(self, h, ctx, a, b):
-        return self._row(h, ctx)[ATTACH]
-
-    def sym(self, h, ctx, a):
-        r = self._row(h, ctx)
-        return [10.0 * x for x in r[AXIS]] + [r[COUNT], r[DIST]]
-
-    def squeeze(self, h, ctx, a, b, c):
-        r = self._row(h, ctx)
-        return [10.0 * x for x in r[FACE]] + r[UV]
-
-    def leaf(self, h, ctx):
-        return -10.0 if ctx["kids"].get(h[1]) is not None else 10.0
-
-    def child(self, h, ctx):
-        return (ctx["kids"][h[1]], -1)
-
-
 def _finite(values: Sequence[float], what: str) -> list[float]:
     values = list(values)
     if not all(math.isfinite(v) for v in values):

@@ -9,7 +9,8 @@ import shapeprog
 from shapeprog import corpus
 from shapeprog.errors import ParseError
 from shapeprog.vae import VAE, Decoded, Decoder, InvalidSample, decode, decode_latent, encode, interpolate, sample
-from shapeprog.vae.decode import _Budget, _decode_tree, _decode_with, _Net, _program, _propose, _Replay
+from shapeprog.vae.decode import _Budget, _decode_tree, _decode_with, _Net, _program, _propose
+from shapeprog.vae.replay import Replay
 from shapeprog.vae.validity import (ATTACH_MODE, CUBOID_MODE, FORBIDDEN, START_MODE, SYM_MODE, DecodeOptions, Line,
                                     NodeState, allowed_commands, choose_attach, choose_reflect, choose_reflect_axis,
                                     choose_squeeze, choose_squeeze_face, choose_translate, clean_attach, clean_cuboid,
@@ -438,7 +439,7 @@ def test_corpus_programs_replayed_through_the_rules_come_back():
     sample_ = random.Random(0).sample(names, 60)
     for c, i in sample_:
         prog = shapeprog.parse(corpus.read(c, i), f"{c}/{i}.txt")
-        d = _decode_with(_Replay(), program_to_tree(prog, dtype=torch.float64), False, DecodeOptions())
+        d = _decode_with(Replay(), program_to_tree(prog, dtype=torch.float64), False, DecodeOptions())
         check_decoded(d.program)
         same += d.text == shapeprog.to_text(prog)
     assert same >= 0.85 * len(sample_)
@@ -455,8 +456,8 @@ def test_the_node_limit_turns_further_sub_programs_into_leaves():
         text += (f"Assembly Program_{k} {{\n\tbbox = Cuboid(0.3, 0.3, 0.3, True)\n\tcube0 = Cuboid(0.1, 0.1, 0.1, True)\n"
                  "\tattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n}\n")
     tree = program_to_tree(shapeprog.parse(text), dtype=torch.float64)
-    assert _decode_with(_Replay(), tree, False, DecodeOptions()).text == text
-    d = _decode_with(_Replay(), tree, False, DecodeOptions(max_nodes=2))
+    assert _decode_with(Replay(), tree, False, DecodeOptions()).text == text
+    d = _decode_with(Replay(), tree, False, DecodeOptions(max_nodes=2))
     assert [b.name for b in d.program.blocks] == ["Program_0", "Program_1"]
     assert "\tcube1 = Cuboid(0.3, 0.3, 0.3, True)" in d.text and "cube2 = Cuboid" in d.text
     check_decoded(d.program)
