@@ -102,7 +102,7 @@ class _Net:
 
     The same arithmetic as :meth:`Decoder.forward` (tested), without the batch and time dimensions, and
     with each head run only when the line needs it. The decoding loop talks to the network through
-    these methods only (:class:`_Replay` is a stand-in with the same methods).
+    these methods only (:class:`~shapeprog.vae.replay.Replay` is a stand-in with the same methods).
     """
 
     def __init__(self, decoder: Decoder, backend: str | None = None):
