@@ -193,16 +193,47 @@ def _load_vae(args, category: str | None):
         raise SystemExit(f"error: {e}") from None
 
 
-def _write_decoded(folder: Path, stem: str, result) -> None:
-    """``stem.txt`` (the program) and ``stem.obj`` (its cuboids) in ``folder``."""
-    atomic_write(folder / f"{stem}.txt", result.text)
-    with torch.no_grad():
-        io.write_obj(folder / f"{stem}.obj", execute(result.program).corners)
+def _export_decoded(results, out: str | None, name: str, png: str | None, cols: int, size: int,
+                    progress: bool = False) -> None:
+    """Write decoded programs: ``name.format(i)`` + ``.txt`` and ``.obj`` in ``out``, a picture grid ``png``
+    (``cols`` cells of ``size`` pixels per row); print the programs when neither is given. Each program is
+    executed once."""
+    from tqdm import tqdm
+
+    if not out and not png:
+        for i, r in enumerate(results):
+            print(f"# {name.split('_')[0]} {i}\n{r.text}")
+        return
+    if out:
+        Path(out).mkdir(parents=True, exist_ok=True)
+    shapes = []
+    for i, r in enumerate(tqdm(results, desc="writing", unit="shape", disable=not progress)):
+        with torch.no_grad():
+            shape = execute(r.program)
+        if out:
+            atomic_write(Path(out) / f"{name.format(i)}.txt", r.text)
+            io.write_obj(Path(out) / f"{name.format(i)}.obj", shape.corners)
+        shapes.append((shape.corners, shape.line.numpy()))
+    if out:
+        print(f"wrote {len(results)} programs and meshes to {out}/")
+    if png:
+        render_grid(shapes, png, cols=cols, size=size)
+        print(f"wrote {png}")
+
+
+def _sampling_report(results, max_tries: int, seconds: float) -> str:
+    """How often :func:`shapeprog.vae.sample` was refused: first-draw and within-``max_tries`` shares, the
+    refused share of all draws, and the rate."""
+    n = len(results)
+    draws = sum(min(r.tries, max_tries) for r in results)
+    first = sum(r.tries == 1 for r in results)
+    within = sum(r.tries <= max_tries for r in results)
+    return (f"{100 * first / n:.1f} % valid on the first draw, {100 * within / n:.1f} % within {max_tries} draws, "
+            f"{100 * (1 - within / max(draws, 1)):.1f} % of {draws} draws refused; sampling took {seconds:.1f} s "
+            f"({n / seconds:.1f} samples/s)")
 
 
 def _cmd_sample(args) -> int:
-    from tqdm import tqdm
-
     from .vae import sample
 
     _check_outputs(others=[args.png])
@@ -214,24 +245,7 @@ def _cmd_sample(args) -> int:
     within = sum(r.tries <= args.max_tries for r in results)
     print(f"{args.n} samples of {vae.category} in {seconds:.1f} s ({args.n / seconds:.1f}/s): "
           f"{first} valid on the first try, {within} within {args.max_tries} tries")
-    shapes = []
-    if args.out:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-    for i, r in enumerate(tqdm(results, desc="writing", unit="shape", disable=not args.out or args.quiet)):
-        if args.out:
-            _write_decoded(Path(args.out), f"sample_{i:04d}", r)
-        if args.png:
-            with torch.no_grad():
-                shape = execute(r.program)
-            shapes.append((shape.corners, shape.line.numpy()))
-    if args.out:
-        print(f"wrote {len(results)} programs and meshes to {args.out}/")
-    if args.png:
-        render_grid(shapes, args.png, cols=args.cols, size=args.size)
-        print(f"wrote {args.png}")
-    if not args.out and not args.png:
-        for i, r in enumerate(results):
-            print(f"# sample {i}\n{r.text}")
+    _export_decoded(results, args.out, "sample_{:04d}", args.png, args.cols, args.size, progress=not args.quiet)
     return 0
 
 
@@ -248,19 +262,7 @@ def _cmd_interpolate(args) -> int:
     _refuse_overwrite([args.png], [args.a, args.b])
     vae = _load_vae(args, args.category or _category_of(args.a) or _category_of(args.b))
     results = interpolate(vae, a.program, b.program, args.steps)
-    if args.out:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        for i, r in enumerate(results):
-            _write_decoded(Path(args.out), f"step_{i:03d}", r)
-        print(f"wrote {len(results)} programs and meshes to {args.out}/")
-    if args.png:
-        with torch.no_grad():
-            shapes = [(s.corners, s.line.numpy()) for s in (execute(r.program) for r in results)]
-        render_grid(shapes, args.png, cols=len(shapes), size=args.size)
-        print(f"wrote {args.png}")
-    if not args.out and not args.png:
-        for i, r in enumerate(results):
-            print(f"# step {i}\n{r.text}")
+    _export_decoded(results, args.out, "step_{:03d}", args.png, len(results), args.size)
     return 0
 
 
@@ -335,17 +337,12 @@ def _vae_samples(args) -> tuple[list, str, str]:
     t0 = time.perf_counter()
     results = sample(vae, args.n, seed=args.seed, max_tries=10)
     seconds = time.perf_counter() - t0
-    draws = sum(min(r.tries, 10) for r in results)
-    first = sum(r.tries == 1 for r in results) / len(results)
-    within = sum(r.tries <= 10 for r in results) / len(results)
     where = args.weights or f"the shipped {args.category} model"
     meta = getattr(vae, "meta", {}) or {}
     epoch = f", epoch {meta['epoch']}" if "epoch" in meta else ""
     line = (f"Samples: {len(results)} from {where}{epoch} (seed {args.seed}, validity-checked decoding with "
-            f"rejection, at most 10 draws each): {100 * first:.1f} % valid on the first draw, {100 * within:.1f} % "
-            f"within 10 draws, {100 * (1 - len(results) * within / max(draws, 1)):.1f} % of {draws} draws refused; "
-            f"sampling took {seconds:.1f} s ({len(results) / seconds:.1f} samples/s). A sample refused 10 times is "
-            f"decoded without rejection and kept.\n\n")
+            f"rejection, at most 10 draws each): {_sampling_report(results, 10, seconds)}. A sample refused 10 "
+            f"times is decoded without rejection and kept.\n\n")
     return [r.program for r in results], f"VAE samples ({where})", line
 
 
