@@ -350,6 +350,14 @@ def _cmd_evaluate_generation(args) -> int:
     _check_outputs(others=[args.out])
     if args.programs and args.n:
         raise SystemExit("error: give either --programs DIR or -n N (samples of the VAE), not both")
+    model = None
+    if args.classifier:
+        from .pointnet import load_classifier
+
+        try:
+            model = load_classifier(args.classifier)[0]
+        except (FileNotFoundError, ValueError) as e:
+            raise SystemExit(f"error: {e}") from None
     header, name = "", f"programs in {args.programs}" if args.programs else "generated"
     if args.n:
         samples, name, header = _vae_samples(args)
@@ -366,6 +374,7 @@ def _cmd_evaluate_generation(args) -> int:
     t0 = time.perf_counter()
     try:
         table = generation_table(samples, args.category, ground_truth=not args.no_ground_truth, executor=pool,
+                                 model=model,
                                  stability=not args.no_stability, fool=not args.no_fool, fool_epochs=args.fool_epochs,
                                  fool_average_last=args.fool_average_last, fool_points=args.fool_points,
                                  candidates=args.candidates or None, seed=args.seed,
@@ -496,6 +505,8 @@ def main(argv=None) -> int:
     e.add_argument("-n", type=_int_at_least(1), help="evaluate N samples of the VAE (the shipped model of the "
                                                     "category, or --weights) instead of a folder")
     e.add_argument("--weights", help=weights_help)
+    e.add_argument("--classifier", help="PointNet weights for FD and the features (a train-classifier output; "
+                                        "default: the shipped shapeprog/weights/pointnet_cls.pt)")
     e.add_argument("--out", help="also write the table to this markdown file")
     e.add_argument("--no-ground-truth", action="store_true", help="leave out the ground-truth (val split) row")
     e.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s per shape)")

@@ -84,5 +84,22 @@ def test_evaluate_generation_of_vae_samples(weights, tmp_path, monkeypatch):
     text = out.read_text()
     assert text.startswith(f"Samples: 2 from {weights}") and "valid on the first draw" in text
     assert "VAE samples" in text
+    with pytest.raises(SystemExit, match=r"missing\.pt: no such weights file"):
+        main(["evaluate-generation", "--category", "chair", "--classifier", str(tmp_path / "missing.pt")])
     with pytest.raises(SystemExit, match="not both"):
         main(["evaluate-generation", "--category", "chair", "-n", "2", "--programs", str(tmp_path)])
+
+
+def test_evaluate_generation_with_another_classifier(weights, tmp_path, monkeypatch):
+    from shapeprog import corpus
+    from shapeprog.pointnet import PointNetCls, save_classifier
+
+    load = corpus.load
+    monkeypatch.setattr(corpus, "load", lambda *a, **k: load(*a, **k)[:6])
+    torch.manual_seed(0)
+    mine = save_classifier(tmp_path / "mine.pt", PointNetCls(k=3), ["chair", "table", "storage"])
+    out = tmp_path / "table.md"
+    assert main(["evaluate-generation", "--category", "chair", "-n", "2", "--weights", weights, "--no-ground-truth",
+                 "--no-stability", "--no-fool", "--quiet", "--classifier", str(mine), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "VAE samples" in text and "these use the classifier the caller passed" in text  # not the shipped one
