@@ -110,9 +110,8 @@ def save_weights(vae: VAE, out, category: str, meta: dict | None = None, half: b
 
 def export_weights(checkpoint, out, half: bool = True, meta: dict | None = None) -> Path:
     """Write the VAE of a training checkpoint as a small weights file (``meta`` adds to the recorded)."""
-    info, _ = read_weights(checkpoint)
-    vae = load_model(checkpoint)
-    return save_weights(vae, out, info["category"], {**info["meta"], **(meta or {})}, half)
+    vae = load_model(checkpoint)  # its category and meta come with it
+    return save_weights(vae, out, vae.category, {**vae.meta, **(meta or {})}, half)
 
 
 def load_pretrained(category: str = "chair", device=None) -> VAE:

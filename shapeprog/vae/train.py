@@ -40,7 +40,7 @@ from .model import VAE
 from .vectors import VectorNode, program_to_tree, tree_to_program
 
 __all__ = ["CATEGORIES", "CHECKPOINT_FORMAT", "VAEDataModule", "VAEModule", "load_trees",
-           "reconstruct", "reconstruction_fscores", "validation_split"]
+           "reconstruct", "reconstruction_fscores", "target_surfaces", "validation_split"]
 
 #: The categories a run trains on: one of the corpus's, or all three together.
 CATEGORIES = corpus.CATEGORIES + ("all",)
@@ -217,8 +217,16 @@ def reconstruct(vae: VAE, trees: list[VectorNode]) -> list:
     return out
 
 
-def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int = 10_000,
-                           seed: int = 0) -> list[float | None]:
+def target_surfaces(trees: list[VectorNode], points: int = 10_000, seed: int = 0) -> list[torch.Tensor]:
+    """``points`` surface samples ``(points, 3)`` of each tree's executed program
+    (:func:`~shapeprog.vae.vectors.tree_to_program`): the targets of :func:`reconstruction_fscores`, drawn
+    once for a fixed set of shapes."""
+    gen = torch.Generator().manual_seed(int(seed))
+    return [sample_surface(execute(tree_to_program(t)).corners, points, gen)[0] for t in trees]
+
+
+def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int = 10_000, seed: int = 0,
+                           targets: list[torch.Tensor] | None = None) -> list[float | None]:
     """The F-score (0-100, :func:`shapeprog.metrics.fscore`) of each tree's shape against a program's.
 
     ``points`` surface samples of each executed shape are compared (10,000 in the paper); the target
@@ -229,15 +237,18 @@ def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int 
         programs: one program (or None) per tree, e.g. :func:`reconstruct` of the trees.
         points: surface samples per shape.
         seed: the samples' draw.
+        targets: :func:`target_surfaces` of ``trees`` with the same ``points`` and ``seed``, when already
+            drawn (the same scores, without executing and sampling the targets again).
 
     Returns:
         One F-score per tree, None where the program is None or cannot be executed or sampled (no leaf
         cuboid, a non-finite corner).
     """
-    gen = torch.Generator().manual_seed(int(seed))
+    if targets is None:
+        targets = target_surfaces(trees, points, seed)
+    gen = torch.Generator().manual_seed(int(seed) + 1)
     out: list[float | None] = []
-    for tree, program in zip(trees, programs):
-        target, _ = sample_surface(execute(tree_to_program(tree)).corners, points, gen)
+    for target, program in zip(targets, programs):
         try:
             if program is None:
                 raise ValueError("no program")
@@ -247,6 +258,16 @@ def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int 
             continue
         out.append(fscore(pred, target))
     return out
+
+
+def _same_trees(a: list[VectorNode], b: list[VectorNode]) -> bool:
+    """Whether two lists hold the same trees (equal line vectors and structure)."""
+    def same(x, y) -> bool:
+        if x is None or y is None:
+            return x is y
+        return (len(x.children) == len(y.children) and torch.equal(x.lines.cpu(), y.lines.cpu())
+                and all(same(c, d) for c, d in zip(x.children, y.children)))
+    return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
 
 
 def _corners(program) -> torch.Tensor:
@@ -302,6 +323,8 @@ class VAEModule(L.LightningModule):
             self.weights["kl"] = float(kl_weight)
         self.vae = VAE(hidden_dim)
         self._recon_trees: list[VectorNode] = []
+        # the F-score's shapes and their target samples, drawn on the first reconstruction epoch
+        self._recon_targets: tuple[list[VectorNode], list[torch.Tensor]] | None = None
         self._window: torch.Tensor | None = None  # the training terms summed since they were last logged
         self._window_shapes = 0
 
@@ -393,8 +416,11 @@ class VAEModule(L.LightningModule):
         trees, self._recon_trees = self._recon_trees, []
         if not trees or not self.recon_epoch():
             return
+        points, seed = self.hparams.recon_points, self.hparams.seed
+        if self._recon_targets is None or not _same_trees(self._recon_targets[0], trees):
+            self._recon_targets = (trees, target_surfaces(trees, points, seed))
         programs = reconstruct(self.vae, trees)
-        scores = reconstruction_fscores(trees, programs, self.hparams.recon_points, self.hparams.seed)
+        scores = reconstruction_fscores(trees, programs, points, seed, targets=self._recon_targets[1])
         self.log("val/fscore", float(np.mean([s or 0.0 for s in scores])), sync_dist=True, prog_bar=True)
         self.log("val/recon_failed", sum(s is None for s in scores) / len(scores), sync_dist=True)
         k = self.hparams.image_shapes

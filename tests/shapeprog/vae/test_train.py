@@ -275,6 +275,8 @@ def test_reconstruction_hook_logs_fscore_and_images(tmp_path, monkeypatch):
     trainer.fit(model, dm)
     scores = vae_train.reconstruction_fscores(dm.val_trees[:2], [target, target], points=500, seed=42)
     assert scores[0] > 80 and scores[0] > scores[1]
+    targets = vae_train.target_surfaces(dm.val_trees[:2], points=500, seed=42)  # drawn once, as the hook keeps them
+    assert vae_train.reconstruction_fscores(dm.val_trees[:2], [target, target], 500, 42, targets=targets) == scores
     assert trainer.callback_metrics["val/fscore"] == pytest.approx(sum(scores) / 2, rel=1e-5)
     assert trainer.callback_metrics["val/recon_failed"] == 0.0
     assert best.best_model_path and (Path(logger.log_dir) / "split.json").is_file()
