@@ -19,8 +19,8 @@ import numpy as np
 import torch
 
 from .genmetrics import (CHAMFER_POINTS, CLASSIFIER_POINTS, FoolResult, chamfer_clouds, classifier_clouds,
-                         classifier_features, execute_samples, frechet_distance, gaussian_fit, leaf_parts,
-                         nearest_chamfer, novelty, percent_fool)
+                         classifier_features, coverage, execute_samples, frechet_distance, gaussian_fit,
+                         generalization, leaf_parts, novelty, percent_fool, variety)
 from .lang import Program
 
 __all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_table",
@@ -200,7 +200,9 @@ def _physics_job(job) -> tuple[bool, Optional[bool]]:
 
     corners, stable = job
     rooted = rootedness(corners)
-    return rooted, (stability(corners) if rooted else False) if stable else None
+    if not stable:
+        return rooted, None
+    return rooted, rooted and stability(corners)
 
 
 def _map(executor, fn, jobs) -> list:
@@ -276,11 +278,10 @@ def evaluate_generation(
         row.fool = row.fool_detail.percent
     gen = chamfer_clouds(shapes, chamfer_points, seed=seed + 3)
     kw = dict(candidates=candidates, executor=executor)
-    row.generalization = timed("generalization",
-                               lambda: float(nearest_chamfer(gen, references.train_chamfer, **kw)[0].mean()))
+    row.generalization = timed("generalization", lambda: generalization(gen, references.train_chamfer, **kw))
     if with_coverage:
-        row.coverage = timed("coverage", lambda: float(nearest_chamfer(references.val_chamfer, gen, **kw)[0].mean()))
-    row.variety = timed("variety", lambda: float(nearest_chamfer(gen, None, **kw)[0].mean()))
+        row.coverage = timed("coverage", lambda: coverage(references.val_chamfer, gen, **kw))
+    row.variety = timed("variety", lambda: variety(gen, **kw))
     return row
 
 
