@@ -361,14 +361,14 @@ def generation_table(
     say how each was measured. Arguments as :func:`evaluate_generation`; ``samples`` may be empty
     (``[]``) with ``ground_truth=True`` for the ground-truth row alone.
     """
-    from .pointnet import PRETRAINED, load_classifier, sha256_file
+    from .pointnet import PRETRAINED_SHA256, load_classifier
 
     if category not in PAPER:
         raise ValueError(f"unknown category {category!r}; expected one of {', '.join(PAPER)}")
-    meta, path = {}, None
+    meta, sha = {}, None
     if model is None:
-        model, _, meta = load_classifier()
-        path = PRETRAINED
+        model, _, meta = load_classifier()  # checks the file against PRETRAINED_SHA256
+        sha = PRETRAINED_SHA256
     refs = references or References.build(category, model, seed, chamfer_points, log)
     kw = dict(model=model, executor=executor, stability=stability, fool=fool, fool_epochs=fool_epochs,
               fool_average_last=fool_average_last, fool_points=fool_points, candidates=candidates,
@@ -380,6 +380,5 @@ def generation_table(
     if ground_truth:
         rows.append(evaluate_generation(refs.val_programs, refs, name="ground truth: corpus val",
                                         with_coverage=False, **kw))
-    sha = sha256_file(path) if path is not None else None
     notes = table_notes(meta, sha, fool_epochs, fool_average_last, fool_points, chamfer_points, candidates, stability)
     return format_table(rows, category, notes)
