@@ -27,7 +27,7 @@ import torch
 
 from shapeprog.genmetrics import nearest_chamfer
 from shapeprog.gentable import References, evaluate_generation, format_table, table_notes
-from shapeprog.pointnet import PRETRAINED, load_classifier, sha256_file
+from shapeprog.pointnet import PRETRAINED_SHA256, load_classifier
 
 
 def main(argv=None):
@@ -47,7 +47,7 @@ def main(argv=None):
     print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
           f"threads {torch.get_num_threads()}, workers {args.workers}; load average {os.getloadavg()[0]:.1f}")
     t0, c0 = time.perf_counter(), time.process_time()
-    model, _, meta = load_classifier()
+    model, _, meta = load_classifier()  # checks the file against PRETRAINED_SHA256
     pool = None
     if args.workers > 1:
         pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"))
@@ -72,7 +72,7 @@ def main(argv=None):
     finally:
         if pool is not None:
             pool.shutdown()
-    notes = table_notes(meta, sha256_file(PRETRAINED), args.fool_epochs, args.fool_average_last, args.fool_points,
+    notes = table_notes(meta, PRETRAINED_SHA256, args.fool_epochs, args.fool_average_last, args.fool_points,
                    len(refs.train_chamfer[0]), args.candidates, not args.no_stability)
     print()
     print(format_table([row], args.category, notes))

@@ -19,8 +19,8 @@ import numpy as np
 import torch
 
 from .genmetrics import (CHAMFER_POINTS, CLASSIFIER_POINTS, FoolResult, chamfer_clouds, classifier_clouds,
-                         classifier_features, execute_samples, frechet_distance, gaussian_fit, leaf_parts,
-                         nearest_chamfer, novelty, percent_fool)
+                         classifier_features, coverage, execute_samples, frechet_distance, gaussian_fit,
+                         generalization, leaf_parts, novelty, percent_fool, variety)
 from .lang import Program
 
 __all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_table",
@@ -200,7 +200,9 @@ def _physics_job(job) -> tuple[bool, Optional[bool]]:
 
     corners, stable = job
     rooted = rootedness(corners)
-    return rooted, (stability(corners) if rooted else False) if stable else None
+    if not stable:
+        return rooted, None
+    return rooted, rooted and stability(corners)
 
 
 def _map(executor, fn, jobs) -> list:
@@ -276,11 +278,10 @@ def evaluate_generation(
         row.fool = row.fool_detail.percent
     gen = chamfer_clouds(shapes, chamfer_points, seed=seed + 3)
     kw = dict(candidates=candidates, executor=executor)
-    row.generalization = timed("generalization",
-                               lambda: float(nearest_chamfer(gen, references.train_chamfer, **kw)[0].mean()))
+    row.generalization = timed("generalization", lambda: generalization(gen, references.train_chamfer, **kw))
     if with_coverage:
-        row.coverage = timed("coverage", lambda: float(nearest_chamfer(references.val_chamfer, gen, **kw)[0].mean()))
-    row.variety = timed("variety", lambda: float(nearest_chamfer(gen, None, **kw)[0].mean()))
+        row.coverage = timed("coverage", lambda: coverage(references.val_chamfer, gen, **kw))
+    row.variety = timed("variety", lambda: variety(gen, **kw))
     return row
 
 
@@ -360,14 +361,14 @@ def generation_table(
     say how each was measured. Arguments as :func:`evaluate_generation`; ``samples`` may be empty
     (``[]``) with ``ground_truth=True`` for the ground-truth row alone.
     """
-    from .pointnet import PRETRAINED, load_classifier, sha256_file
+    from .pointnet import PRETRAINED_SHA256, load_classifier
 
     if category not in PAPER:
         raise ValueError(f"unknown category {category!r}; expected one of {', '.join(PAPER)}")
-    meta, path = {}, None
+    meta, sha = {}, None
     if model is None:
-        model, _, meta = load_classifier()
-        path = PRETRAINED
+        model, _, meta = load_classifier()  # checks the file against PRETRAINED_SHA256
+        sha = PRETRAINED_SHA256
     refs = references or References.build(category, model, seed, chamfer_points, log)
     kw = dict(model=model, executor=executor, stability=stability, fool=fool, fool_epochs=fool_epochs,
               fool_average_last=fool_average_last, fool_points=fool_points, candidates=candidates,
@@ -379,6 +380,5 @@ def generation_table(
     if ground_truth:
         rows.append(evaluate_generation(refs.val_programs, refs, name="ground truth: corpus val",
                                         with_coverage=False, **kw))
-    sha = sha256_file(path) if path is not None else None
     notes = table_notes(meta, sha, fool_epochs, fool_average_last, fool_points, chamfer_points, candidates, stability)
     return format_table(rows, category, notes)
