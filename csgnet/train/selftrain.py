@@ -304,9 +304,9 @@ class SelfTrainModule(L.LightningModule):
                                              dec.lengths[rows, best].cpu(), cd[rows.numpy(), best.numpy()]).sum())
         finally:
             self.model.train(was_training)
-        have = torch.isfinite(labels.chamfer)
-        return {"replaced": replaced / len(labels), "labelled": float(have.double().mean()),
-                "chamfer": float(labels.chamfer[have].mean()) if bool(have.any()) else float("inf")}
+        have = labels.labelled()
+        return {"replaced": replaced / len(labels), "labelled": len(have) / len(labels),
+                "chamfer": float(labels.chamfer[have].mean()) if len(have) else float("inf")}
 
     def on_train_epoch_start(self):
         set_stream_epoch(self.trainer, self.current_epoch)

@@ -25,7 +25,7 @@ from ..data import ProgramDataset, load_dataset, split_sizes
 from ..synth import sample_programs
 from .augment import jitter
 from ..decode import greedy
-from ..inference import read_checkpoint
+from ..inference import load_model
 from ..models import CSGNet, ModelConfig, preset
 from ..renderer import render_tokens, stack_trace
 from ..score import score_renders
@@ -181,7 +181,7 @@ class CSGNetModule(L.LightningModule):
         plateau_factor: the drop (0.2).
         log_images: targets / predictions shown in the TensorBoard grid each validation.
         seed: seed of the jitter draws.
-        init: a weights file or checkpoint (:func:`csgnet.inference.read_checkpoint`) whose tensors the
+        init: a weights file or checkpoint (:func:`csgnet.inference.load_model`) whose tensors the
             model starts from, e.g. to continue a run from its exported weights when its checkpoint is
             gone (the optimiser and schedule start afresh); its configuration must equal this one's.
     """
@@ -195,11 +195,11 @@ class CSGNetModule(L.LightningModule):
         self.config: ModelConfig = preset(size, dim, stack, **(model or {}))
         self.model = CSGNet(self.config)
         if init is not None:
-            config, state, _ = read_checkpoint(init)
-            if config != self.config:
+            start = load_model(init)
+            if start.config != self.config:
                 raise ValueError(f"{init}: its model configuration differs from this run's "
-                                 f"({config.to_dict()} against {self.config.to_dict()})")
-            self.model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+                                 f"({start.config.to_dict()} against {self.config.to_dict()})")
+            self.model.load_state_dict(start.state_dict())
         self.loss_norm = loss_norm or ("per_step" if dim == 2 else "sum")
         if self.loss_norm not in ("per_step", "sum"):
             raise ValueError(f"loss_norm must be 'per_step' or 'sum', got {loss_norm!r}")
