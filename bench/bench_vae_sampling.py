@@ -121,20 +121,20 @@ def main(argv=None):
     if args.replay > 0:
         ids = corpus.ids(args.category, "all")
         random.Random(args.seed).shuffle(ids)
+        ids = ids[:args.replay]
         trees = [program_to_tree(parse(corpus.read(args.category, i), f"{args.category}/{i}.txt"), dtype=torch.float64)
-                 for i in ids[:args.replay]]
+                 for i in ids]
         opts = DecodeOptions()
         vae.eval()
         with torch.no_grad():
             net = _Timed(_Net(vae.decoder), H, torch.Generator().manual_seed(args.seed))
             t0, c0 = time.perf_counter(), time.process_time()
-            kept = 0
-            for tree in trees:
+            refused = []
+            for i, tree in zip(ids, trees):
                 try:
                     _decode_with(net, tree, True, opts)
-                    kept += 1
                 except InvalidSample:
-                    pass
+                    refused.append(f"{args.category}/{i}")
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             t0 = time.perf_counter()
             for tree in trees:
@@ -142,8 +142,9 @@ def main(argv=None):
             rules = time.perf_counter() - t0
         print(f"corpus replay ({len(trees)} {args.category} programs, network of hidden_dim {H} run at every step): "
               f"{len(trees) / wall:.1f} programs/s ({cpu / len(trees) * 1e3:.1f} ms CPU each); "
-              f"{kept / len(trees):.1%} pass every rule; rules and execution alone "
+              f"{1 - len(refused) / len(trees):.1%} pass every rule; rules and execution alone "
               f"{rules / len(trees) * 1e3:.1f} ms per program")
+        print(f"  refused: {', '.join(refused) or 'none'}")
     return 0
 
 

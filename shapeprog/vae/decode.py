@@ -40,7 +40,7 @@ from .model import VAE, Decoder
 from .validity import (ATTACH_CMD, CUBOID, MIN_DIM, REFLECT, SQUEEZE, START, STOP, TRANSLATE, DecodeOptions,
                        InvalidSample, Line, NodeState, allowed_commands, argmax_allowed, choose_attach, choose_reflect,
                        choose_reflect_axis, choose_squeeze, choose_squeeze_face, choose_translate, clean_attach,
-                       clean_cuboid, clean_translate, line_vector, remove_ungrounded, try_line)
+                       clean_cuboid, clean_translate, remove_ungrounded, try_line)
 from .vectors import (ALIGNED, ATTACH, AXIS, COUNT, CUBE1, CUBE2, CUBE3, DIMS, DIST, FACE, LINE_DIM, NUM_SLOTS, UV,
                       program_to_tree)
 
@@ -243,7 +243,8 @@ def _propose(net: _Net, h, ctx: dict, state: NodeState, opts: DecodeOptions, bud
              placements: int):
     """The line the decoder proposes at this step, with every rule applied.
 
-    ``vec`` is filled with the line vector as the line is built (the input fed after a refused line).
+    ``vec`` is filled with the line vector as the line is built: the accepted line's vector
+    (:func:`~shapeprog.vae.validity.line_vector`), or the partial vector of a refused line.
 
     Returns:
         (line, local program after it or None, leaf logit or None)
@@ -333,7 +334,7 @@ def _decode_node(net: _Net, node: _Node, reject: bool, opts: DecodeOptions, budg
                 refused = 0
                 inp = vec
             continue
-        inp = line_vector(line)
+        inp = vec  # the accepted line's vector, built by _propose
         if line.cmd == START:
             continue
         if line.cmd == STOP:

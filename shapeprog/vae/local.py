@@ -34,20 +34,18 @@ from typing import Sequence
 
 import numpy as np
 
-from ..lang import AXES, Attach, Block, Cuboid, Reflect, Squeeze
+from ..attach import _DIM_ORDER, COS_DIST_THRESH, EPS, GRID, SMALL_EPS
+from ..geometry import CORNER_SIGNS
+from ..lang import AXES, FACES, Attach, Block, Cuboid, Reflect, Squeeze
 
 __all__ = ["Box", "LocalProgram", "run_block"]
 
-EPS = 0.01
-SMALL_EPS = 1e-4
-COS_DIST_THRESH = 0.9
-GRID = 10
-_DIM_ORDER = (1, 2, 0)  # height, width, length
 _IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-# face -> (axis index k, "val"): 0 for the positive faces, 1 for the negative ones (spec: squeeze)
-_FACE = {"right": (0, 0), "left": (0, 1), "top": (1, 0), "bot": (1, 1), "front": (2, 0), "back": (2, 1)}
-_OPP = {"right": "left", "left": "right", "top": "bot", "bot": "top", "front": "back", "back": "front"}
-_SIGNS = [(sx, sy, sz) for sx in (1.0, -1.0) for sy in (1.0, -1.0) for sz in (1.0, -1.0)]
+# face -> (axis index k, "val"): 0 for the positive faces, 1 for the negative ones (spec: squeeze);
+# FACES pairs them per axis: right/left, top/bot, front/back
+_FACE = {f: divmod(i, 2) for i, f in enumerate(FACES)}
+_OPP = {f: FACES[i ^ 1] for i, f in enumerate(FACES)}
+_SIGNS = [tuple(s) for s in CORNER_SIGNS.tolist()]
 
 Vec = tuple  # (3,) float
 

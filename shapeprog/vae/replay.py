@@ -5,7 +5,7 @@ the rules of :mod:`shapeprog.vae.validity` leave unchanged comes back byte for b
 """
 from __future__ import annotations
 
-from .validity import CUBOID, STOP
+from .validity import STOP
 from .vectors import ALIGNED, ATTACH, AXIS, COUNT, CUBE1, CUBE3, DIMS, DIST, FACE, LINE_DIM, UV
 
 __all__ = ["Replay"]
@@ -28,10 +28,8 @@ class Replay:
 
     def begin(self, h_start, bbox_dims, depth) -> dict:
         node = h_start[0]
-        rows = node.lines.tolist()
-        cub = [i for i, r in enumerate(rows) if max(range(7), key=r.__getitem__) == CUBOID]
-        kids = {row: (node.children[j] if j < len(node.children) else None) for j, row in enumerate(cub)}
-        return {"rows": rows, "kids": kids}
+        kids = dict(zip(node.cuboid_rows.tolist(), node.children))
+        return {"rows": node.lines.tolist(), "kids": kids}
 
     def step(self, line, h, ctx):
         return (h[0], h[1] + 1)

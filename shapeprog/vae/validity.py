@@ -25,8 +25,9 @@ from typing import Iterable, Sequence
 from .. import limits
 from ..lang import AXES, FACES
 from .local import LocalProgram
-from .vectors import (ALIGNED, ATTACH, AXIS, COUNT, CUBE1, CUBE2, CUBE3, DIMS, DIST, FACE, LINE_DIM, MAX_CUBOID_LINES,
-                      NUM_SLOTS, UV)
+from .vectors import _MIN_DIM as MIN_DIM
+from .vectors import (ALIGNED, ATTACH, AXIS, COMMANDS, COUNT, CUBE1, CUBE2, CUBE3, DIMS, DIST, FACE, LINE_DIM,
+                      MAX_CUBOID_LINES, NUM_SLOTS, UV)
 
 __all__ = [
     "ATTACH_CMD",
@@ -62,7 +63,9 @@ __all__ = [
     "try_line",
 ]
 
-START, CUBOID, ATTACH_CMD, REFLECT, TRANSLATE, SQUEEZE, STOP = range(7)
+#: Command indices (the one-hot order of :data:`~shapeprog.vae.vectors.COMMANDS`).
+START, CUBOID, ATTACH_CMD, REFLECT, TRANSLATE, SQUEEZE, STOP = map(
+    COMMANDS.index, ("start", "Cuboid", "attach", "reflect", "translate", "squeeze", "stop"))
 #: Decoding modes: what the last accepted line was (they select the command masks).
 START_MODE, CUBOID_MODE, ATTACH_MODE, SYM_MODE = "start", "cuboid", "attach", "sym"
 #: Commands forbidden in each mode (the reference's ``bad_inds``).
@@ -72,7 +75,6 @@ FORBIDDEN = {
     ATTACH_MODE: (START, CUBOID),
     SYM_MODE: (START, CUBOID, ATTACH_CMD, SQUEEZE),
 }
-MIN_DIM = 0.01
 _TOP_BOT = (FACES.index("top"), FACES.index("bot"))
 
 

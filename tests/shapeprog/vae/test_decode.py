@@ -1,4 +1,5 @@
 """Decoding with semantic validity: masks, every rule, the network step, fuzzing, and the entry points."""
+import importlib
 import random
 
 import numpy as np
@@ -11,6 +12,8 @@ from shapeprog.errors import ParseError
 from shapeprog.vae import VAE, Decoded, Decoder, InvalidSample, decode, decode_latent, encode, interpolate, sample
 from shapeprog.vae.decode import _Budget, _decode_tree, _decode_with, _Net, _program, _propose
 from shapeprog.vae.replay import Replay
+from shapeprog.vae.validity import ATTACH_CMD as ATTACH
+from shapeprog.vae.validity import CUBOID, REFLECT, SQUEEZE, START, STOP, TRANSLATE
 from shapeprog.vae.validity import (ATTACH_MODE, CUBOID_MODE, FORBIDDEN, START_MODE, SYM_MODE, DecodeOptions, Line,
                                     NodeState, allowed_commands, choose_attach, choose_reflect, choose_reflect_axis,
                                     choose_squeeze, choose_squeeze_face, choose_translate, clean_attach, clean_cuboid,
@@ -19,8 +22,6 @@ from shapeprog.vae.local import run_block
 from shapeprog.vae.vectors import CUBES, LINE_DIM, NUM_SLOTS, program_to_tree
 
 from .test_local import flat
-
-START, CUBOID, ATTACH, REFLECT, TRANSLATE, SQUEEZE, STOP = range(7)
 
 
 # ----------------------------------------------------------------------------- hand-built states
@@ -418,6 +419,22 @@ def test_random_outputs_with_rejection_raise_invalid_sample():
             raised += 1
             assert e.node is not None and e.step is not None
     assert raised > 0
+
+
+def test_the_input_after_an_accepted_line_is_its_line_vector(monkeypatch):
+    decode_module = importlib.import_module("shapeprog.vae.decode")  # the attribute is the function decode
+    seen = set()
+
+    def checked(net, h, ctx, state, opts, budget, vec, placements):
+        out = _propose(net, h, ctx, state, opts, budget, vec, placements)
+        assert vec == line_vector(out[0])
+        seen.add(out[0].cmd)
+        return out
+
+    monkeypatch.setattr(decode_module, "_propose", checked)
+    for seed in range(10):
+        _decode_tree(RandomNet(seed), None, False, DecodeOptions())
+    assert seen >= {CUBOID, ATTACH, SQUEEZE, REFLECT, TRANSLATE, STOP}
 
 
 @pytest.mark.parametrize("H", [16, 256])
