@@ -31,7 +31,7 @@ EPS = 0.01
 SMALL_EPS = 1e-4
 COS_DIST_THRESH = 0.9
 GRID = 10
-_DIM_ORDER = (1, 2, 0)  # height, width, length
+DIM_ORDER = (1, 2, 0)  # height, width, length
 
 
 # ----------------------------------------------------------------------------- tensor helpers
@@ -174,7 +174,7 @@ def rule_second(pos, dims, ax, src, g, p_ap, a):
         usable = (nv.abs().sum(-1) + qv.abs().sum(-1)) >= SMALL_EPS
         valid = usable & (disc > 0)
     s = (-B + torch.sqrt(torch.where(valid, disc, torch.ones_like(disc)))) / (2 * A + 1e-8)
-    order = list(_DIM_ORDER)
+    order = list(DIM_ORDER)
     with torch.no_grad():
         score = torch.where(valid, s.abs(), torch.full_like(s, math.inf))[:, order]
         best = torch.tensor(order, device=pos.device)[score.argmin(-1)]
@@ -342,7 +342,7 @@ def rule_general(pos, dims, ax, src, g, prev):
     t = g - b
     if _val(_norm(t)) >= EPS:
         pick = None
-        for k in _DIM_ORDER:
+        for k in DIM_ORDER:
             c0 = _cv(prev[0][0], ax, k)
             if all(_val(_norm(_cv(pa, ax, k) - c0)) < EPS for pa, _ in prev):
                 cvk = _cv(src, ax, k)

@@ -34,7 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..attach import _DIM_ORDER, COS_DIST_THRESH, EPS, GRID, SMALL_EPS
+from ..attach import COS_DIST_THRESH, DIM_ORDER, EPS, GRID, SMALL_EPS
 from ..geometry import CORNER_SIGNS
 from ..lang import AXES, FACES, Attach, Block, Cuboid, Reflect, Squeeze
 
@@ -211,7 +211,7 @@ def _rule_second(box: Box, src: Vec, g: Vec, p_ap: Vec, a: Vec) -> Box:
     nv = [_mul(ax[k], src_c[k]) for k in range(3)]
     qv = [_mul(ax[k], ap_c[k]) for k in range(3)]
     best, s_best = None, math.inf
-    for k in _DIM_ORDER:
+    for k in DIM_ORDER:
         if sum(map(abs, nv[k])) + sum(map(abs, qv[k])) < SMALL_EPS:
             continue
         m = _sub(nv[k], qv[k])
@@ -366,7 +366,7 @@ def _rule_general(box: Box, src: Vec, g: Vec, prev: Sequence[tuple[Vec, Vec]]) -
     nt = _norm(t)
     if nt >= EPS:
         pick = None
-        for k in _DIM_ORDER:
+        for k in DIM_ORDER:
             c0 = _cv(prev[0][0], ax, k)
             if all(_norm(_sub(_cv(pa, ax, k), c0)) < EPS for pa, _ in prev):
                 cvk = _cv(src, ax, k)

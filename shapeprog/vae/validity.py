@@ -25,7 +25,7 @@ from typing import Iterable, Sequence
 from .. import limits
 from ..lang import AXES, FACES
 from .local import LocalProgram
-from .vectors import _MIN_DIM as MIN_DIM
+from .vectors import MIN_DIM
 from .vectors import (ALIGNED, ATTACH, AXIS, COMMANDS, COUNT, CUBE1, CUBE2, CUBE3, DIMS, DIST, FACE, LINE_DIM,
                       MAX_CUBOID_LINES, NUM_SLOTS, UV)
 

@@ -43,6 +43,7 @@ __all__ = [
     "FACE",
     "LINE_DIM",
     "MAX_CUBOID_LINES",
+    "MIN_DIM",
     "NUM_SLOTS",
     "UV",
     "VectorNode",
@@ -78,7 +79,7 @@ ALIGNED = 62
 _START, _CUBOID, _ATTACH, _REFLECT, _TRANSLATE, _SQUEEZE, _STOP = range(7)
 #: Entries of each command's continuous parameters (the L1 loss mask); reflect has none.
 _L1 = {_CUBOID: DIMS, _ATTACH: ATTACH, _TRANSLATE: slice(COUNT, DIST + 1), _SQUEEZE: UV}
-_MIN_DIM = 0.01
+MIN_DIM = 0.01  #: the smallest Cuboid dim a line vector holds (the reference clamp)
 
 
 def command_vector(command: str, dtype: torch.dtype = torch.float32, device=None) -> torch.Tensor:
@@ -207,7 +208,7 @@ def _encode_block(block: Block, error) -> list[list[float]]:
         r = rows[i]
         if isinstance(s, Cuboid):
             r[_CUBOID] = 1.0
-            r[DIMS] = [max(float(v), _MIN_DIM) for v in (s.l, s.h, s.w)]
+            r[DIMS] = [max(float(v), MIN_DIM) for v in (s.l, s.h, s.w)]
             r[ALIGNED] = float(bool(s.aligned))
         elif isinstance(s, Attach):
             r[_ATTACH] = 1.0
@@ -289,7 +290,7 @@ def _decode_block(node: VectorNode, path: str, name_of, decimals: int | None) ->
         argmax = lambda s: max(range(s.start, s.stop), key=lambda k: r[k]) - s.start  # noqa: E731
         a = name_of(argmax(CUBE1))
         if c == _CUBOID:
-            l, h, w = (num(max(v, _MIN_DIM)) for v in r[DIMS])
+            l, h, w = (num(max(v, MIN_DIM)) for v in r[DIMS])
             out.append(Cuboid(name_of(ncub), l, h, w, ncub == 0 or r[ALIGNED] > 0))
             ncub += 1
         elif c == _ATTACH:
