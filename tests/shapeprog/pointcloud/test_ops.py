@@ -204,3 +204,16 @@ def test_bad_indices_and_features_raise_point_cloud_errors():
         query_and_group(_cloud(2, 12, 12), _cloud(2, 3, 13), feats, 0.2, 4)
     with pytest.raises(ValueError, match="use_xyz=False"):
         group_all(_cloud(2, 12, 12), None, use_xyz=False)
+
+
+def test_sampling_runs_on_one_cpu_thread_and_restores_the_setting():
+    xyz = _cloud(2, 50, 14)
+    want_fps, want_ball = farthest_point_sample(xyz, 8), ball_query(0.3, 4, xyz, xyz[:, :8])
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        assert torch.equal(farthest_point_sample(xyz, 8), want_fps)
+        assert torch.equal(ball_query(0.3, 4, xyz, xyz[:, :8]), want_ball)
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
