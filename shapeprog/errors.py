@@ -1,15 +1,18 @@
-"""The errors of the ShapeAssembly layer: a text that is not a valid program, and an execution that
-cannot give finite cuboids. Standard library only.
+"""The errors of the ShapeAssembly layer: a text that is not a valid program, an execution that
+cannot give finite cuboids, and a point cloud that a point-cloud operation cannot take. Standard
+library only.
 
 Example:
     >>> str(ParseError("unknown command 'cubiod'", "chair_12.txt", 2, 9, "cubiod"))
     "chair_12.txt:2:9: unknown command 'cubiod'"
     >>> str(ExecutionError("a corner is not finite", line=4))
     'line 4: a corner is not finite'
+    >>> str(PointCloudError("a coordinate is NaN", "clouds", index=3))
+    '`clouds`: cloud 3: a coordinate is NaN'
 """
 from __future__ import annotations
 
-__all__ = ["ExecutionError", "ParseError", "ParseWarning"]
+__all__ = ["ExecutionError", "ParseError", "ParseWarning", "PointCloudError"]
 
 
 class ParseError(ValueError):
@@ -48,3 +51,21 @@ class ExecutionError(ValueError):
         if file is not None:
             where = f"{file}:{line}"
         super().__init__(f"{where}: {reason}")
+
+
+class PointCloudError(ValueError):
+    """A point cloud (or the indices or features that go with it) that a point-cloud operation cannot
+    take: a wrong shape or dtype, a coordinate that is not finite, fewer points than asked for.
+
+    Attributes:
+        reason: the message without the location.
+        name: the argument at fault (None when the message is about several).
+        index: position of the offending cloud in the batch (None when not one cloud's fault).
+    """
+
+    def __init__(self, reason: str, name: str | None = None, index: int | None = None):
+        self.reason, self.name, self.index = reason, name, index
+        where = "" if name is None else f"`{name}`: "
+        if index is not None:
+            where += f"cloud {index}: "
+        super().__init__(where + reason)
