@@ -38,7 +38,7 @@ def test_bad_arrays_name_the_file(tmp_path):
 
 @pytest.mark.parametrize("name, content, pattern", [
     ("bad.ply", b"ply\nformat nonsense\n", r"bad\.ply: cannot read PLY"),
-    ("x.xyz", b"1 2 3\n", r"x\.xyz: unsupported point-cloud format"),
+    ("x.abc", b"1 2 3\n", r"x\.abc: unsupported point-cloud format"),
     ("c.obj", b"v 1 2 3\nv 1 2 oops\n", r"c\.obj:2: expected 'v x y z'"),
 ])
 def test_unreadable_files_are_located(tmp_path, name, content, pattern):
