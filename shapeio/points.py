@@ -35,6 +35,7 @@ MIN_POINTS = 16
 MAX_POINTS = 20_000_000
 #: Points :func:`read_cloud` samples from a mesh when no count is given (the papers' 10,000).
 MESH_POINTS = 10_000
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def _points_array(x, name: str, path: PathLike) -> np.ndarray:
@@ -108,7 +109,7 @@ def obj_vertices(lines: Iterable[str], where) -> np.ndarray:
             xyz = [float(parts[1]), float(parts[2]), float(parts[3])]
         except ValueError:
             raise InputError(f"{where}:{lineno}: expected 'v x y z', got {line.strip()[:80]!r}") from None
-        if not all(np.isfinite(np.float32(xyz))):
+        if not all(abs(v) <= _FLOAT32_MAX for v in xyz):  # False for NaN
             raise InputError(f"{where}:{lineno}: the coordinates {line.strip()[:80]!r} are not finite float32 numbers")
         if len(pts) == MAX_POINTS:
             raise InputError(f"{where}:{lineno}: more than MAX_POINTS = {MAX_POINTS} points")
@@ -133,7 +134,7 @@ def _xyz_points(lines: Iterable[str], where) -> np.ndarray:
             xyz = [float(parts[0]), float(parts[1]), float(parts[2])]
         except ValueError:
             raise InputError(f"{where}:{lineno}: expected 'x y z', got {line.strip()[:80]!r}") from None
-        if not all(np.isfinite(np.float32(xyz))):
+        if not all(abs(v) <= _FLOAT32_MAX for v in xyz):  # False for NaN
             raise InputError(f"{where}:{lineno}: the coordinates {line.strip()[:80]!r} are not finite float32 numbers")
         if len(pts) == MAX_POINTS:
             raise InputError(f"{where}:{lineno}: more than MAX_POINTS = {MAX_POINTS} points")

@@ -194,17 +194,18 @@ def sample_clouds(category: str, ids: Sequence[int], n_points: int = CLOUD_POINT
     texts = texts or {}
     jobs = [(category, int(i), texts.get(int(i)), n, int(seed)) for i in ids]
     results = map(_cloud_job, jobs) if executor is None else executor.map(_cloud_job, jobs, chunksize=16)
-    out_ids, clouds, failures = [], [], []
-    for k, (shape_id, pts, reason) in enumerate(results, 1):
+    points = np.empty((len(jobs), n, 3), np.float32)  # filled in place: no second copy of the clouds
+    ok = np.zeros(len(jobs), dtype=bool)
+    failures = []
+    for k, (shape_id, pts, reason) in enumerate(results):
         if pts is None:
             failures.append((shape_id, reason))
         else:
-            out_ids.append(shape_id)
-            clouds.append(pts)
+            points[k], ok[k] = pts, True
         if progress is not None:
-            progress(k, len(jobs))
-    points = np.stack(clouds) if clouds else np.zeros((0, n, 3), np.float32)
-    return CloudSet(category, np.asarray(out_ids, dtype=np.int64), points, failures)
+            progress(k + 1, len(jobs))
+    ids = np.asarray([j[1] for j in jobs], dtype=np.int64)
+    return CloudSet(category, ids[ok], points if ok.all() else points[ok], failures)
 
 
 # --------------------------------------------------------------------------------------------------
