@@ -19,7 +19,7 @@ import shapeprog
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
-PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "envs", "shapeio"]
+PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -55,6 +55,9 @@ PUBLIC = {
     "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
                       "VectorNode", "batch_forward", "batch_loss", "decode", "decode_latent", "encode", "interpolate",
                       "load_pretrained", "program_loss", "program_to_tree", "sample", "tree_to_program"},
+    "shapeprog.pointcloud": {"CANONICAL_DIAGONAL", "CloudDataset", "Match", "RetrievalIndex", "Transform",
+                             "collate_clouds", "corpus_cloud", "load_cache", "make_clouds", "normalize",
+                             "program_cloud", "read_cloud", "scale_program"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }

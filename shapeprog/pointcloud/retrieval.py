@@ -43,7 +43,7 @@ PathLike = Union[str, os.PathLike]
 
 #: Points kept per reference cloud (the first ones of the cached cloud: an i.i.d. subset).
 INDEX_POINTS = 2048
-#: Lattice vertices per axis of the coarse stage (16^3 fields: 32 KB per reference in float16).
+#: Lattice vertices per axis of the coarse stage (16^3 fields and splat weights: 16 KB per reference, float16).
 INDEX_GRID = 16
 #: References measured exactly per query.
 INDEX_CANDIDATES = 16
@@ -130,7 +130,7 @@ class RetrievalIndex:
     Args:
         category: the category (names the matches' programs).
         ids: ``(R,)`` shape ids of the references.
-        clouds: ``(R, M, 3) float`` reference clouds in the canonical frame (stored as float16).
+        clouds: ``(R, M, 3) float`` reference clouds in the canonical frame (kept as float32).
         grid: lattice vertices per axis of the coarse stage.
         candidates: references measured exactly per query (None: all of them, exhaustive).
         centers, scales: ``(R, 3)`` and ``(R,)`` each reference's Transform (for
@@ -149,7 +149,7 @@ class RetrievalIndex:
             raise ValueError(f"`grid` must be an int >= 2, got {grid!r}")
         self.category, self.ids, self.grid = category, ids, grid
         self.candidates = candidates
-        self.clouds = clouds.to(torch.float16)
+        self.clouds = clouds.to(torch.float32)
         self.centers = None if centers is None else np.asarray(centers, dtype=np.float64)
         self.scales = None if scales is None else np.asarray(scales, dtype=np.float64)
         splat, field = [], []
