@@ -195,7 +195,8 @@ def load_mesh(path: PathLike):
     if bad.any():
         raise InputError(f"{path}: vertex {int(np.argmax(bad)) + 1} has a NaN or infinite coordinate")
     try:
-        mesh.process()
+        with np.errstate(invalid="ignore", over="ignore"):  # coordinates near the float64 limit: merging casts
+            mesh.process()
     except Exception as e:
         raise InputError(f"{path}: cannot read the mesh ({type(e).__name__}: {e})") from None
     return mesh
