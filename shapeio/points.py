@@ -11,7 +11,9 @@ starts with the file's path, and names the line for text formats.
 
 from __future__ import annotations
 
+import functools
 import os
+import warnings
 from pathlib import Path
 from typing import Iterable, Union
 
@@ -147,7 +149,9 @@ def _xyz_points(lines: Iterable[str], where) -> np.ndarray:
 def _npy_points(path: Path) -> np.ndarray:
     """An ``(N, 3)`` (or ``(N, C >= 3)``: the first three columns) numeric array from a ``.npy`` file."""
     try:
-        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SyntaxWarning)  # numpy parses a garbled header with `ast`
+            arr = np.load(path, mmap_mode="r", allow_pickle=False)
     except Exception as e:  # numpy raises several types for files that are not .npy
         raise InputError(f"{path}: cannot read the .npy file ({type(e).__name__}: {e})") from None
     if not isinstance(arr, np.ndarray):
@@ -193,6 +197,17 @@ def _check_file(path: Path) -> None:
         raise InputError(f"{path}: the file is empty")
 
 
+def _quiet_floats(fn):
+    """Run ``fn`` without NumPy floating-point warnings: a file's NaN, infinite or huge values are checked
+    and reported as :class:`InputError` instead (the overflow on the way is expected, not news)."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with np.errstate(all="ignore"):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+@_quiet_floats
 def read_points(path: PathLike, return_normals: bool = False):
     """Read a point cloud file: OBJ ``v x y z`` lines, PLY (via trimesh), ``.xyz`` text or ``.npy``.
 
@@ -242,9 +257,9 @@ def _obj_has_faces(path: Path) -> bool:
 
 
 def _sample_mesh(mesh, n: int, seed: int, path: Path) -> np.ndarray:
-    area = float(mesh.area)
+    area = float(mesh.area)  # huge coordinates give an infinite area
     if not (np.isfinite(area) and area > 0):
-        raise InputError(f"{path}: the mesh has zero surface area; there is nothing to sample")
+        raise InputError(f"{path}: the mesh has zero or no finite surface area; there is nothing to sample")
     pts, _ = _trimesh().sample.sample_surface(mesh, n, seed=np.random.default_rng(seed))
     return _finite(pts, path)
 
@@ -260,6 +275,7 @@ def _resample(pts: np.ndarray, n: int, seed: int) -> np.ndarray:
     return np.ascontiguousarray(pts[idx])
 
 
+@_quiet_floats
 def read_cloud(path: PathLike, n_points: int | None = None, seed: int = 0) -> np.ndarray:
     """A user's input as a point cloud: a cloud file, or a mesh sampled uniformly by area.
 
@@ -305,6 +321,8 @@ def read_cloud(path: PathLike, n_points: int | None = None, seed: int = 0) -> np
         else:
             pts = _finite(_ply_points(path, loaded)[0], path)
     elif suffix == ".obj" and _obj_has_faces(path):
+        with _open_text(path) as f:
+            obj_vertices(f, path)  # every 'v' line is a point: errors with the line number
         mesh = load_mesh(path)
     elif suffix in CLOUD_SUFFIXES:
         pts = read_points(path)

@@ -116,7 +116,8 @@ def test_meshes_are_sampled_by_area(tmp_path, suffix):
     ("big.xyz", b"1e39 0 0\n", r"big\.xyz:1: the coordinates"),
     ("x.txt", b"1 2 3\n", r"x\.txt: unsupported file type '\.txt'"),
     ("m.stl", b"solid nonsense\nfacet what\n", r"m\.stl: "),
-    ("f.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", r"f\.obj: the mesh has zero surface area"),
+    ("f.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", r"f\.obj: the mesh has zero or no finite surface area"),
+    ("t.obj", b"v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", r"t\.obj:2: expected 'v x y z', got 'v 1 0'"),
     ("s.npy", None, r"s\.npy: expected an \(N, 3\) array"),
     ("nan.npy", None, r"nan\.npy: point 3 has a NaN"),
 ])
