@@ -188,6 +188,9 @@ def load_mesh(path: PathLike):
         raise InputError(f"{path}: cannot read the mesh ({type(e).__name__}: {e})") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{path}: the file holds no triangles")
+    vshape = np.shape(mesh.vertices)
+    if len(vshape) != 2 or vshape[1] != 3:  # e.g. OBJ 'v' lines with two numbers
+        raise InputError(f"{path}: the vertices are not 3D points (array of shape {vshape})")
     if len(mesh.faces) > MAX_MESH_FACES:
         raise InputError(f"{path}: the mesh has {len(mesh.faces)} triangles; at most "
                          f"MAX_MESH_FACES = {MAX_MESH_FACES} are read")
@@ -195,7 +198,8 @@ def load_mesh(path: PathLike):
     if bad.any():
         raise InputError(f"{path}: vertex {int(np.argmax(bad)) + 1} has a NaN or infinite coordinate")
     try:
-        mesh.process()
+        with np.errstate(invalid="ignore", over="ignore"):  # coordinates near the float64 limit: merging casts
+            mesh.process()
     except Exception as e:
         raise InputError(f"{path}: cannot read the mesh ({type(e).__name__}: {e})") from None
     return mesh

@@ -4,6 +4,7 @@
     python -m shapeprog run my_program.txt -o shape.ply
     python -m shapeprog fit table/33075 --points cloud.obj --steps 400 -o fitted.txt
     python -m shapeprog silhouettes --out silhouettes.npz
+    python -m shapeprog make-clouds --category chair --points 10000 --workers 2 --out clouds
     python -m shapeprog sample chair -n 16 --seed 0 --out samples --png grid.png
     python -m shapeprog interpolate chair/173 chair/44017 --steps 8 --png interp.png
     python -m shapeprog reconstruct chair/173 -o recon.txt
@@ -176,6 +177,33 @@ def _cmd_silhouettes(args) -> int:
     write(args.out, data, margin=args.margin)
     counts = ", ".join(f"{split} {len(s.images)}" for split, s in data.items())
     print(f"wrote {args.out}: {counts} images in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _cmd_make_clouds(args) -> int:
+    from tqdm import tqdm
+
+    from .pointcloud.data import make_clouds
+
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise SystemExit(f"error: {args.out}: not a folder")
+    ids = None
+    if args.limit:
+        ids = corpus.ids(args.category, "train")[:args.limit] + corpus.ids(args.category, "val")[:args.limit]
+    bar = tqdm(total=len(ids) if ids is not None else len(corpus.ids(args.category, "all")), unit="shape",
+               desc=f"{args.category} clouds", disable=args.quiet)
+    try:
+        rep = make_clouds(args.category, args.out, n_points=args.points, seed=args.seed, workers=args.workers,
+                          val_fraction=args.val_fraction, split_seed=args.split_seed, dtype=args.dtype, ids=ids,
+                          progress=lambda done, total: bar.update(1))
+    except ValueError as e:  # --points, --val-fraction: checked before any work
+        raise SystemExit(f"error: {e}") from None
+    finally:
+        bar.close()
+    for shape_id, reason in rep.failures:
+        print(f"warning: {args.category}/{shape_id} skipped: {reason}", file=sys.stderr)
+    print(f"wrote {rep.cache} ({rep.count} clouds of {args.points} points, {rep.bytes / 2**20:.1f} MiB, "
+          f"{len(rep.failures)} failed) and {rep.split} in {rep.seconds:.1f} s")
     return 0
 
 
@@ -431,7 +459,7 @@ def main(argv=None) -> int:
                                    "before and after; write the fitted program.")
     f.add_argument("program", help=program_help)
     f.add_argument("--points", default="example",
-                   help="point cloud file (.obj 'v x y z' lines or .ply) or 'example' (the vendored comp_pc.obj)")
+                   help="point cloud file (.obj 'v x y z' lines, .ply, .xyz or .npy) or 'example' (the vendored comp_pc.obj)")
     f.add_argument("--steps", type=_int_at_least(0), default=400, help="optimisation steps")
     f.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
     f.add_argument("--reg", type=float, default=1e-3, help="weight of the pull towards the starting numbers")
@@ -448,6 +476,27 @@ def main(argv=None) -> int:
     s.add_argument("--limit", type=_int_at_least(1), help="only the first N shapes per category and split")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_silhouettes)
+    m = sub.add_parser("make-clouds", help="sample point clouds of a category's corpus shapes into a cache",
+                       description="Sample area-weighted surface points of every executed program of a category "
+                                   "into <out>/<category>_clouds.npz, and write the train / val / test split "
+                                   "(val: a seeded carve-out of the corpus train split; test: the corpus val "
+                                   "split) to <out>/<category>_split.json. A program that fails is reported "
+                                   "and skipped.")
+    m.add_argument("--category", required=True, choices=corpus.CATEGORIES, help="the corpus category")
+    m.add_argument("--out", required=True, help="the cache folder (created if missing)")
+    m.add_argument("--points", type=_int_at_least(1), default=10000, help="points per shape (the papers' 10,000)")
+    m.add_argument("--workers", type=_int_at_least(1), help="processes (default: the CPU count; 1: none)")
+    m.add_argument("--seed", type=int, default=0, help="sampling seed (each shape's seed is a hash of category, "
+                                                       "id and this)")
+    m.add_argument("--val-fraction", type=float, default=0.05, help="share of the corpus train split carved out "
+                                                                    "for validation")
+    m.add_argument("--split-seed", type=int, default=0, help="seed of the validation carve-out")
+    m.add_argument("--dtype", choices=("float16", "float32"), default="float16",
+                   help="storage type of the points (float16: half the size, within 5e-4)")
+    m.add_argument("--limit", type=_int_at_least(1), help="only the first N shapes of the corpus train and val "
+                                                          "splits (a quick check)")
+    m.add_argument("--quiet", action="store_true", help="no progress bar")
+    m.set_defaults(func=_cmd_make_clouds)
     weights_help = "VAE weights file or Lightning checkpoint (default: the shipped model of the category)"
     g = sub.add_parser("sample", help="generate programs with the VAE",
                        description="Sample latents from N(0, I) and decode them with semantic validity "

@@ -36,7 +36,7 @@ from .lang import Program, parse, to_text
 from .sampling import sample_surface
 
 __all__ = ["CLASSIFIER_POINTS", "CHAMFER_POINTS", "FoolResult", "chamfer_clouds", "classifier_clouds",
-           "classifier_features", "coverage", "execute_samples", "feature_variance", "frechet_distance",
+           "classifier_features", "coarse_fields", "coverage", "execute_samples", "feature_variance", "frechet_distance",
            "gaussian_fit", "generalization", "leaf_parts", "nearest_chamfer", "novelty", "percent_fool",
            "program_key", "variety"]
 
@@ -371,11 +371,16 @@ def _grid_vertices(res: int) -> np.ndarray:
     return np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
 
 
-def _coarse_job(job) -> tuple[torch.Tensor, torch.Tensor]:
-    """Trilinear splat weights ``(S, V)`` (each row sums to 1) and grid distance fields ``(S, V)``
-    (distance from every grid vertex to the nearest cloud point) of clouds ``(S, N, 3)`` in
-    ``[-0.5, 0.5]^3``, ``V = res^3``."""
-    clouds, res = job
+def coarse_fields(clouds: torch.Tensor, res: int = COARSE_GRID) -> tuple[torch.Tensor, torch.Tensor]:
+    """The coarse stage of :func:`nearest_chamfer` for clouds ``(S, N, 3) float`` in ``[-0.5, 0.5]^3``.
+
+    Returns:
+        ``splat (S, V) float32``: trilinear weights of each cloud's points on the ``res^3`` lattice over
+        ``[-0.5, 0.5]^3`` (each row sums to 1; points outside are clamped to the box), and
+        ``field (S, V) float32``: the distance from every lattice vertex to the nearest cloud point,
+        ``V = res^3``. ``splat_q @ field_r + splat_r @ field_q`` estimates the chamfer distance of two
+        clouds (one side of each direction replaced by the interpolated field).
+    """
     s, n, _ = clouds.shape
     verts = _grid_vertices(res)
     df = np.empty((s, res ** 3), dtype=np.float32)
@@ -394,6 +399,11 @@ def _coarse_job(job) -> tuple[torch.Tensor, torch.Tensor]:
             idx = idx * res + i0[..., a] + bit
         splat.scatter_add_(1, idx, w / n)
     return splat.float(), torch.from_numpy(df)
+
+
+def _coarse_job(job) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`coarse_fields` of ``(clouds, res)``: one job of the coarse stage."""
+    return coarse_fields(*job)
 
 
 def _tree(points: np.ndarray):

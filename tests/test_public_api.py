@@ -55,8 +55,11 @@ PUBLIC = {
     "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
                       "VectorNode", "batch_forward", "batch_loss", "decode", "decode_latent", "encode", "interpolate",
                       "load_pretrained", "program_loss", "program_to_tree", "sample", "tree_to_program"},
-    "shapeprog.pointcloud": {"PointCloudError", "PointNet2SSG", "SetAbstraction", "ball_query", "farthest_point_sample",
-                             "gather_points", "group_all", "group_points", "query_and_group"},
+    "shapeprog.pointcloud": {"CANONICAL_DIAGONAL", "CloudDataset", "Match", "PointCloudError", "PointNet2SSG",
+                             "RetrievalIndex", "SetAbstraction", "Transform", "ball_query", "collate_clouds",
+                             "corpus_cloud", "farthest_point_sample", "gather_points", "group_all", "group_points",
+                             "load_cache", "make_clouds", "normalize", "program_cloud", "query_and_group",
+                             "read_cloud", "scale_program"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }

@@ -69,5 +69,8 @@ def test_bad_input_names_the_file(tmp_path):
     (tmp_path / "pts.obj").write_text("v 0 0 0\nv 1 0 0\n")
     with pytest.raises(InputError, match=r"pts\.obj: the file holds no triangles"):
         load_mesh(tmp_path / "pts.obj")
+    (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n")  # a 'v' line with two numbers
+    with pytest.raises(InputError, match=r"flat\.obj: the vertices are not 3D points"):
+        load_mesh(tmp_path / "flat.obj")
     with pytest.raises(FileNotFoundError, match=r"none\.obj: no such file"):
         load_mesh(tmp_path / "none.obj")

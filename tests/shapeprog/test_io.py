@@ -110,9 +110,9 @@ def test_read_obj_point_cloud(tmp_path):
         read_points(f)
     with pytest.raises(FileNotFoundError, match="missing.obj"):
         read_points(tmp_path / "missing.obj")
-    (tmp_path / "x.xyz").write_text("1 2 3\n")
-    with pytest.raises(ValueError, match=r"x\.xyz: unsupported"):
-        read_points(tmp_path / "x.xyz")
+    (tmp_path / "x.abc").write_text("1 2 3\n")
+    with pytest.raises(ValueError, match=r"x\.abc: unsupported"):
+        read_points(tmp_path / "x.abc")
 
 
 def test_voxels_npy(tmp_path):
