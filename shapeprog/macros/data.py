@@ -642,7 +642,7 @@ def _convert_ids(category: str, ids: list[int], cleanup: str, max_orders: int) -
 
 def convert_corpus(categories: Iterable[str] = ("chair", "table", "storage"), split: str = "all",
                    executor: Executor | None = None, cleanup: str = "exact", max_orders: int = MAX_ORDERS,
-                   chunk: int = 200) -> CorpusData:
+                   chunk: int = 200, limit: int | None = None) -> CorpusData:
     """Convert corpus programs into sub-programs (all categories by default).
 
     Args:
@@ -653,6 +653,7 @@ def convert_corpus(categories: Iterable[str] = ("chair", "table", "storage"), sp
         cleanup: one of :data:`CLEANUP_MODES`.
         max_orders: orderings to enumerate at most per sub-program.
         chunk: programs per submitted task.
+        limit: convert only the first ``limit`` programs of each category (in split order).
 
     Returns:
         The :class:`CorpusData`; equal signatures are shared objects across the whole result.
@@ -666,7 +667,7 @@ def convert_corpus(categories: Iterable[str] = ("chair", "table", "storage"), sp
     t0 = time.perf_counter()
     tasks, programs = [], {}
     for cat in categories:
-        ids = corpus.ids(cat, split)
+        ids = corpus.ids(cat, split)[:limit]
         programs[cat] = len(ids)
         tasks += [(cat, ids[k:k + chunk]) for k in range(0, len(ids), chunk)]
     if executor is None:
@@ -711,6 +712,9 @@ def order_errors(items: Sequence[tuple[SubProgram, Program]], max_orders: int | 
         Per item, the largest corner difference between its original block (executed alone, its
         ``Program_`` parts as leaves) and any executed ordering, matched cuboid by cuboid
         (``inf`` where an ordering creates other cuboids).
+
+    Raises:
+        LineError: an ordering that is not an executable sequence (e.g. a cube before its targets).
     """
     import torch
 
@@ -722,7 +726,7 @@ def order_errors(items: Sequence[tuple[SubProgram, Program]], max_orders: int | 
         b = prog.block(sub.block)
         jobs.append((n, block_program(prog, b), _block_keys(b), True))
         for o in sub.orders[:max_orders]:
-            jobs.append((n, to_shapeassembly(sub.lines(o), check=False), sub.statement_keys(o), False))
+            jobs.append((n, to_shapeassembly(sub.lines(o)), sub.statement_keys(o), False))
     errors = [0.0] * len(items)
     refs: dict[int, dict] = {}
     with torch.no_grad():

@@ -103,7 +103,8 @@ BB_DIMS = ("bb_x", "bb_y", "bb_z")
 INDENT = "    "
 #: Base lines a macro or a program may expand to (a ShapeAssembly text's line limit).
 MAX_EXPANDED_LINES = limits.MAX_LINES
-_RESERVED = frozenset({"def", "bbox", "True", "False", *FACES, *AXES, *BB_DIMS, *TYPES})
+_RESERVED = frozenset({"def", "bbox", "True", "False", *FACES, *AXES, *BB_DIMS, *TYPES})  # parameter names
+_RESERVED_CUBOIDS = frozenset({"def", "bbox", "True", "False", *BB_DIMS})  # cuboid names may be 'top', 'X'...
 
 
 class MacroError(ValueError):
@@ -114,10 +115,12 @@ class MacroError(ValueError):
         macro: the macro's name, or None for a program line.
         index: 0-based index of the offending line in the macro body or the program.
         arg: 0-based index of the offending argument, or None.
+        ret: 0-based index of the offending name bound by the line (``a, b = ...``), or None.
     """
 
-    def __init__(self, reason: str, macro: str | None = None, index: int | None = None, arg: int | None = None):
-        self.reason, self.macro, self.index, self.arg = reason, macro, index, arg
+    def __init__(self, reason: str, macro: str | None = None, index: int | None = None, arg: int | None = None,
+                 ret: int | None = None):
+        self.reason, self.macro, self.index, self.arg, self.ret = reason, macro, index, arg, ret
         where = ("program" if macro is None else f"macro {macro!r}") + ("" if index is None else f", line {index}")
         super().__init__(f"{where}: {reason}")
 
@@ -274,11 +277,11 @@ BASE: dict[str, FunctionInfo] = {
 # ----------------------------------------------------------------------------- checks
 
 
-def _check_name(name: str, what: str, macro, index, arg=None) -> None:
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z_0-9]*", name or ""):
-        raise MacroError(f"{what} {name!r} is not a name", macro, index, arg)
-    if name in _RESERVED:
-        raise MacroError(f"{what} {name!r} is a reserved word", macro, index, arg)
+def _check_name(name: str, what: str, macro, index, ret=None) -> None:
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z_0-9]*", name):
+        raise MacroError(f"{what} {name!r} is not a name", macro, index, None, ret)
+    if name in (_RESERVED_CUBOIDS if ret is not None else _RESERVED):
+        raise MacroError(f"{what} {name!r} is a reserved word", macro, index, None, ret)
 
 
 def _check_arg(arg: Arg, ptype: str, scope: Mapping[str, str], top: bool, macro, index, k) -> None:
@@ -340,10 +343,10 @@ def _check_calls(calls: Sequence[Call], scope: dict[str, str], functions: Mappin
             needs = needs or n_cub == 0
         if info.n_cuboids and not (top and i == 0):
             has_subject = True
-        for r in call.rets if not (top and i == 0) else ():
-            _check_name(r, "cuboid name", macro, i)
+        for j, r in enumerate(call.rets if not (top and i == 0) else ()):
+            _check_name(r, "cuboid name", macro, i, j)
             if r in scope:
-                raise MacroError(f"name {r!r} is already used", macro, i)
+                raise MacroError(f"name {r!r} is already used", macro, i, None, j)
             scope[r] = CUBE
         if not (top and i == 0):
             n_cub += info.n_cuboids
@@ -499,12 +502,15 @@ def _parse_arg(ln: _Toks):
     return Linear(tuple(terms)), first
 
 
-def _parse_call(ln: _Toks) -> tuple[Call, list, tuple]:
-    """``[a, b =] f(args)``; returns the call, the first token of every argument, and the name token."""
-    rets, is_assign = [], any(t[1] == "=" for t in ln.toks)
+def _parse_call(ln: _Toks) -> tuple[Call, list, tuple, list]:
+    """``[a, b =] f(args)``; returns the call, the first token of every argument, the function's
+    token and the tokens of the names bound."""
+    rets, rtoks, is_assign = [], [], any(t[1] == "=" for t in ln.toks)
     if is_assign:
         while True:
-            rets.append(ln.take("name", what="a cuboid name")[1])
+            rt = ln.take("name", what="a cuboid name")
+            rets.append(rt[1])
+            rtoks.append(rt)
             t = ln.take("punct", what="',' or '='")
             if t[1] == "=":
                 break
@@ -526,24 +532,32 @@ def _parse_call(ln: _Toks) -> tuple[Call, list, tuple]:
             if t[1] != ",":
                 raise ln.error(f"expected ',' or ')', got {t[1]!r}", t)
     ln.end()
-    return Call(fn[1], tuple(args), tuple(rets)), toks, fn
+    return Call(fn[1], tuple(args), tuple(rets)), toks, fn, rtoks
 
 
 def _coerce(call: Call, functions: Mapping[str, FunctionInfo]) -> Call:
-    """Bare names in float slots become one-term expressions (``s`` -> ``Linear(((1.0, 's'),))``)."""
+    """Arguments in their slot's form: a bare name in a float slot is a one-term expression
+    (``s`` -> ``Linear(((1.0, 's'),))``); a face or axis word in a cuboid slot is a cuboid's name."""
     info = functions.get(call.func)
     if info is None or len(info.params) != len(call.args):
         return call
-    args = tuple(Linear.var(a.name) if p.type == FLOAT and isinstance(a, Name) else a
-                 for a, p in zip(call.args, info.params))
-    return Call(call.func, args, call.rets)
+    args = []
+    for a, p in zip(call.args, info.params):
+        if p.type == FLOAT and isinstance(a, Name):
+            a = Linear.var(a.name)
+        elif p.type == CUBE and isinstance(a, Literal) and isinstance(a.value, str):
+            a = Name(a.value)
+        args.append(a)
+    return Call(call.func, tuple(args), call.rets)
 
 
 def _located(e: MacroError, file: str, where: dict) -> ParseError:
     """A MacroError raised by the checks, at the line and token it names."""
-    ln, toks, fn, header = where[(e.macro, e.index)]
+    ln, toks, fn, header, rtoks = where[(e.macro, e.index)]
     if e.arg is not None and e.arg < len(toks):
         tok = toks[e.arg]
+    elif e.ret is not None and e.ret < len(rtoks):
+        tok = rtoks[e.ret]
     elif e.index is None:
         tok = header
     else:
@@ -635,28 +649,28 @@ def _parse(text: str, file: str, functions: Mapping[str, FunctionInfo] | None, p
                         raise ln.error(f"expected ',' or ')', got {t[1]!r}", t)
             ln.take("punct", ":")
             ln.end()
-            for p, pt in zip(params, ptoks):  # name errors at the parameter
+            for j, (p, pt) in enumerate(zip(params, ptoks)):  # name errors at the parameter
                 try:
                     _check_name(p.name, "parameter", ntok[1], None)
                 except MacroError as e:
                     raise ParseError(e.reason, file, lineno, pt[2], pt[1]) from None
-                if sum(q.name == p.name for q in params) > 1:
+                if any(q.name == p.name for q in params[:j]):
                     raise ParseError(f"parameter {p.name!r} appears twice", file, lineno, pt[2], pt[1])
             cur = (ntok[1], tuple(params), [], ntok, lineno)
-            where[(ntok[1], None)] = (lineno, [], ntok, ntok)
+            where[(ntok[1], None)] = (lineno, [], ntok, ntok, [])
             continue
         if code[0].isspace():
             if cur is None:
                 raise ln.error("unexpected indentation (a body line outside a definition)", ln.toks[0])
-            call, toks, fn = _parse_call(ln)
-            where[(cur[0], len(cur[2]))] = (lineno, toks, fn, fn)
+            call, toks, fn, rtoks = _parse_call(ln)
+            where[(cur[0], len(cur[2]))] = (lineno, toks, fn, fn, rtoks)
             cur[2].append(call)
             continue
         finish()
         if not program:
             raise ln.error("a library text holds definitions only", ln.toks[0])
-        call, toks, fn = _parse_call(ln)
-        where[(None, len(prog))] = (lineno, toks, fn, fn)
+        call, toks, fn, rtoks = _parse_call(ln)
+        where[(None, len(prog))] = (lineno, toks, fn, fn, rtoks)
         prog.append(_coerce(call, funcs))
     finish()
     if not program:

@@ -234,18 +234,26 @@ class Library:
         program, _, _ = _parse(text, file, base.infos(), program=False)
         return base.add(*program.defs)
 
-    def parse(self, text: str, file: str = "<string>") -> MacroProgram:
+    def parse(self, text: str, file: str = "<string>", check: bool = True) -> MacroProgram:
         """Parse a macro program that may call this library's functions and check that it expands.
+
+        Args:
+            text: the program text.
+            file: a name used in error messages.
+            check: also expand the program, so that value errors are reported here (False: only
+                syntax, names and types are checked).
 
         Raises:
             ParseError: at the offending line and token (syntax, names, types, and expansion errors
                 such as an attach to its own subject or a fractional translate count).
         """
         program, where, _ = _parse(text, file, self.infos())
+        if not check:
+            return program
         try:
             self.expand(program)
         except MacroError as e:
-            line, toks, fn, _ = where[(None, e.index)]
+            line, toks, fn, _, _ = where[(None, e.index)]
             tok = toks[e.arg] if e.arg is not None and e.arg < len(toks) else fn
             raise ParseError(e.reason, file, line, tok[2], tok[1]) from None
         return program
