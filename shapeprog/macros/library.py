@@ -219,8 +219,16 @@ class Library:
         return Library(self._macros + list(macros))
 
     def with_program(self, program: MacroProgram) -> "Library":
-        """This library plus the program's own definitions."""
-        return self.add(*program.defs) if program.defs else self
+        """This library plus the program's own definitions (those it already holds, unchanged, are
+        not added again)."""
+        new = []
+        for d in program.defs:
+            f = self._functions.get(d.name)
+            if f is None:
+                new.append(d)
+            elif f.definition != d:
+                raise MacroError(f"the program redefines {d.name!r}, which the library defines differently", d.name)
+        return self.add(*new) if new else self
 
     # -- text
     def to_text(self) -> str:
