@@ -19,7 +19,7 @@ import shapeprog
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
-PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "envs", "shapeio"]
+PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.macros", "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -55,6 +55,10 @@ PUBLIC = {
     "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
                       "VectorNode", "batch_forward", "batch_loss", "decode", "decode_latent", "encode", "interpolate",
                       "load_pretrained", "program_loss", "program_to_tree", "sample", "tree_to_program"},
+    "shapeprog.macros": {"Call", "Conversion", "CorpusData", "Cube", "Failure", "Library", "Linear", "Literal",
+                         "MacroDef", "MacroError", "MacroProgram", "Name", "Ordering", "Param", "SubProgram",
+                         "convert_corpus", "convert_program", "execute", "execute_batch", "from_lines", "order_errors",
+                         "parse", "program_parameters", "to_text"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }
