@@ -399,6 +399,8 @@ def _parse_block(block: Block) -> tuple[CuboidLine, list[Cube], list[int], bool]
                 raise ConversionError("the bbox is re-declared")
             continue
         a = idx(s.a, type(s).__name__.lower(), si)
+        if a == BBOX:
+            raise ConversionError(f"statement {si + 1} moves the bbox")
         if isinstance(s, Attach):
             t = idx(s.b, "attach", si)
             moves[a].append(AttachLine(t, s.x1, s.y1, s.z1, s.x2, s.y2, s.z2))

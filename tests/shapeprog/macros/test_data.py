@@ -221,3 +221,12 @@ def test_subprograms_pickle_and_corpus_conversion_runs_on_an_executor():
     assert "chair: 12 programs" in serial.summary()
     with pytest.raises(ValueError, match="cleanup"):
         convert_corpus(["chair"], cleanup="bad")
+
+
+def test_a_program_built_in_code_that_moves_the_bbox_is_refused():
+    from shapeprog.lang import Attach, Block, Cuboid, Program
+
+    prog = Program((Block("Program_0", (Cuboid("bbox", 1.0, 1.0, 1.0, True), Cuboid("cube0", 0.2, 0.2, 0.2, True),
+                                        Attach("bbox", "cube0", 0.5, 0.0, 0.5, 0.5, 0.0, 0.5))),), flat=True)
+    with pytest.raises(ConversionError, match="statement 3 moves the bbox"):
+        convert_block(prog, "Program_0")
