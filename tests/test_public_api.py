@@ -19,7 +19,8 @@ import shapeprog
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
-PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "envs", "shapeio"]
+PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
+            "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -60,6 +61,10 @@ PUBLIC = {
                              "corpus_cloud", "farthest_point_sample", "gather_points", "group_all", "group_points",
                              "load_cache", "make_clouds", "normalize", "program_cloud", "query_and_group",
                              "read_cloud", "scale_program"},
+    "shapeprog.macros": {"Call", "Conversion", "CorpusData", "Cube", "Failure", "Library", "Linear", "Literal",
+                         "MacroDef", "MacroError", "MacroProgram", "Name", "Ordering", "Param", "SubProgram",
+                         "convert_corpus", "convert_program", "execute", "execute_batch", "from_lines", "order_errors",
+                         "parse", "program_parameters", "to_text"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }

@@ -1,0 +1,56 @@
+"""ShapeMOD on ShapeAssembly: sub-programs and their orderings, a typed macro language and library.
+
+* :mod:`~shapeprog.macros.grammar`: the modified grammar (lines with an implicit subject), signatures.
+* :mod:`~shapeprog.macros.data`: corpus programs as sub-programs, their orderings O_P and signatures.
+* :mod:`~shapeprog.macros.lang`: the text of macro programs (typed macros and the lines calling them).
+* :mod:`~shapeprog.macros.library`: a :class:`Library` of base functions and macros; expansion.
+* :mod:`~shapeprog.macros.execute`: differentiable execution through the ShapeAssembly executor.
+
+The data decisions and the language: ``docs/shapemod.md``.
+
+Example:
+    >>> from shapeprog import macros
+    >>> lib = macros.Library.from_text("def post(h: float):\\n    c = Cuboid(0.1, h, 0.1, True)\\n"
+    ...                                "    attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n")
+    >>> p = macros.parse("bbox = Cuboid(1.0, 1.0, 1.0, True)\\np0 = post(0.5)\\n", lib)
+    >>> macros.execute(p, lib).dims.tolist()
+    [[0.10000000149011612, 0.5, 0.10000000149011612]]
+    >>> print(macros.to_text(lib.inline(p)), end="")
+    bbox = Cuboid(1.0, 1.0, 1.0, True)
+    p0 = Cuboid(0.1, 0.5, 0.1, True)
+    attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)
+"""
+from __future__ import annotations
+
+from .data import (Conversion, CorpusData, Cube, Failure, Ordering, SubProgram, convert_corpus, convert_program,
+                   order_errors)
+from .execute import execute, execute_batch, program_parameters
+from .lang import Call, Linear, Literal, MacroDef, MacroError, MacroProgram, Name, Param, from_lines, to_text
+from .library import Library, parse
+
+__all__ = [
+    "Call",
+    "Conversion",
+    "CorpusData",
+    "Cube",
+    "Failure",
+    "Library",
+    "Linear",
+    "Literal",
+    "MacroDef",
+    "MacroError",
+    "MacroProgram",
+    "Name",
+    "Ordering",
+    "Param",
+    "SubProgram",
+    "convert_corpus",
+    "convert_program",
+    "execute",
+    "execute_batch",
+    "from_lines",
+    "order_errors",
+    "parse",
+    "program_parameters",
+    "to_text",
+]

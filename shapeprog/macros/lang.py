@@ -1,0 +1,752 @@
+"""The text language of macro programs (ShapeMOD): typed macros, and programs that call them.
+Standard library only.
+
+A text holds macro definitions, then program lines::
+
+    def leg(s: float, b: bool, t: float):
+        c = Cuboid(s, bb_y, s, b)
+        squeeze(bbox, bbox, bot, 0.6 * s, t)
+        reflect(X)
+
+    def four_legs(s: float, b: bool, t: float):
+        c1 = leg(s, b, t)
+        c2 = leg(0.95 * s, b, 1.0 - t)
+
+    bbox = Cuboid(1.2, 0.9, 1.0, True)
+    leg0, leg1 = four_legs(0.1, True, 0.2)
+    seat = Cuboid(1.2, 0.1, 1.0, True)
+    attach(leg0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)
+
+* **Calls.** Every line calls a function: one of the five base functions of the modified grammar
+  (:data:`BASE`) or a macro defined earlier (in the text or in a library). A call binds one name to
+  each cuboid it creates (``a, b = f(...)``; none for a function that creates no cuboid). Base
+  commands other than ``Cuboid`` act on the *last declared cuboid*, which is why they name no subject.
+* **Types.** A parameter is ``float``, ``cube`` (a cuboid id), ``face``, ``axis`` or ``bool``. In a
+  macro body a float argument is a linear expression (``0.6 * s``, ``1.0 - t``, ``bb_y``,
+  ``0.5 * bb_x + 0.1 * s + 0.2``) over the macro's float parameters and the bbox dims ``bb_x``,
+  ``bb_y``, ``bb_z`` of the sub-program; a cuboid id is ``bbox``, a ``cube`` parameter or a cuboid
+  created earlier in the body; faces, axes and booleans are literals or parameters of that type.
+  In program lines every float is a number (a *free parameter* of the program), every cuboid id is
+  ``bbox`` or a cuboid named by an earlier line. The first program line is ``bbox = Cuboid(...)``.
+* **Format.** ``def`` lines start at column 1, body lines are indented (the printer uses 4 spaces), a
+  blank line follows each definition; ``#`` starts a comment; numbers print with ``repr``.
+  :func:`to_text` prints the canonical form, so ``to_text(parse(t)) == t`` for printed texts and
+  ``parse(to_text(p)) == p``.
+
+:func:`parse` here checks syntax, names and types; :meth:`shapeprog.macros.library.Library.parse` also
+expands the program and reports value errors (e.g. an attach to its own subject) at their line.
+Errors are :class:`~shapeprog.errors.ParseError` with file, line, column and token. The decisions:
+``docs/shapemod.md`` ("Macro programs").
+
+Example:
+    >>> p = parse("def bar(h: float):\\n    c = Cuboid(bb_x, h, bb_z, True)\\n    attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n"
+    ...           "\\nbbox = Cuboid(1.0, 2.0, 1.0, True)\\nslab = bar(0.25)\\n")
+    >>> p.defs[0].body[0].args[1], p.lines[1]
+    (Linear(terms=((1.0, 'h'),)), Call(func='bar', args=(Linear(terms=((0.25, None),)),), rets=('slab',)))
+    >>> print(to_text(p), end="")
+    def bar(h: float):
+        c = Cuboid(bb_x, h, bb_z, True)
+        attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)
+    <BLANKLINE>
+    bbox = Cuboid(1.0, 2.0, 1.0, True)
+    slab = bar(0.25)
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Mapping, Sequence, Union
+
+from .. import limits
+from ..errors import ParseError
+from ..lang import AXES, FACES
+from .grammar import BBOX, AttachLine, CuboidLine, Line, ReflectLine, SqueezeLine, TranslateLine
+
+__all__ = [
+    "AXIS",
+    "BASE",
+    "BB_DIMS",
+    "BOOL",
+    "CUBE",
+    "FACE",
+    "FLOAT",
+    "INDENT",
+    "MAX_EXPANDED_LINES",
+    "TYPES",
+    "Arg",
+    "Call",
+    "FunctionInfo",
+    "Linear",
+    "Literal",
+    "MacroDef",
+    "MacroError",
+    "MacroProgram",
+    "Name",
+    "Param",
+    "check_def",
+    "check_program",
+    "def_text",
+    "from_lines",
+    "parameters",
+    "parse",
+    "replace_parameters",
+    "to_text",
+]
+
+FLOAT, CUBE, FACE, AXIS, BOOL = "float", "cube", "face", "axis", "bool"
+#: The parameter types.
+TYPES = (FLOAT, CUBE, FACE, AXIS, BOOL)
+#: The bbox dims, an implicit float input of every macro body.
+BB_DIMS = ("bb_x", "bb_y", "bb_z")
+#: Indentation of printed macro bodies.
+INDENT = "    "
+#: Base lines a macro or a program may expand to (a ShapeAssembly text's line limit).
+MAX_EXPANDED_LINES = limits.MAX_LINES
+_RESERVED = frozenset({"def", "bbox", "True", "False", *FACES, *AXES, *BB_DIMS, *TYPES})  # parameter names
+_RESERVED_CUBOIDS = frozenset({"def", "bbox", "True", "False", *BB_DIMS})  # cuboid names may be 'top', 'X'...
+
+
+class MacroError(ValueError):
+    """A macro or macro program that is not valid (built in code, or found while expanding).
+
+    Attributes:
+        reason: the message without the location.
+        macro: the macro's name, or None for a program line.
+        index: 0-based index of the offending line in the macro body or the program.
+        arg: 0-based index of the offending argument, or None.
+        ret: 0-based index of the offending name bound by the line (``a, b = ...``), or None.
+    """
+
+    def __init__(self, reason: str, macro: str | None = None, index: int | None = None, arg: int | None = None,
+                 ret: int | None = None):
+        self.reason, self.macro, self.index, self.arg, self.ret = reason, macro, index, arg, ret
+        where = ("program" if macro is None else f"macro {macro!r}") + ("" if index is None else f", line {index}")
+        super().__init__(f"{where}: {reason}")
+
+
+# ----------------------------------------------------------------------------- AST
+
+
+@dataclass(frozen=True)
+class Linear:
+    """A linear float expression: ``terms`` in text order, each ``(coefficient, variable)``; the
+    variable None is the constant term. ``Linear(((0.6, 's'),))`` is ``0.6 * s``;
+    ``Linear(((1.0, None), (-1.0, 't')))`` is ``1.0 - t``."""
+
+    terms: tuple[tuple[float, str | None], ...]
+
+    @classmethod
+    def const(cls, value: float) -> "Linear":
+        return cls(((float(value), None),))
+
+    @classmethod
+    def var(cls, name: str, coef: float = 1.0) -> "Linear":
+        return cls(((float(coef), name),))
+
+    @property
+    def value(self) -> float | None:
+        """The number, for a constant expression (one constant term); else None."""
+        if len(self.terms) == 1 and self.terms[0][1] is None:
+            return self.terms[0][0]
+        return None
+
+    def variables(self) -> list[str]:
+        """The variables, in order of first appearance."""
+        return list(dict.fromkeys(v for _, v in self.terms if v is not None))
+
+    def coefficients(self) -> dict[str | None, float]:
+        """Summed coefficient per variable (None: the constant)."""
+        out: dict[str | None, float] = {}
+        for c, v in self.terms:
+            out[v] = out.get(v, 0.0) + c
+        return out
+
+    def evaluate(self, env: Mapping[str, float]) -> float:
+        return sum(c * (1.0 if v is None else env[v]) for c, v in self.terms)
+
+    def __str__(self) -> str:
+        out = []
+        for i, (c, v) in enumerate(self.terms):
+            neg = c < 0 or (c == 0 and math.copysign(1.0, c) < 0)
+            a = abs(c)
+            if v is None:
+                body = repr(a)
+            elif a == 1.0:
+                body = v
+            else:
+                body = f"{repr(a)} * {v}"
+            if i == 0:
+                out.append(("-" if neg else "") + body)
+            else:
+                out.append((" - " if neg else " + ") + body)
+        return "".join(out)
+
+
+@dataclass(frozen=True)
+class Name:
+    """A name used as an argument: ``bbox``, a cuboid or a parameter of a non-float type."""
+
+    name: str
+
+    def __str__(self) -> str:
+        return self.name
+
+
+@dataclass(frozen=True)
+class Literal:
+    """A face, axis or boolean constant."""
+
+    value: Union[str, bool]
+
+    def __str__(self) -> str:
+        return str(self.value)
+
+
+Arg = Union[Linear, Name, Literal]
+
+
+@dataclass(frozen=True)
+class Param:
+    """A typed parameter (``type`` in :data:`TYPES`)."""
+
+    name: str
+    type: str
+
+
+@dataclass(frozen=True)
+class Call:
+    """One line: ``rets = func(args)``; ``rets`` names the cuboids the call creates, in order."""
+
+    func: str
+    args: tuple[Arg, ...]
+    rets: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class MacroDef:
+    """``def name(params): body``: a macro whose body calls base functions and earlier macros."""
+
+    name: str
+    params: tuple[Param, ...]
+    body: tuple[Call, ...]
+
+
+@dataclass(frozen=True)
+class MacroProgram:
+    """A macro program: its own macro definitions, then its lines (the first one declares the bbox)."""
+
+    defs: tuple[MacroDef, ...]
+    lines: tuple[Call, ...]
+
+
+@dataclass(frozen=True)
+class FunctionInfo:
+    """What a caller needs to know about a function (base or macro).
+
+    Attributes:
+        name: its name.
+        params: its typed parameters.
+        n_cuboids: the cuboids a call creates (the names it binds).
+        needs_subject: its first base line acts on a cuboid declared before the call.
+        structure: the base commands of its expansion, in order (e.g. ``('Cuboid', 'squeeze', 'reflect')``).
+    """
+
+    name: str
+    params: tuple[Param, ...]
+    n_cuboids: int
+    needs_subject: bool
+    structure: tuple[str, ...]
+
+
+def _p(spec: str) -> tuple[Param, ...]:
+    return tuple(Param(*x.split(":")) for x in spec.split())
+
+
+#: The five base functions of the modified grammar.
+BASE: dict[str, FunctionInfo] = {
+    "Cuboid": FunctionInfo("Cuboid", _p("l:float h:float w:float aligned:bool"), 1, False, ("Cuboid",)),
+    "attach": FunctionInfo("attach", _p("target:cube x1:float y1:float z1:float x2:float y2:float z2:float"), 0,
+                           True, ("attach",)),
+    "squeeze": FunctionInfo("squeeze", _p("t1:cube t2:cube face:face u:float v:float"), 0, True, ("squeeze",)),
+    "reflect": FunctionInfo("reflect", _p("axis:axis"), 0, True, ("reflect",)),
+    "translate": FunctionInfo("translate", _p("axis:axis n:float d:float"), 0, True, ("translate",)),
+}
+
+
+# ----------------------------------------------------------------------------- checks
+
+
+def _check_name(name: str, what: str, macro, index, ret=None) -> None:
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z_0-9]*", name):
+        raise MacroError(f"{what} {name!r} is not a name", macro, index, None, ret)
+    if name in (_RESERVED_CUBOIDS if ret is not None else _RESERVED):
+        raise MacroError(f"{what} {name!r} is a reserved word", macro, index, None, ret)
+
+
+def _check_arg(arg: Arg, ptype: str, scope: Mapping[str, str], top: bool, macro, index, k) -> None:
+    """One argument against its slot type; ``scope`` maps names to types (bbox included)."""
+    if ptype == FLOAT:
+        if not isinstance(arg, Linear) or not arg.terms:
+            raise MacroError(f"expected a float expression, got {arg!s}", macro, index, k)
+        for c, v in arg.terms:
+            if not (isinstance(c, (int, float)) and math.isfinite(c)):
+                raise MacroError(f"coefficient {c!r} is not a finite number", macro, index, k)
+        if top:
+            if arg.value is None:
+                raise MacroError(f"a program's float arguments are numbers, got {arg!s}", macro, index, k)
+            return
+        for v in arg.variables():
+            if v not in BB_DIMS and scope.get(v) != FLOAT:
+                raise MacroError(f"{v!r} is not a float parameter", macro, index, k)
+        return
+    if ptype == CUBE:
+        if not isinstance(arg, Name):
+            raise MacroError(f"expected a cuboid, got {arg!s}", macro, index, k)
+        if scope.get(arg.name) != CUBE:
+            raise MacroError(f"unknown cuboid {arg.name!r}", macro, index, k)
+        return
+    allowed = {FACE: FACES, AXIS: AXES, BOOL: (True, False)}[ptype]
+    if isinstance(arg, Literal):
+        if arg.value not in allowed or isinstance(arg.value, bool) != (ptype == BOOL):
+            raise MacroError(f"expected a {ptype}, got {arg!s}", macro, index, k)
+        return
+    if isinstance(arg, Name) and not top and scope.get(arg.name) == ptype:
+        return
+    raise MacroError(f"expected a {ptype}, got {arg!s}", macro, index, k)
+
+
+def _check_calls(calls: Sequence[Call], scope: dict[str, str], functions: Mapping[str, FunctionInfo],
+                 macro: str | None) -> tuple[int, bool, tuple[str, ...]]:
+    """Type-check a body (``macro`` set) or program lines; returns (cuboids created, needs a subject,
+    structure). ``scope`` is extended with the names bound."""
+    top = macro is None
+    n_cub, needs, structure = 0, False, []
+    has_subject = False
+    for i, call in enumerate(calls):
+        info = functions.get(call.func)
+        if info is None or (macro is not None and call.func == macro):
+            raise MacroError(f"unknown function {call.func!r}", macro, i)
+        if len(call.args) != len(info.params):
+            raise MacroError(f"{call.func} expects {len(info.params)} arguments, got {len(call.args)}", macro, i)
+        for k, (arg, p) in enumerate(zip(call.args, info.params)):
+            _check_arg(arg, p.type, scope, top, macro, i, k)
+        if top and i == 0:
+            if call.func != "Cuboid" or call.rets != ("bbox",):
+                raise MacroError("a program must start with 'bbox = Cuboid(...)'", macro, i)
+        elif len(call.rets) != info.n_cuboids:
+            raise MacroError(f"{call.func} creates {info.n_cuboids} cuboid(s), the line names {len(call.rets)}",
+                             macro, i)
+        if info.needs_subject and not has_subject:
+            if top:
+                raise MacroError(f"{call.func} acts on the last declared cuboid, and there is none", macro, i)
+            needs = needs or n_cub == 0
+        if info.n_cuboids and not (top and i == 0):
+            has_subject = True
+        for j, r in enumerate(call.rets if not (top and i == 0) else ()):
+            _check_name(r, "cuboid name", macro, i, j)
+            if r in scope:
+                raise MacroError(f"name {r!r} is already used", macro, i, None, j)
+            scope[r] = CUBE
+        if not (top and i == 0):
+            n_cub += info.n_cuboids
+        structure += info.structure
+        if len(structure) > MAX_EXPANDED_LINES:
+            raise MacroError(f"expands to more than {MAX_EXPANDED_LINES} base lines (MAX_EXPANDED_LINES)", macro, i)
+    return n_cub, needs, tuple(structure)
+
+
+def check_def(defn: MacroDef, functions: Mapping[str, FunctionInfo]) -> FunctionInfo:
+    """Check a macro definition against the functions it may call; returns its :class:`FunctionInfo`.
+
+    Raises:
+        MacroError: a bad name, a duplicate or reserved parameter, an unknown function (a macro may
+            not call itself), a wrong argument count or type, an unknown variable, or an empty body.
+    """
+    _check_name(defn.name, "macro name", defn.name, None)
+    if defn.name in BASE:
+        raise MacroError(f"{defn.name!r} is a base function", defn.name)
+    scope = {"bbox": CUBE}
+    for p in defn.params:
+        _check_name(p.name, "parameter", defn.name, None)
+        if p.type not in TYPES:
+            raise MacroError(f"unknown type {p.type!r} of parameter {p.name!r} (expected one of {', '.join(TYPES)})",
+                             defn.name)
+        if p.name in scope:
+            raise MacroError(f"parameter {p.name!r} appears twice", defn.name)
+        scope[p.name] = p.type
+    if not defn.body:
+        raise MacroError("empty body", defn.name)
+    n, needs, structure = _check_calls(defn.body, scope, functions, defn.name)
+    return FunctionInfo(defn.name, defn.params, n, needs, structure)
+
+
+def check_program(program: MacroProgram, functions: Mapping[str, FunctionInfo]) -> dict[str, FunctionInfo]:
+    """Check a program's definitions (in order) and lines; returns every callable function's info."""
+    funcs = dict(functions)
+    for d in program.defs:
+        if d.name in funcs:
+            raise MacroError(f"function {d.name!r} is defined twice", d.name)
+        funcs[d.name] = check_def(d, funcs)
+    if not program.lines:
+        raise MacroError("a program needs at least its bbox line")
+    _check_calls(program.lines, {"bbox": CUBE}, funcs, None)
+    return funcs
+
+
+# ----------------------------------------------------------------------------- printer
+
+
+def _call_text(c: Call) -> str:
+    head = f"{', '.join(c.rets)} = " if c.rets else ""
+    return f"{head}{c.func}({', '.join(str(a) for a in c.args)})"
+
+
+def def_text(d: MacroDef) -> str:
+    """One definition as text (header, indented body, no trailing blank line)."""
+    params = ", ".join(f"{p.name}: {p.type}" for p in d.params)
+    return "\n".join([f"def {d.name}({params}):"] + [INDENT + _call_text(c) for c in d.body]) + "\n"
+
+
+def to_text(program: MacroProgram) -> str:
+    """The canonical text of ``program``: each definition followed by a blank line, then the lines."""
+    return "".join(def_text(d) + "\n" for d in program.defs) + "".join(_call_text(c) + "\n" for c in program.lines)
+
+
+# ----------------------------------------------------------------------------- parser
+
+_TOKEN = re.compile(r"\s*(?:(?P<num>(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)|(?P<name>[A-Za-z_][A-Za-z_0-9]*)"
+                    r"|(?P<punct>[(),=:*+\-])|(?P<bad>\S))")
+
+
+class _Toks:
+    def __init__(self, text: str, file: str, lineno: int):
+        self.text, self.file, self.lineno = text, file, lineno
+        self.toks = [(m.lastgroup, m.group(m.lastgroup), m.start(m.lastgroup) + 1)
+                     for m in _TOKEN.finditer(text) if m.lastgroup]
+        self.i = 0
+
+    def error(self, reason: str, tok=None) -> ParseError:
+        if tok is None:
+            tok = self.toks[self.i] if self.i < len(self.toks) else ("end", "", len(self.text.rstrip()) + 1)
+        return ParseError(reason, self.file, self.lineno, tok[2], tok[1])
+
+    def peek(self):
+        return self.toks[self.i] if self.i < len(self.toks) else None
+
+    def take(self, kind: str | None = None, text: str | None = None, what: str = ""):
+        t = self.peek()
+        want = what or (repr(text) if text else kind)
+        if t is None:
+            raise self.error(f"expected {want}, got the end of the line")
+        if t[0] == "bad":
+            raise self.error(f"unexpected character {t[1]!r}")
+        if (kind and t[0] != kind) or (text and t[1] != text):
+            raise self.error(f"expected {want}, got {t[1]!r}")
+        self.i += 1
+        return t
+
+    def end(self) -> None:
+        if self.peek() is not None:
+            t = self.peek()
+            raise self.error(f"unexpected {t[1]!r} after the line" if t[0] != "bad" else f"unexpected character {t[1]!r}")
+
+
+def _number(ln: _Toks, t) -> float:
+    return limits.number(t[1], ln.file, ln.lineno, t[2])
+
+
+def _parse_arg(ln: _Toks):
+    """One argument: a bare name (a Name) or a linear expression; returns (arg, first token)."""
+    first = ln.peek()
+    if first is None or first[1] in (",", ")"):
+        raise ln.error("expected an argument")
+    t2 = ln.toks[ln.i + 1] if ln.i + 1 < len(ln.toks) else None
+    if first[0] == "name" and (t2 is None or t2[1] in (",", ")")):
+        ln.i += 1
+        if first[1] in ("True", "False"):
+            return Literal(first[1] == "True"), first
+        if first[1] in FACES or first[1] in AXES:
+            return Literal(first[1]), first
+        return Name(first[1]), first
+    terms = []
+    sign = 1.0
+    if first[1] in ("-", "+"):
+        sign = -1.0 if first[1] == "-" else 1.0
+        ln.i += 1
+    while True:
+        t = ln.peek()
+        if t is None or t[0] not in ("num", "name"):
+            raise ln.error("expected a number or a name in the expression")
+        ln.i += 1
+        if t[0] == "num":
+            c = _number(ln, t)
+            nxt = ln.peek()
+            if nxt is not None and nxt[1] == "*":
+                ln.i += 1
+                v = ln.take("name", what="a variable after '*'")
+                terms.append((sign * c, v[1]))
+            else:
+                terms.append((sign * c, None))
+        else:
+            if t[1] in ("True", "False") or t[1] in FACES or t[1] in AXES:
+                raise ln.error(f"{t[1]!r} cannot be part of an expression", t)
+            terms.append((sign, t[1]))
+        nxt = ln.peek()
+        if nxt is None or nxt[1] in (",", ")"):
+            break
+        if nxt[1] not in ("+", "-"):
+            raise ln.error(f"expected '+', '-', ',' or ')', got {nxt[1]!r}")
+        sign = -1.0 if nxt[1] == "-" else 1.0
+        ln.i += 1
+    return Linear(tuple(terms)), first
+
+
+def _parse_call(ln: _Toks) -> tuple[Call, list, tuple, list]:
+    """``[a, b =] f(args)``; returns the call, the first token of every argument, the function's
+    token and the tokens of the names bound."""
+    rets, rtoks, is_assign = [], [], any(t[1] == "=" for t in ln.toks)
+    if is_assign:
+        while True:
+            rt = ln.take("name", what="a cuboid name")
+            rets.append(rt[1])
+            rtoks.append(rt)
+            t = ln.take("punct", what="',' or '='")
+            if t[1] == "=":
+                break
+            if t[1] != ",":
+                raise ln.error(f"expected ',' or '=', got {t[1]!r}", t)
+    fn = ln.take("name", what="a function name")
+    ln.take("punct", "(")
+    args, toks = [], []
+    if ln.peek() is not None and ln.peek()[1] == ")":
+        ln.i += 1
+    else:
+        while True:
+            a, t = _parse_arg(ln)
+            args.append(a)
+            toks.append(t)
+            t = ln.take("punct", what="',' or ')'")
+            if t[1] == ")":
+                break
+            if t[1] != ",":
+                raise ln.error(f"expected ',' or ')', got {t[1]!r}", t)
+    ln.end()
+    return Call(fn[1], tuple(args), tuple(rets)), toks, fn, rtoks
+
+
+def _coerce(call: Call, functions: Mapping[str, FunctionInfo]) -> Call:
+    """Arguments in their slot's form: a bare name in a float slot is a one-term expression
+    (``s`` -> ``Linear(((1.0, 's'),))``); a face or axis word in a cuboid slot is a cuboid's name."""
+    info = functions.get(call.func)
+    if info is None or len(info.params) != len(call.args):
+        return call
+    args = []
+    for a, p in zip(call.args, info.params):
+        if p.type == FLOAT and isinstance(a, Name):
+            a = Linear.var(a.name)
+        elif p.type == CUBE and isinstance(a, Literal) and isinstance(a.value, str):
+            a = Name(a.value)
+        args.append(a)
+    return Call(call.func, tuple(args), call.rets)
+
+
+def _located(e: MacroError, file: str, where: dict) -> ParseError:
+    """A MacroError raised by the checks, at the line and token it names."""
+    ln, toks, fn, header, rtoks = where[(e.macro, e.index)]
+    if e.arg is not None and e.arg < len(toks):
+        tok = toks[e.arg]
+    elif e.ret is not None and e.ret < len(rtoks):
+        tok = rtoks[e.ret]
+    elif e.index is None:
+        tok = header
+    else:
+        tok = fn
+    return ParseError(e.reason, file, ln, tok[2], tok[1])
+
+
+def parse(text: str, file: str = "<string>", functions: Mapping[str, FunctionInfo] | None = None) -> MacroProgram:
+    """Parse a macro program (definitions, then program lines) and check its names and types.
+
+    Args:
+        text: the program text.
+        file: a name used in error messages.
+        functions: functions the text may call besides the base ones and its own definitions (e.g.
+            a library's, :meth:`shapeprog.macros.library.Library.infos`).
+
+    Raises:
+        ParseError: ``file:line:column: reason`` at the offending token.
+    """
+    return _parse(text, file, functions)[0]
+
+
+def _parse(text: str, file: str, functions: Mapping[str, FunctionInfo] | None, program: bool = True):
+    """:func:`parse`, also returning where each program line and definition line is
+    (``{(macro or None, index): (line, argument tokens, function token, header token)}``) and every
+    callable function's info. ``program=False`` reads a library text: definitions only."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    lines = [x[:-1] if x.endswith("\r") else x for x in lines]
+    limits.check_lines(lines, file)
+    funcs: dict[str, FunctionInfo] = dict(BASE)
+    for name, info in (functions or {}).items():
+        funcs.setdefault(name, info)
+    defs: list[MacroDef] = []
+    prog: list[Call] = []
+    where: dict = {}
+    cur = None  # (name, params, body calls, header token, header line)
+
+    def finish():
+        nonlocal cur
+        if cur is None:
+            return
+        name, params, body, htok, hline = cur
+        cur = None
+        if not body:
+            raise ParseError("a definition needs an indented body", file, hline, htok[2], htok[1])
+        d = MacroDef(name, params, tuple(_coerce(c, funcs) for c in body))
+        if name in BASE:
+            raise ParseError(f"{name!r} is a base function", file, hline, htok[2], htok[1])
+        if name in funcs:
+            raise ParseError(f"function {name!r} is already defined", file, hline, htok[2], htok[1])
+        try:
+            funcs[name] = check_def(d, funcs)
+        except MacroError as e:
+            raise _located(e, file, where) from None
+        defs.append(d)
+
+    for i, raw in enumerate(lines):
+        lineno = i + 1
+        code = raw.split("#", 1)[0]
+        if not code.strip():
+            continue
+        ln = _Toks(code, file, lineno)
+        if ln.toks and ln.toks[0][1] == "def" and not code[0].isspace():
+            finish()
+            if prog:
+                raise ln.error("definitions must come before the program lines", ln.toks[0])
+            ln.take("name", "def")
+            ntok = ln.take("name", what="a macro name")
+            ln.take("punct", "(")
+            params: list[Param] = []
+            ptoks = []
+            if ln.peek() is not None and ln.peek()[1] == ")":
+                ln.i += 1
+            else:
+                while True:
+                    pt = ln.take("name", what="a parameter name")
+                    ln.take("punct", ":")
+                    ty = ln.take("name", what="a type")
+                    if ty[1] not in TYPES:
+                        raise ln.error(f"unknown type {ty[1]!r} (expected one of {', '.join(TYPES)})", ty)
+                    params.append(Param(pt[1], ty[1]))
+                    ptoks.append(pt)
+                    t = ln.take("punct", what="',' or ')'")
+                    if t[1] == ")":
+                        break
+                    if t[1] != ",":
+                        raise ln.error(f"expected ',' or ')', got {t[1]!r}", t)
+            ln.take("punct", ":")
+            ln.end()
+            for j, (p, pt) in enumerate(zip(params, ptoks)):  # name errors at the parameter
+                try:
+                    _check_name(p.name, "parameter", ntok[1], None)
+                except MacroError as e:
+                    raise ParseError(e.reason, file, lineno, pt[2], pt[1]) from None
+                if any(q.name == p.name for q in params[:j]):
+                    raise ParseError(f"parameter {p.name!r} appears twice", file, lineno, pt[2], pt[1])
+            cur = (ntok[1], tuple(params), [], ntok, lineno)
+            where[(ntok[1], None)] = (lineno, [], ntok, ntok, [])
+            continue
+        if code[0].isspace():
+            if cur is None:
+                raise ln.error("unexpected indentation (a body line outside a definition)", ln.toks[0])
+            call, toks, fn, rtoks = _parse_call(ln)
+            where[(cur[0], len(cur[2]))] = (lineno, toks, fn, fn, rtoks)
+            cur[2].append(call)
+            continue
+        finish()
+        if not program:
+            raise ln.error("a library text holds definitions only", ln.toks[0])
+        call, toks, fn, rtoks = _parse_call(ln)
+        where[(None, len(prog))] = (lineno, toks, fn, fn, rtoks)
+        prog.append(_coerce(call, funcs))
+    finish()
+    if not program:
+        return MacroProgram(tuple(defs), ()), where, funcs
+    if not prog:
+        raise ParseError("a program needs at least its bbox line ('bbox = Cuboid(...)')", file, max(len(lines), 1), 1,
+                         "")
+    result = MacroProgram(tuple(defs), tuple(prog))
+    try:
+        _check_calls(result.lines, {"bbox": CUBE}, funcs, None)
+    except MacroError as e:
+        raise _located(e, file, where) from None
+    return result, where, funcs
+
+
+# ----------------------------------------------------------------------------- parameters and lines
+
+
+def parameters(program: MacroProgram) -> list[float]:
+    """The program's free float parameters: every number of its lines, in text order (the bbox dims
+    first)."""
+    return [a.value for c in program.lines for a in c.args if isinstance(a, Linear)]
+
+
+def replace_parameters(program: MacroProgram, values: Sequence[float]) -> MacroProgram:
+    """A copy of ``program`` whose line numbers are ``values`` (the order of :func:`parameters`)."""
+    it = iter(values)
+    lines = []
+    for c in program.lines:
+        args = tuple(Linear.const(float(next(it))) if isinstance(a, Linear) else a for a in c.args)
+        lines.append(Call(c.func, args, c.rets))
+    rest = list(it)
+    if rest:
+        raise ValueError(f"{len(rest)} value(s) more than the program's parameters")
+    return MacroProgram(program.defs, tuple(lines))
+
+
+def from_lines(lines: Sequence[Line], names: Sequence[str] | None = None) -> MacroProgram:
+    """A line sequence of :mod:`shapeprog.macros.grammar` as a macro program of base calls.
+
+    Args:
+        lines: the sequence (bbox line first).
+        names: one name per non-bbox Cuboid line (default ``cube0``, ``cube1``, ...).
+
+    Example:
+        >>> lines = (CuboidLine(1.0, 1.0, 1.0, True), CuboidLine(0.5, 0.2, 0.5, True),
+        ...          AttachLine(-1, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5), ReflectLine("X"))
+        >>> print(to_text(from_lines(lines)), end="")
+        bbox = Cuboid(1.0, 1.0, 1.0, True)
+        cube0 = Cuboid(0.5, 0.2, 0.5, True)
+        attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)
+        reflect(X)
+    """
+    n = sum(type(x) is CuboidLine for x in lines[1:])
+    names = [f"cube{k}" for k in range(n)] if names is None else list(names)
+    if len(names) != n:
+        raise ValueError(f"`names` must hold {n} names, got {len(names)}")
+    ref = lambda t: Name("bbox" if t == BBOX else names[t])  # noqa: E731
+    f = Linear.const
+    out = []
+    k = -1
+    for ln in lines:
+        t = type(ln)
+        if t is CuboidLine:
+            out.append(Call("Cuboid", (f(ln.l), f(ln.h), f(ln.w), Literal(bool(ln.aligned))),
+                            ("bbox",) if k < 0 else (names[k],)))
+            k += 1
+        elif t is AttachLine:
+            out.append(Call("attach", (ref(ln.target),) + tuple(f(getattr(ln, a)) for a in
+                                                                  ("x1", "y1", "z1", "x2", "y2", "z2"))))
+        elif t is SqueezeLine:
+            out.append(Call("squeeze", (ref(ln.t1), ref(ln.t2), Literal(ln.face), f(ln.u), f(ln.v))))
+        elif t is ReflectLine:
+            out.append(Call("reflect", (Literal(ln.axis),)))
+        elif t is TranslateLine:
+            out.append(Call("translate", (Literal(ln.axis), f(ln.n), f(ln.d))))
+        else:
+            raise TypeError(f"not a line of the grammar: {type(ln).__name__}")
+    return MacroProgram((), tuple(out))
