@@ -35,7 +35,7 @@ from ..errors import ParseError
 from ..limits import decode
 from . import limits
 from .execute import run
-from .lang import LANG_3D, Call, Expr, Num, parse, to_text, walk
+from .lang import LANG_3D, Call, Expr, Num, Var, _parse_spans, to_text
 
 __all__ = ["CATEGORIES", "DISCOVERY_SIZE", "SPLITS", "DataWarning", "ShapeRecord", "load", "parse_record",
            "read_lines"]
@@ -84,8 +84,8 @@ def parse_record(text: str, file: str = "<string>", line: int = 1) -> ShapeRecor
 
     Raises:
         ParseError: ``file:line:column: reason`` with the offending token (a missing ``:``, a malformed
-            key, a program that does not parse or is not a Shape, a negative dimension, a division by 0,
-            a line longer than :data:`~shapeprog.coder.limits.MAX_TEXT_LENGTH`).
+            key, a program that does not parse or is not a Shape, a variable, a negative dimension, a
+            division by 0, a line longer than :data:`~shapeprog.coder.limits.MAX_TEXT_LENGTH`).
     """
     if len(text) > limits.MAX_TEXT_LENGTH:
         raise ParseError(f"line longer than {limits.MAX_TEXT_LENGTH} characters (MAX_TEXT_LENGTH)", file, line,
@@ -98,18 +98,21 @@ def parse_record(text: str, file: str = "<string>", line: int = 1) -> ShapeRecor
         raise ParseError(f"malformed shape key {key[:40]!r}; expected '<PartNet id>_0_<index>'", file, line, 1,
                          key[:40])
     start = len(key) + 2
-    program = parse(prog, LANG_3D, file=file, line=line, column=start)
+    program, toks = _parse_spans(prog, LANG_3D, file=file, line=line, column=start)
+    names = [(i, e) for i, e in toks.spans if isinstance(e, Var)]
+    if names:
+        raise toks.error(f"a data line has no variables; got {names[0][1].name!r}", names[0][0])
     ex = run(program, LANG_3D)
     if ex.hard_errors:
-        bad = [e for e in walk(program) if isinstance(e, Call) and e.fn == "Cuboid"
-               and any(isinstance(a, Num) and a.value <= 0 for a in e.args)]
-        negative = [e for e in bad if any(isinstance(a, Num) and a.value < 0 for a in e.args)]
-        if negative or len(bad) == 0 or len(ex.hard_errors) > len(bad):
-            node = negative[0] if negative else None
-            where = prog.find(to_text(node)) if node is not None else -1
-            reason = "a negative cuboid dimension" if negative else ex.hard_errors[0]
-            token = to_text(node) if node is not None else prog[:20]
-            raise ParseError(reason, file, line, start + max(where, 0), token)
+        cuboids = [(i, e) for i, e in toks.spans if isinstance(e, Call) and e.fn == "Cuboid"]
+        zero = [c for c in cuboids if any(isinstance(a, Num) and a.value == 0 for a in c[1].args)]
+        negative = [c for c in cuboids if any(isinstance(a, Num) and a.value < 0 for a in c[1].args)]
+        if negative:
+            i, node = min(negative, key=lambda c: c[0])
+            raise toks.error(f"a negative cuboid dimension in {to_text(node)}", i)
+        if len(ex.hard_errors) > len(zero):  # something else than a 0.0 dimension
+            others = [e for e in ex.hard_errors if not e.endswith("a dimension is <= 0")]
+            raise ParseError(others[0] if others else ex.hard_errors[0], file, line, start, prog[:20])
     return ShapeRecord(key, int(m.group(1)), int(m.group(3)), line, program, ex.primitives(prec=2, orient=True))
 
 
@@ -142,11 +145,7 @@ def _bounds(split: str, n: int) -> tuple:
     raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
 
 
-@functools.lru_cache(maxsize=None)
-def _load(category: str, split: str) -> tuple:
-    lines = read_lines(category)
-    lo, hi = _bounds(split, len(lines))
-    name = f"PN_{category}.txt"
+def _parse_lines(lines: list, name: str, lo: int, hi: int) -> tuple:
     records, errors = [], []
     for n in range(lo, hi):
         try:
@@ -156,13 +155,20 @@ def _load(category: str, split: str) -> tuple:
     return tuple(records), tuple(errors)
 
 
+@functools.lru_cache(maxsize=None)
+def _load(category: str, split: str) -> tuple:
+    lines = read_lines(category)
+    lo, hi = _bounds(split, len(lines))
+    return _parse_lines(lines, f"PN_{category}.txt", lo, hi)
+
+
 def load(category: str, split: str = "discovery", strict: bool = False) -> list:
     """The shapes of ``category`` (``'chair'``, ``'table'``, ``'storage'``) in ``split``:
     ``'discovery'`` (lines 1 to 400), ``'heldout'`` (lines 401 to 1,100) or ``'all'``, in file order.
 
     A line that cannot be read is skipped and reported (a :class:`DataWarning` naming
-    ``file:line: reason`` for each) and the rest still loads; with ``strict=True`` the first error is
-    raised instead. Each split is parsed once per process (the records are immutable).
+    ``file:line:column: reason`` for each) and the rest still loads; with ``strict=True`` the first error
+    is raised instead. Each split is parsed once per process (the records are immutable).
 
     Returns:
         list of :class:`ShapeRecord`.

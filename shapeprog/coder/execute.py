@@ -35,7 +35,7 @@ Example:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -114,10 +114,10 @@ class Execution:
         lang: the domain.
     """
 
-    parts: tuple
-    hard_errors: tuple
-    soft_errors: tuple
-    lang: Lang
+    parts: tuple = field(repr=False)
+    hard_errors: tuple = ()
+    soft_errors: tuple = ()
+    lang: Lang = field(default=None, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -274,18 +274,19 @@ class _Run:
         self.soft: list = []
 
     def value(self, e: Expr, env: Mapping, want: Type):
-        if isinstance(e, Num):
+        t = type(e)
+        if t is Num:
             return e.value
-        if isinstance(e, AxisConst):
-            return e.name
-        if isinstance(e, IntConst):
-            return e.value
-        if isinstance(e, Var):
+        if t is Call:
+            return self.call(e, env)
+        if t is Var:
             if e.name not in env:
                 raise ExecutionError(f"variable {e.name!r} has no value")
             return self._checked(e.name, env[e.name], want)
-        if isinstance(e, Call):
-            return self.call(e, env)
+        if t is AxisConst:
+            return e.name
+        if t is IntConst:
+            return e.value
         raise ExecutionError(f"not an expression node: {type(e).__name__}")
 
     def _checked(self, name: str, v, want: Type):

@@ -579,130 +579,140 @@ def expand(expr: Expr, library: Library, names=None) -> Expr:
 
 # ----------------------------------------------------------------------------- parsing
 
-_TOKEN = re.compile(r"""
-    (?P<int>INT\#[0-9]*\#?)
-  | (?P<num>[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)
-  | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
-  | (?P<punct>[(),:=])
-  | (?P<ws>\s+)
-  | (?P<bad>.)
-""", re.VERBOSE | re.DOTALL)
-
-_END = "end"
+# One token: a count, a number, a name, or any other single non-space character (punctuation, or an error
+# reported by the parser); whitespace separates tokens and is skipped.
+_TOKEN = re.compile(r"INT#[0-9]*#?|[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?|[A-Za-z_][A-Za-z0-9_]*|\S")
+_BAD_CHAR = re.compile(r"[^\sA-Za-z0-9_(),:=#.+\-]")
+_NAME_START = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz_")
+_NUM_START = frozenset("0123456789+-.")
+_PUNCT = frozenset("(),:=")
 
 
 class _Tokens:
-    """The tokens of one text as ``(kind, text, offset)``, a cursor, and errors at (line, column)."""
+    """The tokens of one text (strings; ``""`` marks the end), a cursor, and errors at (line, column).
+    Offsets are found again only for an error, which keeps the common path fast."""
 
     def __init__(self, text: str, file: str, line: int, column: int):
         self.text, self.file, self.line, self.column = text, file, line, column
         if len(text) > limits.MAX_TEXT_LENGTH:
-            raise self.error(f"text longer than {limits.MAX_TEXT_LENGTH} characters (MAX_TEXT_LENGTH)",
-                             ("bad", text[limits.MAX_TEXT_LENGTH:limits.MAX_TEXT_LENGTH + 10], limits.MAX_TEXT_LENGTH))
-        toks = []
-        for m in _TOKEN.finditer(text):
-            kind = m.lastgroup
-            if kind == "ws":
-                continue
-            if kind == "bad":
-                raise self.error(f"unexpected character {m.group()!r}", ("bad", m.group(), m.start()))
-            toks.append((kind, m.group(), m.start()))
-        toks.append((_END, "", len(text)))
-        self.toks = toks
+            raise self._error_at(f"text longer than {limits.MAX_TEXT_LENGTH} characters (MAX_TEXT_LENGTH)",
+                                 limits.MAX_TEXT_LENGTH, text[limits.MAX_TEXT_LENGTH:limits.MAX_TEXT_LENGTH + 10])
+        bad = _BAD_CHAR.search(text)
+        if bad is not None:
+            raise self._error_at(f"unexpected character {bad.group()!r}", bad.start(), bad.group())
+        self.toks = _TOKEN.findall(text)
+        self.toks.append("")
+        self.last = len(self.toks) - 1
         self.i = 0
+        self.spans: list | None = None  # when a list: (token index, node) of every Call and Var
 
-    def peek(self):
-        return self.toks[self.i]
+    def next(self) -> int:
+        i = self.i
+        if i < self.last:
+            self.i = i + 1
+        return i
 
-    def next(self):
-        tok = self.toks[self.i]
-        if tok[0] is not _END:
-            self.i += 1
-        return tok
+    def offset(self, i: int) -> int:
+        """The offset in the text of token ``i``."""
+        if i >= self.last:
+            return len(self.text)
+        for k, m in enumerate(_TOKEN.finditer(self.text)):
+            if k == i:
+                return m.start()
+        raise AssertionError("token index out of range")  # pragma: no cover
 
-    def error(self, reason: str, tok) -> ParseError:
-        off = tok[2]
+    def _error_at(self, reason: str, off: int, token: str) -> ParseError:
         nl = self.text.count("\n", 0, off)
         col = off - self.text.rfind("\n", 0, off) if nl else off + self.column
-        return ParseError(reason, self.file, self.line + nl, col, tok[1])
+        return ParseError(reason, self.file, self.line + nl, col, token)
 
-    def expect(self, text: str, what: str):
-        tok = self.next()
-        if tok[1] != text or tok[0] is _END:
-            shown = "the end of the text" if tok[0] is _END else repr(tok[1])
-            raise self.error(f"expected {what}, got {shown}", tok)
-        return tok
+    def error(self, reason: str, i: int) -> ParseError:
+        return self._error_at(reason, self.offset(i), self.toks[i])
+
+    def shown(self, i: int) -> str:
+        return "the end of the text" if i >= self.last else repr(self.toks[i])
+
+    def expect(self, text: str, what: str) -> int:
+        i = self.next()
+        if self.toks[i] != text:
+            raise self.error(f"expected {what}, got {self.shown(i)}", i)
+        return i
 
 
 def _parse_expr(toks: _Tokens, lib: Library, want: Type | None, params: Mapping[str, Type] | None,
                 depth: int) -> Expr:
-    tok = toks.next()
-    kind, text = tok[0], tok[1]
+    i = toks.next()
+    text = toks.toks[i]
     if depth > limits.MAX_DEPTH:
-        raise toks.error(f"nested deeper than {limits.MAX_DEPTH} (MAX_DEPTH)", tok)
-    if kind == "name":
-        if toks.toks[toks.i][1] == "(":
+        raise toks.error(f"nested deeper than {limits.MAX_DEPTH} (MAX_DEPTH)", i)
+    if not text:
+        raise toks.error("unexpected end of the text", i)
+    c = text[0]
+    if c in _NAME_START and not text.startswith("INT#"):
+        if toks.toks[toks.i] == "(":
             sig = lib.signature(text)
             if sig is None:
-                raise toks.error(f"unknown function {text!r}", tok)
+                raise toks.error(f"unknown function {text!r}", i)
             if want is not None and sig.returns is not want:
-                raise toks.error(f"expected {want}, got {text}, a {sig.returns} function", tok)
+                raise toks.error(f"expected {want}, got {text}, a {sig.returns} function", i)
             toks.i += 1
             args = []
-            for i, ptype in enumerate(sig.params):
-                if i:
-                    sep = toks.next()
-                    if sep[1] != "," or sep[0] != "punct":
-                        if sep[1] == ")" and sep[0] == "punct":
-                            raise toks.error(f"{text} takes {sig.arity} argument(s), got {i}", sep)
-                        shown = "the end of the text" if sep[0] is _END else repr(sep[1])
-                        raise toks.error(f"expected ',' in {text}(...), got {shown}", sep)
+            for k, ptype in enumerate(sig.params):
+                if k:
+                    j = toks.next()
+                    if toks.toks[j] != ",":
+                        if toks.toks[j] == ")":
+                            raise toks.error(f"{text} takes {sig.arity} argument(s), got {k}", j)
+                        raise toks.error(f"expected ',' in {text}(...), got {toks.shown(j)}", j)
                 args.append(_parse_expr(toks, lib, ptype, params, depth + 1))
-            close = toks.next()
-            if close[1] != ")" or close[0] != "punct":
-                if close[1] == "," and close[0] == "punct":
-                    raise toks.error(f"{text} takes {sig.arity} argument(s), got more", close)
-                shown = "the end of the text" if close[0] is _END else repr(close[1])
-                raise toks.error(f"expected ')' closing {text}, got {shown}", close)
-            return Call(text, tuple(args))
+            j = toks.next()
+            if toks.toks[j] != ")":
+                if toks.toks[j] == ",":
+                    raise toks.error(f"{text} takes {sig.arity} argument(s), got more", j)
+                raise toks.error(f"expected ')' closing {text}, got {toks.shown(j)}", j)
+            node = Call(text, tuple(args))
+            if toks.spans is not None:
+                toks.spans.append((i, node))
+            return node
         if text in AXES:
             if want not in (None, Type.AXIS):
-                raise toks.error(f"expected {want}, got the axis {text}", tok)
+                raise toks.error(f"expected {want}, got the axis {text}", i)
             if text not in lib.lang.axes:
-                raise toks.error(f"axis {text} is not in the {lib.lang.name} language", tok)
+                raise toks.error(f"axis {text} is not in the {lib.lang.name} language", i)
             return AxisConst(text)
         if lib.signature(text) is not None:
-            raise toks.error(f"function {text!r} needs its arguments in parentheses", tok)
+            raise toks.error(f"function {text!r} needs its arguments in parentheses", i)
         if want is Type.SHAPE:
-            raise toks.error(f"a variable ({text!r}) cannot stand for a Shape", tok)
+            raise toks.error(f"a variable ({text!r}) cannot stand for a Shape", i)
         vtype = want if want is not None else (params or {}).get(text, Type.FLOAT)
         if params is not None:
             if text not in params:
-                raise toks.error(f"{text!r} is not a parameter", tok)
+                raise toks.error(f"{text!r} is not a parameter", i)
             if params[text] is not vtype:
-                raise toks.error(f"parameter {text!r} is {params[text]}, expected {vtype} here", tok)
-        return Var(text, vtype)
-    if kind == "num":
+                raise toks.error(f"parameter {text!r} is {params[text]}, expected {vtype} here", i)
+        node = Var(text, vtype)
+        if toks.spans is not None:
+            toks.spans.append((i, node))
+        return node
+    if c in _NUM_START and (len(text) > 1 or c.isdigit()):
         if want is not Type.FLOAT and want is not None:
-            raise toks.error(f"expected {want}, got the number {text}", tok)
+            raise toks.error(f"expected {want}, got the number {text}", i)
         value = float(text)
         if not math.isfinite(value) or abs(value) > limits.MAX_ABS_NUMBER:
             raise toks.error(f"number {text} is out of range (limit: magnitude {limits.MAX_ABS_NUMBER}, "
-                             "MAX_ABS_NUMBER)", tok)
+                             "MAX_ABS_NUMBER)", i)
         return Num(value)
-    if kind == "int":
+    if text.startswith("INT#"):
         digits = text[4:-1] if text.endswith("#") and len(text) > 5 else None
         if digits is None:
-            raise toks.error(f"malformed count {text!r}; expected INT#k#", tok)
+            raise toks.error(f"malformed count {text!r}; expected INT#k#", i)
         if want not in (None, Type.INT):
-            raise toks.error(f"expected {want}, got the count {text}", tok)
+            raise toks.error(f"expected {want}, got the count {text}", i)
         k = int(digits) if len(digits) <= 6 else limits.MAX_COUNT + 1
         if not 1 <= k <= limits.MAX_COUNT:
-            raise toks.error(f"count {text} must be from 1 to {limits.MAX_COUNT} (MAX_COUNT)", tok)
+            raise toks.error(f"count {text} must be from 1 to {limits.MAX_COUNT} (MAX_COUNT)", i)
         return IntConst(k)
-    if kind is _END:
-        raise toks.error("unexpected end of the text", tok)
-    raise toks.error(f"expected an expression, got {text!r}", tok)
+    raise toks.error(f"expected an expression, got {text!r}", i)
 
 
 def parse(text: str, library: Library | Lang | None = None, *, expect: Type | None = Type.SHAPE,
@@ -725,10 +735,22 @@ def parse(text: str, library: Library | Lang | None = None, *, expect: Type | No
     lib = _library(library)
     toks = _Tokens(text, file, line, column)
     expr = _parse_expr(toks, lib, expect, None, 1)
-    rest = toks.peek()
-    if rest[0] is not _END:
-        raise toks.error(f"unexpected {rest[1]!r} after the expression", rest)
+    if toks.i < toks.last:
+        raise toks.error(f"unexpected {toks.toks[toks.i]!r} after the expression", toks.i)
     return expr
+
+
+def _parse_spans(text: str, library: Library | Lang | None = None, *, file: str = "<string>", line: int = 1,
+                 column: int = 1) -> tuple:
+    """:func:`parse` of a Shape expression, also giving its tokens, whose ``spans`` list ``(token index,
+    node)`` for every Call and Var node (look nodes up by identity; ``toks.offset(index)`` is the offset
+    of the node's name), for error messages about sub-expressions."""
+    toks = _Tokens(text, file, line, column)
+    toks.spans = []
+    expr = _parse_expr(toks, _library(library), Type.SHAPE, None, 1)
+    if toks.i < toks.last:
+        raise toks.error(f"unexpected {toks.toks[toks.i]!r} after the expression", toks.i)
+    return expr, toks
 
 
 def parse_abstraction(text: str, library: Library | Lang | None = None, *, file: str = "<string>", line: int = 1,
@@ -743,43 +765,44 @@ def parse_abstraction(text: str, library: Library | Lang | None = None, *, file:
     lib = _library(library)
     toks = _Tokens(text, file, line, column)
     head = toks.next()
-    if head[0] != "name":
+    name = toks.toks[head]
+    if not name or name[0] not in _NAME_START or name.startswith("INT#"):
         raise toks.error("expected the abstraction's name", head)
     toks.expect("(", "'('")
     params: dict = {}
     locs: dict = {}
-    if toks.peek()[1] == ")":
+    if toks.toks[toks.i] == ")":
         toks.next()
     else:
         while True:
-            name = toks.next()
-            if name[0] != "name" or name[1] in AXES:
-                raise toks.error("expected a parameter name", name)
-            if name[1] in params:
-                raise toks.error(f"parameter {name[1]!r} is declared twice", name)
+            k = toks.next()
+            pname = toks.toks[k]
+            if not pname or pname[0] not in _NAME_START or pname.startswith("INT#") or pname in AXES:
+                raise toks.error("expected a parameter name", k)
+            if pname in params:
+                raise toks.error(f"parameter {pname!r} is declared twice", k)
             toks.expect(":", "':' and a type")
-            tname = toks.next()
-            if tname[1] not in ("Float", "Axis", "Int"):
-                raise toks.error(f"unknown parameter type {tname[1]!r}; expected Float, Axis or Int", tname)
-            params[name[1]] = _TYPES[tname[1]]
-            locs[name[1]] = name
+            t = toks.next()
+            if toks.toks[t] not in ("Float", "Axis", "Int"):
+                raise toks.error(f"unknown parameter type {toks.toks[t]!r}; expected Float, Axis or Int", t)
+            params[pname] = _TYPES[toks.toks[t]]
+            locs[pname] = k
             sep = toks.next()
-            if sep[1] == ")":
+            if toks.toks[sep] == ")":
                 break
-            if sep[1] != ",":
+            if toks.toks[sep] != ",":
                 raise toks.error("expected ',' or ')' in the parameter list", sep)
     toks.expect("=", "'='")
-    if lib.signature(head[1]) is not None:
-        raise toks.error(f"{head[1]!r} is already a function of the library", head)
+    if lib.signature(name) is not None:
+        raise toks.error(f"{name!r} is already a function of the library", head)
     body = _parse_expr(toks, lib, Type.SHAPE, params, 1)
-    rest = toks.peek()
-    if rest[0] is not _END:
-        raise toks.error(f"unexpected {rest[1]!r} after the body", rest)
+    if toks.i < toks.last:
+        raise toks.error(f"unexpected {toks.toks[toks.i]!r} after the body", toks.i)
     used = variables(body)
-    for name, tok in locs.items():
-        if name not in used:
-            raise toks.error(f"parameter {name!r} is not used in the body", tok)
+    for pname, k in locs.items():
+        if pname not in used:
+            raise toks.error(f"parameter {pname!r} is not used in the body", k)
     try:
-        return Abstraction(head[1], tuple(Param(n, t) for n, t in params.items()), body)
+        return Abstraction(name, tuple(Param(n, t) for n, t in params.items()), body)
     except ProgramError as e:
         raise toks.error(str(e), head) from None
