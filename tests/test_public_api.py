@@ -19,7 +19,7 @@ import shapeprog
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
-PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "envs", "shapeio"]
+PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.coder", "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -55,6 +55,10 @@ PUBLIC = {
     "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
                       "VectorNode", "batch_forward", "batch_loss", "decode", "decode_latent", "encode", "interpolate",
                       "load_pretrained", "program_loss", "program_to_tree", "sample", "tree_to_program"},
+    "shapeprog.coder": {"LANG_2D", "LANG_3D", "WEIGHTS", "Abstraction", "Execution", "ExecutionError", "Library",
+                        "Param", "ParseError", "ProgramError", "Type", "check", "data", "execute", "expand", "limits",
+                        "match", "naive_cost", "naive_program", "naive_summary", "objective", "omega", "parse",
+                        "parse_abstraction", "preference", "program_cost", "run", "to_text"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }
