@@ -16,9 +16,9 @@ __all__ = ["MAX_ABS_NUMBER", "MAX_COUNT", "MAX_DEPTH", "MAX_NODES", "MAX_PARTS",
 
 #: Characters of one program text, or of one line of a data file (data maximum: 1,398).
 MAX_TEXT_LENGTH = 100_000
-#: Nesting depth of an expression, the root at depth 1 (data maximum: 20).
+#: Nesting depth of an expression, the root at depth 1 (data maximum: 21).
 MAX_DEPTH = 256
-#: Nodes of an expression tree, also after expanding abstractions (data maximum: 176).
+#: Nodes of an expression tree, also after expanding abstractions (data maximum: 245).
 MAX_NODES = 100_000
 #: Magnitude of a number literal (data maximum: 2.06).
 MAX_ABS_NUMBER = 1000.0
