@@ -34,7 +34,7 @@ from importlib import resources
 from ..errors import ParseError
 from ..limits import decode
 from . import limits
-from .execute import run
+from .execute import ExecutionError, run
 from .lang import LANG_3D, Call, Expr, Num, Var, _parse_spans, to_text
 
 __all__ = ["CATEGORIES", "DISCOVERY_SIZE", "SPLITS", "DataWarning", "ShapeRecord", "load", "parse_record",
@@ -85,7 +85,8 @@ def parse_record(text: str, file: str = "<string>", line: int = 1) -> ShapeRecor
     Raises:
         ParseError: ``file:line:column: reason`` with the offending token (a missing ``:``, a malformed
             key, a program that does not parse or is not a Shape, a variable, a negative dimension, a
-            division by 0, a line longer than :data:`~shapeprog.coder.limits.MAX_TEXT_LENGTH`).
+            division by 0, a limit such as :data:`~shapeprog.coder.limits.MAX_PARTS` or
+            :data:`~shapeprog.coder.limits.MAX_TEXT_LENGTH`).
     """
     if len(text) > limits.MAX_TEXT_LENGTH:
         raise ParseError(f"line longer than {limits.MAX_TEXT_LENGTH} characters (MAX_TEXT_LENGTH)", file, line,
@@ -102,7 +103,10 @@ def parse_record(text: str, file: str = "<string>", line: int = 1) -> ShapeRecor
     names = [(i, e) for i, e in toks.spans if isinstance(e, Var)]
     if names:
         raise toks.error(f"a data line has no variables; got {names[0][1].name!r}", names[0][0])
-    ex = run(program, LANG_3D)
+    try:
+        ex = run(program, LANG_3D)
+    except ExecutionError as e:  # a limit, e.g. MAX_PARTS
+        raise ParseError(e.reason if e.expr is None else f"{e.expr}: {e.reason}", file, line, start, prog[:20]) from None
     if ex.hard_errors:
         cuboids = [(i, e) for i, e in toks.spans if isinstance(e, Call) and e.fn == "Cuboid"]
         zero = [c for c in cuboids if any(isinstance(a, Num) and a.value == 0 for a in c[1].args)]

@@ -11,6 +11,7 @@ import importlib
 MODULES = [
     "fuzz.csg_targets",
     "fuzz.shapeassembly_targets",
+    "fuzz.shapecoder_targets",
 ]
 
 
