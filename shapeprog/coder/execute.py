@@ -117,7 +117,7 @@ class Execution:
     parts: tuple = field(repr=False)
     hard_errors: tuple = ()
     soft_errors: tuple = ()
-    lang: Lang = field(default=None, repr=False)
+    lang: Lang | None = field(default=None, repr=False)
 
     @property
     def ok(self) -> bool:

@@ -68,6 +68,9 @@ def test_heldout_lines_with_zero_dims_and_reoriented_axes():
      "Div(1.0,0.0): division by 0"),
     ("172_0_0:Union(Cuboid(1,1,1),Move(Cuboid(1,1,1),0,0,0)", 54, "", "expected ')' closing Union"),
     ("172_0_0:Move(Cuboid(1,1,1),0,0,x_1)", 32, "x_1", "a data line has no variables"),
+    ("1_0_0:SymTrans(SymTrans(Cuboid(1,1,1),AX,INT#40#,1),AY,INT#40#,1)", 7, "SymTrans(SymTrans(Cu",
+     "more than 1000 parts (MAX_PARTS)"),
+    ("1_0_0:Cuboid(1,1,1)" + " " * 100_000, 100_001, " " * 10, "line longer than 100000 characters"),
 ])
 def test_malformed_lines_name_file_line_column_token(text, col, token, reason):
     with pytest.raises(ParseError) as err:
@@ -75,6 +78,7 @@ def test_malformed_lines_name_file_line_column_token(text, col, token, reason):
     e = err.value
     assert (e.file, e.line, e.column, e.token) == ("PN_chair.txt", 12, col, token)
     assert reason in e.reason and text[col - 1:].startswith(token)
+    assert len(str(e)) < 200
 
 
 def test_bad_lines_are_reported_and_the_rest_loads(monkeypatch):
