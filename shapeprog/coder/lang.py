@@ -585,7 +585,6 @@ _TOKEN = re.compile(r"INT#[0-9]*#?|[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?
 _BAD_CHAR = re.compile(r"[^\sA-Za-z0-9_(),:=#.+\-]")
 _NAME_START = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz_")
 _NUM_START = frozenset("0123456789+-.")
-_PUNCT = frozenset("(),:=")
 
 
 class _Tokens:
