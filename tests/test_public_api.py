@@ -20,7 +20,7 @@ import shapeprog
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
-            "envs", "shapeio"]
+            "shapeprog.coder", "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -65,6 +65,10 @@ PUBLIC = {
                          "MacroDef", "MacroError", "MacroProgram", "Name", "Ordering", "Param", "SubProgram",
                          "convert_corpus", "convert_program", "execute", "execute_batch", "from_lines", "order_errors",
                          "parse", "program_parameters", "to_text"},
+    "shapeprog.coder": {"LANG_2D", "LANG_3D", "WEIGHTS", "Abstraction", "Execution", "ExecutionError", "Library",
+                        "Param", "ParseError", "ProgramError", "Type", "check", "data", "execute", "expand", "limits",
+                        "match", "naive_cost", "naive_program", "naive_summary", "objective", "omega", "parse",
+                        "parse_abstraction", "preference", "program_cost", "run", "to_text"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }

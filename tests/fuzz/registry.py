@@ -12,6 +12,7 @@ MODULES = [
     "fuzz.csg_targets",
     "fuzz.shapeassembly_targets",
     "fuzz.pointcloud_targets",
+    "fuzz.shapecoder_targets",
 ]
 
 

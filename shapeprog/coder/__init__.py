@@ -1,0 +1,56 @@
+"""ShapeCoder: abstraction discovery over unstructured primitives (Jones et al., SIGGRAPH 2023).
+
+This sub-package has the foundation: the language (:mod:`shapeprog.coder.lang`: typed expression trees,
+text form, abstractions, libraries, the 3D domain and the 2D toy domain), the executor
+(:mod:`shapeprog.coder.execute`: programs to primitives), the objective F
+(:mod:`shapeprog.coder.objective`) and the vendored PartNet primitive data (:mod:`shapeprog.coder.data`).
+See docs/shapecoder.md.
+
+Example:
+    >>> from shapeprog import coder
+    >>> shapes = coder.data.load("table")
+    >>> round(coder.naive_summary(s.prims for s in shapes).F, 2)
+    125.8
+    >>> expr, env = coder.naive_program(shapes[0].prims)
+    >>> coder.execute(expr, env=env) == shapes[0].prims
+    True
+"""
+from __future__ import annotations
+
+from . import data, limits  # cheap: data reads nothing until asked
+from .execute import Execution, ExecutionError, execute, run  # the function shadows the module name
+from .lang import (LANG_2D, LANG_3D, Abstraction, Library, ParseError, Param, ProgramError, Type, check, expand,
+                   parse, parse_abstraction, to_text)
+from . import objective  # the module; F itself is objective.objective
+from .objective import WEIGHTS, match, naive_cost, naive_program, naive_summary, omega, preference, program_cost
+
+__all__ = [
+    "LANG_2D",
+    "LANG_3D",
+    "WEIGHTS",
+    "Abstraction",
+    "Execution",
+    "ExecutionError",
+    "Library",
+    "Param",
+    "ParseError",
+    "ProgramError",
+    "Type",
+    "check",
+    "data",
+    "execute",
+    "expand",
+    "limits",
+    "match",
+    "naive_cost",
+    "naive_program",
+    "naive_summary",
+    "objective",
+    "omega",
+    "parse",
+    "parse_abstraction",
+    "preference",
+    "program_cost",
+    "run",
+    "to_text",
+]

@@ -1,0 +1,807 @@
+"""The ShapeCoder language: typed expression trees, their text form, abstractions and libraries.
+Standard library only.
+
+A program is an expression tree of frozen dataclasses: :class:`Call` (a function applied to its
+arguments), :class:`Num` (a float literal), :class:`Var` (a named float or categorical variable),
+:class:`AxisConst` (``AX``, ``AY``, ``AZ``) and :class:`IntConst` (``INT#k#``). Every node has one of
+four :class:`Type` s: ``Shape``, ``Float``, ``Axis`` or ``Int``.
+
+The base functions of a domain are the rows of its :class:`Lang` table: :data:`LANG_3D` (``Cuboid``,
+``Move``, ``Rotate``, ``Union``, ``SymRef``, ``SymTrans`` and the float operators ``Add``, ``Sub``,
+``Mul``, ``Div``, ``Inv``) and the 2D toy domain :data:`LANG_2D` (``Rectangle`` in place of ``Cuboid``,
+two-coordinate ``Move``, no ``Rotate``, axes ``AX``/``AY`` only). An :class:`Abstraction` is a named
+function with typed parameters whose body is an expression over them; a :class:`Library` is a domain
+plus an ordered tuple of abstractions (each may call the ones before it). :func:`expand` replaces every
+abstraction call by its body, giving a base-language program.
+
+Text form: ``Fn(arg,arg,...)``, numbers as Python writes floats, ``INT#k#`` for counts, any other name
+a variable whose type is the type of its slot. :func:`parse` reads it (errors are
+:class:`~shapeprog.errors.ParseError` naming file, line, column and token) and :func:`to_text` writes it
+without spaces; ``parse(to_text(e)) == e`` for every well-typed tree. See docs/shapecoder.md
+("Language").
+
+Example:
+    >>> e = parse("Union(Move(Cuboid(0.5,0.1,0.5),0,-0.2,0), SymRef(Move(Cuboid(a,b,a),-0.3,0,0),AX))")
+    >>> e.fn, e.args[1].args[1]
+    ('Union', AxisConst(name='AX'))
+    >>> to_text(e)
+    'Union(Move(Cuboid(0.5,0.1,0.5),0.0,-0.2,0.0),SymRef(Move(Cuboid(a,b,a),-0.3,0.0,0.0),AX))'
+    >>> lib = Library().add(parse_abstraction("Leg(w: Float, x: Float) = Move(Cuboid(w,0.5,w),x,-0.25,x)"))
+    >>> to_text(expand(parse("Leg(0.1,-0.4)", lib), lib))
+    'Move(Cuboid(0.1,0.5,0.1),-0.4,-0.25,-0.4)'
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Iterator, Mapping, Union
+
+from ..errors import ParseError
+from . import limits
+
+__all__ = [
+    "AXES",
+    "FLOAT_CONSTANTS",
+    "FLOAT_FN",
+    "FN",
+    "LANG_2D",
+    "LANG_3D",
+    "Abstraction",
+    "AxisConst",
+    "Call",
+    "Expr",
+    "IntConst",
+    "Lang",
+    "Library",
+    "Num",
+    "Param",
+    "ParseError",
+    "ProgramError",
+    "Signature",
+    "Type",
+    "Var",
+    "check",
+    "expand",
+    "parse",
+    "parse_abstraction",
+    "size",
+    "substitute",
+    "to_text",
+    "variables",
+    "walk",
+]
+
+#: The axis names, in coordinate order.
+AXES = ("AX", "AY", "AZ")
+#: The float literals that count as constants (weight 0.5) rather than free floats (weight 2.0).
+FLOAT_CONSTANTS = (0.0, 1.0, 2.0)
+#: Cost kind of a shape function (base or abstraction).
+FN = "fn"
+#: Cost kind of a float operator.
+FLOAT_FN = "float_fn"
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+
+class ProgramError(ValueError):
+    """An expression tree that is not well-typed, an invalid abstraction or library, or a tree beyond a
+    limit. The message names the offending sub-expression (its text, shortened)."""
+
+
+class Type(enum.Enum):
+    """The type of an expression; its value is the name used in the text form."""
+
+    SHAPE = "Shape"
+    FLOAT = "Float"
+    AXIS = "Axis"
+    INT = "Int"
+
+    def __str__(self) -> str:
+        return self.value
+
+    @property
+    def categorical(self) -> bool:
+        """``Axis`` and ``Int`` values are categorical (cost weight 0.5)."""
+        return self in (Type.AXIS, Type.INT)
+
+
+_TYPES = {t.value: t for t in Type}
+
+
+# ----------------------------------------------------------------------------- expression nodes
+
+
+@dataclass(frozen=True)
+class Num:
+    """A float literal (finite, magnitude at most :data:`~shapeprog.coder.limits.MAX_ABS_NUMBER`)."""
+
+    value: float
+
+    def __post_init__(self):
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ProgramError(f"Num needs a float, got {type(v).__name__}")
+        v = float(v)
+        if not math.isfinite(v) or abs(v) > limits.MAX_ABS_NUMBER:
+            raise ProgramError(f"number {v!r} is out of range (limit: magnitude {limits.MAX_ABS_NUMBER}, "
+                               "MAX_ABS_NUMBER)")
+        object.__setattr__(self, "value", v)
+
+
+@dataclass(frozen=True)
+class Var:
+    """A named variable: a float (``S_i_j_``, ``P_F_i_``, an abstraction parameter) or a categorical one
+    (``type`` ``Axis`` or ``Int``). The text form shows only the name; the parser takes the type from the
+    variable's slot."""
+
+    name: str
+    type: Type = Type.FLOAT
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not _NAME.match(self.name):
+            raise ProgramError(f"not a variable name: {self.name!r}")
+        if self.name in AXES or self.name.startswith("INT#"):
+            raise ProgramError(f"{self.name!r} is reserved")
+        if not isinstance(self.type, Type) or self.type is Type.SHAPE:
+            raise ProgramError(f"variable {self.name!r} must be Float, Axis or Int, not {self.type}")
+
+
+@dataclass(frozen=True)
+class AxisConst:
+    """``AX``, ``AY`` or ``AZ``."""
+
+    name: str
+
+    def __post_init__(self):
+        if self.name not in AXES:
+            raise ProgramError(f"not an axis: {self.name!r}; expected one of {', '.join(AXES)}")
+
+
+@dataclass(frozen=True)
+class IntConst:
+    """``INT#k#``, a count (1 to :data:`~shapeprog.coder.limits.MAX_COUNT`)."""
+
+    value: int
+
+    def __post_init__(self):
+        if isinstance(self.value, bool) or not isinstance(self.value, int) \
+                or not 1 <= self.value <= limits.MAX_COUNT:
+            raise ProgramError(f"INT#{self.value}#: a count must be an int from 1 to {limits.MAX_COUNT} "
+                               "(MAX_COUNT)")
+
+
+@dataclass(frozen=True)
+class Call:
+    """``fn(args...)``: a base function of the domain or an abstraction of the library."""
+
+    fn: str
+    args: tuple = ()
+
+    def __post_init__(self):
+        if not isinstance(self.fn, str) or not _NAME.match(self.fn):
+            raise ProgramError(f"not a function name: {self.fn!r}")
+        if not isinstance(self.args, tuple):
+            object.__setattr__(self, "args", tuple(self.args))
+
+
+Expr = Union[Call, Num, Var, AxisConst, IntConst]
+
+
+# ----------------------------------------------------------------------------- domains
+
+
+@dataclass(frozen=True)
+class Signature:
+    """One function: its name, parameter types, return type and cost kind (:data:`FN` or
+    :data:`FLOAT_FN`)."""
+
+    name: str
+    params: tuple
+    returns: Type
+    kind: str = FN
+
+    @property
+    def arity(self) -> int:
+        return len(self.params)
+
+
+@dataclass(frozen=True)
+class Lang:
+    """A base language (domain): its function table and its primitives.
+
+    Attributes:
+        name: ``"3d"`` or ``"2d"``.
+        dim: 3 or 2 (coordinates of a part).
+        functions: the base functions, shape functions first, then the float operators.
+        axes: the axis names of the domain (``AX AY AZ`` or ``AX AY``).
+        prim_fields: the fields of an executed primitive: ``W H D X Y Z RX RY RZ`` (3D) or ``W H X Y``.
+        match_threshold: the largest primitive distance a match accepts (``of_max_error``: 0.1 / 0.05).
+        max_prims: the most primitives of one scene (16 / 12; the recognition network's limit).
+    """
+
+    name: str
+    dim: int
+    functions: tuple
+    axes: tuple
+    prim_fields: tuple
+    match_threshold: float
+    max_prims: int
+    _table: dict = field(init=False, repr=False, compare=False, hash=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "_table", {s.name: s for s in self.functions})
+
+    def signature(self, name: str) -> Signature | None:
+        """The base function ``name``, or None."""
+        return self._table.get(name)
+
+    @property
+    def shape_functions(self) -> tuple:
+        """Names of the base functions returning a Shape (|L| of the base library counts them)."""
+        return tuple(s.name for s in self.functions if s.returns is Type.SHAPE)
+
+
+_S, _F, _A, _I = Type.SHAPE, Type.FLOAT, Type.AXIS, Type.INT
+_FLOAT_OPS = (Signature("Add", (_F, _F), _F, FLOAT_FN), Signature("Sub", (_F, _F), _F, FLOAT_FN),
+              Signature("Mul", (_F, _F), _F, FLOAT_FN), Signature("Div", (_F, _F), _F, FLOAT_FN),
+              Signature("Inv", (_F,), _F, FLOAT_FN))
+
+#: The 3D domain of the paper (PartNet cuboids).
+LANG_3D = Lang(
+    name="3d", dim=3,
+    functions=(Signature("Cuboid", (_F, _F, _F), _S), Signature("Move", (_S, _F, _F, _F), _S),
+               Signature("Rotate", (_S, _A, _F), _S), Signature("Union", (_S, _S), _S),
+               Signature("SymRef", (_S, _A), _S), Signature("SymTrans", (_S, _A, _I, _F), _S)) + _FLOAT_OPS,
+    axes=AXES, prim_fields=("W", "H", "D", "X", "Y", "Z", "RX", "RY", "RZ"), match_threshold=0.1, max_prims=16)
+
+#: The 2D toy domain (axis-aligned rectangles).
+LANG_2D = Lang(
+    name="2d", dim=2,
+    functions=(Signature("Rectangle", (_F, _F), _S), Signature("Move", (_S, _F, _F), _S),
+               Signature("Union", (_S, _S), _S), Signature("SymRef", (_S, _A), _S),
+               Signature("SymTrans", (_S, _A, _I, _F), _S)) + _FLOAT_OPS,
+    axes=AXES[:2], prim_fields=("W", "H", "X", "Y"), match_threshold=0.05, max_prims=12)
+
+
+# ----------------------------------------------------------------------------- tree utilities
+
+
+def walk(expr: Expr) -> Iterator[Expr]:
+    """Every node of ``expr``, in text (pre-)order."""
+    stack = [expr]
+    while stack:
+        node = stack.pop()
+        yield node
+        if isinstance(node, Call):
+            stack.extend(reversed(node.args))
+
+
+def size(expr: Expr) -> int:
+    """The number of nodes (tokens other than punctuation) of ``expr``."""
+    return sum(1 for _ in walk(expr))
+
+
+def variables(expr: Expr) -> dict:
+    """``{name: Type}`` of the variables of ``expr``, in order of first occurrence."""
+    out: dict = {}
+    for node in walk(expr):
+        if isinstance(node, Var):
+            out.setdefault(node.name, node.type)
+    return out
+
+
+def substitute(expr: Expr, mapping: Mapping[str, Expr]) -> Expr:
+    """``expr`` with every variable named in ``mapping`` replaced by its expression (not recursively)."""
+    if isinstance(expr, Var):
+        return mapping.get(expr.name, expr)
+    if isinstance(expr, Call):
+        args = tuple(substitute(a, mapping) for a in expr.args)
+        return expr if args == expr.args else Call(expr.fn, args)
+    return expr
+
+
+def _fmt(value: float) -> str:
+    return repr(float(value))
+
+
+def to_text(expr: Expr) -> str:
+    """The text form: ``Fn(a,b,...)`` without spaces, floats as ``repr``, counts as ``INT#k#``."""
+    parts: list = []
+
+    def emit(e):
+        if isinstance(e, Call):
+            parts.append(e.fn)
+            parts.append("(")
+            for i, a in enumerate(e.args):
+                if i:
+                    parts.append(",")
+                emit(a)
+            parts.append(")")
+        elif isinstance(e, Num):
+            parts.append(_fmt(e.value))
+        elif isinstance(e, Var):
+            parts.append(e.name)
+        elif isinstance(e, AxisConst):
+            parts.append(e.name)
+        elif isinstance(e, IntConst):
+            parts.append(f"INT#{e.value}#")
+        else:
+            raise ProgramError(f"not an expression node: {type(e).__name__}")
+
+    emit(expr)
+    return "".join(parts)
+
+
+def _short(expr: Expr, n: int = 60) -> str:
+    try:
+        text = to_text(expr)
+    except (ProgramError, RecursionError):
+        return f"<{type(expr).__name__}>"
+    return text if len(text) <= n else text[:n - 3] + "..."
+
+
+# ----------------------------------------------------------------------------- abstractions and libraries
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter of an abstraction: its name and type (Float, Axis or Int)."""
+
+    name: str
+    type: Type = Type.FLOAT
+
+
+@dataclass(frozen=True)
+class Abstraction:
+    """A named shape function ``name(params) = body``; the body uses each parameter as a :class:`Var` of
+    the parameter's type, and may call the base functions and the library's earlier abstractions.
+
+    Validated when it joins a :class:`Library` (types, every parameter used, no free variables).
+    """
+
+    name: str
+    params: tuple
+    body: Expr
+
+    def __post_init__(self):
+        if not isinstance(self.params, tuple):
+            object.__setattr__(self, "params", tuple(self.params))
+
+    @property
+    def signature(self) -> Signature:
+        return Signature(self.name, tuple(p.type for p in self.params), Type.SHAPE, FN)
+
+    def to_text(self) -> str:
+        """``Name(a: Float, b: Axis) = Body``, the form :func:`parse_abstraction` reads."""
+        params = ", ".join(f"{p.name}: {p.type}" for p in self.params)
+        return f"{self.name}({params}) = {to_text(self.body)}"
+
+
+@dataclass(frozen=True)
+class Library:
+    """A domain's base language plus an ordered tuple of abstractions; immutable (``add`` and ``remove``
+    return new libraries). Construction validates every abstraction against the ones before it.
+
+    Attributes:
+        lang: the base language (:data:`LANG_3D` by default).
+        abstractions: the abstractions, in definition order.
+    """
+
+    lang: Lang = LANG_3D
+    abstractions: tuple = ()
+    _table: dict = field(init=False, repr=False, compare=False, hash=False)
+
+    def __post_init__(self):
+        if not isinstance(self.abstractions, tuple):
+            object.__setattr__(self, "abstractions", tuple(self.abstractions))
+        table: dict = {}
+        object.__setattr__(self, "_table", table)
+        for ab in self.abstractions:
+            self._validate(ab)
+            table[ab.name] = ab
+
+    def _validate(self, ab: Abstraction) -> None:
+        if not isinstance(ab, Abstraction):
+            raise ProgramError(f"not an Abstraction: {type(ab).__name__}")
+        if not _NAME.match(ab.name) or ab.name in AXES or ab.name.startswith("INT#"):
+            raise ProgramError(f"not an abstraction name: {ab.name!r}")
+        if self.lang.signature(ab.name) is not None:
+            raise ProgramError(f"{ab.name!r} is a base function of the {self.lang.name} language")
+        if ab.name in self._table:
+            raise ProgramError(f"the library already has an abstraction {ab.name!r}")
+        declared: dict = {}
+        for p in ab.params:
+            if not isinstance(p, Param) or not isinstance(p.type, Type) or p.type is Type.SHAPE:
+                raise ProgramError(f"{ab.name}: a parameter must be a Param of type Float, Axis or Int, got {p!r}")
+            Var(p.name, p.type)  # checks the name
+            if p.name in declared:
+                raise ProgramError(f"{ab.name}: parameter {p.name!r} is declared twice")
+            declared[p.name] = p.type
+        got = check(ab.body, self, params=declared)
+        if got is not Type.SHAPE:
+            raise ProgramError(f"{ab.name}: the body must be a Shape, got {got}")
+        unused = [n for n in declared if n not in variables(ab.body)]
+        if unused:
+            raise ProgramError(f"{ab.name}: parameter(s) {', '.join(unused)} not used in the body")
+
+    def signature(self, name: str) -> Signature | None:
+        """The signature of base function or abstraction ``name``, or None."""
+        sig = self.lang.signature(name)
+        if sig is None and name in self._table:
+            sig = self._table[name].signature
+        return sig
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._table
+
+    def __getitem__(self, name: str) -> Abstraction:
+        return self._table[name]
+
+    def __iter__(self) -> Iterator[Abstraction]:
+        return iter(self.abstractions)
+
+    def __len__(self) -> int:
+        return len(self.abstractions)
+
+    @property
+    def size(self) -> int:
+        """|L|: the base shape functions plus the abstractions (6 + n in 3D)."""
+        return len(self.lang.shape_functions) + len(self.abstractions)
+
+    def add(self, ab: Abstraction) -> "Library":
+        """A new library with ``ab`` appended (validated against this library)."""
+        self._validate(ab)
+        return dataclasses.replace(self, abstractions=self.abstractions + (ab,))
+
+    def remove(self, name: str) -> "Library":
+        """A new library without abstraction ``name``; later abstractions that call it get it inlined."""
+        if name not in self._table:
+            raise KeyError(f"no abstraction {name!r} in the library")
+        kept = []
+        for ab in self.abstractions:
+            if ab.name != name:
+                kept.append(Abstraction(ab.name, ab.params, expand(ab.body, self, names=(name,))))
+        return dataclasses.replace(self, abstractions=tuple(kept))
+
+    def to_text(self) -> str:
+        """One ``Name(params) = Body`` line per abstraction."""
+        return "".join(ab.to_text() + "\n" for ab in self.abstractions)
+
+    @classmethod
+    def from_text(cls, text: str, lang: Lang = LANG_3D, file: str = "<string>") -> "Library":
+        """The library written by :meth:`to_text` (blank lines and ``#`` comments skipped)."""
+        lib = cls(lang)
+        for n, line in enumerate(text.splitlines(), 1):
+            if line.strip() and not line.lstrip().startswith("#"):
+                lib = lib.add(parse_abstraction(line, lib, file=file, line=n))
+        return lib
+
+
+def _library(library) -> Library:
+    if library is None:
+        return Library()
+    if isinstance(library, Lang):
+        return Library(library)
+    if not isinstance(library, Library):
+        raise TypeError(f"expected a Library or a Lang, got {type(library).__name__}")
+    return library
+
+
+# ----------------------------------------------------------------------------- type checking and expansion
+
+
+def check(expr: Expr, library: Library | Lang | None = None, expect: Type | None = None,
+          params: Mapping[str, Type] | None = None) -> Type:
+    """The type of ``expr``, checking every call's arity and argument types, each variable's type against
+    its slot (and against ``params`` when given: then every variable must be one of them), the axes of
+    the domain, and the limits :data:`~shapeprog.coder.limits.MAX_DEPTH` and
+    :data:`~shapeprog.coder.limits.MAX_NODES`.
+
+    Raises:
+        ProgramError: naming the offending sub-expression.
+    """
+    lib = _library(library)
+    count = [0]
+
+    def go(e, want, depth):
+        count[0] += 1
+        if count[0] > limits.MAX_NODES:
+            raise ProgramError(f"more than {limits.MAX_NODES} nodes (MAX_NODES)")
+        if depth > limits.MAX_DEPTH:
+            raise ProgramError(f"nested deeper than {limits.MAX_DEPTH} (MAX_DEPTH)")
+        if isinstance(e, Call):
+            sig = lib.signature(e.fn)
+            if sig is None:
+                raise ProgramError(f"unknown function {e.fn!r} in {_short(e)}")
+            if len(e.args) != sig.arity:
+                raise ProgramError(f"{e.fn} takes {sig.arity} argument(s), got {len(e.args)} in {_short(e)}")
+            for a, t in zip(e.args, sig.params):
+                go(a, t, depth + 1)
+            got = sig.returns
+        elif isinstance(e, Num):
+            got = Type.FLOAT
+        elif isinstance(e, AxisConst):
+            if e.name not in lib.lang.axes:
+                raise ProgramError(f"axis {e.name} is not in the {lib.lang.name} language")
+            got = Type.AXIS
+        elif isinstance(e, IntConst):
+            got = Type.INT
+        elif isinstance(e, Var):
+            if params is not None:
+                if e.name not in params:
+                    raise ProgramError(f"{e.name!r} is not a parameter")
+                if params[e.name] is not e.type:
+                    raise ProgramError(f"parameter {e.name!r} is {params[e.name]}, used as {e.type}")
+            got = e.type
+        else:
+            raise ProgramError(f"not an expression node: {type(e).__name__}")
+        if want is not None and got is not want:
+            raise ProgramError(f"expected {want}, got {got}: {_short(e)}")
+        return got
+
+    return go(expr, expect, 1)
+
+
+def expand(expr: Expr, library: Library, names=None) -> Expr:
+    """``expr`` with the abstraction calls replaced by their bodies (arguments substituted for the
+    parameters), recursively, so that only base functions remain; with ``names``, only the abstractions
+    named there are expanded.
+
+    Raises:
+        ProgramError: the expansion exceeds :data:`~shapeprog.coder.limits.MAX_NODES` nodes.
+    """
+    lib = _library(library)
+    only = None if names is None else frozenset(names)
+    cache: dict = {}
+    budget = [limits.MAX_NODES]
+
+    def go(e):
+        if not isinstance(e, Call):
+            return e
+        args = tuple(go(a) for a in e.args)
+        if e.fn in lib and (only is None or e.fn in only):
+            ab = lib[e.fn]
+            if ab.name not in cache:
+                cache[ab.name] = go(ab.body)
+            out = substitute(cache[ab.name], {p.name: a for p, a in zip(ab.params, args)})
+            budget[0] -= size(out)
+        else:
+            out = e if args == e.args else Call(e.fn, args)
+        if budget[0] < 0:
+            raise ProgramError(f"the expansion exceeds {limits.MAX_NODES} nodes (MAX_NODES)")
+        return out
+
+    return go(expr)
+
+
+# ----------------------------------------------------------------------------- parsing
+
+# One token: a count, a number, a name, or any other single non-space character (punctuation, or an error
+# reported by the parser); whitespace separates tokens and is skipped.
+_TOKEN = re.compile(r"INT#[0-9]*#?|[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?|[A-Za-z_][A-Za-z0-9_]*|\S")
+_BAD_CHAR = re.compile(r"[^\sA-Za-z0-9_(),:=#.+\-]")
+_NAME_START = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz_")
+_NUM_START = frozenset("0123456789+-.")
+
+
+class _Tokens:
+    """The tokens of one text (strings; ``""`` marks the end), a cursor, and errors at (line, column).
+    Offsets are found again only for an error, which keeps the common path fast."""
+
+    def __init__(self, text: str, file: str, line: int, column: int):
+        self.text, self.file, self.line, self.column = text, file, line, column
+        if len(text) > limits.MAX_TEXT_LENGTH:
+            raise self._error_at(f"text longer than {limits.MAX_TEXT_LENGTH} characters (MAX_TEXT_LENGTH)",
+                                 limits.MAX_TEXT_LENGTH, text[limits.MAX_TEXT_LENGTH:limits.MAX_TEXT_LENGTH + 10])
+        bad = _BAD_CHAR.search(text)
+        if bad is not None:
+            raise self._error_at(f"unexpected character {bad.group()!r}", bad.start(), bad.group())
+        self.toks = _TOKEN.findall(text)
+        self.toks.append("")
+        self.last = len(self.toks) - 1
+        self.i = 0
+        self.spans: list | None = None  # when a list: (token index, node) of every Call and Var
+
+    def next(self) -> int:
+        i = self.i
+        if i < self.last:
+            self.i = i + 1
+        return i
+
+    def offset(self, i: int) -> int:
+        """The offset in the text of token ``i``."""
+        if i >= self.last:
+            return len(self.text)
+        for k, m in enumerate(_TOKEN.finditer(self.text)):
+            if k == i:
+                return m.start()
+        raise AssertionError("token index out of range")  # pragma: no cover
+
+    def _error_at(self, reason: str, off: int, token: str) -> ParseError:
+        nl = self.text.count("\n", 0, off)
+        col = off - self.text.rfind("\n", 0, off) if nl else off + self.column
+        return ParseError(reason, self.file, self.line + nl, col, token)
+
+    def error(self, reason: str, i: int) -> ParseError:
+        return self._error_at(reason, self.offset(i), self.toks[i])
+
+    def shown(self, i: int) -> str:
+        return "the end of the text" if i >= self.last else repr(self.toks[i])
+
+    def expect(self, text: str, what: str) -> int:
+        i = self.next()
+        if self.toks[i] != text:
+            raise self.error(f"expected {what}, got {self.shown(i)}", i)
+        return i
+
+
+def _parse_expr(toks: _Tokens, lib: Library, want: Type | None, params: Mapping[str, Type] | None,
+                depth: int) -> Expr:
+    i = toks.next()
+    text = toks.toks[i]
+    if depth > limits.MAX_DEPTH:
+        raise toks.error(f"nested deeper than {limits.MAX_DEPTH} (MAX_DEPTH)", i)
+    if not text:
+        raise toks.error("unexpected end of the text", i)
+    c = text[0]
+    if c in _NAME_START and not text.startswith("INT#"):
+        if toks.toks[toks.i] == "(":
+            sig = lib.signature(text)
+            if sig is None:
+                raise toks.error(f"unknown function {text!r}", i)
+            if want is not None and sig.returns is not want:
+                raise toks.error(f"expected {want}, got {text}, a {sig.returns} function", i)
+            toks.i += 1
+            args = []
+            for k, ptype in enumerate(sig.params):
+                if k:
+                    j = toks.next()
+                    if toks.toks[j] != ",":
+                        if toks.toks[j] == ")":
+                            raise toks.error(f"{text} takes {sig.arity} argument(s), got {k}", j)
+                        raise toks.error(f"expected ',' in {text}(...), got {toks.shown(j)}", j)
+                args.append(_parse_expr(toks, lib, ptype, params, depth + 1))
+            j = toks.next()
+            if toks.toks[j] != ")":
+                if toks.toks[j] == ",":
+                    raise toks.error(f"{text} takes {sig.arity} argument(s), got more", j)
+                raise toks.error(f"expected ')' closing {text}, got {toks.shown(j)}", j)
+            node = Call(text, tuple(args))
+            if toks.spans is not None:
+                toks.spans.append((i, node))
+            return node
+        if text in AXES:
+            if want not in (None, Type.AXIS):
+                raise toks.error(f"expected {want}, got the axis {text}", i)
+            if text not in lib.lang.axes:
+                raise toks.error(f"axis {text} is not in the {lib.lang.name} language", i)
+            return AxisConst(text)
+        if lib.signature(text) is not None:
+            raise toks.error(f"function {text!r} needs its arguments in parentheses", i)
+        if want is Type.SHAPE:
+            raise toks.error(f"a variable ({text!r}) cannot stand for a Shape", i)
+        vtype = want if want is not None else (params or {}).get(text, Type.FLOAT)
+        if params is not None:
+            if text not in params:
+                raise toks.error(f"{text!r} is not a parameter", i)
+            if params[text] is not vtype:
+                raise toks.error(f"parameter {text!r} is {params[text]}, expected {vtype} here", i)
+        node = Var(text, vtype)
+        if toks.spans is not None:
+            toks.spans.append((i, node))
+        return node
+    if c in _NUM_START and (len(text) > 1 or c.isdigit()):
+        if want is not Type.FLOAT and want is not None:
+            raise toks.error(f"expected {want}, got the number {text}", i)
+        value = float(text)
+        if not math.isfinite(value) or abs(value) > limits.MAX_ABS_NUMBER:
+            raise toks.error(f"number {text} is out of range (limit: magnitude {limits.MAX_ABS_NUMBER}, "
+                             "MAX_ABS_NUMBER)", i)
+        return Num(value)
+    if text.startswith("INT#"):
+        digits = text[4:-1] if text.endswith("#") and len(text) > 5 else None
+        if digits is None:
+            raise toks.error(f"malformed count {text!r}; expected INT#k#", i)
+        if want not in (None, Type.INT):
+            raise toks.error(f"expected {want}, got the count {text}", i)
+        k = int(digits) if len(digits) <= 6 else limits.MAX_COUNT + 1
+        if not 1 <= k <= limits.MAX_COUNT:
+            raise toks.error(f"count {text} must be from 1 to {limits.MAX_COUNT} (MAX_COUNT)", i)
+        return IntConst(k)
+    raise toks.error(f"expected an expression, got {text!r}", i)
+
+
+def parse(text: str, library: Library | Lang | None = None, *, expect: Type | None = Type.SHAPE,
+          file: str = "<string>", line: int = 1, column: int = 1) -> Expr:
+    """Parse one expression (whitespace, including newlines, is ignored between tokens).
+
+    Args:
+        text: e.g. ``"Move(Cuboid(0.1,0.5,0.1),-0.4,0,x)"``.
+        library: the functions that may be called: a :class:`Library` (base functions plus abstractions)
+            or a bare :class:`Lang`; :data:`LANG_3D` by default.
+        expect: the type the expression must have (``Shape`` by default; ``Float`` for a float
+            expression such as ``"Add(a,1.0)"``).
+        file, line, column: where the text starts, for error messages.
+
+    Raises:
+        ParseError: ``file:line:column: reason`` with the offending token.
+    """
+    if not isinstance(text, str):
+        raise TypeError(f"text must be a str, got {type(text).__name__}")
+    lib = _library(library)
+    toks = _Tokens(text, file, line, column)
+    expr = _parse_expr(toks, lib, expect, None, 1)
+    if toks.i < toks.last:
+        raise toks.error(f"unexpected {toks.toks[toks.i]!r} after the expression", toks.i)
+    return expr
+
+
+def _parse_spans(text: str, library: Library | Lang | None = None, *, file: str = "<string>", line: int = 1,
+                 column: int = 1) -> tuple:
+    """:func:`parse` of a Shape expression, also giving its tokens, whose ``spans`` list ``(token index,
+    node)`` for every Call and Var node (look nodes up by identity; ``toks.offset(index)`` is the offset
+    of the node's name), for error messages about sub-expressions."""
+    toks = _Tokens(text, file, line, column)
+    toks.spans = []
+    expr = _parse_expr(toks, _library(library), Type.SHAPE, None, 1)
+    if toks.i < toks.last:
+        raise toks.error(f"unexpected {toks.toks[toks.i]!r} after the expression", toks.i)
+    return expr, toks
+
+
+def parse_abstraction(text: str, library: Library | Lang | None = None, *, file: str = "<string>", line: int = 1,
+                      column: int = 1) -> Abstraction:
+    """Parse ``Name(p: Type, ...) = Body`` (the form of :meth:`Abstraction.to_text`); the body may call
+    the base functions and the abstractions of ``library``. The abstraction is not added to it.
+
+    Raises:
+        ParseError: bad syntax, an unknown type, a variable that is not a parameter, a parameter used
+            with two types or not at all.
+    """
+    lib = _library(library)
+    toks = _Tokens(text, file, line, column)
+    head = toks.next()
+    name = toks.toks[head]
+    if not name or name[0] not in _NAME_START or name.startswith("INT#"):
+        raise toks.error("expected the abstraction's name", head)
+    toks.expect("(", "'('")
+    params: dict = {}
+    locs: dict = {}
+    if toks.toks[toks.i] == ")":
+        toks.next()
+    else:
+        while True:
+            k = toks.next()
+            pname = toks.toks[k]
+            if not pname or pname[0] not in _NAME_START or pname.startswith("INT#") or pname in AXES:
+                raise toks.error("expected a parameter name", k)
+            if pname in params:
+                raise toks.error(f"parameter {pname!r} is declared twice", k)
+            toks.expect(":", "':' and a type")
+            t = toks.next()
+            if toks.toks[t] not in ("Float", "Axis", "Int"):
+                raise toks.error(f"unknown parameter type {toks.toks[t]!r}; expected Float, Axis or Int", t)
+            params[pname] = _TYPES[toks.toks[t]]
+            locs[pname] = k
+            sep = toks.next()
+            if toks.toks[sep] == ")":
+                break
+            if toks.toks[sep] != ",":
+                raise toks.error("expected ',' or ')' in the parameter list", sep)
+    toks.expect("=", "'='")
+    if lib.signature(name) is not None:
+        raise toks.error(f"{name!r} is already a function of the library", head)
+    body = _parse_expr(toks, lib, Type.SHAPE, params, 1)
+    if toks.i < toks.last:
+        raise toks.error(f"unexpected {toks.toks[toks.i]!r} after the body", toks.i)
+    used = variables(body)
+    for pname, k in locs.items():
+        if pname not in used:
+            raise toks.error(f"parameter {pname!r} is not used in the body", k)
+    try:
+        return Abstraction(name, tuple(Param(n, t) for n, t in params.items()), body)
+    except ProgramError as e:
+        raise toks.error(str(e), head) from None
