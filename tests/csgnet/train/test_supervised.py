@@ -9,6 +9,7 @@ import torch.nn.functional as F
 from csgnet.train.checkpoint import AtomicCheckpointIO
 from csgnet.train.streams import MixedLengthBatches
 from csgnet.inference import export_weights
+from csgnet.models import preset
 from csgnet.train.supervised import CSGDataModule, CSGNetModule
 from csgnet.vocab import vocabulary
 
@@ -120,4 +121,9 @@ def test_configs_parse_and_build(config, monkeypatch, train_main):
     assert cli.model.config.dim == cli.datamodule.dim
     name = config[:-5]
     assert cli.model.config.stack == ("stack" in name)
-    assert cli.model.hparams.size == name.split("_")[1]
+    # the name's second word is the preset, or "medium": the small preset with a wider GRU
+    word = name.split("_")[1]
+    if word == "medium":
+        assert cli.model.hparams.size == "small" and cli.model.config.hidden > preset("small", 2, False).hidden
+    else:
+        assert cli.model.hparams.size == word
