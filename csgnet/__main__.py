@@ -195,7 +195,10 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
         written = [export.save_png(img, stem.with_suffix(".png")), compare]
         _save_sheet(_contact_sheet([shape, img], cols=2), compare)
     else:
-        written = [export.save_obj(img, stem.with_suffix(".obj"))]
+        compare = stem.with_name(stem.name + "_compare.png")
+        written = [export.save_obj(img, stem.with_suffix(".obj")), compare]
+        _save_sheet(_contact_sheet([depth_view(shape, a) for a in range(3)]
+                                   + [depth_view(img, a) for a in range(3)], cols=3), compare)
     if program is not None:
         written.append(export.save_scad(program, stem.with_suffix(".scad")))
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))
@@ -366,13 +369,25 @@ def cmd_table6(args) -> int:
     return 0
 
 
+def depth_view(vol, axis: int) -> np.ndarray:
+    """A grey picture ``(64, 64) uint8`` of a voxel volume seen along ``axis`` (from index 0 on): each
+    pixel's first occupied voxel, near dark and far light; white where the ray meets nothing."""
+    vol = np.asarray(vol, dtype=bool)
+    hit = vol.any(axis=axis)
+    depth = np.argmax(vol, axis=axis).astype(np.float64) / max(vol.shape[axis] - 1, 1)
+    return np.where(hit, np.round(30 + 170 * depth), 255).astype(np.uint8)
+
+
 def _contact_sheet(images, cols: int = 6):
+    """Images side by side in grey frames: bool images are drawn black on white, uint8 ones as grey levels."""
     h, w = images[0].shape
     rows = -(-len(images) // cols)
     sheet = np.full((rows * (h + 2), cols * (w + 2)), 128, np.uint8)  # grey frames
     for i, img in enumerate(images):
         r, c = divmod(i, cols)
-        sheet[r * (h + 2) + 1: r * (h + 2) + 1 + h, c * (w + 2) + 1: c * (w + 2) + 1 + w] = np.where(img, 0, 255)
+        img = np.asarray(img)
+        grey = img if img.dtype == np.uint8 else np.where(img, 0, 255)
+        sheet[r * (h + 2) + 1: r * (h + 2) + 1 + h, c * (w + 2) + 1: c * (w + 2) + 1 + w] = grey
     return sheet
 
 
@@ -436,8 +451,9 @@ def main(argv=None) -> int:
 
     p = sub.add_parser("parse", help="infer programs for shapes (images, .npy grids, meshes)",
                        description="Infer a CSG program for each input shape and write, per input, "
-                       "NAME.txt (the program), a render (NAME.png and NAME_compare.png in 2D, NAME.obj in "
-                       "3D) and NAME.scad into --out. Inputs with the same name get NAME_2, NAME_3, ...; "
+                       "NAME.txt (the program), a render (NAME.png in 2D, NAME.obj in 3D), NAME_compare.png "
+                       "(the input beside the result; in 3D depth views along x, y and z, input above, "
+                       "result below) and NAME.scad into --out. Inputs with the same name get NAME_2, NAME_3, ...; "
                        "a command that would write over one of its inputs is refused. A file that cannot "
                        "be parsed is reported as 'error: FILE: reason' and the others are processed; the "
                        "exit status is 2 if any failed.")
