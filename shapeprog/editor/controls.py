@@ -276,41 +276,54 @@ def _sa_influence(program: Program, specs: list[_Spec]) -> list[tuple[int, ...]]
                       lambda spec: (spec.slots[0][0], spec.slots[0][1]))
 
 
-def _moved(corners, x) -> list[set[int]]:
-    """Per parameter, the leaves whose corners have a non-zero derivative with respect to it."""
+#: Derivatives below this share of a leaf's largest one count as zero when finding the cuboids a control moves.
+_GRAD_TOL = 1e-6
+
+
+def _moved(corners, x):
+    """(L, P) derivatives of each leaf's randomly weighted corner sum with respect to each parameter, and
+    (L,) the size below which a leaf's derivative counts as zero."""
     import torch
 
-    moved: list[set[int]] = [set() for _ in range(x.shape[0])]
-    if x.shape[0] == 0:
-        return moved
+    L, P = corners.shape[0], x.shape[0]
+    grads = torch.zeros(L, P, dtype=torch.float64)
     g = torch.Generator().manual_seed(0)
-    for leaf in range(corners.shape[0]):
+    for leaf in range(L if P else 0):
         w = torch.rand(8, 3, generator=g, dtype=corners.dtype) + 0.5  # no cancellation between corners
         (grad,) = torch.autograd.grad((corners[leaf] * w).sum(), x, retain_graph=True, allow_unused=True)
         if grad is not None:
-            for i in torch.nonzero(grad).flatten().tolist():
-                moved[i].add(leaf)
-    return moved
+            grads[leaf] = grad.detach().to(torch.float64)
+    # a path that cancels exactly (a squeeze overriding a declared extent) leaves rounding noise
+    tol = _GRAD_TOL * grads.abs().amax(1).clamp_min(1e-6) if P else torch.zeros(L, dtype=torch.float64)
+    return grads, tol
 
 
 def _influence(specs, moved, made, line_of, key_of) -> list[tuple[int, ...]]:
-    """Leaves per control: a number's by derivative; a discrete one's are its line's numbers' leaves and
-    the leaves its line created."""
+    """Leaves per control: a number's by its derivative (the sum over the numbers it sets); a discrete
+    one's are its line's numbers' leaves and the leaves its line created."""
+    grads, tol = moved
+
+    def leaves_of(params) -> set[int]:
+        d = grads[:, list(params)].sum(1)
+        return set(_nonzero(d.abs() > tol))
+
     by_line: dict = {}
     for spec in specs:
         if spec.params:
-            acc = by_line.setdefault(key_of(spec), set())
-            for i in spec.params:
-                acc |= moved[i]
+            by_line.setdefault(key_of(spec), set()).update(leaves_of(spec.params))
     out = []
     for spec in specs:
         if spec.params and spec.control.kind == FLOAT:
-            leaves = set().union(*(moved[i] for i in spec.params))
+            leaves = leaves_of(spec.params)
         else:
             ln = line_of(spec)
             leaves = by_line.get(key_of(spec), set()) | {k for k, m in enumerate(made) if m == ln}
         out.append(tuple(sorted(leaves)))
     return out
+
+
+def _nonzero(mask) -> list[int]:
+    return mask.nonzero().flatten().tolist()
 
 
 # ----------------------------------------------------------------------------- macro programs

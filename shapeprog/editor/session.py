@@ -13,11 +13,12 @@ Example:
     (True, [0.5, 0.4000000059604645, 0.5])
     >>> s.set({"Program_0:1:cuboid.h": 9.0}), str(s.error)
     (False, "box.txt:2:21: control 'Program_0:1:cuboid.h': value 9.0 is outside [0.01, 4.0]")
-    >>> s.undo(); s.shape.dims[0].tolist()
-    [0.5, 0.20000000298023224, 0.5]
+    >>> s.undo(), s.shape.dims[0].tolist()
+    (True, [0.5, 0.20000000298023224, 0.5])
 """
 from __future__ import annotations
 
+import dataclasses
 import io as _io
 import math
 import re
@@ -124,7 +125,7 @@ class EditSession:
         self.name = re.sub(r"[^A-Za-z0-9_.-]+", "_", name or str(Path(file).with_suffix("")).strip("/")) or "program"
         self.error: Exception | None = None
         self.target: ExecutedShape | None = None
-        self._controls: dict[int, list[Control]] = {}
+        self._controls: dict = {}
         self._plan = None
         self._plan_key = None
         self.history: History | None = None
@@ -165,7 +166,7 @@ class EditSession:
                 from ..macros.execute import execute as macro_execute
 
                 return macro_execute(program, self.library)
-            key = replace_numbers(program, iter(lambda: 0.0, None))
+            key = self._structure(program)
             if key != self._plan_key:
                 self._plan, self._plan_key = ExecutionPlan([program]), key
             try:
@@ -173,16 +174,27 @@ class EditSession:
             except ExecutionError as e:
                 raise ExecutionError(e.reason, e.line, file=self.file) from None
 
+    def _structure(self, program):
+        """The program with every number zeroed: equal for programs that differ in numbers only."""
+        if isinstance(program, Program):
+            return replace_numbers(program, iter(lambda: 0.0, None))
+        from ..macros.lang import parameters, replace_parameters
+
+        return replace_parameters(program, [0.0] * len(parameters(program)))
+
     def controls(self) -> list[Control]:
-        """The current program's controls, with the cuboids each moves (cached per program)."""
+        """The current program's controls with their current values. The cuboids each moves are found
+        once per program structure (a change of numbers only keeps them)."""
         if self.program is None:
             return []
-        key = id(self.history.current)
+        key = self._structure(self.program)
         if key not in self._controls:
             if len(self._controls) > 64:
                 self._controls.clear()
-            self._controls[key] = controls(self.program, self.library)
-        return self._controls[key]
+            self._controls[key] = {c.name: c.cuboids for c in controls(self.program, self.library)}
+        moved = self._controls[key]
+        return [dataclasses.replace(c, cuboids=moved.get(c.name, ()))
+                for c in controls(self.program, self.library, cuboids=False)]
 
     def values(self) -> dict:
         """Control name -> current value."""
