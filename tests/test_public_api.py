@@ -20,7 +20,7 @@ import shapeprog
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
-            "shapeprog.coder", "envs", "shapeio"]
+            "shapeprog.coder", "shapeprog.editor", "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -69,8 +69,10 @@ PUBLIC = {
                         "Param", "ParseError", "ProgramError", "Type", "check", "data", "execute", "expand", "limits",
                         "match", "naive_cost", "naive_program", "naive_summary", "objective", "omega", "parse",
                         "parse_abstraction", "preference", "program_cost", "run", "to_text"},
+    "shapeprog.editor": {"BOOL", "CHOICE", "FLOAT", "INT", "Control", "EditSession", "apply", "controls",
+                         "corner_distance", "load_program"},
     "envs": set(),
-    "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
+    "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new"},
 }
 
 

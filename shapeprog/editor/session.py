@@ -297,8 +297,8 @@ class EditSession:
     def export(self, folder, kinds=EXPORT_KINDS) -> list[Path]:
         """Write the current program's text, OBJ and PNG as new files ``<name>_edit<NNN>.<kind>`` in ``folder``.
 
-        Nothing is written outside ``folder`` and no file is replaced: NNN is the first number for which
-        none of the files exists, and each file is written atomically as a new file
+        Nothing is written outside ``folder`` and no file is replaced: NNN is one more than the largest
+        number of a ``<name>_edit<NNN>.*`` file there, and each file is written atomically as a new file
         (:func:`shapeio.write_new`).
 
         Args:
@@ -337,12 +337,10 @@ class EditSession:
                 buf = _io.BytesIO()
                 Image.fromarray(img).save(buf, format="PNG")
                 data[k] = buf.getvalue()
-        n = 1
+        taken = [re.fullmatch(re.escape(self.name) + r"_edit(\d+)\..*", p.name) for p in folder.iterdir()]
+        n = max([int(m.group(1)) for m in taken if m] + [0]) + 1
         while True:
             paths = {k: folder / f"{self.name}_edit{n:03d}.{k}" for k in kinds}
-            if any(p.exists() for p in paths.values()):
-                n += 1
-                continue
             written = []
             try:
                 for k in kinds:
