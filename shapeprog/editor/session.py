@@ -28,7 +28,7 @@ from typing import Mapping
 import torch
 
 from shapeio import write_new
-from shapeio.history import History
+from shapeio.editing import History
 
 from .. import corpus
 from ..errors import EditError, ExecutionError, ParseError
@@ -117,7 +117,7 @@ class EditSession:
         shape: the current geometry (:class:`~shapeprog.execute.ExecutedShape`; None without a program).
         error: the error of the last operation (None when it succeeded); the page shows it.
         target: the target geometry of goal-directed editing (None without one).
-        history: the undo / redo :class:`~shapeio.history.History` of states.
+        history: the undo / redo :class:`~shapeio.editing.History` of states.
     """
 
     def __init__(self, text: str, file: str = "<string>", library=None, name: str | None = None):

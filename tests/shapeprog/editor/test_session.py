@@ -1,4 +1,4 @@
-"""shapeprog.editor.session and shapeio.history: undo / redo invariants, failed edits keeping the last good
+"""shapeprog.editor.session and shapeio.editing: undo / redo invariants, failed edits keeping the last good
 geometry, parse errors at open, plan reuse equal to fresh execution, target distance, exports."""
 import random
 
@@ -8,7 +8,7 @@ import torch
 from PIL import Image
 
 from shapeio import write_new
-from shapeio.history import History
+from shapeio.editing import History
 from shapeprog import corpus
 from shapeprog.editor import EditSession, apply, controls, corner_distance
 from shapeprog.editor.controls import FLOAT
@@ -175,3 +175,13 @@ def test_macro_session_and_expansion():
     assert s.undo() and s.shape.dims[0, 0].item() == pytest.approx(0.1)
     bad = EditSession(MACROS.replace("four_legs(0.1", "four_legs(bbox"), "m.txt", library=Library())
     assert isinstance(bad.error, ParseError) and bad.error.line == 11
+
+
+def test_importing_the_editor_does_not_import_viser():
+    import subprocess
+    import sys
+
+    code = ("import sys, shapeprog, shapeprog.editor, shapeprog.editor.server, shapeio.editing; "
+            "assert 'viser' not in sys.modules, 'viser imported'")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr

@@ -1,4 +1,5 @@
-"""An undo / redo history of immutable states, shared by the program editors. Standard library only.
+"""What the two program editors (``shapeprog.editor``, ``csgnet.editor``) share: an undo / redo history
+of immutable states, and the lazy import of the browser library. Standard library only.
 
 Example:
     >>> h = History("a")
@@ -14,9 +15,26 @@ from __future__ import annotations
 
 from typing import Generic, TypeVar
 
-__all__ = ["History", "MAX_HISTORY"]
+__all__ = ["EDITOR_EXTRA", "History", "MAX_HISTORY", "import_viser"]
 
 T = TypeVar("T")
+
+#: The optional extra that installs the editors' browser library.
+EDITOR_EXTRA = "editor"
+
+
+def import_viser():
+    """The ``viser`` module, imported on first use.
+
+    Raises:
+        ImportError: viser is not installed; the message names the extra that installs it.
+    """
+    try:
+        import viser
+    except ImportError as e:
+        raise ImportError(f"the editor needs viser, which is not installed: pip install -e '.[{EDITOR_EXTRA}]' "
+                          f"(or pip install 'viser>=1.0')") from e
+    return viser
 
 #: States kept; the oldest are dropped beyond it (a slider drag pushes one state per move).
 MAX_HISTORY = 2000

@@ -1,0 +1,120 @@
+"""The editor page (viser): it serves HTTP on 127.0.0.1, a control change replaces the geometry, refused
+edits and parse errors show in the page, undo / redo / reset / export. Skipped without viser (the
+``editor`` extra); the real-browser test is skipped without a headless Chromium."""
+import shutil
+import socket
+import urllib.request
+
+import numpy as np
+import pytest
+import torch
+
+from shapeprog import corpus
+from shapeprog.editor import EditSession, apply
+from shapeprog.execute import execute
+from shapeprog.lang import parse
+
+viser = pytest.importorskip("viser", reason="viser is not installed (the 'editor' extra: pip install -e '.[editor]')")
+
+from shapeprog.editor.server import EditorApp, cuboid_edges  # noqa: E402
+
+CHAIR = corpus.read("chair", 173)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def app(tmp_path):
+    s = EditSession(CHAIR, "chair/173.txt")
+    s.set_target(corpus.read("chair", 42220))
+    a = EditorApp(s, port=_free_port(), export_dir=tmp_path)
+    yield a
+    a.stop()
+
+
+def test_serves_the_page_on_localhost(app):
+    assert app.url.startswith("http://127.0.0.1:")
+    with urllib.request.urlopen(app.url, timeout=10) as r:
+        assert r.status == 200 and b"<html" in r.read().lower()
+
+
+def test_a_control_change_replaces_the_geometry(app):
+    s = app.session
+    c = next(c for c in s.controls() if c.name == "Program_0:1:cuboid.h")
+    v0, d0 = app.state["version"], app.state["distance"]
+    app.handle(c.name).value = 0.5
+    assert app.state["version"] == v0 + 1
+    want = execute(apply(parse(CHAIR), {c.name: 0.5})).corners.numpy()
+    assert np.array_equal(app.state["corners"], want)
+    assert app.state["highlight"] == c.cuboids and len(c.cuboids) > 0
+    assert app.state["distance"] != d0 and app.state["error"] is None
+    assert "0.5" in app.state["text"].split("\n")[2] and app.text_box.value == app.state["text"]
+    # undo, redo, reset move the controls too
+    assert app.undo() and app.handle(c.name).value == pytest.approx(c.value)
+    assert np.array_equal(app.state["corners"], execute(parse(CHAIR)).corners.numpy())
+    assert app.redo() and app.handle(c.name).value == pytest.approx(0.5)
+    assert app.reset() and app.state["text"] == CHAIR
+    # a structural change (a drop-down) rebuilds the controls
+    face = next(c for c in s.controls() if c.name.endswith("squeeze.face"))
+    other = next(f for f in face.choices if f != face.value)
+    app.handle(face.name).value = other
+    assert app.state["error"] is None and f", {other}, " in app.state["text"]
+    assert app.handle(face.name).value == other
+
+
+def test_a_refused_edit_shows_the_error_and_keeps_the_geometry(app):
+    before, version = app.state["corners"].copy(), app.state["version"]
+    assert not app.run_text(CHAIR.replace("squeeze(", "squeez(", 1))
+    assert "chair/173.txt:" in app.state["error"] and "unknown command 'squeez'" in app.state["error"]
+    assert np.array_equal(app.state["corners"], before) and app.state["version"] == version
+    assert app.run_text(CHAIR) is True or app.state["error"] is None
+
+
+def test_exports_go_to_the_export_folder(app, tmp_path):
+    paths = app.export()
+    assert [p.parent for p in paths] == [tmp_path] * 3 and all(p.is_file() for p in paths)
+    assert parse(paths[0].read_text()) == app.session.program
+
+
+def test_a_program_that_does_not_parse_opens_with_its_error(tmp_path):
+    bad = CHAIR.replace("attach(", "attach(nothing, ", 1)
+    a = EditorApp(EditSession(bad, "bad.txt"), port=_free_port(), export_dir=tmp_path, source_text=bad)
+    try:
+        assert a.state["error"].startswith("bad.txt:") and a.text_box.value == bad
+        with urllib.request.urlopen(a.url, timeout=10) as r:
+            assert r.status == 200
+        assert a.run_text(CHAIR) and a.state["error"] is None and len(a.state["corners"]) == 6
+    finally:
+        a.stop()
+
+
+def test_cuboid_edges():
+    corners = execute(parse(CHAIR)).corners
+    e = cuboid_edges(corners)
+    assert e.shape == (12 * len(corners), 2, 3)
+    lengths = np.linalg.norm(e[:, 0] - e[:, 1], axis=-1).reshape(-1, 12)
+    dims = execute(parse(CHAIR)).dims.numpy()
+    for k in range(len(corners)):  # each extent appears on 4 edges
+        assert np.allclose(np.sort(lengths[k]), np.sort(np.repeat(dims[k], 4)), atol=1e-6)
+
+
+BROWSERS = [b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)]
+
+
+@pytest.mark.skipif(not BROWSERS, reason="no headless browser: install Debian's 'chromium' package to run the "
+                                         "real-browser test")
+def test_real_browser_screenshot(app, tmp_path):
+    import subprocess
+
+    from PIL import Image
+
+    shot = tmp_path / "shot.png"
+    subprocess.run([BROWSERS[0], "--headless", "--no-sandbox", "--disable-gpu", "--use-gl=swiftshader",
+                    "--virtual-time-budget=15000", f"--screenshot={shot}", "--window-size=1200,800", app.url],
+                   check=True, timeout=120, capture_output=True)
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    assert img.std() > 5  # not a blank page
