@@ -19,7 +19,7 @@ import shapeprog
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
-PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
+PACKAGES = ["csgnet", "csgnet.renderer", "csgnet.editor", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
             "shapeprog.coder", "shapeprog.editor", "envs", "shapeio"]
 
 
@@ -51,6 +51,8 @@ PUBLIC = {
     "csgnet.renderer": {"Execution", "PrimitiveCache", "SIZE", "StackMachine", "apply_op_", "draw_packed",
                         "encode_programs", "encode_programs_ids", "encode_tokens", "execute", "pack", "popcount",
                         "primitive_cache", "render_programs", "render_tokens", "stack_trace", "unpack"},
+    "csgnet.editor": {"CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls",
+                      "render_png_bytes"},
     "shapeprog": {"ExecutionError", "ParseError", "corpus", "execute", "execute_batch", "fit", "parse",
                   "print_program", "to_text"},
     "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
