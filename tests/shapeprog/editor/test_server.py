@@ -118,3 +118,63 @@ def test_real_browser_screenshot(app, tmp_path):
                    check=True, timeout=120, capture_output=True)
     img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     assert img.std() > 5  # not a blank page
+
+
+@pytest.mark.parametrize("argv", [["shapeprog", "edit", "chair/173", "--target", "chair/42220"],
+                                  ["csgnet", "edit", "c(32,32,28)s(32,32,20)-"]])
+def test_the_edit_command_serves_until_interrupted(argv, tmp_path):
+    """``python -m shapeprog edit ... --port N --no-browser`` prints its address and serves the page."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    port = _free_port()
+    root = Path(__file__).resolve().parents[3]
+    proc = subprocess.Popen([sys.executable, "-m", *argv, "--port", str(port), "--no-browser", "--export-dir",
+                             str(tmp_path)], cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        deadline = time.time() + 120
+        while "editing" not in line and time.time() < deadline and proc.poll() is None:
+            line = proc.stdout.readline()
+        assert f"http://127.0.0.1:{port}" in line, proc.stderr.read() if proc.poll() is not None else line
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}", timeout=10) as r:
+            assert r.status == 200
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def test_the_edit_command_refuses_bad_arguments(tmp_path, capsys):
+    from shapeprog.__main__ import main
+
+    with pytest.raises(SystemExit, match="neither a file nor a corpus id"):
+        main(["edit", "chair/x", "--no-browser", "--export-dir", str(tmp_path)])
+    with pytest.raises(SystemExit, match="export folder does not exist"):
+        main(["edit", "chair/173", "--no-browser", "--export-dir", str(tmp_path / "missing")])
+    with pytest.raises(SystemExit, match="no program chair/1 in the corpus"):
+        main(["edit", "chair/1", "--no-browser", "--export-dir", str(tmp_path)])
+
+
+def test_macro_program_page_and_expanded_toggle(tmp_path):
+    from editor_testutil import MACROS
+
+    a = EditorApp(EditSession(MACROS, "m.txt"), port=_free_port(), export_dir=tmp_path)
+    try:
+        n_macro = len(a._handles)
+        a.handle("1:four_legs.s").value = 0.15
+        assert a.state["error"] is None and "four_legs(0.15," in a.state["text"]
+        corners = a.state["corners"].copy()
+        a.expanded.value = True  # the base-language parameters of the expansion
+        assert len(a._handles) > n_macro and "def " not in a.state["text"]
+        assert np.array_equal(a.state["corners"], corners)
+        a.expanded.value = False
+        assert len(a._handles) == n_macro and "four_legs(0.15," in a.state["text"]
+    finally:
+        a.stop()
