@@ -52,6 +52,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import weakref
 from dataclasses import dataclass
 from typing import Mapping, Union
 
@@ -426,7 +427,22 @@ def _is_macro(program) -> bool:
     return False
 
 
+_CACHE: dict = {}  # id(program) -> (weak reference, library, specs): a session asks again for the same program
+_CACHE_SIZE = 8
+
+
 def _specs(program, library) -> list[_Spec]:
+    hit = _CACHE.get(id(program))
+    if hit is not None and hit[0]() is program and hit[1] is library:
+        return hit[2]
+    specs = _specs_uncached(program, library)
+    if len(_CACHE) >= _CACHE_SIZE:
+        _CACHE.pop(next(iter(_CACHE)))
+    _CACHE[id(program)] = (weakref.ref(program), library, specs)
+    return specs
+
+
+def _specs_uncached(program, library) -> list[_Spec]:
     if _is_macro(program):
         from ..macros.library import Library
 

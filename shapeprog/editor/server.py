@@ -19,6 +19,7 @@ imported. The page shows:
 """
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from pathlib import Path
@@ -79,6 +80,7 @@ class EditorApp:
         self._handles: dict[str, object] = {}
         self._structure = None
         self._line_nodes: list = []
+        self._layout = None
         self.state: dict = {"version": 0}
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.server.scene.set_up_direction("+y")
@@ -188,7 +190,9 @@ class EditorApp:
                 self._sync_values()
                 self._show()
                 return
-            if self.session._structure(self.session.program) != self._structure:
+            if c is not None and c.kind == FLOAT:  # numbers only: the controls and the cuboids they move stay
+                self._controls[name] = dataclasses.replace(c, value=value)
+            elif self.session._structure(self.session.program) != self._structure:
                 self._rebuild_controls()
             else:
                 self._controls = {c.name: c for c in self.session.controls()}
@@ -279,7 +283,9 @@ class EditorApp:
         """The error and status texts."""
         s = self.session
         err = s.error
-        self.error_md.content = "" if err is None else f"**Error:** `{err}`"
+        content = "" if err is None else f"**Error:** `{err}`"
+        if self.error_md.content != content:
+            self.error_md.content = content
         n = 0 if s.shape is None else len(s.shape)
         d = s.distance()
         parts = [f"{n} cuboids", f"{len(self._controls)} controls"]
@@ -299,20 +305,24 @@ class EditorApp:
                 lines = s.shape.line.numpy()
                 colors = part_colors(len(lines), lines)
                 groups = sorted(set(lines.tolist()))
-                for k in range(len(groups), len(self._line_nodes)):
-                    self._line_nodes[k].remove()
-                self._line_nodes = self._line_nodes[:len(groups)]
+                layout = [(ln, int((lines == ln).sum())) for ln in groups]
+                same = layout == self._layout
+                if not same:
+                    for node in self._line_nodes:
+                        node.remove()
+                    self._line_nodes = []
                 for k, ln in enumerate(groups):
                     idx = np.nonzero(lines == ln)[0]
                     v, f = mesh_arrays(corners[idx])
+                    if same:  # only the vertices move: one small message per line
+                        self._line_nodes[k].vertices = v.numpy().astype(np.float32)
+                        continue
                     rgb = tuple(int(x) for x in colors[idx[0]])
                     node = scene.add_mesh_simple(f"/shape/part{k}", v.numpy(), f.numpy(), color=rgb,
                                                  flat_shading=True, side="double")
                     node.on_click(lambda _, ln=int(ln): self._clicked(ln))
-                    if k < len(self._line_nodes):
-                        self._line_nodes[k] = node
-                    else:
-                        self._line_nodes.append(node)
+                    self._line_nodes.append(node)
+                self._layout = layout
                 if s.target is not None and "target" not in self.state:
                     scene.add_line_segments("/target", cuboid_edges(s.target.corners), _TARGET_RGB,
                                             thickness=0.004)
