@@ -51,6 +51,11 @@ def cuboid_edges(corners) -> np.ndarray:
     return np.stack([c[:, i], c[:, j]], axis=2).reshape(-1, 2, 3)
 
 
+def _signature(cs: list[Control]) -> tuple:
+    """What the page's controls are made from, values aside."""
+    return tuple((c.name, c.kind, c.low, c.high, c.choices, c.line, c.label) for c in cs)
+
+
 class EditorApp:
     """A running editor page.
 
@@ -78,7 +83,7 @@ class EditorApp:
         self.lock = threading.RLock()
         self._syncing = False
         self._handles: dict[str, object] = {}
-        self._structure = None
+        self._signature = None
         self._line_nodes: list = []
         self._layout = None
         self.state: dict = {"version": 0}
@@ -115,12 +120,13 @@ class EditorApp:
 
     # -- controls
     def _rebuild_controls(self) -> None:
-        """Remove and re-add the controls (the program's structure changed)."""
+        """Remove and re-add the controls (the set of controls changed)."""
         if self.controls_folder is not None:
             self.controls_folder.remove()
         self._handles = {}
-        self._controls = {c.name: c for c in self.session.controls()}
-        self._structure = self.session._structure(self.session.program) if self.session.program is not None else None
+        cs = self.session.controls()
+        self._controls = {c.name: c for c in cs}
+        self._signature = _signature(cs)
         gui = self.server.gui
         self.controls_folder = gui.add_folder("Parameters")
         self._syncing = True
@@ -157,20 +163,21 @@ class EditorApp:
         return h
 
     def _sync_values(self) -> None:
-        """Put the session's values into the controls (after undo / redo / a refused edit)."""
+        """Put the session's values into the controls (after undo / redo / a discrete or refused edit); the
+        controls are rebuilt only when their set (names, kinds, ranges, choices) changed."""
         if self.session.program is None:
             return
-        structure = self.session._structure(self.session.program)
-        if structure != self._structure:
+        cs = self.session.controls()
+        if _signature(cs) != self._signature:
             self._rebuild_controls()
             return
         self._syncing = True
         try:
-            for c in self.session.controls():
+            for c in cs:
                 h = self._handles.get(c.name)
                 if h is not None and h.value != c.value:
                     h.value = c.value
-                self._controls[c.name] = c
+            self._controls = {c.name: c for c in cs}
         finally:
             self._syncing = False
 
@@ -192,10 +199,8 @@ class EditorApp:
                 return
             if c is not None and c.kind == FLOAT:  # numbers only: the controls and the cuboids they move stay
                 self._controls[name] = dataclasses.replace(c, value=value)
-            elif self.session._structure(self.session.program) != self._structure:
-                self._rebuild_controls()
             else:
-                self._controls = {c.name: c for c in self.session.controls()}
+                self._sync_values()
             moved = self._controls[name].cuboids if name in self._controls else ()
             self._draw(highlight=moved, t0=t0)
 

@@ -109,7 +109,7 @@ def test_corpus_round_trip_and_child_bbox_tie():
 def test_edit_equals_text_edit():
     """apply() gives the program of the text edited at the control's token, and the same geometry."""
     rng = random.Random(0)
-    for name, p in SAMPLE[::5]:
+    for name, p in SAMPLE[::8]:
         text = to_text(p)
         for c in rng.sample(controls(p, cuboids=False), 5):
             if c.kind == FLOAT:
@@ -147,7 +147,7 @@ def test_edit_equals_text_edit():
 
 def test_range_edges_execute():
     """Every float control at its low and at its high end executes to finite cuboids (15 corpus programs)."""
-    for name, p in SAMPLE[::20]:
+    for name, p in SAMPLE[::30]:
         edited = []
         for c in controls(p, cuboids=False):
             if c.kind == FLOAT:

@@ -58,7 +58,7 @@ def test_a_control_change_replaces_the_geometry(app):
     assert np.array_equal(app.state["corners"], execute(parse(CHAIR)).corners.numpy())
     assert app.redo() and app.handle(c.name).value == pytest.approx(0.5)
     assert app.reset() and app.state["text"] == CHAIR
-    # a structural change (a drop-down) rebuilds the controls
+    # a structural change (a drop-down) keeps the controls, with their new values
     face = next(c for c in s.controls() if c.name.endswith("squeeze.face"))
     other = next(f for f in face.choices if f != face.value)
     app.handle(face.name).value = other
