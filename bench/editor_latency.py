@@ -9,7 +9,7 @@ controls drawn at random (seed ``--seed``) within their ranges, after one warm-u
 * ``page``: setting the control's value on a running :class:`shapeprog.editor.server.EditorApp` (what a
   slider move in the browser runs on the server: the core step, then the meshes and the highlight sent
   to the page's scene), when viser is installed;
-* ``structural``: a drop-down / checkbox edit on the page, which also rebuilds the controls and finds the
+* ``structural``: a drop-down / checkbox edit on the page, which also compiles the new structure and finds the
   cuboids each moves (one backward pass per leaf).
 
 and for the CSG editor ``page`` on ``c(32,32,28)s(32,32,20)-`` (a slider: re-render and new image).
@@ -103,7 +103,7 @@ def bench_program(spec: str, edits: int, seed: int, page: bool) -> None:
                 times.append(dt)
             app.undo()
         if times:
-            print(f"  structural (drop-down -> controls rebuilt): {_stats(times)}")
+            print(f"  structural (drop-down -> controls updated): {_stats(times)}")
     finally:
         app.stop()
 
