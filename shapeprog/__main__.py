@@ -442,18 +442,10 @@ def _int_at_least(low: int):
     return convert
 
 
-def _cmd_edit(args) -> int:
-    from shapeio.editing import import_viser
-
+def _open_for_edit(args):
+    """The edit session of ``edit``'s arguments: (session, the text as read, its file name)."""
     from .editor.session import EditSession, read_source
 
-    try:
-        import_viser()
-    except ImportError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    if not Path(args.export_dir).is_dir():
-        raise SystemExit(f"error: {args.export_dir}: the export folder does not exist")
     library = None
     if args.library:
         from .macros.library import Library
@@ -477,8 +469,25 @@ def _cmd_edit(args) -> int:
     if session.error is not None:
         print(f"error: {session.error} (the page shows it; fix the text there)", file=sys.stderr)
     if args.target:
-        ttext, tfile = read_source(args.target)
+        try:
+            ttext, tfile = read_source(args.target)
+        except (FileNotFoundError, KeyError) as e:
+            raise SystemExit(f"error: --target: {e.args[0]}") from None
         session.set_target(ttext, tfile)
+    return session, text, file
+
+
+def _cmd_edit(args) -> int:
+    from shapeio.editing import import_viser
+
+    try:
+        import_viser()
+    except ImportError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    if not Path(args.export_dir).is_dir():
+        raise SystemExit(f"error: {args.export_dir}: the export folder does not exist")
+    session, text, file = _open_for_edit(args)
     from .editor.server import EditorApp
 
     app = EditorApp(session, host=args.host, port=args.port, export_dir=args.export_dir, source_text=text)
