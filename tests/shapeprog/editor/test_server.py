@@ -74,6 +74,16 @@ def test_a_refused_edit_shows_the_error_and_keeps_the_geometry(app):
     assert app.run_text(CHAIR) is True or app.state["error"] is None
 
 
+def test_a_refused_control_value_is_shown_and_the_control_put_back(app):
+    before, text = app.state["corners"].copy(), app.state["text"]
+    h = app.handle("Program_0:1:cuboid.h")
+    old = h.value
+    h.value = 9.0  # beyond the slider's range, as a stale or hand-made message could send
+    assert "control 'Program_0:1:cuboid.h': value 9.0 is outside [0.01, 4.0]" in app.state["error"]
+    assert h.value == old and app.state["text"] == text and np.array_equal(app.state["corners"], before)
+    assert "Error" in app.error_md.content
+
+
 def test_exports_go_to_the_export_folder(app, tmp_path):
     paths = app.export()
     assert [p.parent for p in paths] == [tmp_path] * 3 and all(p.is_file() for p in paths)
