@@ -162,12 +162,13 @@ class EditorApp:
         h.on_update(lambda e, name=c.name: self._changed(name, e.target.value))
         return h
 
-    def _sync_values(self) -> None:
+    def _sync_values(self, cuboids: bool = True) -> None:
         """Put the session's values into the controls (after undo / redo / a discrete or refused edit); the
-        controls are rebuilt only when their set (names, kinds, ranges, choices) changed."""
+        controls are rebuilt only when their set (names, kinds, ranges, choices) changed. ``cuboids=False``
+        leaves the cuboids each control moves to be found later."""
         if self.session.program is None:
             return
-        cs = self.session.controls()
+        cs = self.session.controls(cuboids)
         if _signature(cs) != self._signature:
             self._rebuild_controls()
             return
@@ -199,10 +200,14 @@ class EditorApp:
                 return
             if c is not None and c.kind == FLOAT:  # numbers only: the controls and the cuboids they move stay
                 self._controls[name] = dataclasses.replace(c, value=value)
-            else:
-                self._sync_values()
-            moved = self._controls[name].cuboids if name in self._controls else ()
-            self._draw(highlight=moved, t0=t0)
+                self._draw(highlight=self._controls[name].cuboids, t0=t0)
+                return
+            # a new structure: the geometry first, then the cuboids each control moves (a backward pass per
+            # leaf) and the highlight
+            self._sync_values(cuboids=False)
+            self._draw(highlight=(), t0=t0)
+            self._controls = {c.name: c for c in self.session.controls()}
+            self._draw(highlight=self._controls[name].cuboids if name in self._controls else (), geometry=False)
 
     def _step(self, move) -> bool:
         with self.lock:

@@ -182,19 +182,22 @@ class EditSession:
 
         return replace_parameters(program, [0.0] * len(parameters(program)))
 
-    def controls(self) -> list[Control]:
+    def controls(self, cuboids: bool = True) -> list[Control]:
         """The current program's controls with their current values. The cuboids each moves are found
-        once per program structure (a change of numbers only keeps them)."""
+        once per program structure (a change of numbers only keeps them); ``cuboids=False`` leaves them
+        out (and skips finding them)."""
         if self.program is None:
             return []
+        plain = controls(self.program, self.library, cuboids=False)
+        if not cuboids:
+            return plain
         key = self._structure(self.program)
         if key not in self._controls:
             if len(self._controls) > 64:
                 self._controls.clear()
             self._controls[key] = {c.name: c.cuboids for c in controls(self.program, self.library)}
         moved = self._controls[key]
-        return [dataclasses.replace(c, cuboids=moved.get(c.name, ()))
-                for c in controls(self.program, self.library, cuboids=False)]
+        return [dataclasses.replace(c, cuboids=moved.get(c.name, ())) for c in plain]
 
     def values(self) -> dict:
         """Control name -> current value."""
