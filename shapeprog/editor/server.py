@@ -53,7 +53,12 @@ def cuboid_edges(corners) -> np.ndarray:
 
 def _signature(cs: list[Control]) -> tuple:
     """What the page's controls are made from, values aside."""
-    return tuple((c.name, c.kind, c.low, c.high, c.choices, c.line, c.label) for c in cs)
+    return tuple((c.name, c.kind, c.low, c.high, c.choices, c.line) for c in cs)
+
+
+def _heads(cs: list[Control]) -> dict[int, str]:
+    """The folder title of each program line's controls (``line 6 attach(cube1, cube0)``)."""
+    return {c.line: c.label.rsplit(" ", 1)[0] for c in cs}
 
 
 class EditorApp:
@@ -83,6 +88,7 @@ class EditorApp:
         self.lock = threading.RLock()
         self._syncing = False
         self._handles: dict[str, object] = {}
+        self._folders: dict[int, object] = {}
         self._signature = None
         self._line_nodes: list = []
         self._layout = None
@@ -135,9 +141,12 @@ class EditorApp:
                 groups: dict[int, list[Control]] = {}
                 for c in self._controls.values():
                     groups.setdefault(c.line, []).append(c)
+                self._folders = {}
+                heads = _heads(list(self._controls.values()))
                 for line, cs in groups.items():
-                    head = cs[0].label.rsplit(" ", 1)[0]
-                    with gui.add_folder(head, expand_by_default=len(self._controls) <= 40):
+                    self._folders[line] = folder = gui.add_folder(heads[line],
+                                                                  expand_by_default=len(self._controls) <= 40)
+                    with folder:
                         for c in cs:
                             self._handles[c.name] = self._add_control(c)
             names = ("(none)",) + tuple(self._controls)
@@ -178,6 +187,9 @@ class EditorApp:
                 h = self._handles.get(c.name)
                 if h is not None and h.value != c.value:
                     h.value = c.value
+            for line, head in _heads(cs).items():  # a new attach target is in its line's title
+                if self._folders[line].label != head:
+                    self._folders[line].label = head
             self._controls = {c.name: c for c in cs}
         finally:
             self._syncing = False

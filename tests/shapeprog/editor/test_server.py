@@ -64,6 +64,12 @@ def test_a_control_change_replaces_the_geometry(app):
     app.handle(face.name).value = other
     assert app.state["error"] is None and f", {other}, " in app.state["text"]
     assert app.handle(face.name).value == other
+    # a new attach target: the same widgets, the line's folder retitled
+    att = next(c for c in app.session.controls() if c.name.endswith("attach.b") and len(c.choices) > 1)
+    h = app.handle(att.name)
+    h.value = next(x for x in att.choices if x != att.value)
+    assert app.state["error"] is None and app.handle(att.name) is h
+    assert f", {h.value})" in app._folders[att.line].label
 
 
 def test_a_refused_edit_shows_the_error_and_keeps_the_geometry(app):
