@@ -9,6 +9,7 @@
     python -m csgnet export-weights runs/x/checkpoints/best-012.ckpt --out csgnet/weights/csgnet2d.pt
     python -m csgnet table4 --weights "CSGNet RL=runs/rl.pt" csgnet/weights/csgnet2d.pt --images 50 --out table4.md
     python -m csgnet table6 --data data/synthetic --weights csgnet/weights/csgnet2d.pt --out table6.md
+    python -m csgnet edit "c(32,32,28)s(32,32,20)-" --port 8081 --no-browser
 """
 
 from __future__ import annotations
@@ -418,6 +419,51 @@ def _non_negative(text: str) -> int:
     return value
 
 
+def cmd_edit(args) -> int:
+    import time
+
+    from shapeio.editing import import_viser
+
+    from .editor import CSGEditSession
+
+    try:
+        import_viser()
+    except ImportError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    if not Path(args.export_dir).is_dir():
+        print(f"error: {args.export_dir}: the export folder does not exist", file=sys.stderr)
+        return 1
+    text, name = args.program, "csg"
+    path = Path(args.program)
+    if path.is_file():  # a file holding a program (e.g. a parse result): its first non-blank line
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines() if ln.strip()]
+        if not lines:
+            print(f"error: {path}: no program in the file", file=sys.stderr)
+            return 1
+        text, name = lines[0], path.stem
+    if args.dim is None:
+        args.dim = 3 if any(h + "(" in text for p in primitives(3) for h in (p.kind, p.long) if h) else 2
+    session = CSGEditSession(text, args.dim, name=name)
+    if session.error is not None:
+        print(f"error: {session.error} (the page shows it; fix the text there)", file=sys.stderr)
+    from .editor.server import CSGEditorApp
+
+    app = CSGEditorApp(session, host=args.host, port=args.port, export_dir=args.export_dir, source_text=text)
+    print(f"editing {text!r} at {app.url} (exports go to {Path(args.export_dir).resolve()}); Ctrl-C stops",
+          flush=True)
+    if not args.no_browser:
+        import webbrowser
+
+        webbrowser.open(app.url)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        app.stop()
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m csgnet", description="CSG programs: render, generate datasets, parse shapes, evaluate parsers.")
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -524,6 +570,18 @@ def main(argv=None) -> int:
     t6.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
     t6.add_argument("--out", default=None, help="write the markdown table here")
     t6.set_defaults(func=cmd_table6)
+
+    ed = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",
+                        description="Serve an editor page for a CSG program: the live render, one slider per "
+                                    "primitive parameter, undo / redo / reset, export. Runs until interrupted. "
+                                    "See docs/editor.md.")
+    ed.add_argument("program", help='program text, e.g. "c(32,32,28)s(32,32,20)-", or a file whose first line is one')
+    ed.add_argument("--dim", type=int, choices=(2, 3), default=None, help="2 or 3 (default: guessed from the text)")
+    ed.add_argument("--port", type=int, default=8080, help="port of the page")
+    ed.add_argument("--host", default="127.0.0.1", help="address to bind (default: this machine only)")
+    ed.add_argument("--export-dir", default=".", help="the folder exports are written to (never elsewhere)")
+    ed.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    ed.set_defaults(func=cmd_edit)
 
     args = ap.parse_args(argv)
     args.argv = list(argv) if argv is not None else sys.argv[1:]
