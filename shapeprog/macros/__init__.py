@@ -24,11 +24,13 @@ from __future__ import annotations
 
 from .data import (Conversion, CorpusData, Cube, Failure, Ordering, SubProgram, convert_corpus, convert_program,
                    order_errors)
+from .api import BlockRefactor, Refactored, collection, expand, load_library, program_stats, refactor
 from .execute import execute, execute_batch, program_parameters
 from .lang import Call, Linear, Literal, MacroDef, MacroError, MacroProgram, Name, Param, from_lines, to_text
 from .library import Library, parse
 
 __all__ = [
+    "BlockRefactor",
     "Call",
     "Conversion",
     "CorpusData",
@@ -43,14 +45,20 @@ __all__ = [
     "Name",
     "Ordering",
     "Param",
+    "Refactored",
     "SubProgram",
+    "collection",
     "convert_corpus",
     "convert_program",
     "execute",
     "execute_batch",
+    "expand",
     "from_lines",
+    "load_library",
     "order_errors",
     "parse",
     "program_parameters",
+    "program_stats",
+    "refactor",
     "to_text",
 ]

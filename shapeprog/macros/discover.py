@@ -499,7 +499,7 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
         seed: the seed of every random draw.
         executor: runs the best-program searches (None: this process).
         out: folder of ``state.json`` (written after every round; an existing state of the same
-            collection, seed and settings is resumed).
+            collection, seed and settings, ``num_rounds`` aside, is resumed).
         log: progress lines.
         stop_after: seconds after which no new round is started.
     """
@@ -509,7 +509,9 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
     path = None if out is None else Path(out) / "state.json"
     if path is not None and path.exists():
         state, raw = Discovery.from_json(path.read_text(encoding="utf-8"), str(path))
-        if raw["nodes"] != digest or raw["seed"] != seed or raw["config"] != dict(cfg):
+        same = {k: v for k, v in raw["config"].items() if k != "num_rounds"} == {
+            k: v for k, v in cfg.items() if k != "num_rounds"}
+        if raw["nodes"] != digest or raw["seed"] != seed or not same:
             raise ParseError("the state was written for another collection, seed or configuration", str(path), 1, 1,
                              "")
         if log:
