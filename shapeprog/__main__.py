@@ -494,7 +494,10 @@ def _cmd_refactor(args) -> int:
             lib = load_library(args.library)
         except ValueError as e:
             raise SystemExit(f"error: {e}") from None
-    r = refactor(prog.program, lib, mode=args.search)
+    cat, _, ident = args.program.partition("/")
+    named = cat in corpus.CATEGORIES and ident.isdigit() and not Path(args.program).is_file()
+    r = refactor(prog.program, lib, mode=args.search, category=cat if named else Path(args.program).stem,
+                 shape_id=int(ident) if named else 0)
     for b in r.blocks:
         print(f"# {b.key}: f {b.f_base:.2f} (base) -> {b.f:.2f} (macros)")
         base = to_text_base(b.program, lib)

@@ -107,7 +107,7 @@ class Refactored:
 
 
 def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Library, mode: str = "beam",
-             max_orders: int = 1000) -> Refactored:
+             max_orders: int = 1000, category: str = "", shape_id: int = 0) -> Refactored:
     """Rewrite a program with ``library``'s macros: per sub-program, the best program P* over its
     orderings (:func:`shapeprog.macros.objective.best_program`).
 
@@ -117,12 +117,13 @@ def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Libr
         library: the macros.
         mode: ``'beam'`` (the reference's search) or ``'exact'``.
         max_orders: orderings searched per sub-program.
+        category, shape_id: name the blocks of a parsed program (``'chair/173/Program_0'``).
 
     Raises:
         ValueError: a block of the program cannot be written in the modified grammar.
     """
     if isinstance(program, Program):
-        conv = convert_program(program)
+        conv = convert_program(program, category, shape_id)
         if conv.failures:
             raise ValueError(f"cannot refactor: {conv.failures[0]}")
         subs = conv.subprograms
