@@ -251,9 +251,20 @@ class Discovery:
             raise ParseError(f"not JSON: {e.msg}", file, e.lineno, e.colno, "") from None
         if not isinstance(d, dict) or d.get("format") != "shapemod-discovery/1":
             raise ParseError("not a shapemod discovery state", file, 1, 1, "")
-        lib = Library.from_text(d["library"], file) if d["library"] else Library()
-        return cls(list(lib.macros), list(d["active"]), [list(c) for c in d["current"]], list(d["history"]),
-                   int(d["counter"])), d
+        try:
+            lib = Library.from_text(d["library"], file) if d["library"] else Library()
+            state = cls(list(lib.macros), [str(a) for a in d["active"]], [[int(o) for o in c] for c in d["current"]],
+                        list(d["history"]), int(d["counter"]))
+            for k in ("nodes", "seed", "config"):
+                d[k]
+        except (KeyError, TypeError, ValueError) as e:
+            if isinstance(e, ParseError):
+                raise
+            raise ParseError(f"a damaged discovery state ({type(e).__name__}: {e})", file, 1, 1, "") from None
+        unknown = [a for a in state.active if a not in lib]
+        if unknown:
+            raise ParseError(f"active macro {unknown[0]!r} is not defined", file, 1, 1, unknown[0])
+        return state, d
 
 
 # ----------------------------------------------------------------------------- a round

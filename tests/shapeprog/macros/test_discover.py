@@ -133,3 +133,18 @@ def test_generalise_snaps_coefficients_and_edits():
     # edits: 0.6 * x0, 0.5, True -> 3 single edits and 3 pairs
     assert len(edges) == 6
     assert all(len(out[g].coverage) == 4 for _, g in edges)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("{", "not JSON"), ("[]", "not a shapemod discovery state"),
+    ('{"format": "shapemod-discovery/1"}', "damaged"),
+    ('{"format": "shapemod-discovery/1", "library": "def f(:\\n", "active": [], "current": [], "history": [], '
+     '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "expected a parameter name"),
+    ('{"format": "shapemod-discovery/1", "library": "", "active": ["nfunc_0"], "current": [], "history": [], '
+     '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "not defined"),
+])
+def test_damaged_state_is_refused(tmp_path, text, match):
+    (tmp_path / "state.json").write_text(text)
+    with pytest.raises(ParseError, match=match) as e:
+        discover(planted(5), small_cfg(), out=tmp_path, log=None)
+    assert "state.json" in str(e.value)
