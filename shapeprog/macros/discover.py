@@ -16,9 +16,10 @@ orderings). Each round:
      infrequent-macro swap (macros whose usage share fell below ``func_change_thresh`` of its previous
      value are removed, then re-added one at a time); else the candidate's component is dropped. Then the
      removal sweep tries removing each macro.
-   * ``milp``: the current macros plus the ``milp_pool`` best-ranked candidates, and an exact choice by
-     ``scipy.optimize.milp`` of the subset minimising the subsample's objective (|L| plus the mean over
-     sub-programs of the best cover, a flow over line positions per ordering).
+   * ``milp``: the current macros (with ``milp_warm``, after the greedy loop has run) plus the ``milp_pool``
+     best-ranked remaining candidates, and an exact choice by ``scipy.optimize.milp`` of the subset
+     minimising the subsample's objective (|L| plus the mean over sub-programs of the best cover, a flow
+     over line positions per ordering).
 3. **filterBadOrders**: every sub-program keeps the orderings scoring below its best + ``order_thresh``.
 
 f on the subsample is the mean over its sub-programs of the best program's f (so ``|L|`` enters once).
@@ -61,7 +62,7 @@ DEFAULTS: dict = {
     "abs_order_num": 1000, "abs_beam_size": 10, "abs_max_error": 0.06, "abs_add_threshold": 0.05,
     "order_thresh": 1.0, "func_change_thresh": 0.5, "err_shape_perc": 0.7, "err_const_perc": 0.9, "prec": 2,
     "scale_prec": 20, "cluster_eps": 0.05, "gen_limit": 300, "selection": "greedy", "search": "beam",
-    "milp_pool": 60, "milp_time_limit": 120, "chunk": 50,
+    "milp_pool": 60, "milp_time_limit": 120, "milp_warm": True, "chunk": 50,
 }
 _CHOICES = {"selection": ("greedy", "milp"), "search": ("beam", "exact")}
 
@@ -384,10 +385,16 @@ def _greedy(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub,
     return lib, f_start, f_cur, tries, accepted
 
 
-def _milp(nodes, state: Discovery, lib: Library, cands: dict, sub, cfg, executor, log):
+def _milp(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub, cfg, executor, log):
     from scipy.optimize import Bounds, LinearConstraint, milp
     from scipy.sparse import coo_matrix
     f_start, _ = evaluate(lib, state.active, sub, cfg, executor)
+    f_prev = f_start
+    if cfg["milp_warm"]:  # the greedy picks first: the milp then starts from them and cannot end worse
+        known = {def_text(_rename(m, "macro")) for m in state.macros}
+        lib, _, f_prev, _, _ = _greedy(nodes, state, lib, cands, comp, sub, cfg, executor, log)
+        cands = {k: c for k, c in cands.items() if k not in
+                 {def_text(_rename(m, "macro")) for m in state.macros} - known}
     pool = sorted(cands.values(), key=lambda c: (-_rank(c, lib, cfg["cand_cluster_num"]), c.key))[:cfg["milp_pool"]]
     names = [f"_cand{i}" for i in range(len(pool))]
     big = lib.add(*[_rename(c.definition, n) for c, n in zip(pool, names)])
@@ -456,6 +463,7 @@ def _milp(nodes, state: Discovery, lib: Library, cands: dict, sub, cfg, executor
             log(f"  milp: no solution ({res.message}); library unchanged")
         return lib, f_start, f_start, 0, 0
     chosen = [m for m in macros if res.x[col[m]] > 0.5]
+    saved = (list(state.macros), list(state.active), state.counter)
     new_defs = []
     active = []
     for m in chosen:
@@ -473,6 +481,11 @@ def _milp(nodes, state: Discovery, lib: Library, cands: dict, sub, cfg, executor
     if log:
         log(f"  milp: {res.message.strip()} objective {res.fun:.3f}; {len(new_defs)} added, "
             f"{len([m for m in chosen if m not in names])} kept; f {f_start:.3f} -> {f_end:.3f}")
+    if f_end > f_prev:  # a time-limited solve that stopped above its starting point: keep the start
+        state.macros, state.active, state.counter = saved
+        lib, f_end, new_defs = state.full_library(), f_prev, []
+        if log:
+            log(f"  milp: worse than its starting library ({f_prev:.3f}); kept that")
     return lib, f_start, f_end, len(pool), len(new_defs)
 
 
@@ -544,7 +557,7 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
         if cfg["selection"] == "greedy":
             lib, f0, f1, tries, acc = _greedy(nodes, state, lib, cands, comp, sub, cfg, executor, log)
         else:
-            lib, f0, f1, tries, acc = _milp(nodes, state, lib, cands, sub, cfg, executor, log)
+            lib, f0, f1, tries, acc = _milp(nodes, state, lib, cands, comp, sub, cfg, executor, log)
         f2 = _removal(state, lib, sub, f1, cfg, executor, log)
         t2 = time.time()
         dropped = _filter_orders(nodes, state, lib, cfg, executor)
