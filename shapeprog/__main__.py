@@ -484,7 +484,7 @@ def _cmd_discover_macros(args) -> int:
 
 
 def _cmd_refactor(args) -> int:
-    from .macros import Library, load_library, refactor
+    from .macros import Library, from_lines, load_library, refactor, to_text
 
     prog = _Program(args.program)
     if Path(args.library).is_file():
@@ -500,7 +500,7 @@ def _cmd_refactor(args) -> int:
                  shape_id=int(ident) if named else 0)
     for b in r.blocks:
         print(f"# {b.key}: f {b.f_base:.2f} (base) -> {b.f:.2f} (macros)")
-        base = to_text_base(b.program, lib)
+        base = to_text(from_lines(b.lines))
         left = base.splitlines()
         right = b.text.splitlines()
         width = max((len(x) for x in left), default=0)
@@ -517,11 +517,6 @@ def _cmd_refactor(args) -> int:
         atomic_write(args.output, r.text)
         print(f"wrote {args.output}")
     return 0
-
-
-def to_text_base(program, library) -> str:
-    from .macros import to_text
-    return to_text(library.with_program(program).inline(program))
 
 
 def _cmd_table1(args) -> int:

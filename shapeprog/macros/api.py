@@ -76,7 +76,7 @@ def _used(program: MacroProgram, library: Library) -> list:
 @dataclass(frozen=True)
 class BlockRefactor:
     """One sub-program refactored: its key, macro program (with the definitions it uses), text, f and
-    the base program's f, and :func:`program_stats`."""
+    the base program's f, :func:`program_stats`, and the base lines of the ordering it rewrites."""
 
     key: str
     program: MacroProgram
@@ -84,6 +84,7 @@ class BlockRefactor:
     f: float
     f_base: float
     stats: dict
+    lines: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -141,7 +142,8 @@ def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Libr
         rb = best_program(orders, base, btpls, mode)
         mp = to_program(orders[r.order], r.calls, library)
         mp = MacroProgram(tuple(_used(mp, library)), mp.lines)
-        blocks.append(BlockRefactor(s.key, mp, to_text(mp), r.f, rb.f, program_stats(mp, library)))
+        blocks.append(BlockRefactor(s.key, mp, to_text(mp), r.f, rb.f, program_stats(mp, library),
+                                     tuple(orders[r.order])))
     stats = {k: sum(b.stats[k] for b in blocks) for k in blocks[0].stats} if blocks else {}
     stats.update(f=sum(b.f for b in blocks), f_base=sum(b.f_base for b in blocks), blocks=len(blocks))
     text = "".join(f"# {b.key}\n{b.text}\n" for b in blocks)
