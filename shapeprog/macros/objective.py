@@ -44,7 +44,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .grammar import BBOX, AttachLine, CuboidLine, Line, ReflectLine, SqueezeLine, TranslateLine, command
+from .grammar import BBOX, AttachLine, CuboidLine, Line, ReflectLine, SqueezeLine, command
 from .lang import AXIS, BB_DIMS, BOOL, CUBE, FACE, FLOAT, Call, Linear, Literal, MacroProgram, Name
 from .library import Library
 

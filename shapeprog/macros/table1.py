@@ -28,7 +28,7 @@ import numpy as np
 
 from .api import collection, load_library
 from .baseline import baseline_library
-from .lang import BASE, BOOL, CUBE, FLOAT
+from .lang import BOOL, CUBE, FLOAT
 from .library import Library
 from .objective import beam_search, exact_search, fit_options, templates
 
