@@ -5,6 +5,11 @@
 * :mod:`~shapeprog.macros.lang`: the text of macro programs (typed macros and the lines calling them).
 * :mod:`~shapeprog.macros.library`: a :class:`Library` of base functions and macros; expansion.
 * :mod:`~shapeprog.macros.execute`: differentiable execution through the ShapeAssembly executor.
+* :mod:`~shapeprog.macros.objective`: the objective f, least-squares fits, the best-program search.
+* :mod:`~shapeprog.macros.proposal`: clusters, abstracted programs, candidate macros, generalisation.
+* :mod:`~shapeprog.macros.discover`: discovery rounds (greedy or milp selection), resumable, any executor.
+* :mod:`~shapeprog.macros.baseline`: the paper's baseline macros; :mod:`~shapeprog.macros.table1`: Table 1.
+* :mod:`~shapeprog.macros.api`: :func:`load_library`, :func:`refactor`, :func:`expand`, :func:`collection`.
 
 The data decisions and the language: ``docs/shapemod.md``.
 
