@@ -1,6 +1,6 @@
 """Discovery: a planted macro is found with its parameter relations, f decreases, the result does not
 depend on the executor, a killed run resumes, the milp selection, the settings."""
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -66,11 +66,12 @@ def test_same_result_whatever_the_executor(tmp_path):
     nodes = planted(60)
     cfg = small_cfg(abs_shape_num=60, chunk=7)
     a = discover(nodes, cfg, seed=3, log=None)
-    with ThreadPoolExecutor(2) as ex:
-        b = discover(nodes, cfg, seed=3, executor=ex, log=None)
-    assert a.history[0]["f_after"] == b.history[0]["f_after"]
-    assert Library(a.macros).to_text() == Library(b.macros).to_text()
-    assert a.current == b.current
+    for pool in (ThreadPoolExecutor, ProcessPoolExecutor):
+        with pool(2) as ex:
+            b = discover(nodes, cfg, seed=3, executor=ex, log=None)
+        assert a.history[0]["f_after"] == b.history[0]["f_after"]
+        assert Library(a.macros).to_text() == Library(b.macros).to_text()
+        assert a.current == b.current
 
 
 def test_resume_after_a_kill(tmp_path):
