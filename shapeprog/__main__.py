@@ -13,6 +13,9 @@
     python -m shapeprog evaluate-generation --category chair --programs samples/ --out table.md
     python -m shapeprog train-classifier --out shapeprog/weights/pointnet_cls.pt
     python -m shapeprog edit chair/173 --port 8080 --no-browser --target chair/37982
+    python -m shapeprog discover-macros --category chair --rounds 5 --workers 2 --out runs/shapemod_chair
+    python -m shapeprog refactor chair/173 --library chair
+    python -m shapeprog table1 --category chair --limit 200 --out table1.md
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
 path of a UTF-8 ShapeAssembly file (corpus format with ``Assembly`` blocks, or the flat format).
@@ -504,6 +507,101 @@ def _cmd_edit(args) -> int:
     return 0
 
 
+def _cmd_discover_macros(args) -> int:
+    import os
+    import platform
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .macros.api import collection
+    from .macros.discover import discover, load_config
+
+    cfg = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
+                      abs_shape_num=args.subsample, selection=args.selection, search=args.search)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    t0 = time.time()
+    log = (lambda m: None) if args.quiet else (lambda m: print(f"[{time.time() - t0:7.1f} s] {m}", flush=True))
+    try:
+        nodes, ids = collection(args.category, args.split, args.limit, args.seed, executor=pool,
+                                max_orders=cfg["abs_order_num"])
+        log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
+        state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
+                         stop_after=args.stop_after)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    lib = state.library()
+    header = (f"# ShapeMOD library ({args.category}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
+              f"# command: {command}\n"
+              f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}), sub-programs: {len(nodes.keys)}\n"
+              f"# rounds: {len(state.history)}, selection {cfg['selection']}, search {cfg['search']}, "
+              f"f per sub-program (subsample): "
+              + ", ".join(f"{h['f_after']:.2f}" for h in state.history) + "\n"
+              f"# time: {time.time() - t0:.0f} s on {platform.machine()}, {os.cpu_count()} CPUs, "
+              f"{args.workers} worker(s)\n")
+    atomic_write(out / "library.txt", header + lib.to_text())
+    print(f"wrote {out / 'library.txt'} ({len(lib.macros)} macros)")
+    return 0
+
+
+def _cmd_refactor(args) -> int:
+    from .macros import Library, from_lines, load_library, refactor, to_text
+
+    prog = _Program(args.program)
+    if Path(args.library).is_file():
+        lib = Library.from_text(decode(Path(args.library).read_bytes(), args.library), args.library)
+    else:
+        try:
+            lib = load_library(args.library)
+        except ValueError as e:
+            raise SystemExit(f"error: {e}") from None
+    cat, _, ident = args.program.partition("/")
+    named = cat in corpus.CATEGORIES and ident.isdigit() and not Path(args.program).is_file()
+    r = refactor(prog.program, lib, mode=args.search, category=cat if named else Path(args.program).stem,
+                 shape_id=int(ident) if named else 0)
+    for b in r.blocks:
+        print(f"# {b.key}: f {b.f_base:.2f} (base) -> {b.f:.2f} (macros)")
+        base = to_text(from_lines(b.lines))
+        left = base.splitlines()
+        right = b.text.splitlines()
+        width = max((len(x) for x in left), default=0)
+        for i in range(max(len(left), len(right))):
+            a = left[i] if i < len(left) else ""
+            c = right[i] if i < len(right) else ""
+            print(f"{a:<{width}}  |  {c}")
+        print()
+    st = r.stats
+    print(f"total: f {st['f_base']:.2f} -> {st['f']:.2f}; lines {st['lines']}, floats {st['float']}, "
+          f"cuboid ids {st['cube']}, categoricals {st['categorical']}, booleans {st['bool']} "
+          f"(after the bbox lines)")
+    if args.output:
+        atomic_write(args.output, r.text)
+        print(f"wrote {args.output}")
+    return 0
+
+
+def _cmd_table1(args) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .macros.table1 import table1
+
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    try:
+        text = table1(args.categories, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
+                      library_files=dict(x.split("=", 1) for x in args.library or ()),
+                      log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    print(text)
+    if args.out:
+        atomic_write(args.out, text + "\n")
+        print(f"wrote {args.out}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="shapeprog", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -657,7 +755,48 @@ def main(argv=None) -> int:
     d.add_argument("--export-dir", default=".", help="the folder exports are written to (never elsewhere)")
     d.add_argument("--no-browser", action="store_true", help="do not open a browser")
     d.set_defaults(func=_cmd_edit)
+    d = sub.add_parser("discover-macros", help="ShapeMOD: discover a macro library from a category's programs",
+                       description="Run ShapeMOD discovery (proposal, generalisation, integration, filterBadOrders) "
+                                   "on a corpus category; state.json is written after every round and an "
+                                   "interrupted run resumes from it; library.txt holds the result.")
+    d.add_argument("--category", required=True, choices=corpus.CATEGORIES)
+    d.add_argument("--out", required=True, help="output folder (state.json, library.txt)")
+    d.add_argument("--config", help="settings YAML (default: configs/shapemod/default.yaml's values)")
+    d.add_argument("--rounds", type=_int_at_least(1), help="rounds (default 5)")
+    d.add_argument("--proposal-steps", type=_int_at_least(1), help="proposal steps per round (default 10000)")
+    d.add_argument("--subsample", type=_int_at_least(1), help="sub-programs of the integration subsample (1000)")
+    d.add_argument("--selection", choices=("greedy", "milp"), help="greedy (the reference) or milp (exact)")
+    d.add_argument("--search", choices=("beam", "exact"), help="best-program search: beam (reference) or exact")
+    d.add_argument("--split", default="all", choices=("train", "val", "all"))
+    d.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the searches (1: none)")
+    d.add_argument("--stop-after", type=float, help="seconds after which no new round starts")
+    d.add_argument("--quiet", action="store_true")
+    d.set_defaults(func=_cmd_discover_macros, argv=None)
+    rf = sub.add_parser("refactor", help="rewrite a program with a ShapeMOD library",
+                        description="Rewrite every sub-program with the library's macros (best program over its "
+                                    "orderings); print it beside the base program with both f.")
+    rf.add_argument("program", help=program_help)
+    rf.add_argument("--library", default="chair", help="a shipped library's category or a library file")
+    rf.add_argument("--search", choices=("beam", "exact"), default="beam")
+    rf.add_argument("-o", "--output", help="write the macro programs here")
+    rf.set_defaults(func=_cmd_refactor)
+    tb = sub.add_parser("table1", help="ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows",
+                        description="Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the "
+                                    "given categories beside the paper's rows.")
+    tb.add_argument("--categories", nargs="+", default=["chair"], choices=corpus.CATEGORIES)
+    tb.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes per category")
+    tb.add_argument("--seed", type=int, default=0)
+    tb.add_argument("--library", action="append", help="CATEGORY=FILE: a library file instead of the shipped one")
+    tb.add_argument("--search", choices=("beam", "exact"), default="beam")
+    tb.add_argument("--workers", type=_int_at_least(1), default=1)
+    tb.add_argument("--out", help="also write the table (markdown) here")
+    tb.add_argument("--quiet", action="store_true")
+    tb.set_defaults(func=_cmd_table1)
     args = ap.parse_args(argv)
+    if hasattr(args, "argv"):
+        args.argv = argv
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")

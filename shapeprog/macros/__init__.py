@@ -5,6 +5,11 @@
 * :mod:`~shapeprog.macros.lang`: the text of macro programs (typed macros and the lines calling them).
 * :mod:`~shapeprog.macros.library`: a :class:`Library` of base functions and macros; expansion.
 * :mod:`~shapeprog.macros.execute`: differentiable execution through the ShapeAssembly executor.
+* :mod:`~shapeprog.macros.objective`: the objective f, least-squares fits, the best-program search.
+* :mod:`~shapeprog.macros.proposal`: clusters, abstracted programs, candidate macros, generalisation.
+* :mod:`~shapeprog.macros.discover`: discovery rounds (greedy or milp selection), resumable, any executor.
+* :mod:`~shapeprog.macros.baseline`: the paper's baseline macros; :mod:`~shapeprog.macros.table1`: Table 1.
+* :mod:`~shapeprog.macros.api`: :func:`load_library`, :func:`refactor`, :func:`expand`, :func:`collection`.
 
 The data decisions and the language: ``docs/shapemod.md``.
 
@@ -24,11 +29,13 @@ from __future__ import annotations
 
 from .data import (Conversion, CorpusData, Cube, Failure, Ordering, SubProgram, convert_corpus, convert_program,
                    order_errors)
+from .api import BlockRefactor, Refactored, collection, expand, load_library, program_stats, refactor
 from .execute import execute, execute_batch, program_parameters
 from .lang import Call, Linear, Literal, MacroDef, MacroError, MacroProgram, Name, Param, from_lines, to_text
 from .library import Library, parse
 
 __all__ = [
+    "BlockRefactor",
     "Call",
     "Conversion",
     "CorpusData",
@@ -43,14 +50,20 @@ __all__ = [
     "Name",
     "Ordering",
     "Param",
+    "Refactored",
     "SubProgram",
+    "collection",
     "convert_corpus",
     "convert_program",
     "execute",
     "execute_batch",
+    "expand",
     "from_lines",
+    "load_library",
     "order_errors",
     "parse",
     "program_parameters",
+    "program_stats",
+    "refactor",
     "to_text",
 ]

@@ -1,0 +1,183 @@
+"""Public entry points of ShapeMOD: the shipped libraries, refactoring a program with a library, expansion
+back to the base language, and the corpus collection discovery runs on.
+
+Example:
+    >>> from shapeprog import corpus, parse
+    >>> from shapeprog.macros import Library, refactor
+    >>> lib = Library.from_text("def slab(h: float):\\n    c = Cuboid(bb_x, h, bb_z, True)\\n"
+    ...                         "    attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n")
+    >>> r = refactor(parse(corpus.read("chair", 173)), lib)
+    >>> r.stats["blocks"], r.stats["f"] <= r.stats["f_base"]
+    (2, True)
+"""
+from __future__ import annotations
+
+from concurrent.futures import Executor
+from dataclasses import dataclass
+from importlib import resources
+from typing import Sequence
+
+import numpy as np
+
+from ..lang import Program
+from .data import SubProgram, convert_program
+from .discover import Nodes, nodes_from_subprograms
+from .grammar import to_shapeassembly
+from .lang import BASE, BOOL, CUBE, FLOAT, MacroProgram, to_text
+from .library import Library
+from .objective import Result, best_program, templates, to_program
+
+__all__ = ["BlockRefactor", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "load_library", "refactor",
+           "program_stats"]
+
+#: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
+LIBRARY_CATEGORIES = ("chair",)
+
+
+def load_library(category: str) -> Library:
+    """The shipped discovered library of ``category`` (see ``shapeprog/macros/libs/README.md``).
+
+    Raises:
+        ValueError: no library is shipped for ``category``.
+    """
+    if category not in LIBRARY_CATEGORIES:
+        raise ValueError(f"no shipped ShapeMOD library for {category!r} (shipped: {', '.join(LIBRARY_CATEGORIES)})")
+    name = f"{category}.txt"
+    text = resources.files("shapeprog.macros").joinpath("libs", name).read_text(encoding="utf-8")
+    return Library.from_text(text, f"shapeprog/macros/libs/{name}")
+
+
+def program_stats(program: MacroProgram, library: Library) -> dict:
+    """Counts of a macro program's calls after the bbox line: ``lines`` (calls), ``float``, ``cube``,
+    ``categorical``, ``bool`` parameters; ``bbox_floats`` / ``bbox_bools`` of its bbox line."""
+    lib = library.with_program(program)
+    st = {"lines": 0, "float": 0, "cube": 0, "categorical": 0, "bool": 0, "bbox_floats": 3, "bbox_bools": 1}
+    for c in program.lines[1:]:
+        st["lines"] += 1
+        for p in lib[c.func].params:
+            key = {FLOAT: "float", CUBE: "cube", BOOL: "bool"}.get(p.type, "categorical")
+            st[key] += 1
+    return st
+
+
+def _used(program: MacroProgram, library: Library) -> list:
+    """Definitions of the macros ``program`` calls, with their dependencies, in library order."""
+    need: set = set()
+    todo = [c.func for c in program.lines if c.func not in BASE]
+    while todo:
+        f = todo.pop()
+        if f in need:
+            continue
+        need.add(f)
+        todo += [c.func for c in library[f].definition.body if c.func not in BASE]
+    return [m for m in library.macros if m.name in need]
+
+
+@dataclass(frozen=True)
+class BlockRefactor:
+    """One sub-program refactored: its key, macro program (with the definitions it uses), text, f and
+    the base program's f, :func:`program_stats`, and the base lines of the ordering it rewrites."""
+
+    key: str
+    program: MacroProgram
+    text: str
+    f: float
+    f_base: float
+    stats: dict
+    lines: tuple = ()
+
+
+@dataclass(frozen=True)
+class Refactored:
+    """A refactored program: one :class:`BlockRefactor` per sub-program (``Assembly`` block).
+
+    Attributes:
+        blocks: the blocks in program order.
+        text: every block's text under a ``# <block>`` comment line.
+        stats: summed :func:`program_stats` plus ``f`` and ``f_base`` (sums over blocks) and ``blocks``.
+    """
+
+    blocks: tuple[BlockRefactor, ...]
+    text: str
+    stats: dict
+
+    @property
+    def program(self) -> MacroProgram:
+        """The root block's macro program."""
+        return self.blocks[0].program
+
+
+def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Library, mode: str = "beam",
+             max_orders: int = 1000, category: str = "", shape_id: int = 0) -> Refactored:
+    """Rewrite a program with ``library``'s macros: per sub-program, the best program P* over its
+    orderings (:func:`shapeprog.macros.objective.best_program`).
+
+    Args:
+        program: a parsed ShapeAssembly program (converted with
+            :func:`~shapeprog.macros.data.convert_program`), or sub-programs.
+        library: the macros.
+        mode: ``'beam'`` (the reference's search) or ``'exact'``.
+        max_orders: orderings searched per sub-program.
+        category, shape_id: name the blocks of a parsed program (``'chair/173/Program_0'``).
+
+    Raises:
+        ValueError: a block of the program cannot be written in the modified grammar.
+    """
+    if isinstance(program, Program):
+        conv = convert_program(program, category, shape_id)
+        if conv.failures:
+            raise ValueError(f"cannot refactor: {conv.failures[0]}")
+        subs = conv.subprograms
+    elif isinstance(program, SubProgram):
+        subs = [program]
+    else:
+        subs = list(program)
+    tpls = templates(library)
+    base = Library()
+    btpls = templates(base)
+    blocks = []
+    for s in subs:
+        orders = [s.lines(o) for o in s.orders[:max_orders]]
+        r: Result = best_program(orders, library, tpls, mode)
+        rb = best_program(orders, base, btpls, mode)
+        mp = to_program(orders[r.order], r.calls, library)
+        mp = MacroProgram(tuple(_used(mp, library)), mp.lines)
+        blocks.append(BlockRefactor(s.key, mp, to_text(mp), r.f, rb.f, program_stats(mp, library),
+                                     tuple(orders[r.order])))
+    stats = {k: sum(b.stats[k] for b in blocks) for k in blocks[0].stats} if blocks else {}
+    stats.update(f=sum(b.f for b in blocks), f_base=sum(b.f_base for b in blocks), blocks=len(blocks))
+    text = "".join(f"# {b.key}\n{b.text}\n" for b in blocks)
+    return Refactored(tuple(blocks), text, stats)
+
+
+def expand(program: MacroProgram, library: Library | None = None) -> Program:
+    """A macro program as a flat base ShapeAssembly program (its own definitions and ``library``'s)."""
+    lib = Library() if library is None else library
+    return to_shapeassembly(lib.expand(program).lines)
+
+
+def collection(category: str, split: str = "all", limit: int | None = None, seed: int = 0,
+               executor: Executor | None = None, max_orders: int = 1000) -> tuple[Nodes, list[int]]:
+    """The sub-programs of a corpus category as discovery :class:`~shapeprog.macros.discover.Nodes`.
+
+    Args:
+        category, split: the corpus programs.
+        limit: a random subset of this many shapes (drawn with ``seed``); None: all.
+        executor: converts chunks of programs (optional).
+
+    Returns:
+        (nodes, the shape ids used, sorted).
+    """
+    from .. import corpus
+    from .data import convert_corpus
+    ids = corpus.ids(category, split)
+    if limit is not None and limit < len(ids):
+        rng = np.random.default_rng(seed)
+        ids = sorted(int(i) for i in rng.choice(ids, size=limit, replace=False))
+        from ..lang import parse
+        subs = []
+        for i in ids:
+            subs += convert_program(parse(corpus.read(category, i), f"{category}/{i}.txt"), category, i).subprograms
+    else:
+        subs = convert_corpus([category], split, executor=executor).by_category(category)
+    return nodes_from_subprograms(subs, max_orders), list(ids)

@@ -1,0 +1,574 @@
+"""ShapeMOD macro discovery: rounds of proposal, generalisation, integration and filterBadOrders.
+
+:func:`discover` runs ``num_rounds`` rounds over a :class:`Nodes` collection (sub-programs with their
+orderings). Each round:
+
+1. **Proposal** (:mod:`shapeprog.macros.proposal`): ``cand_cluster_num`` steps of clusters and abstracted
+   programs give candidate macros with their coverage; the ``gen_limit`` most covering ones are
+   generalised (coefficient snapping, <= ``cand_max_changes`` edits), and inside every connected component
+   of the generalisation graph a candidate whose gain is below the best gain among those with its coverage
+   count is dropped.
+2. **Selection**, two modes (``selection``):
+
+   * ``greedy`` (the reference's integration): candidates ranked by gain x frequency; up to
+     ``cand_abs_num`` tries, each evaluating f on the round's subsample (``abs_shape_num`` sub-programs)
+     with the candidate added; accepted when f drops by more than ``abs_add_threshold``; else the
+     infrequent-macro swap (macros whose usage share fell below ``func_change_thresh`` of its previous
+     value are removed, then re-added one at a time); else the candidate's component is dropped. Then the
+     removal sweep tries removing each macro.
+   * ``milp``: the current macros (with ``milp_warm``, after the greedy loop has run) plus the ``milp_pool``
+     best-ranked remaining candidates, and an exact choice by ``scipy.optimize.milp`` of the subset
+     minimising the subsample's objective (|L| plus the mean over sub-programs of the best cover, a flow
+     over line positions per ordering).
+3. **filterBadOrders**: every sub-program keeps the orderings scoring below its best + ``order_thresh``.
+
+f on the subsample is the mean over its sub-programs of the best program's f (so ``|L|`` enters once).
+The best-program searches run through a ``concurrent.futures.Executor`` given by the caller (None: in
+this process), ``chunk`` sub-programs per task, results gathered in submission order, and every random
+draw comes from ``numpy.random.default_rng([seed, round, phase])`` in the calling process: the result is
+the same whatever the executor. After every round the state (library, active macros, orderings, history)
+is written atomically to ``state.json`` in the output folder; :func:`discover` given the same folder
+resumes after the last finished round.
+
+Macros removed from the active set stay defined (an active macro may call them); :meth:`Discovery.library`
+writes them inlined into their callers.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from concurrent.futures import Executor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from ..errors import ParseError
+from .grammar import Line
+from .lang import BASE, MacroDef, check_def, def_text
+from .library import Library
+from .objective import WEIGHTS, beam_search, exact_search, fit_options, templates
+from .proposal import Candidate, gain, generalise, heur_score, propose_step
+
+__all__ = ["DEFAULTS", "Discovery", "Nodes", "discover", "evaluate", "load_config", "nodes_from_subprograms"]
+
+#: The spec's defaults (``configs/shapemod/default.yaml`` holds the same values).
+DEFAULTS: dict = {
+    "num_rounds": 5, "cand_cluster_num": 10000, "cand_cluster_size": 20, "cand_abs_num": 20, "cand_max_changes": 2,
+    "cand_max_error": 0.05, "cand_max_avg_error": 0.02, "cand_max_lines": 4, "abs_shape_num": 1000,
+    "abs_order_num": 1000, "abs_beam_size": 10, "abs_max_error": 0.06, "abs_add_threshold": 0.05,
+    "order_thresh": 1.0, "func_change_thresh": 0.5, "err_shape_perc": 0.7, "err_const_perc": 0.9, "prec": 2,
+    "scale_prec": 20, "cluster_eps": 0.05, "gen_limit": 300, "selection": "greedy", "search": "beam",
+    "milp_pool": 60, "milp_time_limit": 120, "milp_warm": True, "chunk": 50,
+}
+_CHOICES = {"selection": ("greedy", "milp"), "search": ("beam", "exact")}
+
+
+def load_config(path: str | Path | None = None, **overrides) -> dict:
+    """The defaults, updated from a YAML file and then ``overrides``.
+
+    Raises:
+        ParseError: an unknown key or a value of the wrong type, naming the file and the key.
+    """
+    cfg = dict(DEFAULTS)
+    items: list[tuple[str, object, str]] = []
+    if path is not None:
+        import yaml
+        text = Path(path).read_text(encoding="utf-8")
+        try:
+            data = yaml.safe_load(text) or {}
+        except yaml.YAMLError as e:
+            raise ParseError(f"not YAML: {e}", str(path), 1, 1, "") from None
+        if not isinstance(data, dict):
+            raise ParseError("a config is a mapping of settings", str(path), 1, 1, "")
+        items += [(k, v, str(path)) for k, v in data.items()]
+    items += [(k, v, "<overrides>") for k, v in overrides.items() if v is not None]
+    for k, v, where in items:
+        if k not in DEFAULTS:
+            raise ParseError(f"unknown setting {k!r}", where, 1, 1, str(k))
+        want = type(DEFAULTS[k])
+        if want is float and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        if not isinstance(v, want) or isinstance(v, bool) != (want is bool):
+            raise ParseError(f"setting {k!r} must be {want.__name__}, got {v!r}", where, 1, 1, str(k))
+        if k in _CHOICES and v not in _CHOICES[k]:
+            raise ParseError(f"setting {k!r} must be one of {_CHOICES[k]}, got {v!r}", where, 1, 1, str(k))
+        cfg[k] = v
+    return cfg
+
+
+@dataclass
+class Nodes:
+    """The collection: per sub-program its key, its orderings' lines and their signatures."""
+
+    keys: list[str]
+    lines: list[list[tuple[Line, ...]]]
+    sigs: list[list[tuple]]
+
+    def digest(self) -> str:
+        h = hashlib.sha256()
+        for k, ls in zip(self.keys, self.lines):
+            h.update(f"{k}:{len(ls)};".encode())
+        return h.hexdigest()[:16]
+
+
+def nodes_from_subprograms(subs, max_orders: int = 1000) -> Nodes:
+    """:class:`Nodes` from :class:`~shapeprog.macros.data.SubProgram` s (their first ``max_orders``
+    orderings)."""
+    keys, lines, sigs = [], [], []
+    for s in subs:
+        if not s.orders or not s.cubes:
+            continue
+        os = s.orders[:max_orders]
+        keys.append(s.key)
+        lines.append([s.lines(o) for o in os])
+        sigs.append([o.signature for o in os])
+    return Nodes(keys, lines, sigs)
+
+
+# ----------------------------------------------------------------------------- evaluation (the hot spot)
+
+
+def _eval_chunk(lib_text: str, active: tuple[str, ...], items: list[list[tuple[Line, ...]]], cfg: dict,
+                per_order: bool):
+    """Worker: best programs of some sub-programs. Returns per item (f, called function names) or, with
+    ``per_order``, per item the f of every ordering."""
+    lib = Library.from_text(lib_text) if lib_text else Library()
+    tpls = templates(lib)
+    tpls = [t for t in tpls if t.name in BASE or t.name in active]
+    nm = len(active)
+    out = []
+    for orders in items:
+        scores = []
+        best, best_f = (), math.inf
+        for lines in orders:
+            opts = fit_options(lines, tpls, cfg["abs_max_error"], cfg["prec"])
+            if cfg["search"] == "beam":
+                calls, f = beam_search(opts, nm, cfg["abs_beam_size"])
+            else:
+                calls, f = exact_search(opts, nm)
+            scores.append(f)
+            if f < best_f:
+                best, best_f = calls, f
+        out.append(scores if per_order else (best_f, [o.func for o in best]))
+    return out
+
+
+def _map(executor: Executor | None, fn, chunks: list) -> list:
+    if executor is None:
+        return [fn(*c) for c in chunks]
+    futs = [executor.submit(fn, *c) for c in chunks]
+    return [f.result() for f in futs]
+
+
+def evaluate(library: Library, active: Sequence[str], items: Sequence[Sequence[tuple[Line, ...]]], cfg: Mapping,
+             executor: Executor | None = None, per_order: bool = False):
+    """Best programs of ``items`` (each a list of orderings' lines) under ``library`` restricted to
+    ``active`` macros, through ``executor`` in chunks of ``cfg['chunk']``.
+
+    Returns:
+        ``(mean f, usage)`` with usage the number of calls per function, or with ``per_order`` the list
+        of per-ordering f of every item.
+    """
+    text = library.to_text()
+    ch = max(1, int(cfg["chunk"]))
+    chunks = [(text, tuple(active), list(items[i:i + ch]), dict(cfg), per_order) for i in range(0, len(items), ch)]
+    res = [r for part in _map(executor, _eval_chunk, chunks) for r in part]
+    if per_order:
+        return res
+    usage: dict[str, int] = {}
+    for _, funcs in res:
+        for f in funcs:
+            usage[f] = usage.get(f, 0) + 1
+    return float(np.mean([f for f, _ in res])) if res else 0.0, usage
+
+
+def _options_chunk(lib_text: str, names: tuple[str, ...], items, cfg: dict):
+    """Worker for the milp: per item, per ordering, (n lines, [(func, pos, k, cost + 10 * error)])."""
+    lib = Library.from_text(lib_text) if lib_text else Library()
+    tpls = [t for t in templates(lib) if t.name in BASE or t.name in names]
+    out = []
+    for orders in items:
+        per = []
+        for lines in orders:
+            opts = fit_options(lines, tpls, cfg["abs_max_error"], cfg["prec"])
+            per.append((len(lines), [(o.func, o.pos, o.k, o.cost + WEIGHTS["err"] * o.error)
+                                     for row in opts for o in row]))
+        out.append(per)
+    return out
+
+
+# ----------------------------------------------------------------------------- state
+
+
+@dataclass
+class Discovery:
+    """The state of a discovery run.
+
+    Attributes:
+        macros: every accepted macro in definition order (``nfunc_<k>``).
+        active: the names of the macros in L.
+        current: per node, the indices of its current orderings.
+        history: per finished round, a dict of figures (f before/after, |L|, candidates, seconds...).
+        counter: the next macro number.
+    """
+
+    macros: list[MacroDef]
+    active: list[str]
+    current: list[list[int]]
+    history: list[dict] = field(default_factory=list)
+    counter: int = 0
+
+    def full_library(self) -> Library:
+        return Library(self.macros)
+
+    def library(self) -> Library:
+        """L as a library: the active macros, where each one that calls a removed macro is inlined to base
+        calls (so the library holds exactly |L| - 5 macros)."""
+        full = self.full_library()
+        active = set(self.active)
+        out = []
+        for m in self.macros:
+            if m.name not in active:
+                continue
+            if any(c.func not in BASE and c.func not in active for c in m.body):
+                m = full.expand_macro(m.name)
+            out.append(m)
+        return Library(out)
+
+    def to_json(self, nodes_digest: str, cfg: Mapping, seed: int) -> str:
+        return json.dumps({"format": "shapemod-discovery/1", "nodes": nodes_digest, "seed": seed, "config": dict(cfg),
+                           "library": Library(self.macros).to_text(), "active": self.active, "current": self.current,
+                           "history": self.history, "counter": self.counter}, indent=1)
+
+    @classmethod
+    def from_json(cls, text: str, file: str = "state.json") -> tuple["Discovery", dict]:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise ParseError(f"not JSON: {e.msg}", file, e.lineno, e.colno, "") from None
+        if not isinstance(d, dict) or d.get("format") != "shapemod-discovery/1":
+            raise ParseError("not a shapemod discovery state", file, 1, 1, "")
+        try:
+            lib = Library.from_text(d["library"], file) if d["library"] else Library()
+            state = cls(list(lib.macros), [str(a) for a in d["active"]], [[int(o) for o in c] for c in d["current"]],
+                        list(d["history"]), int(d["counter"]))
+            for k in ("nodes", "seed", "config"):
+                d[k]
+        except (KeyError, TypeError, ValueError) as e:
+            if isinstance(e, ParseError):
+                raise
+            raise ParseError(f"a damaged discovery state ({type(e).__name__}: {e})", file, 1, 1, "") from None
+        unknown = [a for a in state.active if a not in lib]
+        if unknown:
+            raise ParseError(f"active macro {unknown[0]!r} is not defined", file, 1, 1, unknown[0])
+        return state, d
+
+
+# ----------------------------------------------------------------------------- a round
+
+
+def _index(nodes: Nodes, current) -> dict:
+    idx: dict = {}
+    for i, cur in enumerate(current):
+        for o in cur:
+            idx.setdefault(nodes.sigs[i][o], []).append((i, o))
+    return idx
+
+
+def _rename(defn: MacroDef, name: str) -> MacroDef:
+    return MacroDef(name, defn.params, defn.body)
+
+
+def _components(keys: Sequence[str], edges) -> dict[str, str]:
+    parent = {k: k for k in keys}
+
+    def root(k):
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    for a, b in edges:
+        if a in parent and b in parent:
+            parent[root(a)] = root(b)
+    return {k: root(k) for k in keys}
+
+
+def _propose(nodes: Nodes, state: Discovery, lib: Library, cfg: Mapping, rng, log) -> tuple[dict, dict]:
+    tpls = [t for t in templates(lib) if t.name in BASE or t.name in state.active]
+    index = _index(nodes, state.current)
+    cands: dict[str, Candidate] = {}
+    steps = cfg["cand_cluster_num"]
+    t0 = time.time()
+    for s in range(steps):
+        for c in propose_step(nodes, state.current, index, lib, tpls, cfg, rng):
+            k = c.key
+            if k in cands:
+                cands[k].coverage |= c.coverage
+            else:
+                cands[k] = c
+        if log and (s + 1) % max(1, steps // 10) == 0:
+            log(f"  proposal {s + 1}/{steps}: {len(cands)} candidates, {time.time() - t0:.0f} s")
+    existing = {def_text(_rename(m, "macro")) for m in state.macros}
+    top = sorted(cands.values(), key=lambda c: (-len(c.coverage), c.key))[:cfg["gen_limit"]]
+    gen, edges = generalise({c.key: c for c in top}, lib, cfg)
+    gen = {k: c for k, c in gen.items() if k not in existing and c.coverage}
+    comp = _components(list(gen), edges)
+    gains = {k: gain(c.definition, lib) for k, c in gen.items()}
+    best: dict = {}
+    for k, c in gen.items():
+        key = (comp[k], len(c.coverage))
+        best[key] = max(best.get(key, -math.inf), gains[k])
+    kept = {k: c for k, c in gen.items() if gains[k] >= best[(comp[k], len(c.coverage))] and gains[k] > 0}
+    if log:
+        log(f"  proposal: {len(cands)} candidates, {len(gen)} after generalisation, {len(kept)} kept")
+    return kept, {k: comp[k] for k in kept}
+
+
+def _rank(c: Candidate, lib: Library, steps: int) -> float:
+    """gain x frequency, frequency = |coverage| / (base lines x proposal steps)."""
+    if getattr(c, "_info", None) is None:
+        info = check_def(c.definition, lib.infos())
+        c._info = (len(info.structure), heur_score(info.structure, info.params))
+    n, g = c._info
+    return g * len(c.coverage) / (n * max(steps, 1))
+
+
+def _greedy(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub, cfg, executor, log):
+    thresh = cfg["abs_add_threshold"]
+    f_cur, usage = evaluate(lib, state.active, sub, cfg, executor)
+    f_start = f_cur
+    tries = accepted = 0
+    cands = dict(cands)
+    while tries < cfg["cand_abs_num"] and cands:
+        tries += 1
+        ranks = {k: _rank(c, lib, cfg["cand_cluster_num"]) for k, c in cands.items()}
+        k = max(cands, key=lambda x: (ranks[x], x))
+        c = cands.pop(k)
+        name = f"nfunc_{state.counter}"
+        lib2 = lib.add(_rename(c.definition, name))
+        act2 = state.active + [name]
+        f2, usage2 = evaluate(lib2, act2, sub, cfg, executor)
+        ok = f2 < f_cur - thresh
+        if not ok:
+            total = max(sum(usage.values()), 1)
+            total2 = max(sum(usage2.values()), 1)
+            infreq = [m for m in state.active
+                      if usage.get(m, 0) and usage2.get(m, 0) / total2 < cfg["func_change_thresh"] * usage[m] / total]
+            if infreq:
+                act3 = [m for m in act2 if m not in infreq]
+                f3, usage3 = evaluate(lib2, act3, sub, cfg, executor)
+                if f3 < f_cur - thresh:
+                    ok, act2, f2, usage2 = True, act3, f3, usage3
+                    for m in infreq:
+                        act4 = act2 + [m]
+                        f4, usage4 = evaluate(lib2, act4, sub, cfg, executor)
+                        if f4 < f2 - thresh:
+                            act2, f2, usage2 = act4, f4, usage4
+        if log:
+            log(f"  integration try {tries}: {name} {'accepted' if ok else 'rejected'}, f {f_cur:.3f} -> {f2:.3f}")
+        if ok:
+            state.macros.append(_rename(c.definition, name))
+            state.counter += 1
+            state.active = act2
+            lib, f_cur, usage = lib2, f2, usage2
+            accepted += 1
+            for other in cands.values():
+                other.coverage -= c.coverage
+            cands = {x: y for x, y in cands.items() if y.coverage}
+        else:
+            cands = {x: y for x, y in cands.items() if comp.get(x) != comp.get(k)}
+    return lib, f_start, f_cur, tries, accepted
+
+
+def _milp(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub, cfg, executor, log):
+    from scipy.optimize import Bounds, LinearConstraint, milp
+    from scipy.sparse import coo_matrix
+    f_start, _ = evaluate(lib, state.active, sub, cfg, executor)
+    f_prev = f_start
+    if cfg["milp_warm"]:  # the greedy picks first: the milp then starts from them and cannot end worse
+        known = {def_text(_rename(m, "macro")) for m in state.macros}
+        lib, _, f_prev, _, _ = _greedy(nodes, state, lib, cands, comp, sub, cfg, executor, log)
+        cands = {k: c for k, c in cands.items() if k not in
+                 {def_text(_rename(m, "macro")) for m in state.macros} - known}
+    pool = sorted(cands.values(), key=lambda c: (-_rank(c, lib, cfg["cand_cluster_num"]), c.key))[:cfg["milp_pool"]]
+    names = [f"_cand{i}" for i in range(len(pool))]
+    big = lib.add(*[_rename(c.definition, n) for c, n in zip(pool, names)])
+    macros = list(state.active) + names
+    text = big.to_text()
+    ch = max(1, int(cfg["chunk"]))
+    chunks = [(text, tuple(macros), list(sub[i:i + ch]), dict(cfg)) for i in range(0, len(sub), ch)]
+    data = [r for part in _map(executor, _options_chunk, chunks) for r in part]
+    col = {m: j for j, m in enumerate(macros)}
+    nv = len(macros)
+    cost = [1.0] * nv  # lambda_n per macro in L
+    rows, cols, vals, lo, hi = [], [], [], [], []
+    r = 0
+    n_items = len(data)
+    for per in data:
+        srcs = []
+        for n_lines, opts in per:
+            s = len(cost)
+            cost.append(0.0)
+            srcs.append(s)
+            out_at: dict[int, list[int]] = {}
+            in_at: dict[int, list[int]] = {}
+            for func, pos, k, c in opts:
+                j = len(cost)
+                cost.append(c / n_items)
+                out_at.setdefault(pos, []).append(j)
+                in_at.setdefault(pos + k, []).append(j)
+                if func in col:  # x_e <= y_f
+                    rows += [r, r]
+                    cols += [j, col[func]]
+                    vals += [1.0, -1.0]
+                    lo.append(-np.inf)
+                    hi.append(0.0)
+                    r += 1
+            for p in range(1, n_lines):
+                for j in out_at.get(p, ()):
+                    rows.append(r)
+                    cols.append(j)
+                    vals.append(1.0)
+                if p == 1:
+                    rows.append(r)
+                    cols.append(s)
+                    vals.append(-1.0)
+                for j in in_at.get(p, ()):
+                    rows.append(r)
+                    cols.append(j)
+                    vals.append(-1.0)
+                lo.append(0.0)
+                hi.append(0.0)
+                r += 1
+        for s in srcs:
+            rows.append(r)
+            cols.append(s)
+            vals.append(1.0)
+        lo.append(1.0)
+        hi.append(1.0)
+        r += 1
+    nvar = len(cost)
+    a = coo_matrix((vals, (rows, cols)), shape=(r, nvar)).tocsr()
+    integ = np.zeros(nvar)
+    integ[:nv] = 1
+    res = milp(np.array(cost), constraints=LinearConstraint(a, lo, hi), integrality=integ,
+               bounds=Bounds(np.zeros(nvar), np.ones(nvar)), options={"time_limit": cfg["milp_time_limit"]})
+    if res.x is None:
+        if log:
+            log(f"  milp: no solution ({res.message}); library unchanged")
+        return lib, f_start, f_start, 0, 0
+    chosen = [m for m in macros if res.x[col[m]] > 0.5]
+    saved = (list(state.macros), list(state.active), state.counter)
+    new_defs = []
+    active = []
+    for m in chosen:
+        if m in names:
+            nm = f"nfunc_{state.counter}"
+            state.counter += 1
+            new_defs.append(_rename(pool[names.index(m)].definition, nm))
+            active.append(nm)
+        else:
+            active.append(m)
+    state.macros += new_defs
+    state.active = active
+    lib = state.full_library()
+    f_end, _ = evaluate(lib, state.active, sub, cfg, executor)
+    if log:
+        log(f"  milp: {res.message.strip()} objective {res.fun:.3f}; {len(new_defs)} added, "
+            f"{len([m for m in chosen if m not in names])} kept; f {f_start:.3f} -> {f_end:.3f}")
+    if f_end > f_prev:  # a time-limited solve that stopped above its starting point: keep the start
+        state.macros, state.active, state.counter = saved
+        lib, f_end, new_defs = state.full_library(), f_prev, []
+        if log:
+            log(f"  milp: worse than its starting library ({f_prev:.3f}); kept that")
+    return lib, f_start, f_end, len(pool), len(new_defs)
+
+
+def _removal(state: Discovery, lib: Library, sub, f_cur: float, cfg, executor, log) -> float:
+    for m in list(state.active):
+        act = [x for x in state.active if x != m]
+        f2, _ = evaluate(lib, act, sub, cfg, executor)
+        if f_cur - f2 > cfg["abs_add_threshold"]:
+            if log:
+                log(f"  removal: {m} removed, f {f_cur:.3f} -> {f2:.3f}")
+            state.active, f_cur = act, f2
+    return f_cur
+
+
+def _filter_orders(nodes: Nodes, state: Discovery, lib: Library, cfg, executor) -> int:
+    items = [[nodes.lines[i][o] for o in cur] for i, cur in enumerate(state.current)]
+    scores = evaluate(lib, state.active, items, cfg, executor, per_order=True)
+    dropped = 0
+    for i, (cur, sc) in enumerate(zip(state.current, scores)):
+        best = min(sc) if sc else 0.0
+        keep = [o for o, f in zip(cur, sc) if f < best + cfg["order_thresh"]]
+        dropped += len(cur) - len(keep)
+        state.current[i] = keep
+    return dropped
+
+
+def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: Executor | None = None,
+             out: str | Path | None = None, log: Callable[[str], None] | None = print,
+             stop_after: float | None = None) -> Discovery:
+    """Run discovery (see the module docstring).
+
+    Args:
+        nodes: the collection.
+        cfg: settings (:func:`load_config`).
+        seed: the seed of every random draw.
+        executor: runs the best-program searches (None: this process).
+        out: folder of ``state.json`` (written after every round; an existing state of the same
+            collection, seed and settings, ``num_rounds`` aside, is resumed).
+        log: progress lines.
+        stop_after: seconds after which no new round is started.
+    """
+    cfg = dict(DEFAULTS if cfg is None else cfg)
+    digest = nodes.digest()
+    state = Discovery([], [], [list(range(len(ls))) for ls in nodes.lines])
+    path = None if out is None else Path(out) / "state.json"
+    if path is not None and path.exists():
+        state, raw = Discovery.from_json(path.read_text(encoding="utf-8"), str(path))
+        same = {k: v for k, v in raw["config"].items() if k != "num_rounds"} == {
+            k: v for k, v in cfg.items() if k != "num_rounds"}
+        if raw["nodes"] != digest or raw["seed"] != seed or not same:
+            raise ParseError("the state was written for another collection, seed or configuration", str(path), 1, 1,
+                             "")
+        if log:
+            log(f"resuming after round {len(state.history)} from {path}")
+    t_all = time.time()
+    for rnd in range(len(state.history), cfg["num_rounds"]):
+        if stop_after is not None and time.time() - t_all > stop_after:
+            break
+        t0 = time.time()
+        lib = state.full_library()
+        rng = np.random.default_rng([seed, rnd, 0])
+        live = [i for i, c in enumerate(state.current) if c]
+        pick = rng.choice(len(live), size=min(cfg["abs_shape_num"], len(live)), replace=False)
+        sub = [[nodes.lines[live[j]][o] for o in state.current[live[j]]] for j in sorted(pick.tolist())]
+        if log:
+            log(f"round {rnd + 1}/{cfg['num_rounds']}: |L| = {5 + len(state.active)}, {len(sub)} sub-programs sampled")
+        cands, comp = _propose(nodes, state, lib, cfg, np.random.default_rng([seed, rnd, 1]), log)
+        t1 = time.time()
+        if cfg["selection"] == "greedy":
+            lib, f0, f1, tries, acc = _greedy(nodes, state, lib, cands, comp, sub, cfg, executor, log)
+        else:
+            lib, f0, f1, tries, acc = _milp(nodes, state, lib, cands, comp, sub, cfg, executor, log)
+        f2 = _removal(state, lib, sub, f1, cfg, executor, log)
+        t2 = time.time()
+        dropped = _filter_orders(nodes, state, lib, cfg, executor)
+        state.history.append({"round": rnd + 1, "f_before": f0, "f_after": f2, "L": 5 + len(state.active),
+                              "candidates": len(cands), "tries": tries, "accepted": acc, "orders_dropped": dropped,
+                              "seconds_proposal": round(t1 - t0, 1), "seconds_integration": round(t2 - t1, 1),
+                              "seconds": round(time.time() - t0, 1)})
+        if log:
+            log(f"round {rnd + 1} done: f {f0:.3f} -> {f2:.3f}, |L| = {5 + len(state.active)}, "
+                f"{dropped} orderings dropped, {time.time() - t0:.0f} s")
+        if path is not None:
+            from shapeio import atomic_write
+            atomic_write(path, state.to_json(digest, cfg, seed), mkdir=True)
+    return state

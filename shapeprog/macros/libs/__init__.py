@@ -1,0 +1,1 @@
+"""Shipped ShapeMOD libraries (text files): see README.md."""
