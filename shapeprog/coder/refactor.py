@@ -94,6 +94,8 @@ class Refactored:
 # ----------------------------------------------------------------------------- the rules (egglog text)
 
 _FLOAT_OPS = {"Add": "+", "Sub": "-", "Mul": "*", "Div": "/"}
+#: Prefix of the abstractions' constructors (keeps them apart from egglog's and the rules' names).
+_AB = "L_"
 
 
 #: Added to every tolerance so that 2-decimal values exactly ``tol`` apart pass despite float rounding.
@@ -125,7 +127,7 @@ def _declarations(lib: Library) -> str:
                f"(SymTrans Shape Ax Cnt Flt :cost {c['fn']})"]
     sort = {Type.FLOAT: "Flt", Type.AXIS: "Ax", Type.INT: "Cnt"}
     for ab in lib.abstractions:
-        shapes.append(f"({ab.name} {' '.join(sort[p.type] for p in ab.params)} :cost {c['fn']})")
+        shapes.append(f"({_AB}{ab.name} {' '.join(sort[p.type] for p in ab.params)} :cost {c['fn']})")
     flt = [f"(Num f64 :cost {c['float_var']})", f"(K f64 :cost {c['float_const']})"]
     flt += [f"({op} Flt Flt :cost {c['float_fn']})" for op in _FLOAT_OPS] + [f"(Inv Flt :cost {c['float_fn']})"]
     return "\n".join([
@@ -161,7 +163,7 @@ def _bookkeeping(lib: Library) -> list:
         if not any(isinstance(n, Call) and (n.fn == "Rotate" or (n.fn in lib and not _norot_ab(lib, n.fn)))
                    for n in walk(ab.body)):
             pats = " ".join("_" for _ in ab.params)
-            rules.append(f"(rule ((= s ({ab.name} {pats}))) ((norot s)) :ruleset rw)")
+            rules.append(f"(rule ((= s ({_AB}{ab.name} {pats}))) ((norot s)) :ruleset rw)")
     return rules
 
 
@@ -271,7 +273,7 @@ def abstraction_rule(ab: Abstraction, lib: Library, tol: float | None = None) ->
             sig = lib.signature(e.fn)
             if sig.kind == "float_fn":
                 raise AssertionError  # float expressions appear only in slots, handled below
-            parts = [e.fn]
+            parts = [_AB + e.fn if e.fn in lib else e.fn]
             for a, t in zip(e.args, sig.params):
                 if t is Type.FLOAT:
                     counter[0] += 1
@@ -312,7 +314,7 @@ def abstraction_rule(ab: Abstraction, lib: Library, tol: float | None = None) ->
     for p in ab.params:
         args.append(bound[p.name] if p.type is Type.FLOAT else cat[p.name])
     del ptypes
-    return (f"(rule ({' '.join(queries + guards)}) ((union s ({ab.name} {' '.join(args)}))) :ruleset rw)")
+    return (f"(rule ({' '.join(queries + guards)}) ((union s ({_AB}{ab.name} {' '.join(args)}))) :ruleset rw)")
 
 
 def _value_expr(e: Expr, bound: Mapping, needed: set) -> str:
@@ -346,7 +348,7 @@ def egglog_program(lib: Library) -> str:
 
 def _term(e: Expr, lib: Library) -> str:
     if isinstance(e, Call):
-        return "(" + e.fn + "".join(" " + _term(a, lib) for a in e.args) + ")"
+        return "(" + (_AB + e.fn if e.fn in lib else e.fn) + "".join(" " + _term(a, lib) for a in e.args) + ")"
     if isinstance(e, Num):
         v = round(e.value, 12) + 0.0
         return f"(K {_f64(v)})" if v in FLOAT_CONSTANTS else f"(Num {_f64(v)})"
@@ -383,7 +385,7 @@ def _from_term(text: str, lib: Library) -> Expr:
             args = []
             while toks[pos[0]] != ")":
                 args.append(go())
-            out = Call(head, tuple(args))
+            out = Call(head[len(_AB):] if head.startswith(_AB) else head, tuple(args))
         if toks[pos[0]] != ")":
             raise RefactorError(f"malformed extracted term near {toks[pos[0]]!r}")
         pos[0] += 1
