@@ -39,7 +39,8 @@ from .objective import WEIGHTS, match, naive_program, omega, program_cost, token
 from .proposal import propose
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, egglog_program, refactor
 
-__all__ = ["Config", "DiscoveryResult", "Summary", "discover", "evaluate", "integrate", "summarize", "wake"]
+__all__ = ["Config", "DiscoveryResult", "Summary", "discover", "discover_category", "evaluate", "integrate", "summarize",
+           "wake", "write_outputs"]
 
 
 @dataclass(frozen=True)
@@ -394,3 +395,44 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
             rnd, phase = rnd + 1, "wake"
             save(rnd, phase)
     return DiscoveryResult(library, programs, costs, errors, hist)
+
+
+def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str], header: str = "") -> None:
+    """Write ``library.txt`` (one abstraction per line), ``programs.txt`` (``<key>:<program>`` lines) and
+    ``log.json`` (the F log and the summary) into ``out``, each atomically."""
+    from shapeio import atomic_write
+
+    out = Path(out)
+    atomic_write(out / "library.txt", header + result.library.to_text(), mkdir=True)
+    atomic_write(out / "programs.txt", "".join(f"{k}:{to_text(p)}\n" for k, p in zip(keys, result.programs)))
+    atomic_write(out / "log.json", json.dumps({"log": result.log, "summary": asdict(result.summary())}, indent=1))
+
+
+def discover_category(category: str, out: str | Path, cfg: Config = Config(), shapes: int = 400, workers: int = 2,
+                      minutes: float | None = None, log: Callable | None = print,
+                      progress: Callable | None = None) -> DiscoveryResult:
+    """:func:`discover` on the first ``shapes`` discovery shapes of ``category`` with a process pool of
+    ``workers`` (1: none), then :func:`write_outputs`. ``out`` may hold the ``state.json`` of an earlier
+    run (it resumes); a folder with a ``library.txt`` but no state is refused (user files are never
+    overwritten).
+
+    Raises:
+        FileExistsError: ``out`` has outputs of something else.
+    """
+    from . import data
+
+    out = Path(out)
+    if (out / "library.txt").exists() and not (out / "state.json").exists():
+        raise FileExistsError(f"{out / 'library.txt'} exists and is not from a resumable run; choose another --out")
+    recs = data.load(category)[:shapes]
+    stop_at = None if minutes is None else time.time() + 60 * minutes
+    if workers > 1:
+        with cf.ProcessPoolExecutor(workers) as ex:
+            result = discover(recs, cfg, LANG_3D, ex, out, log, progress, stop_at)
+    else:
+        result = discover(recs, cfg, LANG_3D, None, out, log, progress, stop_at)
+    s = result.summary()
+    header = (f"# ShapeCoder library discovered on the first {len(recs)} {category} shapes: rounds={cfg.rounds}, "
+              f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, seed={cfg.seed}; F={s.F:.2f}, |L|={s.library_size}\n")
+    write_outputs(out, result, [r.key for r in recs], header)
+    return result

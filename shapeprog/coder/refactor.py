@@ -38,7 +38,7 @@ import time
 from dataclasses import dataclass
 from typing import Mapping
 
-from . import limits
+from ..errors import RefactorError
 from .lang import (AXES, FLOAT_CONSTANTS, Abstraction, AxisConst, Call, Expr, IntConst, Lang, Library, Num, ProgramError,
                    Type, Var, _library, _short, check, substitute, walk)
 
@@ -60,12 +60,6 @@ SEMANTIC_TOL = 0.01
 ABSTRACTION_TOL = {"3d": 0.055, "2d": 0.04}
 #: Integer e-node costs: the paper's costs times 10.
 COSTS = {"fn": 10, "float_fn": 1, "float_var": 20, "float_const": 5, "cat": 5}
-
-
-class RefactorError(ValueError):
-    """A program the refactor cannot take (not a well-typed Shape expression, an unbound variable, more
-    primitives than the domain allows), a limit out of range, or an e-graph failure. The message names the
-    program (shortened)."""
 
 
 @dataclass(frozen=True)
