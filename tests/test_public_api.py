@@ -68,7 +68,9 @@ PUBLIC = {
     "shapeprog.coder": {"LANG_2D", "LANG_3D", "WEIGHTS", "Abstraction", "Execution", "ExecutionError", "Library",
                         "Param", "ParseError", "ProgramError", "Type", "check", "data", "execute", "expand", "limits",
                         "match", "naive_cost", "naive_program", "naive_summary", "objective", "omega", "parse",
-                        "parse_abstraction", "preference", "program_cost", "run", "to_text"},
+                        "parse_abstraction", "preference", "program_cost", "run", "to_text", "Config",
+                        "DiscoveryResult", "Inferred", "RefactorError", "Refactored", "Summary", "discover", "infer",
+                        "load_library", "refactor", "summarize"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
 }
