@@ -256,7 +256,7 @@ def integrate(shapes: Sequence, programs: list, costs: list, errors: list, libra
                     log(f"accept {name} without {', '.join(fdec)} F={f3:.3f}")
                 continue
         if log:
-            log(f"reject {name} (F {f2:.3f} >= {base:.3f})")
+            log(f"reject candidate {cand.abstraction(name).to_text()} (F {f2:.3f} >= {base:.3f})")
     return library, programs, costs, errors, accepted, index
 
 

@@ -108,3 +108,21 @@ def test_summary_columns():
     p = parse("SymRef(Move(Cuboid(0.1,0.5,0.1),-0.4,0.2,0.0),AX)")
     s = summarize([p], lib, [0.01])
     assert (s.num_struct, s.num_param, s.library_size) == (3, 6, 6) and s.F == pytest.approx(3 + 10 + 0.5 + 0.5 + 0.1)
+
+
+def test_cli_infer_and_discover_refusal(tmp_path, capsys):
+    from shapeprog.__main__ import main
+
+    lib = tmp_path / "lib.txt"
+    lib.write_text("Legs(w: Float, h: Float, x: Float, y: Float, z: Float) = SymRef(Move(Cuboid(w,h,w),x,y,z),AX)\n")
+    assert main(["abstract-infer", "chair/401", "--library", str(lib)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("program:") and "expanded:" in out and "cost:" in out
+    bad = tmp_path / "bad.txt"
+    bad.write_text("Legs(w: Float) = Cubiod(w,w,w)\n")
+    assert main(["abstract-infer", "chair/401", "--library", str(bad)]) == 2
+    assert "bad.txt:1:" in capsys.readouterr().err
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "library.txt").write_text("# mine\n")
+    assert main(["discover-abstractions", "chair", "--out", str(tmp_path / "run"), "--shapes", "2", "--quiet"]) == 1
+    assert (tmp_path / "run" / "library.txt").read_text() == "# mine\n"
