@@ -326,10 +326,12 @@ def _value_expr(e: Expr, bound: Mapping, needed: set) -> str:
     raise ProgramError(f"not a float expression: {_short(e)}")
 
 
-def egglog_program(lib: Library) -> str:
+def egglog_program(lib: Library, semantic=None) -> str:
     """The egglog declarations and rules for ``lib``: sorts, the value table, the bookkeeping rules, the
-    semantic rules and one rule per abstraction (those :func:`abstraction_rule` can express)."""
-    rules = _bookkeeping(lib) + semantic_rules(lib.lang)
+    semantic rules (all, or those at the positions ``semantic`` of :func:`semantic_rules`) and one rule per
+    abstraction (those :func:`abstraction_rule` can express)."""
+    sem = semantic_rules(lib.lang)
+    rules = _bookkeeping(lib) + (sem if semantic is None else [sem[i] for i in semantic])
     for ab in lib.abstractions:
         r = abstraction_rule(ab, lib)
         if r is not None:

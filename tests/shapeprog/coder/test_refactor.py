@@ -134,3 +134,62 @@ def test_two_d_domain_and_rule_counts():
 def test_refactor_is_deterministic():
     expr, env = naive_program(data.load("chair")[5].prims)
     assert refactor(expr, env=env).expr == refactor(expr, env=env).expr
+
+
+# One input per semantic rule (positions in semantic_rules(LANG_3D)), where the rule applies.
+_C, _D = "Cuboid(0.1,0.2,0.3)", "Cuboid(0.2,0.1,0.4)"
+RULE_INPUTS = [
+    f"SymRef(Move({_C},-0.4,0.1,0.2),AX)",  # 1 flip (X)
+    f"Union(Move({_C},-0.4,0.1,0.2),Move({_C},0.4,0.1,0.2))",  # 4 introduction (X)
+    f"SymRef(Move({_C},-0.4,0.1,0.2),AX)",  # 7 expansion (X)
+    f"SymRef(Move({_C},0.1,-0.4,0.2),AY)",
+    f"Union(Move({_C},0.1,-0.4,0.2),Move({_C},0.1,0.4,0.2))",
+    f"SymRef(Move({_C},0.1,-0.4,0.2),AY)",
+    f"SymRef(Move({_C},0.1,0.2,-0.4),AZ)",
+    f"Union(Move({_C},0.1,0.2,-0.4),Move({_C},0.1,0.2,0.4))",
+    f"SymRef(Move({_C},0.1,0.2,-0.4),AZ)",
+    f"Move(SymTrans(Move({_C},-0.4,0.1,0.2),AZ,INT#2#,0.4),0.1,0.0,0.1)",  # 10
+    f"Union(Move({_C},0.1,0.2,0.3),Move({_D},0.1,0.2,0.3))",  # 11
+    f"Move(Union({_C},Move({_D},0.3,0.0,0.0)),0.1,0.2,0.3)",  # 12
+    f"Move(Move({_C},0.1,0.2,0.3),0.2,0.1,0.0)",  # 13
+    f"Move({_C},0.0,0.005,0.0)",  # 14
+    f"Union({_C},Move({_D},0.5,0.0,0.0))",  # 15
+    f"Union({_C},Union(Move({_D},0.5,0.0,0.0),Move({_D},-0.5,0.0,0.0)))",  # 16
+    f"Move({_C},Inv(Inv(0.3)),0.1,0.2)",  # 17
+    f"Rotate(Rotate({_C},AX,0.1),AX,0.2)",  # 18
+    f"Rotate({_C},AY,0.005)",  # 19
+    f"Union(Rotate({_C},AY,0.3),Rotate(Move({_D},0.5,0.0,0.0),AY,0.3))",  # 20
+    f"Rotate(Union({_C},Move({_D},0.5,0.0,0.0)),AY,0.3)",  # 21
+    f"Rotate(Move({_C},0.1,0.2,0.3),AZ,0.4)",  # 22
+    f"SymRef(Union(Move({_C},-0.3,0.1,0.0),Move({_D},-0.5,0.2,0.0)),AX)",  # 23
+    f"Move({_C},Add(0.0,0.3),0.1,0.2)",  # 24
+    f"Move({_C},Add(0.3,0.0),0.1,0.2)",  # 25
+]
+
+
+def _grow(expr, rules_text, iterations=3):
+    """Root variants (terms whose top e-node differs) and the cheapest term after some iterations."""
+    from egglog import bindings
+
+    from shapeprog.coder.refactor import _from_term, _term
+
+    lib = Library()
+    eg = bindings.EGraph()
+    eg.run_program(*eg.parse_program(rules_text))
+    eg.run_program(*eg.parse_program(f"(let $root {_term(expr, lib)})"))
+    for _ in range(iterations):
+        eg.run_program(*eg.parse_program("(run rw 1)"))
+    var = eg.run_program(*eg.parse_program("(extract $root 20)"))[0]
+    best = eg.run_program(*eg.parse_program("(extract $root)"))[0]
+    return ([_from_term(var.termdag.to_string(t), lib) for t in var.terms],
+            _from_term(best.termdag.to_string(best.term), lib))
+
+
+@pytest.mark.parametrize("k", range(25))
+def test_each_semantic_rule_fires_and_keeps_the_primitives(k):
+    expr = parse(RULE_INPUTS[k])
+    base_vars, _ = _grow(expr, egglog_program(Library(), semantic=[]))
+    variants, best = _grow(expr, egglog_program(Library(), semantic=[k]))
+    assert len(variants) > len(base_vars) or best != expr, f"rule {k} did not fire"
+    for v in variants + [best]:
+        assert _same_geometry(v, expr), (k, to_text(v))
