@@ -32,6 +32,7 @@ Example:
 """
 from __future__ import annotations
 
+import logging
 import math
 import re
 import time
@@ -392,6 +393,8 @@ def _from_term(text: str, lib: Library) -> Expr:
 
 # ----------------------------------------------------------------------------- the refactor call
 
+_LOG = logging.getLogger(__name__)
+
 #: Default limits (the reference's egg settings: 5 iterations, 10,000 e-nodes, 5 s).
 MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT = 5, 10_000, 5.0
 
@@ -473,6 +476,9 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
         raise
     except Exception as e:  # egglog reports its own errors (EggSmolError and others)
         raise RefactorError(f"egglog failed on {_short(expr)}: {e}") from None
+    if stop in ("nodes", "time"):
+        _LOG.info("e-graph stopped early (%s limit) after %d iteration(s), %d e-nodes: %s", stop, done, nodes,
+                  _short(expr))
     cost = program_cost(best, lib)
     if cost >= input_cost:
         best, cost = expr, input_cost

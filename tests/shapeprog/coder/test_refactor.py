@@ -105,10 +105,12 @@ def test_abstraction_rule_guards_and_unbindable_parameters():
     assert "(union s (L_A" in egglog_program(lib)
 
 
-def test_limits_stop_cleanly_and_bad_input_raises():
+def test_limits_stop_cleanly_and_bad_input_raises(caplog):
     expr, env = naive_program(data.load("chair")[3].prims)  # 16 primitives
-    r = refactor(expr, env=env, max_nodes=500)
+    with caplog.at_level("INFO", logger="shapeprog.coder.refactor"):
+        r = refactor(expr, env=env, max_nodes=500)
     assert r.stop == "nodes" and r.iterations >= 1
+    assert "stopped early (nodes limit)" in caplog.text
     assert match(execute(r.expr, strict=False), data.load("chair")[3].prims).valid
     r0 = refactor(expr, env=env, iterations=0)
     assert r0.stop == "iterations" and r0.iterations == 0 and r0.cost <= r0.input_cost
