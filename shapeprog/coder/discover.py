@@ -55,6 +55,8 @@ class Config:
         iterations, max_nodes, time_limit: e-graph limits of each refactor (5, 10,000, 5 s).
         refactor_all: integration refactors every program (the paper) rather than only those a candidate
             covers.
+        semantic_rewrites: use the semantic rewrites (False: only the abstraction rules, the paper's
+            "no semantic rewrites" ablation).
     """
 
     rounds: int = 4
@@ -65,6 +67,7 @@ class Config:
     max_nodes: int = MAX_ENODES
     time_limit: float = TIME_LIMIT
     refactor_all: bool = False
+    semantic_rewrites: bool = True
 
     def __post_init__(self):
         for name in ("rounds", "n_proposals", "n_abstractions", "iterations", "max_nodes"):
@@ -123,16 +126,18 @@ def evaluate(expr: Expr, library: Library, prims) -> tuple | None:
 
 
 @functools.lru_cache(maxsize=8)
-def _rules(library: Library) -> str:
-    return egglog_program(library)
+def _rules(library: Library, semantic: bool = True) -> str:
+    return egglog_program(library, None if semantic else [])
 
 
 def _best_of(task) -> tuple:
     """Worker: refactor each candidate program with the library; the cheapest valid one (or the current)."""
     current, candidates, library, prims, limits = task
+    limits = dict(limits)
+    semantic = limits.pop("semantic", True)
     best = evaluate(current, library, prims)
     best_expr = current
-    rules = _rules(library)
+    rules = _rules(library, semantic)
     for cand in candidates:
         try:
             r = refactor(cand, library, rules=rules, **limits)
@@ -146,7 +151,8 @@ def _best_of(task) -> tuple:
 
 
 def _limits(cfg: Config) -> dict:
-    return {"iterations": cfg.iterations, "max_nodes": cfg.max_nodes, "time_limit": cfg.time_limit}
+    return {"iterations": cfg.iterations, "max_nodes": cfg.max_nodes, "time_limit": cfg.time_limit,
+            "semantic": cfg.semantic_rewrites}
 
 
 def _map(executor, fn, tasks, progress: Callable | None, desc: str):
