@@ -126,3 +126,15 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
     (tmp_path / "run" / "library.txt").write_text("# mine\n")
     assert main(["discover-abstractions", "chair", "--out", str(tmp_path / "run"), "--shapes", "2", "--quiet"]) == 1
     assert (tmp_path / "run" / "library.txt").read_text() == "# mine\n"
+
+
+def test_config_is_checked_and_the_no_rewrite_ablation_keeps_programs_valid():
+    with pytest.raises(ValueError, match="rounds"):
+        Config(rounds=-1)
+    with pytest.raises(ValueError, match="n_proposals"):
+        Config(n_proposals=1.5)
+    shapes = _chairs(4, seed=5)
+    res = discover(shapes, Config(rounds=0, semantic_rewrites=False), log=None)
+    assert all(evaluate(p, res.library, s) is not None for p, s in zip(res.programs, shapes))
+    # without the rewrites the wake cannot introduce the reflections the naive programs lack
+    assert not any(n.fn == "SymRef" for p in res.programs for n in walk(p) if isinstance(n, Call))
