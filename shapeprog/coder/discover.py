@@ -194,8 +194,9 @@ def _uses(programs: Sequence[Expr], name: str) -> int:
 def integrate(shapes: Sequence, programs: list, costs: list, errors: list, library: Library, candidates: list,
               cfg: Config = Config(), executor: cf.Executor | None = None, weights: list | None = None,
               log: Callable | None = None, progress: Callable | None = None, start_index: int = 0) -> tuple:
-    """Integration of ranked candidates (``[(rank, Candidate)]``); returns ``(library, programs, costs,
-    errors, accepted names)``."""
+    """Integration of ranked candidates (``[(rank, Candidate)]``, see the module docstring); new
+    abstractions are named ``A<k>`` from ``start_index`` on. Returns ``(library, programs, costs, errors,
+    accepted names, next index)``."""
     prims = [getattr(s, "prims", s) for s in shapes]
     n = len(prims)
     weights = [1.0] * n if weights is None else weights
