@@ -361,6 +361,8 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
         costs, errors, rnd, phase = st["costs"], st["errors"], st["round"], st["phase"]
         hist, weights, index = st["log"], st["weights"], st["index"]
         log(f"resume at round {rnd}, phase {phase}")
+        if hist:
+            t0 -= hist[-1]["seconds"]  # the log's seconds count the time of every session
     if len(weights) != len(shapes):
         raise ValueError(f"the state in {out} has {len(weights)} shapes, got {len(shapes)}")
 
