@@ -2,7 +2,8 @@
 
 :func:`infer` finds a program for one shape (its primitives, or one line of a ``PN_*.txt`` file) that
 uses the library's abstractions: the naive program is refactored with the library
-(:func:`shapeprog.coder.refactor.refactor`), as the discovery's final round does for its own shapes.
+(:func:`shapeprog.coder.refactor.refactor`), again on the result while the cost drops (up to ``passes``
+calls), as the discovery's wake does round after round for its own shapes.
 :func:`load_library` reads a library shipped in ``shapeprog/data/coder_libraries/<category>.txt``.
 
 Example:
@@ -60,14 +61,16 @@ def _prims(shape) -> tuple:
     return order(tuple(round(v, 2) + 0.0 for v in p) for p in prims)
 
 
-def infer(shape, library: Library, *, iterations: int = MAX_ITERATIONS, max_nodes: int = MAX_ENODES,
-          time_limit: float = TIME_LIMIT) -> Inferred:
+def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITERATIONS,
+          max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT) -> Inferred:
     """The program of one shape under ``library``.
 
     Args:
         shape: one line of the ``PN_<category>.txt`` format (``<id>_0_<index>:<program>``), or a list of
             primitives (9-tuples ``(W, H, D, X, Y, Z, RX, RY, RZ)``; 4-tuples with a 2D library).
         library: e.g. :func:`load_library`.
+        passes: refactor calls at most, each on the previous one's program (each call is limited by
+            ``iterations``, ``max_nodes``, ``time_limit``); stops at the first that does not lower the cost.
 
     Raises:
         ParseError: a malformed line. ValueError: primitives of the wrong width, or more than the
@@ -79,18 +82,23 @@ def infer(shape, library: Library, *, iterations: int = MAX_ITERATIONS, max_node
         raise ValueError(f"the library is {lang.name} but the primitives have {len(prims[0])} fields")
     if len(prims) > lang.max_prims:
         raise ValueError(f"the shape has {len(prims)} primitives; at most {lang.max_prims} are allowed")
+    if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
+        raise ValueError(f"passes must be an int >= 1, got {passes!r}")
     naive, env = naive_program(prims)
     naive = substitute(naive, {k: Num(v) for k, v in env.items()})
-    r = refactor(naive, library, iterations=iterations, max_nodes=max_nodes, time_limit=time_limit)
-    best = None
-    for e in (r.expr, naive):
-        got = evaluate(e, library, prims)
-        if got is not None and (best is None or got[0] < best[1][0]):
-            best = (e, got)
-    if best is None:  # pragma: no cover - the naive program always re-covers its primitives
-        raise RefactorError("no program re-covers the shape")
+    best = (naive, evaluate(naive, library, prims))
+    if best[1] is None:  # pragma: no cover - the naive program always re-covers its primitives
+        raise RefactorError("the naive program does not re-cover the shape")
+    stop = "iterations"
+    for _ in range(passes):
+        r = refactor(best[0], library, iterations=iterations, max_nodes=max_nodes, time_limit=time_limit)
+        stop = r.stop
+        got = evaluate(r.expr, library, prims)
+        if got is None or got[0] >= best[1][0] - 1e-9:
+            break
+        best = (r.expr, got)
     e, (cost, err) = best
-    return Inferred(to_text(e), to_text(expand(e, library)), cost, err, r.stop)
+    return Inferred(to_text(e), to_text(expand(e, library)), cost, err, stop)
 
 
 def shipped_libraries() -> tuple:
