@@ -106,7 +106,8 @@ def shipped_libraries() -> tuple:
     folder = resources.files("shapeprog").joinpath(*_DIR)
     if not folder.is_dir():
         return ()
-    return tuple(sorted(p.name[:-4] for p in folder.iterdir() if p.name.endswith(".txt")))
+    return tuple(sorted(p.name[:-4] for p in folder.iterdir() if p.name[:-4] in data.CATEGORIES
+                        and p.name.endswith(".txt")))
 
 
 def load_library(category: str) -> Library:
