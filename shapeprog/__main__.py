@@ -37,7 +37,7 @@ from shapeio import InputError, atomic_write, refuse_overwrite
 from shapeio.mesh import WRITE_SUFFIXES
 
 from . import corpus, io
-from .errors import ExecutionError, ParseError
+from .errors import ExecutionError, ParseError, RefactorError
 from .execute import execute
 from .fit import fit
 from .gentable import generation_table, train_category_classifier
@@ -445,6 +445,56 @@ def _int_at_least(low: int):
     return convert
 
 
+def _cmd_discover_abstractions(args) -> int:
+    from .coder.discover import Config, discover_category
+
+    category = args.category or args.category_pos
+    if category not in ("chair", "table", "storage"):
+        raise SystemExit("error: give the category: chair, table or storage")
+    progress = None
+    if not args.quiet:
+        from tqdm import tqdm
+        progress = lambda it, total, desc: tqdm(it, total=total, desc=desc, leave=False)  # noqa: E731
+    cfg = Config(rounds=args.rounds, n_proposals=args.proposals, n_abstractions=args.abstractions, seed=args.seed)
+    t0 = time.time()
+    res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress)
+    s = res.summary()
+    print(f"{category}: F={s.F:.2f} |L|={s.library_size} struct={s.num_struct:.2f} param={s.num_param:.2f} "
+          f"shapes={s.shapes} ({time.time() - t0:.0f} s); wrote {args.out}/library.txt, programs.txt, log.json")
+    return 0
+
+
+def _cmd_abstract_infer(args) -> int:
+    from .coder import data
+    from .coder.infer import infer, load_library, shipped_libraries
+    from .coder.lang import Library
+
+    if args.library in shipped_libraries():
+        lib = load_library(args.library)
+    else:
+        path = Path(args.library)
+        if not path.is_file():
+            raise SystemExit(f"error: {args.library!r} is neither a shipped library "
+                             f"({', '.join(shipped_libraries()) or 'none'}) nor a file")
+        lib = Library.from_text(decode(path.read_bytes(), str(path)), file=str(path))
+    spec = args.shape
+    cat, _, num = spec.partition("/")
+    if cat in data.CATEGORIES and num.isdigit():
+        lines = data.read_lines(cat)
+        if not 1 <= int(num) <= len(lines):
+            raise SystemExit(f"error: {cat} has lines 1 to {len(lines)}")
+        line = data.parse_record(lines[int(num) - 1], f"PN_{cat}.txt", int(num))
+        shape = line.prims
+    elif Path(spec).is_file():
+        text = decode(Path(spec).read_bytes(), spec).strip().splitlines()
+        shape = data.parse_record(text[0], spec, 1).prims
+    else:
+        shape = spec
+    r = infer(shape, lib)
+    print(f"program:  {r.text}\nexpanded: {r.expanded}\ncost: {r.cost:.2f}  error: {r.error:.4f}  e-graph: {r.stop}")
+    return 0
+
+
 def _open_for_edit(args):
     """The edit session of ``edit``'s arguments: (session, the text as read, its file name)."""
     from .editor.session import EditSession, read_source
@@ -740,6 +790,30 @@ def main(argv=None) -> int:
     t.add_argument("--finetune-epochs", type=_int_at_least(0), default=1, help="final epochs on all 2,500 points")
     t.add_argument("--seed", type=int, default=0, help="seed of the sampling and the training")
     t.set_defaults(func=_cmd_train_classifier)
+    d = sub.add_parser("discover-abstractions", help="ShapeCoder: discover a library of abstractions for a category",
+                       description="Run ShapeCoder's discovery (wake by e-graph refactoring, proposal, integration, "
+                                   "removal sweep; a final wake with the library fixed) on the first N discovery "
+                                   "shapes of a PartNet category; write library.txt, programs.txt, log.json and a "
+                                   "resumable state.json into --out.")
+    d.add_argument("category_pos", nargs="?", metavar="category", help="chair, table or storage")
+    d.add_argument("--category", choices=("chair", "table", "storage"), help="the category (or give it first)")
+    d.add_argument("--out", required=True, help="output folder (an earlier run's folder resumes it)")
+    d.add_argument("--rounds", type=_int_at_least(0), default=4, help="proposal/integration rounds (paper: 4)")
+    d.add_argument("--shapes", type=_int_at_least(1), default=400, help="the first N discovery shapes (paper: 400)")
+    d.add_argument("--proposals", type=_int_at_least(1), default=10000, help="proposals per round (paper: 10,000)")
+    d.add_argument("--abstractions", type=_int_at_least(1), default=20, help="candidates tried per round (N_A, 20)")
+    d.add_argument("--seed", type=int, default=42, help="seed of the proposals")
+    d.add_argument("--workers", type=_int_at_least(1), default=2, help="processes for the per-program refactors")
+    d.add_argument("--minutes", type=float, help="start no phase after this many minutes (the run stays resumable)")
+    d.add_argument("--quiet", action="store_true", help="no progress bars")
+    d.set_defaults(func=_cmd_discover_abstractions)
+    a = sub.add_parser("abstract-infer", help="ShapeCoder: infer one shape's program with a discovered library",
+                       description="Post hoc inference: refactor the naive program of one shape with a library's "
+                                   "abstractions; print the program, its expansion, its cost and error.")
+    a.add_argument("shape", help="a PN_<category>.txt line, a file with one such line, or <category>/<line number> "
+                                 "of the vendored data (e.g. chair/401)")
+    a.add_argument("--library", required=True, help="a shipped category (chair) or a library.txt file")
+    a.set_defaults(func=_cmd_abstract_infer)
     d = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",
                        description="Serve an editor page for a program: the shape in 3D, one control per free "
                                    "parameter, live re-execution, undo / redo / reset, export of text, OBJ and "
@@ -801,7 +875,7 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("default")
             return args.func(args)
-    except (ParseError, ExecutionError) as e:
+    except (ParseError, ExecutionError, RefactorError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     except (OSError, InputError) as e:  # unreadable inputs, unwritable outputs: the message names the file

@@ -14,7 +14,7 @@ Example:
 """
 from __future__ import annotations
 
-__all__ = ["EditError", "ExecutionError", "ParseError", "ParseWarning", "PointCloudError"]
+__all__ = ["EditError", "ExecutionError", "ParseError", "ParseWarning", "PointCloudError", "RefactorError"]
 
 
 class ParseError(ValueError):
@@ -89,3 +89,9 @@ class PointCloudError(ValueError):
         if index is not None:
             where += f"cloud {index}: "
         super().__init__(where + reason)
+
+
+class RefactorError(ValueError):
+    """A ShapeCoder program the e-graph refactor cannot take (not a closed, well-typed Shape expression),
+    an e-graph limit out of range, or a failure inside the e-graph engine. The message names the program
+    (shortened)."""

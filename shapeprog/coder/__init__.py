@@ -1,6 +1,11 @@
 """ShapeCoder: abstraction discovery over unstructured primitives (Jones et al., SIGGRAPH 2023).
 
-This sub-package has the foundation: the language (:mod:`shapeprog.coder.lang`: typed expression trees,
+Discovery: :mod:`shapeprog.coder.refactor` (e-graph refactoring with egglog),
+:mod:`shapeprog.coder.proposal` (structure signatures, clusters, greedy abstraction),
+:mod:`shapeprog.coder.discover` (wake by refactoring, integration, the rounds) and
+:mod:`shapeprog.coder.infer` (post hoc inference, shipped libraries).
+
+The foundation: the language (:mod:`shapeprog.coder.lang`: typed expression trees,
 text form, abstractions, libraries, the 3D domain and the 2D toy domain), the executor
 (:mod:`shapeprog.coder.execute`: programs to primitives), the objective F
 (:mod:`shapeprog.coder.objective`) and the vendored PartNet primitive data (:mod:`shapeprog.coder.data`).
@@ -23,24 +28,37 @@ from .lang import (LANG_2D, LANG_3D, Abstraction, Library, ParseError, Param, Pr
                    parse, parse_abstraction, to_text)
 from . import objective  # the module; F itself is objective.objective
 from .objective import WEIGHTS, match, naive_cost, naive_program, naive_summary, omega, preference, program_cost
+from ..errors import RefactorError
+from .refactor import Refactored, refactor
+from .discover import Config, DiscoveryResult, Summary, discover, summarize
+from .infer import Inferred, infer, load_library
 
 __all__ = [
     "LANG_2D",
     "LANG_3D",
     "WEIGHTS",
     "Abstraction",
+    "Config",
+    "DiscoveryResult",
     "Execution",
     "ExecutionError",
     "Library",
     "Param",
     "ParseError",
     "ProgramError",
+    "RefactorError",
+    "Refactored",
+    "Summary",
     "Type",
     "check",
     "data",
+    "discover",
     "execute",
     "expand",
+    "infer",
+    "Inferred",
     "limits",
+    "load_library",
     "match",
     "naive_cost",
     "naive_program",
@@ -51,6 +69,8 @@ __all__ = [
     "parse_abstraction",
     "preference",
     "program_cost",
+    "refactor",
     "run",
+    "summarize",
     "to_text",
 ]

@@ -13,12 +13,12 @@ import re
 from shapeprog.coder import data as scdata
 from shapeprog.coder.lang import parse, to_text
 from shapeprog.coder.limits import MAX_ABS_NUMBER, MAX_COUNT
-from shapeprog.errors import ParseError
+from shapeprog.errors import ParseError, RefactorError
 from shapeprog.limits import decode
 
 from fuzz.engine import Target, mutate as mutate_bytes
 
-__all__ = ["BOUND_S", "TARGETS", "mutate", "run", "seeds"]
+__all__ = ["BOUND_S", "TARGETS", "mutate", "run", "run_refactor", "seeds"]
 
 #: The longest one input may take (on a loaded 2-core machine).
 BOUND_S = 3.0
@@ -97,4 +97,22 @@ def _mutator(data: bytes, rng: random.Random, seeds_: list) -> bytes:
     return mutate(rng, data.decode("utf-8", "surrogatepass")).encode("utf-8", "surrogatepass")
 
 
-TARGETS = [Target("shapecoder/data-line", [t.encode() for t in seeds()], run, (ParseError,), BOUND_S, _mutator)]
+def run_refactor(data: bytes) -> list:
+    """Read one data line and refactor its program with the semantic rewrites (small limits); the
+    refactored program must re-cover the line's primitives. Only ParseError and RefactorError may escape."""
+    from shapeprog.coder.execute import execute
+    from shapeprog.coder.objective import match
+    from shapeprog.coder.refactor import refactor
+
+    rec = scdata.parse_record(decode(data, "fuzz.txt"), "fuzz.txt", 1)
+    if len(rec.prims) > 16 or any(min(p[:3]) <= 0 for p in rec.prims):
+        return [v for p in rec.prims for v in p]  # beyond the scenes discovery takes, or a hard error
+    r = refactor(rec.program, iterations=3, max_nodes=3000, time_limit=1.0)
+    got = execute(r.expr, strict=False)
+    assert len(got) == len(rec.prims) and match(got, rec.prims).valid, "the refactor changed the primitives"
+    return [v for p in got for v in p] + [r.cost]
+
+
+TARGETS = [Target("shapecoder/data-line", [t.encode() for t in seeds()], run, (ParseError,), BOUND_S, _mutator),
+           Target("shapecoder/refactor", [t.encode() for t in seeds(6)], run_refactor, (ParseError, RefactorError),
+                  BOUND_S, _mutator)]

@@ -1,0 +1,449 @@
+"""The ShapeCoder discovery loop: wake (search by refactoring), proposal, integration, and a final round
+with the library fixed. Per-program work goes through a ``concurrent.futures.Executor`` from the caller.
+
+One round (``rounds`` of them, then a final wake with the library fixed):
+
+1. **Wake** (:func:`wake`): each shape's candidates (its current program, the same with every abstraction
+   expanded, and the naive program) are refactored with the current library
+   (:func:`shapeprog.coder.refactor.refactor`); the cheapest that re-covers the shape's primitives
+   (a valid Hungarian match of every primitive, :func:`shapeprog.coder.objective.match`) is kept. This
+   replaces the paper's recognition network (not built; see docs/shapecoder.md).
+2. **Proposal** (:func:`shapeprog.coder.proposal.propose`): the top ``n_abstractions`` candidates.
+3. **Integration** (:func:`integrate`): for each candidate in rank order, the library plus the candidate
+   refactors the programs it covers (input and expanded); it is accepted when F strictly decreases;
+   otherwise, when abstractions lost more than half their uses (f_dec), the library without them is
+   tried. After an acceptance the weights of the covered programs are halved.
+4. **Removal sweep**: each abstraction is removed in turn (its calls expanded, the programs that used it
+   refactored); a removal is kept when F strictly decreases.
+
+A program's cost is its :func:`~shapeprog.coder.objective.program_cost` plus λ_e (10) times the mean
+matched distance to its shape's primitives; F adds ω of each abstraction.
+
+State (the library, the programs, the log of F per phase) is written atomically to ``out/state.json``
+after every phase; a run started again on the same folder resumes after the last finished phase.
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import functools
+import json
+import random
+import time
+from dataclasses import dataclass, field, asdict
+from pathlib import Path
+from typing import Callable, Sequence
+
+from .execute import execute
+from .lang import LANG_3D, Call, Expr, Lang, Library, Num, ProgramError, expand, parse, substitute, to_text, walk
+from .objective import WEIGHTS, match, naive_program, omega, program_cost, token_counts
+from .proposal import propose
+from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, egglog_program, refactor
+
+__all__ = ["Config", "DiscoveryResult", "Summary", "discover", "discover_category", "evaluate", "integrate", "summarize",
+           "wake", "write_outputs"]
+
+
+@dataclass(frozen=True)
+class Config:
+    """Settings of a discovery run (the paper's values where it has them).
+
+    Attributes:
+        rounds: proposal/integration rounds (``max_sc_rounds`` 4), then one final wake.
+        n_proposals: proposals per round (10,000).
+        n_abstractions: candidates tried per round (N_A, 20).
+        seed: random seed of the proposals (42).
+        iterations, max_nodes, time_limit: e-graph limits of each refactor (5, 10,000, 5 s).
+        refactor_all: integration refactors every program (the paper) rather than only those a candidate
+            covers.
+        semantic_rewrites: use the semantic rewrites (False: only the abstraction rules, the paper's
+            "no semantic rewrites" ablation).
+    """
+
+    rounds: int = 4
+    n_proposals: int = 10_000
+    n_abstractions: int = 20
+    seed: int = 42
+    iterations: int = MAX_ITERATIONS
+    max_nodes: int = MAX_ENODES
+    time_limit: float = TIME_LIMIT
+    refactor_all: bool = False
+    semantic_rewrites: bool = True
+
+    def __post_init__(self):
+        for name in ("rounds", "n_proposals", "n_abstractions", "iterations", "max_nodes"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"Config.{name} must be an int >= 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class Summary:
+    """F and the paper's Table 2 columns for a library and its programs.
+
+    Attributes:
+        F: mean program cost (tokens + 10 · error) + Σ ω.
+        programs: the mean program cost alone.
+        library_size: |L| (base shape functions + abstractions).
+        num_struct: mean shape-function tokens per program.
+        num_param: mean free-float and categorical tokens per program.
+        shapes: how many programs.
+    """
+
+    F: float
+    programs: float
+    library_size: int
+    num_struct: float
+    num_param: float
+    shapes: int
+
+
+def summarize(programs: Sequence[Expr], library: Library, errors: Sequence[float] | None = None) -> Summary:
+    """The :class:`Summary` of ``programs`` (with geometric ``errors``, 0 by default) under ``library``."""
+    if not programs:
+        raise ValueError("no programs")
+    errors = [0.0] * len(programs) if errors is None else list(errors)
+    n = len(programs)
+    counts = [token_counts(p, library) for p in programs]
+    prog = sum(c.cost(WEIGHTS) + WEIGHTS.error * e for c, e in zip(counts, errors)) / n
+    lib_cost = sum(omega(ab, library) for ab in library.abstractions)
+    return Summary(prog + lib_cost, prog, library.size, sum(c.num_struct for c in counts) / n,
+                   sum(c.num_param for c in counts) / n, n)
+
+
+def evaluate(expr: Expr, library: Library, prims) -> tuple | None:
+    """``(cost, error)`` of a program for a shape, or None when it does not re-cover the primitives
+    (a hard error, another primitive count, or a match beyond the threshold)."""
+    try:
+        got = execute(expr, library, strict=True)
+    except (ProgramError, ValueError):
+        return None
+    if len(got) != len(prims):
+        return None
+    m = match(got, prims, threshold=library.lang.match_threshold)
+    if not m.valid:
+        return None
+    return program_cost(expr, library) + WEIGHTS.error * m.error, m.error
+
+
+@functools.lru_cache(maxsize=8)
+def _rules(library: Library, semantic: bool = True) -> str:
+    return egglog_program(library, None if semantic else [])
+
+
+def _best_of(task) -> tuple:
+    """Worker: refactor each candidate program with the library; the cheapest valid one (or the current)."""
+    current, candidates, library, prims, limits = task
+    limits = dict(limits)
+    semantic = limits.pop("semantic", True)
+    best = evaluate(current, library, prims)
+    best_expr = current
+    rules = _rules(library, semantic)
+    for cand in candidates:
+        try:
+            r = refactor(cand, library, rules=rules, **limits)
+        except RefactorError:
+            continue
+        for e in (r.expr, cand):
+            got = evaluate(e, library, prims)
+            if got is not None and (best is None or got[0] < best[0] - 1e-9):
+                best, best_expr = got, e
+    return best_expr, (None if best is None else best[0]), (None if best is None else best[1])
+
+
+def _limits(cfg: Config) -> dict:
+    return {"iterations": cfg.iterations, "max_nodes": cfg.max_nodes, "time_limit": cfg.time_limit,
+            "semantic": cfg.semantic_rewrites}
+
+
+def _map(executor, fn, tasks, progress: Callable | None, desc: str):
+    it = executor.map(fn, tasks) if executor is not None else map(fn, tasks)
+    if progress is not None:
+        it = progress(it, total=len(tasks), desc=desc)
+    return list(it)
+
+
+def wake(shapes: Sequence, programs: Sequence[Expr] | None, library: Library, cfg: Config = Config(),
+         executor: cf.Executor | None = None, progress: Callable | None = None) -> tuple:
+    """Search by refactoring: ``(programs, costs, errors)``, one per shape (see the module docstring).
+
+    Args:
+        shapes: primitive sets (tuples of 9-tuples, or records with ``.prims``).
+        programs: the current programs (None: start from the naive ones).
+    """
+    prims = [getattr(s, "prims", s) for s in shapes]
+    tasks = []
+    for k, p in enumerate(prims):
+        naive, env = naive_program(p)
+        naive = substitute(naive, {n: Num(v) for n, v in env.items()})
+        cur = naive if programs is None else programs[k]
+        cands = [cur]
+        if programs is not None:
+            ex = expand(cur, library)
+            if ex != cur:
+                cands.append(ex)
+            cands.append(naive)
+        tasks.append((cur, cands, library, p, _limits(cfg)))
+    out = _map(executor, _best_of, tasks, progress, "wake")
+    return [o[0] for o in out], [o[1] for o in out], [o[2] for o in out]
+
+
+def _uses(programs: Sequence[Expr], name: str) -> int:
+    return sum(1 for p in programs for n in walk(p) if isinstance(n, Call) and n.fn == name)
+
+
+def integrate(shapes: Sequence, programs: list, costs: list, errors: list, library: Library, candidates: list,
+              cfg: Config = Config(), executor: cf.Executor | None = None, weights: list | None = None,
+              log: Callable | None = None, progress: Callable | None = None, start_index: int = 0) -> tuple:
+    """Integration of ranked candidates (``[(rank, Candidate)]``, see the module docstring); new
+    abstractions are named ``A<k>`` from ``start_index`` on. Returns ``(library, programs, costs, errors,
+    accepted names, next index)``."""
+    prims = [getattr(s, "prims", s) for s in shapes]
+    n = len(prims)
+    weights = [1.0] * n if weights is None else weights
+    accepted = []
+    index = start_index
+
+    def F(lib, cs):
+        return sum(cs) / n + sum(omega(ab, lib) for ab in lib.abstractions)
+
+    def trial(lib, progs, idx, costs, errors):
+        tasks = []
+        for k in idx:
+            ex = expand(progs[k], lib) if len(lib) else progs[k]
+            cands = [progs[k]] + ([ex] if ex != progs[k] else [])
+            tasks.append((progs[k], cands, lib, prims[k], _limits(cfg)))
+        out = _map(executor, _best_of, tasks, progress, "integrate")
+        new_p, new_c, new_e = list(progs), list(costs), list(errors)
+        for k, (e, c, err) in zip(idx, out):
+            if c is not None and c < new_c[k] - 1e-9:
+                new_p[k], new_c[k], new_e[k] = e, c, err
+        return new_p, new_c, new_e
+
+    base = F(library, costs)
+    for rank, cand in candidates:
+        name = f"A{index}"
+        while name in library:
+            index += 1
+            name = f"A{index}"
+        try:
+            lib2 = library.add(cand.abstraction(name))
+        except ProgramError:
+            continue
+        idx = range(n) if cfg.refactor_all else sorted(cand.programs)
+        p2, c2, e2 = trial(lib2, programs, idx, costs, errors)
+        f2 = F(lib2, c2)
+        if _uses(p2, name) > 0 and f2 < base - 1e-9:
+            library, programs, costs, errors, base = lib2, p2, c2, e2, f2
+            accepted.append(name)
+            index += 1
+            for k in cand.programs:
+                weights[k] *= 0.5
+            if log:
+                log(f"accept {name} = {cand.abstraction(name).to_text()} F={f2:.3f}")
+            continue
+        # f_dec: abstractions that lost more than half their uses
+        fdec = [ab.name for ab in library.abstractions if _uses(p2, ab.name) * 2 < _uses(programs, ab.name)]
+        if fdec and _uses(p2, name) > 0:
+            lib3 = lib2
+            for a in fdec:
+                lib3 = lib3.remove(a)
+            p3 = [expand(p, lib2, names=fdec) for p in programs]
+            c3, e3 = [], []
+            for k, p in enumerate(p3):
+                got = evaluate(p, lib3, prims[k])
+                c3.append(costs[k] if got is None else got[0])
+                e3.append(errors[k] if got is None else got[1])
+            p3, c3, e3 = trial(lib3, p3, range(n), c3, e3)
+            f3 = F(lib3, c3)
+            if f3 < base - 1e-9:
+                library, programs, costs, errors, base = lib3, p3, c3, e3, f3
+                accepted.append(name)
+                index += 1
+                if log:
+                    log(f"accept {name} without {', '.join(fdec)} F={f3:.3f}")
+                continue
+        if log:
+            log(f"reject candidate {cand.abstraction(name).to_text()} (F {f2:.3f} >= {base:.3f})")
+    return library, programs, costs, errors, accepted, index
+
+
+def _remove_sweep(shapes, programs, costs, errors, library, cfg, executor, log, progress):
+    prims = [getattr(s, "prims", s) for s in shapes]
+    n = len(prims)
+
+    def F(lib, cs):
+        return sum(cs) / n + sum(omega(ab, lib) for ab in lib.abstractions)
+
+    base = F(library, costs)
+    for ab in list(library.abstractions):
+        if ab.name not in library:
+            continue
+        lib2 = library.remove(ab.name)
+        users = [k for k in range(n) if _uses([programs[k]], ab.name)]
+        p2, c2, e2 = list(programs), list(costs), list(errors)
+        tasks = []
+        for k in users:
+            ex = expand(programs[k], library, names=(ab.name,))
+            tasks.append((ex, [ex], lib2, prims[k], _limits(cfg)))
+        out = _map(executor, _best_of, tasks, progress, f"remove {ab.name}")
+        ok = True
+        for k, (e, c, err) in zip(users, out):
+            if c is None:
+                ok = False
+                break
+            p2[k], c2[k], e2[k] = e, c, err
+        if not ok:
+            continue
+        f2 = F(lib2, c2)
+        if f2 < base - 1e-9:
+            library, programs, costs, errors, base = lib2, p2, c2, e2, f2
+            if log:
+                log(f"remove {ab.name} F={f2:.3f}")
+    return library, programs, costs, errors
+
+
+@dataclass
+class DiscoveryResult:
+    """The outcome of :func:`discover`: the library, one program per shape, their costs and errors, and
+    the log (one dict per phase: round, phase, F, |L|, seconds)."""
+
+    library: Library
+    programs: list
+    costs: list
+    errors: list
+    log: list = field(default_factory=list)
+
+    def summary(self) -> Summary:
+        return summarize(self.programs, self.library, self.errors)
+
+
+def _save(out: Path | None, state: dict) -> None:
+    if out is None:
+        return
+    from shapeio import atomic_write
+
+    atomic_write(out / "state.json", json.dumps(state, indent=1), mkdir=True)
+
+
+def _load(out: Path | None, lang: Lang):
+    if out is None or not (out / "state.json").is_file():
+        return None
+    st = json.loads((out / "state.json").read_text())
+    lib = Library.from_text(st["library"], lang, file=str(out / "state.json"))
+    st["programs"] = [parse(t, lib, file=str(out / "state.json"), line=i + 1) for i, t in enumerate(st["programs"])]
+    st["library_obj"] = lib
+    return st
+
+
+def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, executor: cf.Executor | None = None,
+             out: str | Path | None = None, log: Callable | None = print, progress: Callable | None = None,
+             stop_at: float | None = None) -> DiscoveryResult:
+    """Run discovery on ``shapes`` (primitive sets or records with ``.prims``).
+
+    Args:
+        cfg: the :class:`Config`.
+        executor: runs the per-program refactors (``executor.map``); None runs them in this process.
+        out: a folder for ``state.json`` (written atomically after each phase; a run on a folder with a
+            state resumes after its last finished phase).
+        log: called with one line per event.
+        progress: a tqdm-like wrapper ``progress(iterable, total=, desc=)``.
+        stop_at: a ``time.time()`` after which no new phase starts (the state stays resumable).
+    """
+    out = Path(out) if out is not None else None
+    log = log or (lambda s: None)
+    st = _load(out, lang)
+    t0 = time.time()
+    if st is None:
+        library, programs, costs, errors = Library(lang), None, None, None
+        rnd, phase, hist, weights, index = 0, "wake", [], [1.0] * len(shapes), 0
+    else:
+        library, programs = st["library_obj"], st["programs"]
+        costs, errors, rnd, phase = st["costs"], st["errors"], st["round"], st["phase"]
+        hist, weights, index = st["log"], st["weights"], st["index"]
+        log(f"resume at round {rnd}, phase {phase}")
+        if hist:
+            t0 -= hist[-1]["seconds"]  # the log's seconds count the time of every session
+    if len(weights) != len(shapes):
+        raise ValueError(f"the state in {out} has {len(weights)} shapes, got {len(shapes)}")
+
+    def record(ph):
+        s = summarize(programs, library, errors)
+        hist.append({"round": rnd, "phase": ph, "F": round(s.F, 4), "L": s.library_size,
+                     "num_struct": round(s.num_struct, 3), "num_param": round(s.num_param, 3),
+                     "seconds": round(time.time() - t0, 1)})
+        log(f"round {rnd} {ph}: F={s.F:.3f} |L|={s.library_size} struct={s.num_struct:.2f} param={s.num_param:.2f}")
+
+    def save(next_round, next_phase):
+        _save(out, {"round": next_round, "phase": next_phase, "library": library.to_text(),
+                    "programs": [to_text(p) for p in programs], "costs": costs, "errors": errors, "log": hist,
+                    "weights": weights, "index": index, "config": asdict(cfg), "lang": lang.name})
+
+    while rnd <= cfg.rounds:
+        if phase == "done":
+            break
+        if stop_at is not None and time.time() > stop_at:
+            log("stopping: time is up (resumable)")
+            break
+        if phase == "wake":
+            programs, costs, errors = wake(shapes, programs, library, cfg, executor, progress)
+            if any(c is None for c in costs):
+                bad = [k for k, c in enumerate(costs) if c is None]
+                raise RefactorError(f"no program re-covers shape(s) {bad[:5]}")
+            record("wake")
+            phase = "integrate" if rnd < cfg.rounds else "done"
+            save(rnd, phase)
+        elif phase == "integrate":
+            rng = random.Random(cfg.seed + rnd)
+            cands = propose(programs, library, cfg.n_proposals, rng, weights, top=cfg.n_abstractions)
+            log(f"round {rnd}: {len(cands)} candidates")
+            library, programs, costs, errors, acc, index = integrate(
+                shapes, programs, costs, errors, library, cands, cfg, executor, weights, log, progress, index)
+            library, programs, costs, errors = _remove_sweep(shapes, programs, costs, errors, library, cfg,
+                                                             executor, log, progress)
+            record("integrate")
+            rnd, phase = rnd + 1, "wake"
+            save(rnd, phase)
+    return DiscoveryResult(library, programs, costs, errors, hist)
+
+
+def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str], header: str = "") -> None:
+    """Write ``library.txt`` (one abstraction per line), ``programs.txt`` (``<key>:<program>`` lines) and
+    ``log.json`` (the F log and the summary) into ``out``, each atomically."""
+    from shapeio import atomic_write
+
+    out = Path(out)
+    atomic_write(out / "library.txt", header + result.library.to_text(), mkdir=True)
+    atomic_write(out / "programs.txt", "".join(f"{k}:{to_text(p)}\n" for k, p in zip(keys, result.programs)))
+    atomic_write(out / "log.json", json.dumps({"log": result.log, "summary": asdict(result.summary())}, indent=1))
+
+
+def discover_category(category: str, out: str | Path, cfg: Config = Config(), shapes: int = 400, workers: int = 2,
+                      minutes: float | None = None, log: Callable | None = print,
+                      progress: Callable | None = None) -> DiscoveryResult:
+    """:func:`discover` on the first ``shapes`` discovery shapes of ``category`` with a process pool of
+    ``workers`` (1: none), then :func:`write_outputs`. ``out`` may hold the ``state.json`` of an earlier
+    run (it resumes); a folder with a ``library.txt`` but no state is refused (user files are never
+    overwritten).
+
+    Raises:
+        FileExistsError: ``out`` has outputs of something else.
+    """
+    from . import data
+
+    out = Path(out)
+    if (out / "library.txt").exists() and not (out / "state.json").exists():
+        raise FileExistsError(f"{out / 'library.txt'} exists and is not from a resumable run; choose another --out")
+    recs = data.load(category)[:shapes]
+    stop_at = None if minutes is None else time.time() + 60 * minutes
+    if workers > 1:
+        with cf.ProcessPoolExecutor(workers) as ex:
+            result = discover(recs, cfg, LANG_3D, ex, out, log, progress, stop_at)
+    else:
+        result = discover(recs, cfg, LANG_3D, None, out, log, progress, stop_at)
+    s = result.summary()
+    last = result.log[-1] if result.log else {"round": 0, "phase": "none", "seconds": 0}
+    header = (f"# ShapeCoder library discovered on the first {len(recs)} {category} shapes: rounds={cfg.rounds}, "
+              f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, seed={cfg.seed}; last finished phase: "
+              f"round {last['round']} {last['phase']} after {last['seconds']:.0f} s; F={s.F:.2f}, |L|={s.library_size}\n")
+    write_outputs(out, result, [r.key for r in recs], header)
+    return result

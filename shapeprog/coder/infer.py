@@ -1,0 +1,126 @@
+"""Post hoc inference with a discovered library, and the shipped libraries.
+
+:func:`infer` finds a program for one shape (its primitives, or one line of a ``PN_*.txt`` file) that
+uses the library's abstractions: the naive program is refactored with the library
+(:func:`shapeprog.coder.refactor.refactor`), again on the result while the cost drops (up to ``passes``
+calls), as the discovery's wake does round after round for its own shapes.
+:func:`load_library` reads a library shipped in ``shapeprog/data/coder_libraries/<category>.txt``.
+
+Example:
+    >>> from shapeprog.coder.lang import Library, parse_abstraction
+    >>> lib = Library().add(parse_abstraction(
+    ...     "Pair(w: Float, h: Float, x: Float, y: Float, z: Float) = SymRef(Move(Cuboid(w,h,w),x,y,z),AX)"))
+    >>> r = infer([(0.06, 0.6, 0.06, -0.31, -0.5, -0.3, 0, 0, 0), (0.06, 0.6, 0.06, 0.31, -0.5, -0.3, 0, 0, 0)], lib)
+    >>> r.text, r.expanded, r.cost, r.error
+    ('Pair(0.06,0.6,-0.31,-0.5,-0.3)', 'SymRef(Move(Cuboid(0.06,0.6,0.06),-0.31,-0.5,-0.3),AX)', 11.0, 0.0)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from . import data
+from .discover import evaluate
+from .execute import order
+from .lang import LANG_3D, Library, Num, expand, substitute, to_text
+from .objective import naive_program
+from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, refactor
+
+__all__ = ["Inferred", "infer", "load_library", "shipped_libraries"]
+
+_DIR = ("data", "coder_libraries")
+
+
+@dataclass(frozen=True)
+class Inferred:
+    """A shape's inferred program.
+
+    Attributes:
+        text: the program with abstraction calls.
+        expanded: the same in the base language.
+        cost: its contribution to F (token cost + 10 · error).
+        error: the mean matched distance of its primitives to the shape's.
+        stop: why the e-graph stopped (see :class:`~shapeprog.coder.refactor.Refactored`).
+    """
+
+    text: str
+    expanded: str
+    cost: float
+    error: float
+    stop: str
+
+
+def _prims(shape) -> tuple:
+    if isinstance(shape, str):
+        return data.parse_record(shape.strip(), "<shape>", 1).prims
+    prims = tuple(tuple(float(v) for v in p) for p in shape)
+    if not prims:
+        raise ValueError("the shape has no primitives")
+    width = len(prims[0])
+    if width not in (4, 9) or any(len(p) != width for p in prims):
+        raise ValueError(f"a shape is a list of 9-tuples (3D) or 4-tuples (2D); got widths {sorted({len(p) for p in prims})}")
+    return order(tuple(round(v, 2) + 0.0 for v in p) for p in prims)
+
+
+def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITERATIONS,
+          max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT) -> Inferred:
+    """The program of one shape under ``library``.
+
+    Args:
+        shape: one line of the ``PN_<category>.txt`` format (``<id>_0_<index>:<program>``), or a list of
+            primitives (9-tuples ``(W, H, D, X, Y, Z, RX, RY, RZ)``; 4-tuples with a 2D library).
+        library: e.g. :func:`load_library`.
+        passes: refactor calls at most, each on the previous one's program (each call is limited by
+            ``iterations``, ``max_nodes``, ``time_limit``); stops at the first that does not lower the cost.
+
+    Raises:
+        ParseError: a malformed line. ValueError: primitives of the wrong width, or more than the
+        domain's :attr:`~shapeprog.coder.lang.Lang.max_prims`. RefactorError: an e-graph failure.
+    """
+    prims = _prims(shape)
+    lang = library.lang
+    if len(prims[0]) != len(lang.prim_fields):
+        raise ValueError(f"the library is {lang.name} but the primitives have {len(prims[0])} fields")
+    if len(prims) > lang.max_prims:
+        raise ValueError(f"the shape has {len(prims)} primitives; at most {lang.max_prims} are allowed")
+    if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
+        raise ValueError(f"passes must be an int >= 1, got {passes!r}")
+    naive, env = naive_program(prims)
+    naive = substitute(naive, {k: Num(v) for k, v in env.items()})
+    best = (naive, evaluate(naive, library, prims))
+    if best[1] is None:  # pragma: no cover - the naive program always re-covers its primitives
+        raise RefactorError("the naive program does not re-cover the shape")
+    stop = "iterations"
+    for _ in range(passes):
+        r = refactor(best[0], library, iterations=iterations, max_nodes=max_nodes, time_limit=time_limit)
+        stop = r.stop
+        got = evaluate(r.expr, library, prims)
+        if got is None or got[0] >= best[1][0] - 1e-9:
+            break
+        best = (r.expr, got)
+    e, (cost, err) = best
+    return Inferred(to_text(e), to_text(expand(e, library)), cost, err, stop)
+
+
+def shipped_libraries() -> tuple:
+    """The categories with a shipped library."""
+    folder = resources.files("shapeprog").joinpath(*_DIR)
+    if not folder.is_dir():
+        return ()
+    return tuple(sorted(p.name[:-4] for p in folder.iterdir() if p.name[:-4] in data.CATEGORIES
+                        and p.name.endswith(".txt")))
+
+
+def load_library(category: str) -> Library:
+    """The shipped library of ``category`` (``shapeprog/data/coder_libraries/<category>.txt``, one
+    abstraction per line; see docs/shapecoder.md for how it was discovered).
+
+    Raises:
+        ValueError: no library is shipped for ``category`` (the message lists those that are).
+        ParseError: a malformed library file (file, line, column).
+    """
+    names = shipped_libraries()
+    if category not in names:
+        raise ValueError(f"no shipped library for {category!r}; shipped: {', '.join(names) or 'none'}")
+    name = f"{category}.txt"
+    text = resources.files("shapeprog").joinpath(*_DIR, name).read_text(encoding="utf-8")
+    return Library.from_text(text, LANG_3D, file=name)

@@ -1,0 +1,485 @@
+"""Refactoring ShapeCoder programs with e-graphs (the ``egglog`` package).
+
+:func:`refactor` puts one program into an e-graph, grows it with the semantic rewrites of the paper
+(:func:`semantic_rules`) plus one conditional rewrite per abstraction of the library
+(:func:`abstraction_rule`), and extracts the cheapest equivalent program.
+
+* **Leaves.** Every float of the program becomes ``(Num v)`` (its value, so equal values share one
+  e-class: the reference's ``do_dedup``), except the constants 0, 1 and 2, which become ``(K v)``; axes
+  are the nullary ``AX AY AZ`` and counts ``(N k)``.
+* **Value table.** ``(function val (Flt) f64 :merge old)``, filled by rules: a leaf's value is its
+  literal, and ``Add Sub Mul Div Inv`` nodes get the value computed from their children's (the
+  reference's ``er_add`` / ``er_inv`` bookkeeping, as ordinary rules).
+* **Conditional rewrites** are rules whose queries compare values: ``(<= (abs (- va vb)) tol)``
+  (tolerance :data:`SEMANTIC_TOL` for the semantic rules, :data:`ABSTRACTION_TOL` for abstractions).
+* **Limits.** The e-graph is run one iteration at a time; before each iteration the e-node count (all
+  constructors, the value table excluded) is checked against ``max_nodes`` and the elapsed time against
+  ``time_limit``; at most ``iterations`` iterations. A run that stops on a limit still extracts the best
+  program found so far (:attr:`Refactored.stop` names the reason).
+* **Extraction** uses the constructors' integer costs, the paper's costs ×10 (:data:`COSTS`): shape
+  function 10, float operator 1, free float 20, constant 0/1/2 5, categorical 5. The program returned is
+  re-costed with :func:`shapeprog.coder.objective.program_cost`.
+
+See docs/shapecoder.md ("Refactor") for the rules and the decisions where this differs from the paper
+and the reference code.
+
+Example:
+    >>> from shapeprog.coder.lang import parse, to_text
+    >>> p = parse("Union(Move(Cuboid(0.1,0.5,0.1),-0.4,0.2,0.1),Move(Cuboid(0.1,0.5,0.1),0.4,0.2,0.1))")
+    >>> r = refactor(p)
+    >>> to_text(r.expr), r.cost < r.input_cost
+    ('SymRef(Move(Cuboid(0.1,0.5,0.1),-0.4,0.2,0.1),AX)', True)
+"""
+from __future__ import annotations
+
+import logging
+import math
+import re
+import time
+from dataclasses import dataclass
+from typing import Mapping
+
+from ..errors import RefactorError
+from .lang import (AXES, FLOAT_CONSTANTS, Abstraction, AxisConst, Call, Expr, IntConst, Lang, Library, Num, ProgramError,
+                   Type, Var, _library, _short, check, substitute, walk)
+
+__all__ = [
+    "ABSTRACTION_TOL",
+    "COSTS",
+    "RefactorError",
+    "Refactored",
+    "SEMANTIC_TOL",
+    "abstraction_rule",
+    "egglog_program",
+    "refactor",
+    "semantic_rules",
+]
+
+#: Tolerance of the conditional semantic rewrites (the reference's 0.01).
+SEMANTIC_TOL = 0.01
+#: Tolerance of the abstraction rewrites (``ab_rw_max_error``), per domain.
+ABSTRACTION_TOL = {"3d": 0.055, "2d": 0.04}
+#: Integer e-node costs: the paper's costs times 10.
+COSTS = {"fn": 10, "float_fn": 1, "float_var": 20, "float_const": 5, "cat": 5}
+
+
+@dataclass(frozen=True)
+class Refactored:
+    """The result of :func:`refactor`.
+
+    Attributes:
+        expr: the extracted program (floats as literals; abstractions of the library may be called).
+        cost: its :func:`~shapeprog.coder.objective.program_cost` (no geometric error).
+        input_cost: the same for the input program.
+        stop: why the e-graph stopped: ``"saturated"``, ``"iterations"``, ``"nodes"`` or ``"time"``.
+        iterations: iterations run.
+        nodes: e-nodes at the end (constructors only).
+        seconds: wall time of the whole call.
+    """
+
+    expr: Expr
+    cost: float
+    input_cost: float
+    stop: str
+    iterations: int
+    nodes: int
+    seconds: float
+
+
+# ----------------------------------------------------------------------------- the rules (egglog text)
+
+_FLOAT_OPS = {"Add": "+", "Sub": "-", "Mul": "*", "Div": "/"}
+#: Prefix of the abstractions' constructors (keeps them apart from egglog's and the rules' names).
+_AB = "L_"
+
+
+#: Added to every tolerance so that 2-decimal values exactly ``tol`` apart pass despite float rounding.
+_EPS = 1e-9
+
+
+def _close(a: str, b: str, tol: float) -> str:
+    return f"(<= (abs (- {a} {b})) {_f64(tol + _EPS)})"
+
+
+def _f64(v: float) -> str:
+    v = float(v)
+    text = repr(v)
+    if "e" in text or "n" in text:  # egglog reads plain decimals only
+        text = f"{v:.15f}"
+    return text
+
+
+def _declarations(lib: Library) -> str:
+    lang = lib.lang
+    c = COSTS
+    axes = " ".join(f"({a} :cost {c['cat']})" for a in lang.axes)
+    if lang.dim == 3:
+        shapes = [f"(Cuboid Flt Flt Flt :cost {c['fn']})", f"(Move Shape Flt Flt Flt :cost {c['fn']})",
+                  f"(Rotate Shape Ax Flt :cost {c['fn']})"]
+    else:
+        shapes = [f"(Rectangle Flt Flt :cost {c['fn']})", f"(Move Shape Flt Flt :cost {c['fn']})"]
+    shapes += [f"(Union Shape Shape :cost {c['fn']})", f"(SymRef Shape Ax :cost {c['fn']})",
+               f"(SymTrans Shape Ax Cnt Flt :cost {c['fn']})"]
+    sort = {Type.FLOAT: "Flt", Type.AXIS: "Ax", Type.INT: "Cnt"}
+    for ab in lib.abstractions:
+        shapes.append(f"({_AB}{ab.name} {' '.join(sort[p.type] for p in ab.params)} :cost {c['fn']})")
+    flt = [f"(Num f64 :cost {c['float_var']})", f"(K f64 :cost {c['float_const']})"]
+    flt += [f"({op} Flt Flt :cost {c['float_fn']})" for op in _FLOAT_OPS] + [f"(Inv Flt :cost {c['float_fn']})"]
+    return "\n".join([
+        f"(datatype Flt {' '.join(flt)})",
+        f"(datatype Ax {axes})",
+        f"(datatype Cnt (N i64 :cost {c['cat']}))",
+        f"(datatype Shape {' '.join(shapes)})",
+        "(function val (Flt) f64 :merge old)",
+        "(relation norot (Shape))",
+        "(ruleset rw)",
+    ])
+
+
+def _bookkeeping(lib: Library) -> list:
+    """The value-table rules: leaves, then each float operator (a Div by about 0 gets no value)."""
+    rules = ["(rule ((= e (Num x))) ((set (val e) x)) :ruleset rw)",
+             "(rule ((= e (K x))) ((set (val e) x)) :ruleset rw)",
+             "(rule ((= e (Inv a)) (= va (val a))) ((set (val e) (neg va))) :ruleset rw)"]
+    for op, sym in _FLOAT_OPS.items():
+        guard = " (> (abs vb) 0.000001)" if op == "Div" else ""
+        rules.append(f"(rule ((= e ({op} a b)) (= va (val a)) (= vb (val b)){guard}) "
+                     f"((set (val e) ({sym} va vb))) :ruleset rw)")
+    # norot: the shape has no rotated part, so reflecting it about its own centre changes nothing
+    prim = "Cuboid" if lib.lang.dim == 3 else "Rectangle"
+    args = " ".join("_" for _ in range(lib.lang.dim))
+    move = " ".join("_" for _ in range(lib.lang.dim))
+    rules += [f"(rule ((= s ({prim} {args}))) ((norot s)) :ruleset rw)",
+              f"(rule ((= s (Move a {move})) (norot a)) ((norot s)) :ruleset rw)",
+              "(rule ((= s (Union a b)) (norot a) (norot b)) ((norot s)) :ruleset rw)",
+              "(rule ((= s (SymRef a _)) (norot a)) ((norot s)) :ruleset rw)",
+              "(rule ((= s (SymTrans a _ _ _)) (norot a)) ((norot s)) :ruleset rw)"]
+    for ab in lib.abstractions:
+        if not any(isinstance(n, Call) and (n.fn == "Rotate" or (n.fn in lib and not _norot_ab(lib, n.fn)))
+                   for n in walk(ab.body)):
+            pats = " ".join("_" for _ in ab.params)
+            rules.append(f"(rule ((= s ({_AB}{ab.name} {pats}))) ((norot s)) :ruleset rw)")
+    return rules
+
+
+def _norot_ab(lib: Library, name: str) -> bool:
+    return not any(isinstance(n, Call) and (n.fn == "Rotate" or (n.fn in lib and not _norot_ab(lib, n.fn)))
+                   for n in walk(lib[name].body))
+
+
+def semantic_rules(lang: Lang) -> list:
+    """The semantic rewrites as egglog commands (3D: the paper's 25 rules, 36 directed rules; 2D: the 17
+    of the reference's 2D list). Numbered as in docs/shapecoder.md; ``C`` rules are guarded with
+    :data:`SEMANTIC_TOL`."""
+    t = _f64(SEMANTIC_TOL + _EPS)
+    k = lang.dim
+    co = ["x", "y", "z"][:k]
+    p1 = " ".join(f"{c}1" for c in co)
+    p2 = " ".join(f"{c}2" for c in co)
+    prim = "Cuboid" if k == 3 else "Rectangle"
+    dims1 = " ".join(["a1", "b1", "c1"][:k])
+    dims2 = " ".join(["a2", "b2", "c2"][:k])
+    rules = []
+
+    def vals(names):
+        return " ".join(f"(= v{n} (val {n}))" for n in names)
+
+    for i, ax in enumerate(lang.axes):
+        c = co[i]
+        # 1-3 (B) reflect-offset flip, guarded: the reflected shape has no rotated part
+        flipped = " ".join(f"(Inv {c}1)" if j == i else f"{co[j]}1" for j in range(k))
+        rules.append(f"(rule ((= s (SymRef (Move S {p1}) ({ax}))) (norot S)) "
+                     f"((union s (SymRef (Move S {flipped}) ({ax})))) :ruleset rw)")
+        # 4-6 (C) symmetry introduction: equal dims, equal off-axis coordinates, opposite on the axis
+        guards = [_close(f"v{d1}", f"v{d2}", SEMANTIC_TOL) for d1, d2 in zip(dims1.split(), dims2.split())]
+        for j in range(k):
+            if j == i:
+                guards.append(f"(<= (abs (+ v{co[j]}1 v{co[j]}2)) {t})")
+                guards.append(f"(< v{co[j]}1 0.0)")
+            else:
+                guards.append(_close(f"v{co[j]}1", f"v{co[j]}2", SEMANTIC_TOL))
+        names = dims1.split() + dims2.split() + [f"{c_}1" for c_ in co] + [f"{c_}2" for c_ in co]
+        rules.append(f"(rule ((= s (Union (Move ({prim} {dims1}) {p1}) (Move ({prim} {dims2}) {p2}))) "
+                     f"{vals(names)} {' '.join(guards)}) "
+                     f"((union s (SymRef (Move ({prim} {dims1}) {p1}) ({ax})))) :ruleset rw)")
+        # 7-9 symmetry expansion (of a single box, which is its own mirror image)
+        rules.append(f"(rewrite (SymRef (Move ({prim} {dims1}) {p1}) ({ax})) "
+                     f"(Union (Move ({prim} {dims1}) {p1}) (Move ({prim} {dims1}) {flipped})) :ruleset rw)")
+    pq = " ".join(f"(Add {c}1 {c}2)" for c in co)
+    # 10 (B) SymTrans absorbs an outer Move
+    rules.append(f"(birewrite (Move (SymTrans (Move S {p1}) A n d) {p2}) (SymTrans (Move S {pq}) A n d) :ruleset rw)")
+    # 11 (C) pull a common Move out of a Union
+    rules.append(f"(rule ((= s (Union (Move S1 {p1}) (Move S2 {p2}))) {vals([f'{c}1' for c in co] + [f'{c}2' for c in co])} "
+                 + " ".join(_close(f"v{c}1", f"v{c}2", SEMANTIC_TOL) for c in co)
+                 + f") ((union s (Move (Union S1 S2) {p1}))) :ruleset rw)")
+    # 12 push a Move into a Union
+    rules.append(f"(rewrite (Move (Union S1 S2) {p1}) (Union (Move S1 {p1}) (Move S2 {p1})) :ruleset rw)")
+    # 13 (B) merge nested Moves
+    rules.append(f"(birewrite (Move (Move S {p1}) {p2}) (Move S {pq}) :ruleset rw)")
+    # 14 (C) drop a zero Move
+    rules.append(f"(rule ((= s (Move S {p1})) {vals([f'{c}1' for c in co])} "
+                 + " ".join(f"(<= (abs v{c}1) {t})" for c in co) + ") ((union s S)) :ruleset rw)")
+    # 15 Union commutativity, 16 (B) associativity
+    rules.append("(rewrite (Union S1 S2) (Union S2 S1) :ruleset rw)")
+    rules.append("(birewrite (Union S1 (Union S2 S3)) (Union (Union S1 S2) S3) :ruleset rw)")
+    # 17 Inv(Inv(a)) -> a
+    rules.append("(rewrite (Inv (Inv a)) a :ruleset rw)")
+    if k == 3:
+        # 18 (B) merge nested Rotates about one axis
+        rules.append("(birewrite (Rotate (Rotate S A a) A b) (Rotate S A (Add a b)) :ruleset rw)")
+        # 19 (C) drop a zero Rotate
+        rules.append(f"(rule ((= s (Rotate S A a)) (= va (val a)) (<= (abs va) {t})) ((union s S)) :ruleset rw)")
+        # 20 (C) pull a common Rotate out of a Union
+        rules.append(f"(rule ((= s (Union (Rotate S1 A a) (Rotate S2 A b))) (= va (val a)) (= vb (val b)) "
+                     f"{_close('va', 'vb', SEMANTIC_TOL)}) ((union s (Rotate (Union S1 S2) A a))) :ruleset rw)")
+        # 21 push a Rotate into a Union
+        rules.append("(rewrite (Rotate (Union S1 S2) A a) (Union (Rotate S1 A a) (Rotate S2 A a)) :ruleset rw)")
+        # 22 (B) swap Move and Rotate (parts turn about their own centres)
+        rules.append(f"(birewrite (Rotate (Move S {p1}) A a) (Move (Rotate S A a) {p1}) :ruleset rw)")
+    # 23 (B) SymRef over a Union
+    rules.append("(birewrite (SymRef (Union S1 S2) A) (Union (SymRef S1 A) (SymRef S2 A)) :ruleset rw)")
+    # 24-25 (C) Add with an addend of about 0
+    rules.append(f"(rule ((= e (Add a b)) (= va (val a)) (<= (abs va) {t})) ((union e b)) :ruleset rw)")
+    rules.append(f"(rule ((= e (Add a b)) (= vb (val b)) (<= (abs vb) {t})) ((union e a)) :ruleset rw)")
+    return rules
+
+
+def abstraction_rule(ab: Abstraction, lib: Library, tol: float | None = None) -> str | None:
+    """The conditional rewrite that introduces ``ab``: its body with every Float slot of a shape function
+    replaced by a pattern variable; the first plain occurrence of each Float parameter binds it, and every
+    other slot (a repeated parameter, a float expression over the parameters, a literal) becomes a guard
+    comparing the slot's value with the value the body computes (within ``tol``, by default
+    :data:`ABSTRACTION_TOL` of the domain). Axis and Int parameters are pattern variables (a repeat must be
+    the same e-class); axis and count literals are matched exactly.
+
+    Returns:
+        the egglog rule text, or None when a Float parameter never fills a slot on its own (the rule
+        could not bind it).
+    """
+    tol = ABSTRACTION_TOL[lib.lang.name] if tol is None else tol
+    ptypes = {p.name: p.type for p in ab.params}
+    bound: dict = {}  # Float param -> slot pattern var
+    slots: list = []  # (pattern var, float expression of the body)
+    cat: dict = {}
+    counter = [0]
+
+    def pat(e: Expr, want: Type) -> str:
+        if isinstance(e, Call):
+            sig = lib.signature(e.fn)
+            if sig.kind == "float_fn":
+                raise AssertionError  # float expressions appear only in slots, handled below
+            parts = [_AB + e.fn if e.fn in lib else e.fn]
+            for a, t in zip(e.args, sig.params):
+                if t is Type.FLOAT:
+                    counter[0] += 1
+                    v = f"f{counter[0]}"
+                    if isinstance(a, Var) and a.name not in bound:
+                        bound[a.name] = v
+                    else:
+                        slots.append((v, a))
+                    parts.append(v)
+                else:
+                    parts.append(pat(a, t))
+            return "(" + " ".join(parts) + ")"
+        if isinstance(e, AxisConst):
+            return f"({e.name})"
+        if isinstance(e, IntConst):
+            return f"(N {e.value})"
+        if isinstance(e, Var):
+            if e.name not in cat:
+                cat[e.name] = f"c_{e.name}"
+            return cat[e.name]
+        raise ProgramError(f"{ab.name}: unexpected node in the body: {_short(e)}")
+
+    lhs = pat(ab.body, Type.SHAPE)
+    floats = [p.name for p in ab.params if p.type is Type.FLOAT]
+    if any(n not in bound for n in floats):
+        return None
+    queries = [f"(= s {lhs})"]
+    needed = set()
+    guards = []
+    for v, e in slots:
+        needed.add(v)
+        guards.append(_close(f"v{v}", _value_expr(e, bound, needed), tol))
+    for n in floats:
+        if bound[n] in needed:
+            pass
+    queries += [f"(= v{v} (val {v}))" for v in sorted(needed)]
+    args = []
+    for p in ab.params:
+        args.append(bound[p.name] if p.type is Type.FLOAT else cat[p.name])
+    del ptypes
+    return (f"(rule ({' '.join(queries + guards)}) ((union s ({_AB}{ab.name} {' '.join(args)}))) :ruleset rw)")
+
+
+def _value_expr(e: Expr, bound: Mapping, needed: set) -> str:
+    """egglog f64 arithmetic computing a float expression of an abstraction body from the bound slots."""
+    if isinstance(e, Num):
+        return _f64(e.value)
+    if isinstance(e, Var):
+        needed.add(bound[e.name])
+        return f"v{bound[e.name]}"
+    if isinstance(e, Call):
+        if e.fn == "Inv":
+            return f"(neg {_value_expr(e.args[0], bound, needed)})"
+        a, b = (_value_expr(x, bound, needed) for x in e.args)
+        return f"({_FLOAT_OPS[e.fn]} {a} {b})"
+    raise ProgramError(f"not a float expression: {_short(e)}")
+
+
+def egglog_program(lib: Library, semantic=None) -> str:
+    """The egglog declarations and rules for ``lib``: sorts, the value table, the bookkeeping rules, the
+    semantic rules (all, or those at the positions ``semantic`` of :func:`semantic_rules`) and one rule per
+    abstraction (those :func:`abstraction_rule` can express)."""
+    sem = semantic_rules(lib.lang)
+    rules = _bookkeeping(lib) + (sem if semantic is None else [sem[i] for i in semantic])
+    for ab in lib.abstractions:
+        r = abstraction_rule(ab, lib)
+        if r is not None:
+            rules.append(r)
+    return _declarations(lib) + "\n" + "\n".join(rules) + "\n"
+
+
+# ----------------------------------------------------------------------------- program <-> term
+
+
+def _term(e: Expr, lib: Library) -> str:
+    if isinstance(e, Call):
+        return "(" + (_AB + e.fn if e.fn in lib else e.fn) + "".join(" " + _term(a, lib) for a in e.args) + ")"
+    if isinstance(e, Num):
+        v = round(e.value, 12) + 0.0
+        return f"(K {_f64(v)})" if v in FLOAT_CONSTANTS else f"(Num {_f64(v)})"
+    if isinstance(e, AxisConst):
+        return f"({e.name})"
+    if isinstance(e, IntConst):
+        return f"(N {e.value})"
+    raise RefactorError(f"unbound variable {e.name!r}" if isinstance(e, Var) else f"bad node {e!r}")
+
+
+_SEXP = re.compile(r"\(|\)|[^\s()]+")
+
+
+def _from_term(text: str, lib: Library) -> Expr:
+    toks = _SEXP.findall(text)
+    pos = [0]
+
+    def go():
+        tok = toks[pos[0]]
+        pos[0] += 1
+        if tok != "(":
+            raise RefactorError(f"unexpected token {tok!r} in the extracted term")
+        head = toks[pos[0]]
+        pos[0] += 1
+        if head in ("Num", "K"):
+            out = Num(float(toks[pos[0]]))
+            pos[0] += 1
+        elif head == "N":
+            out = IntConst(int(toks[pos[0]]))
+            pos[0] += 1
+        elif head in AXES:
+            out = AxisConst(head)
+        else:
+            args = []
+            while toks[pos[0]] != ")":
+                args.append(go())
+            out = Call(head[len(_AB):] if head.startswith(_AB) else head, tuple(args))
+        if toks[pos[0]] != ")":
+            raise RefactorError(f"malformed extracted term near {toks[pos[0]]!r}")
+        pos[0] += 1
+        return out
+
+    return go()
+
+
+# ----------------------------------------------------------------------------- the refactor call
+
+_LOG = logging.getLogger(__name__)
+
+#: Default limits (the reference's egg settings: 5 iterations, 10,000 e-nodes, 5 s).
+MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT = 5, 10_000, 5.0
+
+
+def _check_limits(iterations, max_nodes, time_limit):
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or not 0 <= iterations <= 1000:
+        raise RefactorError(f"iterations must be an int from 0 to 1000, got {iterations!r}")
+    if isinstance(max_nodes, bool) or not isinstance(max_nodes, int) or not 1 <= max_nodes <= 10_000_000:
+        raise RefactorError(f"max_nodes must be an int from 1 to 10,000,000, got {max_nodes!r}")
+    if not isinstance(time_limit, (int, float)) or not 0 < time_limit <= 3600 or not math.isfinite(time_limit):
+        raise RefactorError(f"time_limit must be seconds in (0, 3600], got {time_limit!r}")
+
+
+def _node_count(eg, bindings) -> int:
+    out = eg.run_program(*eg.parse_program("(print-size)"))
+    return sum(n for name, n in out[0].sizes if name not in ("val", "norot"))
+
+
+def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | None = None, *,
+             iterations: int = MAX_ITERATIONS, max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT,
+             rules: str | None = None) -> Refactored:
+    """Refactor one program with the semantic rewrites and the library's abstractions.
+
+    Args:
+        expr: a Shape expression of ``library`` (abstraction calls are kept as e-nodes).
+        library: a :class:`~shapeprog.coder.lang.Library` (or a bare domain); :data:`LANG_3D` by default.
+        env: values of the program's Float variables (e.g. a naive program's ``S_i_j_``); Axis and Int
+            variables are not allowed.
+        iterations, max_nodes, time_limit: the e-graph limits (checked before each iteration).
+        rules: the text of :func:`egglog_program` for ``library``, when the caller has it already.
+
+    Returns:
+        :class:`Refactored`; the input program itself when extraction finds nothing cheaper.
+
+    Raises:
+        RefactorError: a program that is not a closed Shape expression, a limit out of range, or an
+            egglog failure.
+    """
+    from egglog import bindings
+
+    from .objective import program_cost
+
+    t0 = time.perf_counter()
+    lib = _library(library)
+    _check_limits(iterations, max_nodes, time_limit)
+    try:
+        check(expr, lib, Type.SHAPE)
+    except ProgramError as e:
+        raise RefactorError(str(e)) from None
+    if env:
+        expr = substitute(expr, {k: Num(float(v)) for k, v in env.items()
+                                 if isinstance(v, (int, float)) and not isinstance(v, bool)})
+    free = [n for n in walk(expr) if isinstance(n, Var)]
+    if free:
+        raise RefactorError(f"variable {free[0].name!r} has no value in {_short(expr)}")
+    input_cost = program_cost(expr, lib)
+    eg = bindings.EGraph()
+    try:
+        eg.run_program(*eg.parse_program(rules if rules is not None else egglog_program(lib)))
+        eg.run_program(*eg.parse_program(f"(let $root {_term(expr, lib)})"))
+        stop, done = "iterations", 0
+        nodes = _node_count(eg, bindings)
+        for _ in range(iterations):
+            if nodes > max_nodes:
+                stop = "nodes"
+                break
+            if time.perf_counter() - t0 > time_limit:
+                stop = "time"
+                break
+            rep = eg.run_program(*eg.parse_program("(run rw 1)"))
+            done += 1
+            nodes = _node_count(eg, bindings)
+            if not rep[0].report.updated:
+                stop = "saturated"
+                break
+        out = eg.run_program(*eg.parse_program("(extract $root)"))[0]
+        best = _from_term(out.termdag.to_string(out.term), lib)
+    except RefactorError:
+        raise
+    except Exception as e:  # egglog reports its own errors (EggSmolError and others)
+        raise RefactorError(f"egglog failed on {_short(expr)}: {e}") from None
+    if stop in ("nodes", "time"):
+        _LOG.info("e-graph stopped early (%s limit) after %d iteration(s), %d e-nodes: %s", stop, done, nodes,
+                  _short(expr))
+    cost = program_cost(best, lib)
+    if cost >= input_cost:
+        best, cost = expr, input_cost
+    return Refactored(best, cost, input_cost, stop, done, nodes, time.perf_counter() - t0)
