@@ -35,6 +35,7 @@ import torch
 
 from ..errors import PointCloudError
 from ..execute import execute
+from ..geometry import CORNER_SIGNS
 from ..fit import fit as fit_program
 from ..lang import Program, to_text
 from ..metrics import chamfer, fscore
@@ -47,7 +48,7 @@ from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 
 __all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MIN_POINTS", "PRETRAINED", "CloudModel", "Inference",
-           "align_program", "infer", "load_model", "load_pretrained", "shape_metrics"]
+           "align_program", "cloud_corners", "infer", "load_model", "load_pretrained", "shape_metrics"]
 
 #: Fewest points :func:`infer` takes.
 MIN_POINTS = 16
@@ -63,9 +64,28 @@ METRIC_POINTS = 10_000
 PRETRAINED = {"chair": "pointcloud_latent_chair.pt"}
 WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
 _FORMAT, _VERSION = "shapeprog-pointcloud", 1
+#: Cloud points drawn as cubes in pictures, and the cubes' side (canonical units).
+_PICTURE_POINTS, _PICTURE_CUBE = 512, 0.03
 
 
 # ------------------------------------------------------------------------------------------ models
+
+
+def cloud_corners(points, count: int = _PICTURE_POINTS, side: float = _PICTURE_CUBE) -> torch.Tensor:
+    """A cloud as small axis-aligned cubes, for :func:`shapeprog.picture.render_grid`.
+
+    Args:
+        points: ``(N, 3)`` float, y up.
+        count: the first ``count`` points are drawn (the clouds are random subsets already).
+        side: the cubes' edge length.
+
+    Returns:
+        ``(min(N, count), 8, 3) float32`` corners in the spec's corner order.
+    """
+    p = torch.as_tensor(points, dtype=torch.float32)[:count]
+    signs = torch.as_tensor(CORNER_SIGNS, dtype=torch.float32)
+    return p[:, None, :] + (side / 2) * signs[None]
+
 
 
 class CloudModel(torch.nn.Module):

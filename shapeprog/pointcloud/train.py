@@ -36,7 +36,6 @@ from torch.utils.data import DataLoader, Dataset
 
 from shapeio import atomic_write
 
-from ..geometry import CORNER_SIGNS
 from ..picture import render_grid
 from ..vae.batch import BatchOutput, TreeBatch, batch_loss, decode_batch, encode_batch
 from ..vae.decode import decode_latent
@@ -47,9 +46,10 @@ from ..vae.train import _corners, load_trees, reconstruction_fscores, target_sur
 from ..vae.vectors import VectorNode, tree_to_program
 from .data import TRAIN_POINTS, CloudDataset, collate_clouds
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
+from .infer import cloud_corners
 
 __all__ = ["CHECKPOINT_FORMAT", "RECIPES", "WEIGHTS_FORMAT", "CloudDataModule", "EndToEndModule",
-           "LatentRegressionModule", "cloud_corners", "export_weights"]
+           "LatentRegressionModule", "export_weights"]
 
 #: Version of what the modules add to their checkpoints (``checkpoint["shapeprog_pointcloud"]``).
 CHECKPOINT_FORMAT = 1
@@ -57,26 +57,6 @@ CHECKPOINT_FORMAT = 1
 WEIGHTS_FORMAT = "shapeprog-pointcloud"
 #: The recipes and the module of each.
 RECIPES = ("latent", "e2e")
-#: Cloud points drawn as cubes in the image grids, and the cubes' side (canonical units).
-_PICTURE_POINTS, _PICTURE_CUBE = 384, 0.03
-
-
-def cloud_corners(points, count: int = _PICTURE_POINTS, side: float = _PICTURE_CUBE) -> torch.Tensor:
-    """A cloud as small axis-aligned cubes, for :func:`shapeprog.picture.render_grid`.
-
-    Args:
-        points: ``(N, 3)`` float, y up.
-        count: the first ``count`` points are drawn (the clouds are random subsets already).
-        side: the cubes' edge length.
-
-    Returns:
-        ``(min(N, count), 8, 3) float32`` corners in the spec's corner order.
-    """
-    p = torch.as_tensor(points, dtype=torch.float32)[:count]
-    signs = torch.as_tensor(CORNER_SIGNS, dtype=torch.float32)
-    return p[:, None, :] + (side / 2) * signs[None]
-
-
 # ------------------------------------------------------------------------------------------ data
 
 
