@@ -237,6 +237,34 @@ def _cmd_infer(args) -> int:
     return 0
 
 
+def _cmd_pointcloud_tables(args) -> int:
+    from .pointcloud.tables import evaluate, write_tables
+
+    executor = None
+    if args.workers > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        executor = ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def progress(done, total):
+        if not args.quiet and (done % 10 == 0 or done == total):
+            print(f"{done}/{total} shapes", file=sys.stderr, flush=True)
+
+    try:
+        result = evaluate(args.clouds, args.category, weights=args.weights, limit=args.limit, steps=args.steps,
+                          stability=not args.no_stability, retrieval=not args.no_retrieval, executor=executor,
+                          seed=args.seed, progress=progress)
+    finally:
+        if executor is not None:
+            executor.shutdown()
+    command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
+    write_tables(result, args.out, command)
+    for row, m in result.rows.items():
+        print(f"{row}: {m}")
+    print(f"wrote {args.out}")
+    return 0
+
+
 def _cmd_make_clouds(args) -> int:
     from tqdm import tqdm
 
@@ -552,6 +580,23 @@ def main(argv=None) -> int:
     i.add_argument("--seed", type=int, default=0, help="seed of the point subsets")
     i.add_argument("--out", required=True, help="output folder (created if missing)")
     i.set_defaults(func=_cmd_infer)
+    pt = sub.add_parser("pointcloud-tables", help="the papers' point-cloud reconstruction tables on the test split",
+                        description="Measure the point-cloud model (no fitting, Opt Program, Opt Cuboids) and the "
+                                    "retrieval baseline on the test split of a make-clouds cache (noisy 2,048-point "
+                                    "inputs in random scale and position) and write the ShapeMOD Table 3 and "
+                                    "ShapeAssembly Table 7 layouts as Markdown.")
+    pt.add_argument("--category", default="chair", choices=corpus.CATEGORIES, help="the category")
+    pt.add_argument("--clouds", required=True, help="the make-clouds folder")
+    pt.add_argument("--weights", help="a point-cloud weights file (default: the shipped model)")
+    pt.add_argument("--limit", type=_int_at_least(1), help="the first N test shapes only")
+    pt.add_argument("--steps", type=_int_at_least(0), default=150, help="fitting steps of the optimisation rows")
+    pt.add_argument("--no-stability", action="store_true", help="skip the stability test")
+    pt.add_argument("--no-retrieval", action="store_true", help="leave out the retrieval row")
+    pt.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the per-shape work")
+    pt.add_argument("--seed", type=int, default=0, help="seed of the inputs' noise, subsets, scales and positions")
+    pt.add_argument("--quiet", action="store_true", help="no progress lines")
+    pt.add_argument("--out", required=True, help="Markdown file (e.g. docs/tables/pointcloud_chair.md)")
+    pt.set_defaults(func=_cmd_pointcloud_tables, argv=None)
     m = sub.add_parser("make-clouds", help="sample point clouds of a category's corpus shapes into a cache",
                        description="Sample area-weighted surface points of every executed program of a category "
                                    "into <out>/<category>_clouds.npz, and write the train / val / test split "
@@ -656,6 +701,8 @@ def main(argv=None) -> int:
     t.add_argument("--seed", type=int, default=0, help="seed of the sampling and the training")
     t.set_defaults(func=_cmd_train_classifier)
     args = ap.parse_args(argv)
+    if getattr(args, "argv", False) is None:  # commands that record their own command line
+        args.argv = list(argv) if argv is not None else None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")
