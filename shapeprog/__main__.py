@@ -407,11 +407,22 @@ def _cmd_reconstruct(args) -> int:
     return 0
 
 
+def _is_pointcloud_checkpoint(path: str) -> bool:
+    """Whether ``path`` is a Lightning checkpoint of a :mod:`shapeprog.pointcloud.train` module."""
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:  # unreadable: the VAE exporter reports it, naming the file
+        return False
+    return isinstance(payload, dict) and "shapeprog_pointcloud" in payload
+
+
 def _cmd_export_weights(args) -> int:
     from .vae.pretrained import export_weights
 
     _check_outputs(others=[args.out])
     _refuse_overwrite([args.out], [args.checkpoint])
+    if Path(args.checkpoint).is_file() and _is_pointcloud_checkpoint(args.checkpoint):
+        from .pointcloud.train import export_weights  # noqa: F811 - a point-cloud model's checkpoint
     try:
         path = export_weights(args.checkpoint, args.out, half=not args.float32)
     except (FileNotFoundError, ValueError) as e:
@@ -657,10 +668,13 @@ def main(argv=None) -> int:
     c.add_argument("--seed", type=int, default=0, help="seed of the surface samples of the F-score")
     c.add_argument("--weights", help=weights_help)
     c.set_defaults(func=_cmd_reconstruct)
-    x = sub.add_parser("export-weights", help="write a VAE training checkpoint as a small weights file",
+    x = sub.add_parser("export-weights", help="write a VAE or point-cloud training checkpoint as a small weights file",
                        description="Write the VAE of a Lightning checkpoint (or weights file) as a weights file "
-                                   "that --weights and shapeprog.vae.load_pretrained read.")
-    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config configs/shapeassembly/...`")
+                                   "that --weights and shapeprog.vae.load_pretrained read; a checkpoint of a "
+                                   "point-cloud model (configs/pointcloud/) becomes the file that `infer "
+                                   "--weights` and shapeprog.pointcloud.load_model read.")
+    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config configs/shapeassembly/...` "
+                                      "or `configs/pointcloud/...`")
     x.add_argument("--out", required=True, help="the weights file to write (.pt)")
     x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
     x.set_defaults(func=_cmd_export_weights)

@@ -388,7 +388,12 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
     model decodes with the shipped VAE of its category). ``meta`` records epoch, step and what the caller adds.
     The file is written atomically; an existing ``out`` is replaced (it is the caller's to name).
     """
-    payload = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    try:
+        payload = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{checkpoint}: no such checkpoint") from None
+    except Exception as e:
+        raise ValueError(f"{checkpoint}: not a readable checkpoint ({type(e).__name__})") from None
     info = payload.get("shapeprog_pointcloud") if isinstance(payload, dict) else None
     if info is None:
         raise ValueError(f"{checkpoint}: not a checkpoint of a shapeprog.pointcloud.train module")

@@ -129,6 +129,10 @@ def test_fit_logs_images_and_resumes_from_last(clouds, tmp_path, cls):
         assert torch.allclose(model.codes(x), m2.encoder(x), atol=1e-5)
     with pytest.raises(ValueError, match="not 'table'"):
         load_model(path, "table")
+    # the export command recognises a point-cloud checkpoint
+    from shapeprog.__main__ import main
+    assert main(["export-weights", str(last), "--out", str(tmp_path / "cli.pt")]) == 0
+    assert load_model(tmp_path / "cli.pt").recipe == cls.recipe
 
 
 def test_latent_regression_overfits_a_handful_of_clouds(clouds):
