@@ -151,3 +151,13 @@ def test_the_shipped_chair_model_loads_safely_and_infers():
     assert payload["category"] == "chair" and payload["recipe"] in ("latent", "e2e")
     r = infer(corpus_cloud("chair", CHAIR, n_points=3000), "chair", physics=False)
     assert r.text.startswith("Assembly Program_0 {") and 0.0 <= r.metrics["fscore"] <= 100.0
+
+
+def test_a_z_up_cloud_gives_the_same_program_in_its_own_frame(model):
+    from shapeprog.pointcloud.normalize import Transform
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
+    rot = Transform((0.0, 0.0, 0.0), 1.0, "z").rotation  # canonical = rot @ input
+    r_y = infer(cloud, model=model, physics=False)
+    r_z = infer(cloud @ rot, model=model, up="z", physics=False)
+    assert to_text(r_y.canonical) == to_text(r_z.canonical)
+    assert np.allclose(r_z.corners(), r_y.corners() @ rot, atol=1e-3)
