@@ -23,7 +23,7 @@ import time
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Optional
 
 import numpy as np
 import torch
@@ -158,9 +158,15 @@ class TableResult:
 def _mean(results: list[dict], row: str) -> dict:
     ms = [r[row] for r in results if row in r]
     cds = [m["cd"] for m in ms if m["cd"] is not None]
-    pct = lambda key: 100.0 * float(np.mean([bool(m[key]) for m in ms])) if ms and ms[0][key] is not None else None  # noqa: E731
-    return {"cd": 1000.0 * float(np.mean(cds)) if cds else None, "fscore": float(np.mean([m["fscore"] for m in ms])),
-            "rooted": pct("rooted"), "stable": pct("stable"), "n": len(ms)}
+
+    def pct(key: str) -> Optional[float]:
+        if not ms or ms[0][key] is None:
+            return None
+        return 100.0 * float(np.mean([bool(m[key]) for m in ms]))
+
+    return {"cd": 1000.0 * float(np.mean(cds)) if cds else None,
+            "fscore": float(np.mean([m["fscore"] for m in ms])), "rooted": pct("rooted"), "stable": pct("stable"),
+            "n": len(ms)}
 
 
 def evaluate(root, category: str = "chair", weights=None, limit: Optional[int] = None, steps: int = FIT_STEPS,

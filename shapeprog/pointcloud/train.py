@@ -43,7 +43,7 @@ from ..vae.losses import LOSS_WEIGHTS
 from ..vae.model import VAE
 from ..vae.pretrained import load_model, load_pretrained
 from ..vae.train import _corners, load_trees, reconstruction_fscores, target_surfaces
-from ..vae.vectors import VectorNode, tree_to_program
+from ..vae.vectors import VectorNode
 from .data import TRAIN_POINTS, CloudDataset, collate_clouds
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
 from .infer import cloud_corners
