@@ -9,6 +9,7 @@
     python -m csgnet export-weights runs/x/checkpoints/best-012.ckpt --out csgnet/weights/csgnet2d.pt
     python -m csgnet table4 --weights "CSGNet RL=runs/rl.pt" csgnet/weights/csgnet2d.pt --images 50 --out table4.md
     python -m csgnet table6 --data data/synthetic --weights csgnet/weights/csgnet2d.pt --out table6.md
+    python -m csgnet edit "c(32,32,28)s(32,32,20)-" --port 8081 --no-browser
 """
 
 from __future__ import annotations
@@ -195,7 +196,10 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
         written = [export.save_png(img, stem.with_suffix(".png")), compare]
         _save_sheet(_contact_sheet([shape, img], cols=2), compare)
     else:
-        written = [export.save_obj(img, stem.with_suffix(".obj"))]
+        compare = stem.with_name(stem.name + "_compare.png")
+        written = [export.save_obj(img, stem.with_suffix(".obj")), compare]
+        _save_sheet(_contact_sheet([depth_view(shape, a) for a in range(3)]
+                                   + [depth_view(img, a) for a in range(3)], cols=3), compare)
     if program is not None:
         written.append(export.save_scad(program, stem.with_suffix(".scad")))
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))
@@ -366,13 +370,25 @@ def cmd_table6(args) -> int:
     return 0
 
 
+def depth_view(vol, axis: int) -> np.ndarray:
+    """A grey picture ``(64, 64) uint8`` of a voxel volume seen along ``axis`` (from index 0 on): each
+    pixel's first occupied voxel, near dark and far light; white where the ray meets nothing."""
+    vol = np.asarray(vol, dtype=bool)
+    hit = vol.any(axis=axis)
+    depth = np.argmax(vol, axis=axis).astype(np.float64) / max(vol.shape[axis] - 1, 1)
+    return np.where(hit, np.round(30 + 170 * depth), 255).astype(np.uint8)
+
+
 def _contact_sheet(images, cols: int = 6):
+    """Images side by side in grey frames: bool images are drawn black on white, uint8 ones as grey levels."""
     h, w = images[0].shape
     rows = -(-len(images) // cols)
     sheet = np.full((rows * (h + 2), cols * (w + 2)), 128, np.uint8)  # grey frames
     for i, img in enumerate(images):
         r, c = divmod(i, cols)
-        sheet[r * (h + 2) + 1: r * (h + 2) + 1 + h, c * (w + 2) + 1: c * (w + 2) + 1 + w] = np.where(img, 0, 255)
+        img = np.asarray(img)
+        grey = img if img.dtype == np.uint8 else np.where(img, 0, 255)
+        sheet[r * (h + 2) + 1: r * (h + 2) + 1 + h, c * (w + 2) + 1: c * (w + 2) + 1 + w] = grey
     return sheet
 
 
@@ -401,6 +417,51 @@ def _non_negative(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
     return value
+
+
+def cmd_edit(args) -> int:
+    import time
+
+    from shapeio.editing import import_viser
+
+    from .editor import CSGEditSession
+
+    try:
+        import_viser()
+    except ImportError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    if not Path(args.export_dir).is_dir():
+        print(f"error: {args.export_dir}: the export folder does not exist", file=sys.stderr)
+        return 1
+    text, name = args.program, "csg"
+    path = Path(args.program)
+    if path.is_file():  # a file holding a program (e.g. a parse result): its first non-blank line
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines() if ln.strip()]
+        if not lines:
+            print(f"error: {path}: no program in the file", file=sys.stderr)
+            return 1
+        text, name = lines[0], path.stem
+    if args.dim is None:
+        args.dim = 3 if any(h + "(" in text for p in primitives(3) for h in (p.kind, p.long) if h) else 2
+    session = CSGEditSession(text, args.dim, name=name)
+    if session.error is not None:
+        print(f"error: {session.error} (the page shows it; fix the text there)", file=sys.stderr)
+    from .editor.server import CSGEditorApp
+
+    app = CSGEditorApp(session, host=args.host, port=args.port, export_dir=args.export_dir, source_text=text)
+    print(f"editing {text!r} at {app.url} (exports go to {Path(args.export_dir).resolve()}); Ctrl-C stops",
+          flush=True)
+    if not args.no_browser:
+        import webbrowser
+
+        webbrowser.open(app.url)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        app.stop()
+    return 0
 
 
 def main(argv=None) -> int:
@@ -436,8 +497,9 @@ def main(argv=None) -> int:
 
     p = sub.add_parser("parse", help="infer programs for shapes (images, .npy grids, meshes)",
                        description="Infer a CSG program for each input shape and write, per input, "
-                       "NAME.txt (the program), a render (NAME.png and NAME_compare.png in 2D, NAME.obj in "
-                       "3D) and NAME.scad into --out. Inputs with the same name get NAME_2, NAME_3, ...; "
+                       "NAME.txt (the program), a render (NAME.png in 2D, NAME.obj in 3D), NAME_compare.png "
+                       "(the input beside the result; in 3D depth views along x, y and z, input above, "
+                       "result below) and NAME.scad into --out. Inputs with the same name get NAME_2, NAME_3, ...; "
                        "a command that would write over one of its inputs is refused. A file that cannot "
                        "be parsed is reported as 'error: FILE: reason' and the others are processed; the "
                        "exit status is 2 if any failed.")
@@ -508,6 +570,18 @@ def main(argv=None) -> int:
     t6.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
     t6.add_argument("--out", default=None, help="write the markdown table here")
     t6.set_defaults(func=cmd_table6)
+
+    ed = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",
+                        description="Serve an editor page for a CSG program: the live render, one slider per "
+                                    "primitive parameter, undo / redo / reset, export. Runs until interrupted. "
+                                    "See docs/editor.md.")
+    ed.add_argument("program", help='program text, e.g. "c(32,32,28)s(32,32,20)-", or a file whose first line is one')
+    ed.add_argument("--dim", type=int, choices=(2, 3), default=None, help="2 or 3 (default: guessed from the text)")
+    ed.add_argument("--port", type=int, default=8080, help="port of the page")
+    ed.add_argument("--host", default="127.0.0.1", help="address to bind (default: this machine only)")
+    ed.add_argument("--export-dir", default=".", help="the folder exports are written to (never elsewhere)")
+    ed.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    ed.set_defaults(func=cmd_edit)
 
     args = ap.parse_args(argv)
     args.argv = list(argv) if argv is not None else sys.argv[1:]

@@ -27,11 +27,21 @@ from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
            "load_pretrained", "infer", "Inference",
-           "WEIGHTS", "PRETRAINED"]
+           "WEIGHTS", "PRETRAINED", "SHIPPED"]
 
 WEIGHTS = Path(__file__).parent / "weights"
 # the shipped model per dimension (trained with the command recorded in docs/benchmarks.md)
 PRETRAINED = {2: "csgnet2d.pt", 3: "csgnet3d.pt"}
+KINDS = ("csgnet", "csgnetstack")
+TUNINGS = ("supervised", "reinforce", "selftrain")
+# (dim, kind, tuning) -> the shipped file (docs/benchmarks.md says how each was trained)
+SHIPPED = {
+    (2, "csgnet", "supervised"): "csgnet2d.pt",
+    (3, "csgnet", "supervised"): "csgnet3d.pt",
+    (2, "csgnetstack", "supervised"): "csgnetstack2d.pt",
+    (2, "csgnet", "reinforce"): "rl_csgnet2d.pt",
+    (2, "csgnetstack", "reinforce"): "rl_csgnetstack2d.pt",
+}
 
 
 
@@ -159,11 +169,28 @@ def export_weights(checkpoint, out, half: bool = True) -> Path:
     return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
 
 
-def load_pretrained(dim: int = 2, device=None) -> CSGNet:
-    """The model shipped with the package for ``dim`` (see ``docs/benchmarks.md`` for how it was trained)."""
+def load_pretrained(dim: int = 2, kind: str = "csgnet", tuning: str = "supervised", device=None) -> CSGNet:
+    """A model shipped with the package (see ``docs/benchmarks.md`` for how each was trained).
+
+    Args:
+        dim: 2 or 3.
+        kind: ``"csgnet"`` or ``"csgnetstack"``.
+        tuning: ``"supervised"`` (trained on synthetic programs), or fine-tuned on the silhouettes without
+            programs: ``"reinforce"`` or ``"selftrain"``.
+        device: where to put the model.
+
+    Raises:
+        ValueError: an unknown ``dim``, ``kind`` or ``tuning``, or a combination not shipped (the message
+            lists those that are).
+    """
     if dim not in PRETRAINED:
         raise ValueError(f"dim must be 2 or 3, got {dim!r}")
-    path = WEIGHTS / PRETRAINED[dim]
+    if kind not in KINDS or tuning not in TUNINGS:
+        raise ValueError(f"kind must be one of {KINDS} and tuning one of {TUNINGS}, got {kind!r}, {tuning!r}")
+    if (dim, kind, tuning) not in SHIPPED:
+        have = ", ".join(f"({d}, {k!r}, {t!r})" for d, k, t in sorted(SHIPPED))
+        raise ValueError(f"no {tuning} {kind} model is shipped for {dim}D; shipped (dim, kind, tuning): {have}")
+    path = WEIGHTS / SHIPPED[(dim, kind, tuning)]
     if not path.is_file():
         raise FileNotFoundError(f"the shipped {dim}D weights {path} are missing from this installation")
     return load_model(path, device)

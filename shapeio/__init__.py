@@ -2,8 +2,10 @@
 
 One module per format family, NumPy-level (no torch needed); see ``docs/shapeio.md``:
 
-* :mod:`shapeio.files`: :func:`atomic_write`, :func:`refuse_overwrite`, :func:`remove_stale_temps`,
-  :class:`InputError`.
+* :mod:`shapeio.files`: :func:`atomic_write`, :func:`write_new`, :func:`refuse_overwrite`,
+  :func:`remove_stale_temps`, :class:`InputError`.
+* :mod:`shapeio.editing`: what the program editors share: the undo / redo :class:`~shapeio.editing.History`,
+  the lazy import of the browser library.
 * :mod:`shapeio.image`: the PNG writer, users' images as bool masks, folders of target images.
 * :mod:`shapeio.mesh`: the mesh writer (OBJ, PLY, GLB) and users' meshes.
 * :mod:`shapeio.points`: point clouds (binary PLY, OBJ ``v`` lines).
@@ -12,6 +14,6 @@ One module per format family, NumPy-level (no torch needed); see ``docs/shapeio.
 ``import shapeio`` loads only :mod:`shapeio.files`; the format modules are imported by name.
 """
 
-from .files import InputError, atomic_write, refuse_overwrite, remove_stale_temps
+from .files import InputError, atomic_write, refuse_overwrite, remove_stale_temps, write_new
 
-__all__ = ["InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"]
+__all__ = ["InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new"]

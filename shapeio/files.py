@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Union
 
-__all__ = ["InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "STALE_TEMP_SECONDS"]
+__all__ = ["InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new", "STALE_TEMP_SECONDS"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -145,6 +145,60 @@ def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], ob
         except FileNotFoundError:
             pass
         raise
+    return path
+
+
+def write_new(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], object]]) -> Path:
+    """Write a file that must not exist yet, atomically: it never replaces a file.
+
+    The content is written and flushed as by :func:`atomic_write` to a temporary file beside ``path``,
+    which is then hard-linked to ``path`` (the link fails if ``path`` exists, so a file made meanwhile
+    by someone else is never replaced) and removed. On a file system without hard links the file is
+    created with ``O_EXCL`` instead (still never replacing, but readable while being written).
+
+    Args:
+        path: the new file.
+        data: bytes, text (UTF-8) or a function that writes to the open binary file.
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        FileExistsError: ``path`` exists.
+        FileNotFoundError: its directory does not exist.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{path}: directory {str(folder)!r} does not exist")
+    if os.path.lexists(path):
+        raise FileExistsError(f"{path}: the file exists; it is not replaced")
+
+    def write(f):
+        if callable(data):
+            data(f)
+        else:
+            f.write(data.encode("utf-8") if isinstance(data, str) else data)
+        f.flush()
+        os.fsync(f.fileno())
+
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.atomic-{os.getpid()}-", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), 0o666 & ~_umask())
+            write(f)
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            raise FileExistsError(f"{path}: the file exists; it is not replaced") from None
+        except OSError:  # no hard links here: an exclusive create
+            with open(path, "xb") as f:
+                write(f)
+    finally:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
     return path
 
 

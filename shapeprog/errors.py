@@ -9,10 +9,12 @@ Example:
     'line 4: a corner is not finite'
     >>> str(PointCloudError("a coordinate is NaN", "clouds", index=3))
     '`clouds`: cloud 3: a coordinate is NaN'
+    >>> str(EditError("value 1.5 is outside [0.0, 1.0]", "chair/173.txt", 5, 30, "0.5", control="Program_0:4:attach.y2"))
+    "chair/173.txt:5:30: control 'Program_0:4:attach.y2': value 1.5 is outside [0.0, 1.0]"
 """
 from __future__ import annotations
 
-__all__ = ["ExecutionError", "ParseError", "ParseWarning", "PointCloudError"]
+__all__ = ["EditError", "ExecutionError", "ParseError", "ParseWarning", "PointCloudError"]
 
 
 class ParseError(ValueError):
@@ -29,6 +31,24 @@ class ParseError(ValueError):
     def __init__(self, reason: str, file: str, line: int, column: int, token: str):
         self.reason, self.file, self.line, self.column, self.token = reason, file, line, column, token
         super().__init__(f"{file}:{line}:{column}: {reason}")
+
+
+class EditError(ParseError):
+    """An edit of a program that cannot be made: an unknown control, a value of the wrong type or outside
+    the control's range, or an edited program that the language refuses (e.g. beyond a limit).
+
+    It is a :class:`ParseError` located in the printed program at the token the control changes.
+
+    Attributes:
+        control: the control's name (None when the edit names no single control).
+        value: the value asked for (None when not one value's fault).
+    """
+
+    def __init__(self, reason: str, file: str, line: int, column: int, token: str, control: str | None = None,
+                 value=None):
+        self.control, self.value = control, value
+        super().__init__(reason if control is None else f"control {control!r}: {reason}", file, line, column, token)
+        self.reason = reason
 
 
 class ParseWarning(UserWarning):

@@ -19,8 +19,8 @@ import shapeprog
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
-PACKAGES = ["csgnet", "csgnet.renderer", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
-            "shapeprog.coder", "envs", "shapeio"]
+PACKAGES = ["csgnet", "csgnet.renderer", "csgnet.editor", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
+            "shapeprog.coder", "shapeprog.editor", "envs", "shapeio"]
 
 
 def _public_modules() -> list[str]:
@@ -51,6 +51,8 @@ PUBLIC = {
     "csgnet.renderer": {"Execution", "PrimitiveCache", "SIZE", "StackMachine", "apply_op_", "draw_packed",
                         "encode_programs", "encode_programs_ids", "encode_tokens", "execute", "pack", "popcount",
                         "primitive_cache", "render_programs", "render_tokens", "stack_trace", "unpack"},
+    "csgnet.editor": {"CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls",
+                      "render_png_bytes"},
     "shapeprog": {"ExecutionError", "ParseError", "corpus", "execute", "execute_batch", "fit", "parse",
                   "print_program", "to_text"},
     "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
@@ -69,8 +71,10 @@ PUBLIC = {
                         "Param", "ParseError", "ProgramError", "Type", "check", "data", "execute", "expand", "limits",
                         "match", "naive_cost", "naive_program", "naive_summary", "objective", "omega", "parse",
                         "parse_abstraction", "preference", "program_cost", "run", "to_text"},
+    "shapeprog.editor": {"BOOL", "CHOICE", "FLOAT", "INT", "Control", "EditSession", "apply", "controls",
+                         "corner_distance", "load_program"},
     "envs": set(),
-    "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps"},
+    "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new"},
 }
 
 

@@ -304,12 +304,15 @@ class VAEModule(L.LightningModule):
         image_shapes: reconstructions and samples shown in each image grid (0: no images).
         image_size: pixels per picture in the grids.
         seed: the draws of the F-score's surface samples and of the sampled shapes.
+        init: start from these weights (a file of :func:`~shapeprog.vae.pretrained.save_weights` or a training
+            checkpoint of the same category and size); the optimiser and the epoch count start afresh
+            (``--ckpt_path last`` resumes a run instead).
     """
 
     def __init__(self, category: str = "chair", hidden_dim: int = 256, lr: float = 1e-4, eps: float = 1e-6,
                  loss_weights: dict[str, float] | None = None, kl_weight: float | None = None, batch_shapes: int = 1,
                  recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 10_000,
-                 image_shapes: int = 8, image_size: int = 128, seed: int = 42):
+                 image_shapes: int = 8, image_size: int = 128, seed: int = 42, init: str | None = None):
         super().__init__()
         _check_category(category)
         if int(batch_shapes) < 1:
@@ -322,11 +325,23 @@ class VAEModule(L.LightningModule):
         if kl_weight is not None:
             self.weights["kl"] = float(kl_weight)
         self.vae = VAE(hidden_dim)
+        if init is not None:
+            self._load_init(init)
         self._recon_trees: list[VectorNode] = []
         # the F-score's shapes and their target samples, drawn on the first reconstruction epoch
         self._recon_targets: tuple[list[VectorNode], list[torch.Tensor]] | None = None
         self._window: torch.Tensor | None = None  # the training terms summed since they were last logged
         self._window_shapes = 0
+
+    def _load_init(self, path: str) -> None:
+        """Start from the weights of ``path`` (a weights file or a training checkpoint) of the same VAE."""
+        from .pretrained import read_weights
+        info, state = read_weights(path)
+        mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim}
+        theirs = {"category": info["category"], "hidden_dim": info["hidden_dim"]}
+        if theirs != mine:
+            raise ValueError(f"{path}: the weights are of a VAE with {theirs}, this run is {mine}")
+        self.vae.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
 
     def forward(self, batch: TreeBatch, sample: bool = True):
         """:func:`~shapeprog.vae.batch.batch_forward` of the model on ``batch``."""

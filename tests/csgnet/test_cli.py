@@ -147,3 +147,28 @@ def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
     (iou, _), = program_scores([written], load_shape(EXAMPLES / "table.obj"))
     assert f"after: IoU {100 * iou:.2f}%" in out
     assert (tmp_path / "table.obj").exists() and (tmp_path / "table.scad").exists()
+    # the comparison sheet: depth views along x, y, z of the input (top row) and of the written program
+    # (bottom row), 64 px + 2 px frame each, scaled x3
+    import numpy as np
+    from PIL import Image
+
+    from csgnet.__main__ import depth_view
+
+    sheet = np.asarray(Image.open(tmp_path / "table_compare.png").convert("L"))
+    assert sheet.shape == (2 * 66 * 3, 3 * 66 * 3)
+    vol = csgnet.render(written, dim=3)[0]
+    bottom_z = sheet[66 * 3 + 3::3, 2 * 66 * 3 + 3::3][:64, :64]  # the result's view along z, unscaled
+    assert np.array_equal(bottom_z, depth_view(vol, 2))
+
+
+def test_depth_view_shades_the_first_voxel_along_the_axis():
+    import numpy as np
+
+    from csgnet.__main__ import depth_view
+
+    vol = np.zeros((64, 64, 64), bool)
+    vol[10, 20, 0] = vol[10, 20, 63] = True  # the near voxel hides the far one
+    vol[5, 6, 63] = True
+    view = depth_view(vol, 2)
+    assert view[10, 20] == 30 and view[5, 6] == 200 and view[0, 0] == 255 and view.dtype == np.uint8
+    assert (view < 255).sum() == 2

@@ -15,7 +15,7 @@ import torch
 
 import csgnet
 from csgnet.decode import decode
-from csgnet.inference import PRETRAINED, WEIGHTS, load_model, load_pretrained, load_shape
+from csgnet.inference import PRETRAINED, SHIPPED, WEIGHTS, load_model, load_pretrained, load_shape
 
 HOUSE = Path(__file__).resolve().parents[2] / "examples" / "house.png"
 
@@ -38,61 +38,61 @@ TARGETS_3D = [
 EXPECTED = {
     "csgnet2d.pt": {
         "greedy": [
-            "c(32,32,28)c(32,32,24)+s(24,24,32)-c(32,32,24)+s(40,32,28)-",
-            "c(32,32,16)c(32,40,20)*s(48,32,20)+",
+            "c(32,32,28)s(32,32,24)-t(32,32,16)+s(32,32,16)-c(32,32,28)s(32,32,24)-+",
+            "c(32,32,16)s(24,40,12)+",
             "s(32,32,24)c(32,32,16)-",
-            "t(32,24,20)s(40,40,20)+t(32,40,32)*",
-            "c(16,16,12)c(32,32,8)+c(48,48,12)+",
-            "s(32,32,12)c(32,24,16)s(40,40,20)**",
+            "t(32,24,20)s(32,48,12)+",
+            "c(16,16,12)c(48,48,12)s(32,32,8)++",
+            "s(32,32,12)s(24,40,16)*",
             "c(32,32,20)t(32,16,12)-",
             "t(32,32,28)c(32,40,8)-",
-            "s(24,48,16)c(32,24,20)+",
+            "s(32,40,28)s(16,48,16)-t(40,24,16)+",
         ],
         "beam3": [
             [
-                "c(32,32,28)c(16,32,16)-s(32,24,20)-c(32,32,28)c(32,32,20)-+",
-                "c(32,32,28)c(16,32,16)-s(32,24,20)-c(32,32,28)c(32,32,24)--",
-                "c(32,32,28)c(16,32,16)-s(32,24,20)-c(32,32,28)c(32,32,20)-+c(32,32,24)-",
+                "c(32,32,28)s(32,32,24)t(32,32,20)--",
+                "c(32,32,28)s(32,32,24)t(32,32,20)--s(32,32,16)-",
+                "c(32,32,28)s(32,32,24)t(32,32,20)--s(32,32,16)-c(32,32,24)s(32,32,20)-+",
             ],
             [
-                "c(24,32,20)c(32,40,20)*",
-                "c(32,32,16)t(32,32,32)*",
-                "c(32,32,16)c(32,40,20)*s(48,32,20)+",
+                "c(32,32,16)s(24,40,12)+",
+                "c(32,32,16)s(24,40,16)+",
+                "c(32,32,16)s(24,40,12)-c(32,32,16)+",
             ],
             [
                 "s(32,32,24)c(32,32,16)-",
-                "s(32,32,20)c(32,32,16)-",
-                "s(32,32,24)s(32,32,20)-",
+                "s(32,32,24)c(32,32,16)c(32,32,16)*-",
+                "s(32,32,28)c(32,32,16)-",
             ],
             [
+                "t(32,24,20)s(32,48,12)+",
+                "s(32,48,12)t(32,24,20)+",
                 "t(32,24,20)s(32,40,12)+",
-                "t(32,24,20)s(32,40,16)+",
-                "t(32,24,20)s(40,40,20)+t(32,40,32)*",
             ],
             [
-                "c(16,16,12)c(32,32,8)+c(48,48,12)+",
-                "c(48,48,12)c(32,32,8)+c(16,16,12)+",
-                "c(16,16,12)c(48,48,12)+",
+                "c(16,16,12)c(48,48,12)s(32,32,8)++",
+                "c(48,48,12)c(16,16,12)s(32,32,8)++",
+                "c(16,16,12)c(48,48,12)+s(32,32,8)+",
             ],
             [
-                "s(40,24,20)s(24,40,20)*",
-                "s(40,24,20)s(24,40,20)*c(40,32,16)*",
-                "s(40,24,20)s(24,40,20)*s(32,32,12)*",
+                "s(32,32,12)s(24,40,16)*",
+                "s(32,32,12)s(40,40,16)*",
+                "s(32,32,12)s(24,40,20)*",
             ],
             [
                 "c(32,32,20)t(32,16,12)-",
-                "c(32,32,20)t(32,16,12)-t(32,16,12)+",
-                "c(32,32,20)t(32,16,12)-c(32,24,8)+",
+                "c(24,32,16)c(40,32,16)+t(32,16,16)-",
+                "c(24,32,16)c(40,32,16)+t(32,16,12)-",
             ],
             [
                 "t(32,32,28)c(32,40,8)-",
                 "t(32,32,24)c(32,40,8)-",
-                "t(32,32,32)c(32,40,8)-",
+                "t(32,32,28)c(32,40,8)c(32,40,8)--",
             ],
             [
-                "s(48,48,16)s(32,40,24)+",
-                "s(48,48,16)s(32,40,28)+",
-                "s(32,40,28)s(48,48,16)-t(32,24,24)+",
+                "s(32,40,28)s(16,48,16)-c(32,24,16)+",
+                "s(32,40,28)s(16,48,16)-t(40,24,16)+",
+                "s(32,40,28)s(16,48,16)-c(32,40,20)+",
             ],
         ],
     },
@@ -336,3 +336,18 @@ def test_beam_search_programs_are_unchanged(name):
     model = _model(name)
     decoded = decode(model, _targets(model.config.dim), 3)
     assert decoded.texts() == EXPECTED[name]["beam3"]
+
+
+def test_load_pretrained_names_every_shipped_model_and_refuses_the_others():
+    assert set(SHIPPED.values()) <= set(EXPECTED) and set(PRETRAINED.values()) <= set(SHIPPED.values())
+    for (dim, kind, tuning), file in SHIPPED.items():
+        model = load_pretrained(dim, kind=kind, tuning=tuning)
+        assert model.config.dim == dim and model.config.stack == (kind == "csgnetstack")
+        ref = load_model(WEIGHTS / file)
+        assert all(torch.equal(v, ref.state_dict()[k]) for k, v in model.state_dict().items())
+    with pytest.raises(ValueError, match=r"no supervised csgnetstack model is shipped for 3D; shipped .*\(2, 'csgnet'"):
+        load_pretrained(3, kind="csgnetstack")
+    with pytest.raises(ValueError, match="kind must be one of"):
+        load_pretrained(2, kind="csg")
+    with pytest.raises(ValueError, match="tuning one of"):
+        load_pretrained(2, tuning="rl")

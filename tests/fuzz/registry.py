@@ -13,6 +13,7 @@ MODULES = [
     "fuzz.shapeassembly_targets",
     "fuzz.pointcloud_targets",
     "fuzz.shapecoder_targets",
+    "fuzz.editor_targets",
 ]
 
 

@@ -241,6 +241,21 @@ def test_checkpoint_info_and_refusals():
         VAEModule("chair", loss_weights={"bbox": 1.0})
 
 
+def test_init_starts_from_weights_and_refuses_another_vae(tmp_path):
+    from shapeprog.vae.pretrained import save_weights
+    torch.manual_seed(0)
+    src = VAEModule("table", hidden_dim=8)
+    path = save_weights(src.vae, tmp_path / "w.pt", "table", half=False)
+    torch.manual_seed(1)  # another initialisation, replaced by init
+    again = VAEModule("table", hidden_dim=8, init=str(path))
+    mine, theirs = again.vae.state_dict(), src.vae.state_dict()
+    assert mine.keys() == theirs.keys() and all(torch.equal(mine[k], theirs[k]) for k in mine)
+    with pytest.raises(ValueError, match="w.pt: the weights are of a VAE with .*'table'.*this run is.*'chair'"):
+        VAEModule("chair", hidden_dim=8, init=str(path))
+    with pytest.raises(ValueError, match="this run is .*'hidden_dim': 16"):
+        VAEModule("table", hidden_dim=16, init=str(path))
+
+
 @dataclass
 class _Decoded:
     program: Program

@@ -1,0 +1,197 @@
+"""The CSG editor's browser page: a ``viser`` server over a :class:`~csgnet.editor.CSGEditSession`.
+
+``viser`` (the ``editor`` extra) is imported when a :class:`CSGEditorApp` is made. The page shows the live
+render (2D: the 64x64 canvas as an image, upscaled; 3D: the voxel volume's marching-cubes mesh in the 3D
+view), one slider per primitive parameter and a drop-down per primitive kind and operator, the program
+text (editable, "Run text"), the last error, and undo / redo / reset / export buttons.
+:attr:`CSGEditorApp.state` holds what the page shows.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from shapeio.editing import import_viser
+
+from . import CHOICE, CSGEditSession, Control
+
+__all__ = ["CSGEditorApp"]
+
+#: Pixels per canvas pixel in the page's 2D image.
+IMAGE_SCALE = 6
+
+
+class CSGEditorApp:
+    """A running CSG editor page (see :class:`shapeprog.editor.server.EditorApp` for the ShapeAssembly one).
+
+    Args:
+        session: the program to edit.
+        host, port: where to serve (``127.0.0.1``: this machine only).
+        export_dir: the folder exports go to.
+        source_text: the text as given (shown when it does not parse).
+    """
+
+    def __init__(self, session: CSGEditSession, host: str = "127.0.0.1", port: int = 8080, export_dir=".",
+                 source_text: str | None = None):
+        viser = import_viser()
+        self.export_dir = Path(export_dir)
+        if not self.export_dir.is_dir():
+            raise FileNotFoundError(f"{export_dir}: the export folder does not exist")
+        self.session = session
+        self.source_text = session.text if source_text is None else source_text
+        self.lock = threading.RLock()
+        self._syncing = False
+        self._handles: dict = {}
+        self._names: tuple = ()
+        self.state: dict = {"version": 0}
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        gui = self.server.gui
+        gui.add_markdown(f"**CSG program ({session.dim}D)**")
+        self.status = gui.add_markdown("")
+        self.error_md = gui.add_markdown("")
+        self.image = None
+        if session.dim == 2:
+            self.image = gui.add_image(self._picture(), label="render (64 x 64)", format="png")
+        row = gui.add_button_group("Edit", ("Undo", "Redo", "Reset"))
+        row.on_click(lambda e: {"Undo": self.undo, "Redo": self.redo, "Reset": self.reset}[e.target.value]())
+        gui.add_button("Export text and render", hint=f"into {self.export_dir}").on_click(lambda _: self.export())
+        self.text_box = gui.add_text("Program", self.source_text)
+        gui.add_button("Run text").on_click(lambda _: self.run_text())
+        self.folder = None
+        with self.lock:
+            self._rebuild()
+            self._draw()
+
+    def _picture(self) -> np.ndarray:
+        c = self.session.canvas
+        if c is None:
+            c = np.zeros((64, 64), bool)
+        img = np.where(c, 0, 255).astype(np.uint8)
+        img = np.repeat(np.repeat(img, IMAGE_SCALE, 0), IMAGE_SCALE, 1)
+        return np.repeat(img[:, :, None], 3, 2)
+
+    def _rebuild(self) -> None:
+        if self.folder is not None:
+            self.folder.remove()
+        gui = self.server.gui
+        self.folder = gui.add_folder("Parameters")
+        self._handles = {}
+        cs = self.session.controls()
+        self._names = tuple(c.name for c in cs)
+        self._syncing = True
+        try:
+            with self.folder:
+                for c in cs:
+                    self._handles[c.name] = self._add(c)
+        finally:
+            self._syncing = False
+
+    def _add(self, c: Control):
+        gui = self.server.gui
+        if c.kind == CHOICE:
+            h = gui.add_dropdown(c.label, tuple(c.choices), initial_value=c.value, hint=c.name)
+        else:
+            h = gui.add_slider(c.label, min=c.low, max=c.high, step=1, initial_value=c.value, hint=c.name)
+        h.on_update(lambda e, name=c.name: self._changed(name, e.target.value))
+        return h
+
+    def _sync(self) -> None:
+        cs = self.session.controls()
+        if tuple(c.name for c in cs) != self._names:
+            self._rebuild()
+            return
+        self._syncing = True
+        try:
+            for c in cs:
+                if self._handles[c.name].value != c.value:
+                    self._handles[c.name].value = c.value
+        finally:
+            self._syncing = False
+
+    def _changed(self, name: str, value) -> None:
+        if self._syncing:
+            return
+        with self.lock:
+            t0 = time.perf_counter()
+            if not isinstance(value, str):
+                value = int(round(value))
+            ok = self.session.set({name: value})
+            self._sync()
+            self._draw(t0 if ok else None)
+
+    def _step(self, move) -> bool:
+        with self.lock:
+            done = move()
+            self._sync()
+            self._draw()
+            return done
+
+    def undo(self) -> bool:
+        return self._step(self.session.undo)
+
+    def redo(self) -> bool:
+        return self._step(self.session.redo)
+
+    def reset(self) -> bool:
+        return self._step(self.session.reset)
+
+    def export(self) -> list[Path]:
+        with self.lock:
+            try:
+                paths = self.session.export(self.export_dir)
+            except (OSError, ValueError) as e:
+                self.session.error = e
+                self._draw()
+                return []
+            self.status.content = "wrote " + ", ".join(f"`{p.name}`" for p in paths)
+            self.state["exported"] = [str(p) for p in paths]
+            return paths
+
+    def run_text(self, text: str | None = None) -> bool:
+        with self.lock:
+            if text is not None:
+                self.text_box.value = text
+            ok = self.session.set_text(self.text_box.value)
+            if ok:
+                self._rebuild()
+            self._draw()
+            return ok
+
+    def _draw(self, t0: float | None = None) -> None:
+        s = self.session
+        if s.canvas is not None:
+            if s.dim == 2:
+                self.image.image = self._picture()
+            else:
+                from ..export import voxels_to_mesh
+
+                v, f = voxels_to_mesh(s.canvas)
+                if len(f):
+                    self.server.scene.add_mesh_simple("/shape", (v - 31.5) / 32.0, f, color=(90, 160, 230),
+                                                      flat_shading=True)
+                else:
+                    self.server.scene.remove_by_name("/shape")
+            if s.program is not None and self.text_box.value != s.text:
+                self.text_box.value = s.text
+        self.error_md.content = "" if s.error is None else f"**Error:** `{s.error}`"
+        if t0 is not None:
+            self.state["update_ms"] = 1000 * (time.perf_counter() - t0)
+        filled = 0 if s.canvas is None else int(np.asarray(s.canvas).sum())
+        self.status.content = f"{filled} filled {'pixels' if s.dim == 2 else 'voxels'}"
+        self.state.update(version=self.state["version"] + 1, text=s.text,
+                          canvas=None if s.canvas is None else np.asarray(s.canvas).copy(),
+                          error=None if s.error is None else str(s.error))
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    def handle(self, name: str):
+        """The GUI handle of control ``name`` (setting its ``value`` acts as a change in the page)."""
+        return self._handles[name]
+
+    def stop(self) -> None:
+        self.server.stop()

@@ -1,0 +1,102 @@
+"""What the two program editors (``shapeprog.editor``, ``csgnet.editor``) share: an undo / redo history
+of immutable states, and the lazy import of the browser library. Standard library only.
+
+Example:
+    >>> h = History("a")
+    >>> h.push("b"); h.push("c")
+    >>> h.undo(), h.undo(), h.can_undo
+    ('b', 'a', False)
+    >>> h.redo(), h.current
+    ('b', 'b')
+    >>> h.push("d"); h.can_redo   # a new state drops the redo branch
+    False
+"""
+from __future__ import annotations
+
+from typing import Generic, TypeVar
+
+__all__ = ["EDITOR_EXTRA", "History", "MAX_HISTORY", "import_viser"]
+
+T = TypeVar("T")
+
+#: The optional extra that installs the editors' browser library.
+EDITOR_EXTRA = "editor"
+
+
+def import_viser():
+    """The ``viser`` module, imported on first use.
+
+    Raises:
+        ImportError: viser is not installed; the message names the extra that installs it.
+    """
+    try:
+        import viser
+    except ImportError as e:
+        raise ImportError(f"the editor needs viser, which is not installed: pip install -e '.[{EDITOR_EXTRA}]' "
+                          f"(or pip install 'viser>=1.0')") from e
+    return viser
+
+#: States kept; the oldest are dropped beyond it (a slider drag pushes one state per move).
+MAX_HISTORY = 2000
+
+
+class History(Generic[T]):
+    """A line of states with a cursor: :meth:`push` adds a state after the cursor (dropping the states
+    that :meth:`redo` could have brought back), :meth:`undo` and :meth:`redo` move the cursor.
+
+    Invariants: ``current`` is always a pushed state (or the initial one); ``undo`` then ``redo`` returns
+    to the same state; at most ``limit`` states are kept.
+
+    Args:
+        initial: the first state.
+        limit: states kept (at least 1).
+    """
+
+    def __init__(self, initial: T, limit: int = MAX_HISTORY):
+        if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
+            raise ValueError(f"`limit` must be an int >= 1, got {limit!r}")
+        self._states: list[T] = [initial]
+        self._i = 0
+        self.limit = limit
+
+    @property
+    def current(self) -> T:
+        return self._states[self._i]
+
+    @property
+    def initial(self) -> T:
+        """The oldest state kept (the first one unless ``limit`` dropped it)."""
+        return self._states[0]
+
+    @property
+    def can_undo(self) -> bool:
+        return self._i > 0
+
+    @property
+    def can_redo(self) -> bool:
+        return self._i < len(self._states) - 1
+
+    def __len__(self) -> int:
+        return len(self._states)
+
+    def push(self, state: T) -> None:
+        """Make ``state`` the current state; the redo branch is dropped."""
+        del self._states[self._i + 1:]
+        self._states.append(state)
+        if len(self._states) > self.limit:
+            del self._states[: len(self._states) - self.limit]
+        self._i = len(self._states) - 1
+
+    def undo(self) -> T:
+        """Step back; returns the new current state. IndexError when there is nothing to undo."""
+        if not self.can_undo:
+            raise IndexError("nothing to undo")
+        self._i -= 1
+        return self.current
+
+    def redo(self) -> T:
+        """Step forward again; returns the new current state. IndexError when there is nothing to redo."""
+        if not self.can_redo:
+            raise IndexError("nothing to redo")
+        self._i += 1
+        return self.current
