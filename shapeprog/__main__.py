@@ -4,6 +4,7 @@
     python -m shapeprog run my_program.txt -o shape.ply
     python -m shapeprog fit table/33075 --points cloud.obj --steps 400 -o fitted.txt
     python -m shapeprog silhouettes --out silhouettes.npz
+    python -m shapeprog infer scan.ply --category chair --fit --out result/
     python -m shapeprog make-clouds --category chair --points 10000 --workers 2 --out clouds
     python -m shapeprog sample chair -n 16 --seed 0 --out samples --png grid.png
     python -m shapeprog interpolate chair/173 chair/44017 --steps 8 --png interp.png
@@ -184,6 +185,90 @@ def _cmd_silhouettes(args) -> int:
     return 0
 
 
+def _fmt_metrics(m: dict) -> str:
+    cd = "n/a" if m["cd"] is None else f"{1000 * m['cd']:.1f}"
+    yes = {True: "yes", False: "no", None: "not run"}
+    return f"CD x1000 {cd}, F-score {m['fscore']:.1f}, rooted {yes[m['rooted']]}, stable {yes[m['stable']]}"
+
+
+def _cmd_infer(args) -> int:
+    import json
+
+    import numpy as np
+
+    from shapeio.points import read_cloud
+    from .errors import PointCloudError
+    from .picture import render_grid
+    from .pointcloud.infer import cloud_corners, infer, load_model
+
+    src = Path(args.file)
+    out = Path(args.out)
+    stem = src.stem
+    files = {k: out / f"{stem}{suffix}" for k, suffix in
+             (("program", ".txt"), ("mesh", ".obj"), ("png", ".png"), ("json", ".json"))}
+    _refuse_overwrite(list(files.values()), [args.file])
+    for path in files.values():
+        if path.exists():
+            raise SystemExit(f"error: {path}: exists; infer never overwrites a file (choose another --out)")
+    points = read_cloud(src)
+    model = load_model(args.weights, args.category) if args.weights else None
+    try:
+        r = infer(points, args.category, fit=args.fit, model=model, up=args.up, fit_steps=args.steps,
+                  stability=not args.no_stability, seed=args.seed)
+    except PointCloudError as e:
+        raise SystemExit(f"error: {src}: {e}") from None
+    except ValueError as e:
+        raise SystemExit(f"error: {src}: {e}") from None
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write(files["program"], r.text)
+    io.write_obj(files["mesh"], torch.from_numpy(r.corners()))
+    unit = r.transform.apply(points)
+    canon = execute(r.canonical).corners + torch.from_numpy(r.canonical_offset).float()
+    render_grid([cloud_corners(unit[np.random.default_rng(args.seed).permutation(len(unit))]), canon],
+                files["png"], cols=2, size=args.size)
+    record = {"input": str(src), "category": args.category if model is None else model.category,
+              "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
+              "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
+              "before_fit": r.before, "seconds": r.seconds,
+              "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
+                      "canonical units (bounding-box diagonal 2)"}
+    atomic_write(files["json"], json.dumps(record, indent=1) + "\n")
+    if r.before is not None:
+        print(f"before fitting: {_fmt_metrics(r.before)}")
+    print(("after fitting:  " if r.before is not None else "") + _fmt_metrics(r.metrics))
+    print(f"wrote {files['program']}, {files['mesh']}, {files['png']} and {files['json']} "
+          f"(offset {np.round(r.offset, 4).tolist()})")
+    return 0
+
+
+def _cmd_pointcloud_tables(args) -> int:
+    from .pointcloud.tables import evaluate, write_tables
+
+    executor = None
+    if args.workers > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        executor = ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def progress(done, total):
+        if not args.quiet and (done % 10 == 0 or done == total):
+            print(f"{done}/{total} shapes", file=sys.stderr, flush=True)
+
+    try:
+        result = evaluate(args.clouds, args.category, weights=args.weights, limit=args.limit, steps=args.steps,
+                          stability=not args.no_stability, retrieval=not args.no_retrieval, executor=executor,
+                          seed=args.seed, progress=progress)
+    finally:
+        if executor is not None:
+            executor.shutdown()
+    command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
+    write_tables(result, args.out, command)
+    for row, m in result.rows.items():
+        print(f"{row}: {m}")
+    print(f"wrote {args.out}")
+    return 0
+
+
 def _cmd_make_clouds(args) -> int:
     from tqdm import tqdm
 
@@ -326,11 +411,22 @@ def _cmd_reconstruct(args) -> int:
     return 0
 
 
+def _is_pointcloud_checkpoint(path: str) -> bool:
+    """Whether ``path`` is a Lightning checkpoint of a :mod:`shapeprog.pointcloud.train` module."""
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:  # unreadable: the VAE exporter reports it, naming the file
+        return False
+    return isinstance(payload, dict) and "shapeprog_pointcloud" in payload
+
+
 def _cmd_export_weights(args) -> int:
     from .vae.pretrained import export_weights
 
     _check_outputs(others=[args.out])
     _refuse_overwrite([args.out], [args.checkpoint])
+    if Path(args.checkpoint).is_file() and _is_pointcloud_checkpoint(args.checkpoint):
+        from .pointcloud.train import export_weights  # noqa: F811 - a point-cloud model's checkpoint
     try:
         path = export_weights(args.checkpoint, args.out, half=not args.float32)
     except (FileNotFoundError, ValueError) as e:
@@ -687,6 +783,42 @@ def main(argv=None) -> int:
     s.add_argument("--limit", type=_int_at_least(1), help="only the first N shapes per category and split")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_silhouettes)
+    i = sub.add_parser("infer", help="a ShapeAssembly program for a point cloud or a mesh",
+                       description="Encode a point cloud (.ply .obj .xyz .npy) or a mesh (.obj .ply .stl .glb, "
+                                   "sampled by area) with the trained point-cloud model, decode a program, "
+                                   "optionally polish its numbers by fitting (--fit), and write into --out: "
+                                   "<name>.txt (the program at the input's scale), <name>.obj (its cuboids in "
+                                   "the input's frame), <name>.png (input beside result) and <name>.json "
+                                   "(offset, rotation, metrics). Existing files are never overwritten.")
+    i.add_argument("file", help="point cloud or mesh file")
+    i.add_argument("--category", default="chair", choices=corpus.CATEGORIES,
+                   help="the shipped model to use (shipped: chair)")
+    i.add_argument("--weights", help="a point-cloud weights file instead of the shipped one")
+    i.add_argument("--fit", action="store_true", help="polish the program's numbers against the cloud")
+    i.add_argument("--steps", type=_int_at_least(0), default=150, help="fitting steps (with --fit)")
+    i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x"), help="the input's up axis")
+    i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
+    i.add_argument("--size", type=_int_at_least(8), default=256, help="picture cell size in pixels")
+    i.add_argument("--seed", type=int, default=0, help="seed of the point subsets")
+    i.add_argument("--out", required=True, help="output folder (created if missing)")
+    i.set_defaults(func=_cmd_infer)
+    pt = sub.add_parser("pointcloud-tables", help="the papers' point-cloud reconstruction tables on the test split",
+                        description="Measure the point-cloud model (no fitting, Opt Program, Opt Cuboids) and the "
+                                    "retrieval baseline on the test split of a make-clouds cache (noisy 2,048-point "
+                                    "inputs in random scale and position) and write the ShapeMOD Table 3 and "
+                                    "ShapeAssembly Table 7 layouts as Markdown.")
+    pt.add_argument("--category", default="chair", choices=corpus.CATEGORIES, help="the category")
+    pt.add_argument("--clouds", required=True, help="the make-clouds folder")
+    pt.add_argument("--weights", help="a point-cloud weights file (default: the shipped model)")
+    pt.add_argument("--limit", type=_int_at_least(1), help="the first N test shapes only")
+    pt.add_argument("--steps", type=_int_at_least(0), default=150, help="fitting steps of the optimisation rows")
+    pt.add_argument("--no-stability", action="store_true", help="skip the stability test")
+    pt.add_argument("--no-retrieval", action="store_true", help="leave out the retrieval row")
+    pt.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the per-shape work")
+    pt.add_argument("--seed", type=int, default=0, help="seed of the inputs' noise, subsets, scales and positions")
+    pt.add_argument("--quiet", action="store_true", help="no progress lines")
+    pt.add_argument("--out", required=True, help="Markdown file (e.g. docs/tables/pointcloud_chair.md)")
+    pt.set_defaults(func=_cmd_pointcloud_tables, argv=None)
     m = sub.add_parser("make-clouds", help="sample point clouds of a category's corpus shapes into a cache",
                        description="Sample area-weighted surface points of every executed program of a category "
                                    "into <out>/<category>_clouds.npz, and write the train / val / test split "
@@ -747,10 +879,13 @@ def main(argv=None) -> int:
     c.add_argument("--seed", type=int, default=0, help="seed of the surface samples of the F-score")
     c.add_argument("--weights", help=weights_help)
     c.set_defaults(func=_cmd_reconstruct)
-    x = sub.add_parser("export-weights", help="write a VAE training checkpoint as a small weights file",
+    x = sub.add_parser("export-weights", help="write a VAE or point-cloud training checkpoint as a small weights file",
                        description="Write the VAE of a Lightning checkpoint (or weights file) as a weights file "
-                                   "that --weights and shapeprog.vae.load_pretrained read.")
-    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config configs/shapeassembly/...`")
+                                   "that --weights and shapeprog.vae.load_pretrained read; a checkpoint of a "
+                                   "point-cloud model (configs/pointcloud/) becomes the file that `infer "
+                                   "--weights` and shapeprog.pointcloud.load_model read.")
+    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config configs/shapeassembly/...` "
+                                      "or `configs/pointcloud/...`")
     x.add_argument("--out", required=True, help="the weights file to write (.pt)")
     x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
     x.set_defaults(func=_cmd_export_weights)
@@ -869,8 +1004,8 @@ def main(argv=None) -> int:
     tb.add_argument("--quiet", action="store_true")
     tb.set_defaults(func=_cmd_table1)
     args = ap.parse_args(argv)
-    if hasattr(args, "argv"):
-        args.argv = argv
+    if getattr(args, "argv", False) is None:  # commands that record their own command line
+        args.argv = list(argv) if argv is not None else None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")

@@ -14,6 +14,11 @@ Data (clouds of corpus shapes, the canonical frame, users' files, a nearest-neig
   back; :func:`scale_program`.
 * :mod:`~shapeprog.pointcloud.retrieval`: :class:`RetrievalIndex`, the nearest training program by chamfer.
 * :func:`read_cloud` (from :mod:`shapeio.points`): users' clouds and meshes.
+
+Cloud -> program (training in :mod:`~shapeprog.pointcloud.train`, the only module here importing Lightning):
+
+* :func:`infer` (:mod:`shapeprog.pointcloud.infer`): a program for a cloud in any frame and scale, optionally
+  polished by fitting; :class:`CloudModel` and :func:`load_model` for trained weights files.
 """
 from __future__ import annotations
 
@@ -22,11 +27,13 @@ from shapeprog.errors import PointCloudError
 
 from .data import CloudDataset, collate_clouds, corpus_cloud, load_cache, make_clouds, program_cloud
 from .encoder import PointNet2SSG, SetAbstraction
+from .infer import CloudModel, Inference, infer, load_model
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 from .ops import ball_query, farthest_point_sample, gather_points, group_all, group_points, query_and_group
 from .retrieval import Match, RetrievalIndex
 
-__all__ = ["CANONICAL_DIAGONAL", "CloudDataset", "Match", "PointCloudError", "PointNet2SSG", "RetrievalIndex",
-           "SetAbstraction", "Transform", "ball_query", "collate_clouds", "corpus_cloud", "farthest_point_sample",
-           "gather_points", "group_all", "group_points", "load_cache", "make_clouds", "normalize",
-           "program_cloud", "query_and_group", "read_cloud", "scale_program"]
+__all__ = ["CANONICAL_DIAGONAL", "CloudDataset", "CloudModel", "Inference", "Match", "PointCloudError",
+           "PointNet2SSG", "RetrievalIndex", "SetAbstraction", "Transform", "ball_query", "collate_clouds",
+           "corpus_cloud", "farthest_point_sample", "gather_points", "group_all", "group_points", "infer",
+           "load_cache", "load_model", "make_clouds", "normalize", "program_cloud", "query_and_group", "read_cloud",
+           "scale_program"]

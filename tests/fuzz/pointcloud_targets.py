@@ -1,4 +1,5 @@
-"""Fuzz target for users' point-cloud and mesh files: :func:`shapeio.points.read_cloud`.
+"""Fuzz targets for users' point-cloud and mesh files (:func:`shapeio.points.read_cloud`) and for the clouds
+given to :func:`shapeprog.pointcloud.infer`.
 
 An input is ``<suffix>\\n<file bytes>``: the suffix picks the reader (so the mutator also reaches unknown
 suffixes), the rest is written to a file of that suffix and read with ``n_points=32``. Only ``InputError``
@@ -17,7 +18,7 @@ from shapeio.points import read_cloud
 
 from fuzz.engine import Target
 
-__all__ = ["BOUND_S", "TARGETS", "run", "seeds"]
+__all__ = ["BOUND_S", "TARGETS", "infer_seeds", "run", "run_infer", "seeds"]
 
 #: The longest one read may take (on a loaded 2-core machine).
 BOUND_S = 3.0
@@ -55,4 +56,45 @@ def run(data: bytes) -> list[float]:
         os.unlink(path)
 
 
-TARGETS = [Target("shapeio/cloud-files", seeds(), run, (InputError,), BOUND_S)]
+_MODEL = None
+
+
+def _tiny_model():
+    """A small untrained model (the chair VAE's decoder, an encoder of 16 / 8 centres): made once."""
+    global _MODEL
+    if _MODEL is None:
+        import torch
+
+        from shapeprog.pointcloud.encoder import PointNet2SSG
+        from shapeprog.pointcloud.infer import CloudModel
+        from shapeprog.vae.pretrained import load_pretrained
+
+        torch.manual_seed(0)
+        enc = PointNet2SSG(out_dim=256, npoints=[16, 8], nsamples=[8, 8],
+                           widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
+        _MODEL = CloudModel(enc, load_pretrained("chair"), "chair", "latent")
+    return _MODEL
+
+
+def infer_seeds() -> list[bytes]:
+    """Clouds as float64 bytes: a box surface, a line, and a cloud far from the origin at a large scale."""
+    rng = np.random.default_rng(0)
+    box = rng.uniform(-1, 1, size=(64, 3))
+    box[np.arange(64), rng.integers(0, 3, 64)] = rng.choice([-1.0, 1.0], 64)
+    line = np.stack([np.linspace(0, 1, 32)] * 3, 1)
+    far = box * 1e4 + 1e6
+    return [x.astype(np.float64).tobytes() for x in (box, line, far)]
+
+
+def run_infer(data: bytes) -> list[float]:
+    """Infer a program for the bytes read as float64 triples (the tail that is not a whole triple dropped)."""
+    from shapeprog.pointcloud.infer import infer
+
+    n = len(data) // 24
+    x = np.frombuffer(data[: 24 * n], dtype=np.float64).reshape(n, 3)
+    r = infer(x, model=_tiny_model(), physics=False)
+    return r.corners().reshape(-1).tolist()
+
+
+TARGETS = [Target("shapeio/cloud-files", seeds(), run, (InputError,), BOUND_S),
+           Target("pointcloud/infer", infer_seeds(), run_infer, (ValueError,), BOUND_S)]

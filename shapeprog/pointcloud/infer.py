@@ -1,0 +1,348 @@
+"""Point cloud -> ShapeAssembly program: the model files, :func:`infer` and the polish by fitting.
+
+:func:`infer` takes a cloud ``(N, 3)`` (NumPy or torch) in any position and scale, maps it into the canonical
+frame the training clouds are in (:func:`~shapeprog.pointcloud.normalize.normalize`), encodes
+:data:`ENCODER_POINTS` of its points with the PointNet++ encoder, decodes the code with the VAE decoder
+(non-rejecting validity decoding, :func:`shapeprog.vae.decode.decode_latent`), scales the program uniformly
+so that its executed cuboids span the cloud's bounding box (the decoder works in the corpus frame, whose
+shapes the normalisation scales by 0.85-1.1), and maps the result back into the input's scale and position.
+With ``fit=True`` the program's continuous numbers are then fitted to the cloud by chamfer through the
+differentiable executor (:func:`shapeprog.fit.fit`), keeping the structure.
+
+:class:`CloudModel` is a trained encoder with its decoder; :func:`load_model` reads a weights file written by
+:func:`shapeprog.pointcloud.train.export_weights` (``torch.load(weights_only=True)``), :func:`load_pretrained`
+the file shipped for a category (:data:`PRETRAINED`). Only this module's callers pay for Lightning: this
+module does not import it.
+
+Example:
+    >>> import numpy as np
+    >>> from shapeprog.pointcloud.data import corpus_cloud
+    >>> cloud = corpus_cloud("chair", 173, n_points=3000) * 7.0 + np.array([1.0, 2.0, 3.0])
+    >>> r = infer(cloud, "chair", physics=False)                                       # doctest: +SKIP
+    >>> r.text.startswith("Assembly Program_0 {"), r.metrics["fscore"] > 0              # doctest: +SKIP
+    (True, True)
+"""
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+
+from ..errors import PointCloudError
+from ..execute import execute
+from ..geometry import CORNER_SIGNS
+from ..fit import fit as fit_program
+from ..lang import Program, to_text
+from ..metrics import chamfer, fscore
+from ..sampling import sample_surface
+from ..vae.decode import decode_latent
+from ..vae.model import VAE
+from ..vae.pretrained import load_pretrained as load_vae
+from .data import TRAIN_POINTS
+from .encoder import PointNet2SSG
+from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
+
+__all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MIN_POINTS", "PRETRAINED", "CloudModel", "Inference",
+           "align_program", "cloud_corners", "infer", "load_model", "load_pretrained", "shape_metrics"]
+
+#: Fewest points :func:`infer` takes.
+MIN_POINTS = 16
+#: Points of the (normalised) input the encoder sees (the training clouds' count); fewer are drawn with repeats.
+ENCODER_POINTS = TRAIN_POINTS
+#: Adam steps of the polish (``fit=True``).
+FIT_STEPS = 150
+#: The F-score's distance threshold, canonical units (AABB diagonal 2): the papers' 0.03.
+FSCORE_THRESHOLD = 0.03
+#: Surface samples of the result for the metrics.
+METRIC_POINTS = 10_000
+#: The weights files shipped under ``shapeprog/weights`` (docs/benchmarks.md names the command of each).
+PRETRAINED = {"chair": "pointcloud_latent_chair.pt"}
+WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
+_FORMAT, _VERSION = "shapeprog-pointcloud", 1
+#: Cloud points drawn as cubes in pictures, and the cubes' side (canonical units).
+_PICTURE_POINTS, _PICTURE_CUBE = 512, 0.03
+
+
+# ------------------------------------------------------------------------------------------ models
+
+
+def cloud_corners(points, count: int = _PICTURE_POINTS, side: float = _PICTURE_CUBE) -> torch.Tensor:
+    """A cloud as small axis-aligned cubes, for :func:`shapeprog.picture.render_grid`.
+
+    Args:
+        points: ``(N, 3)`` float, y up.
+        count: the first ``count`` points are drawn (the clouds are random subsets already).
+        side: the cubes' edge length.
+
+    Returns:
+        ``(min(N, count), 8, 3) float32`` corners in the spec's corner order.
+    """
+    p = torch.as_tensor(points, dtype=torch.float32)[:count]
+    signs = torch.as_tensor(CORNER_SIGNS, dtype=torch.float32)
+    return p[:, None, :] + (side / 2) * signs[None]
+
+
+
+class CloudModel(torch.nn.Module):
+    """A trained cloud encoder and the decoder of its latents.
+
+    Attributes:
+        encoder: the :class:`PointNet2SSG` (eval mode).
+        vae: the VAE whose decoder decodes (the shipped VAE for a latent-regression model).
+        category, recipe: what it was trained on and how (``"latent"`` or ``"e2e"``).
+        meta: what the weights file records (epoch, step, command, ...).
+    """
+
+    def __init__(self, encoder: PointNet2SSG, vae: VAE, category: str, recipe: str, meta: Optional[dict] = None):
+        super().__init__()
+        if encoder.config["out_dim"] != vae.decoder.hidden_dim:
+            raise ValueError(f"the encoder's code has {encoder.config['out_dim']} dims, the decoder takes "
+                             f"{vae.decoder.hidden_dim}")
+        self.encoder, self.vae = encoder.eval(), vae.eval()
+        self.category, self.recipe, self.meta = category, recipe, dict(meta or {})
+
+    def codes(self, clouds: torch.Tensor) -> torch.Tensor:
+        """Latents ``(B, H)`` of canonical clouds ``(B, N, 3)``."""
+        p = next(self.encoder.parameters())
+        with torch.no_grad():
+            return self.encoder(clouds.to(p.device, p.dtype))
+
+    def decode(self, codes: torch.Tensor) -> list[Optional[Program]]:
+        """Programs (corpus frame) of latents ``(B, H)``; None where decoding fails."""
+        out = []
+        for z in codes:
+            try:
+                out.append(decode_latent(self.vae.decoder, z, reject=False).program)
+            except ValueError:
+                out.append(None)
+        return out
+
+
+def load_model(path, category: Optional[str] = None) -> CloudModel:
+    """The :class:`CloudModel` of a weights file (:func:`shapeprog.pointcloud.train.export_weights`).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file, for an unreadable file, another format or version, another category.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such weights file")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise ValueError(f"{path}: not a point-cloud model weights file (unreadable: {type(e).__name__})") from None
+    if not isinstance(payload, dict) or payload.get("format") != _FORMAT:
+        raise ValueError(f"{path}: not a point-cloud model weights file (format {_FORMAT!r})")
+    if int(payload.get("version", -1)) != _VERSION:
+        raise ValueError(f"{path}: weights file version {payload.get('version')!r}; this version reads {_VERSION}")
+    cat = payload["category"]
+    if category is not None and cat != category:
+        raise ValueError(f"{path}: a model of category {cat!r}, not {category!r}")
+    cfg = dict(payload["config"])
+    encoder = PointNet2SSG(**cfg)
+    floats = {k: v.float() if v.is_floating_point() else v for k, v in payload["encoder"].items()}
+    try:
+        encoder.load_state_dict(floats)
+        if payload["recipe"] == "e2e":
+            vae = VAE(int(payload["hidden_dim"]))
+            vae.decoder.load_state_dict({k: v.float() for k, v in payload["decoder"].items()})
+        else:
+            vae = load_vae(cat)
+    except RuntimeError as e:
+        raise ValueError(f"{path}: tensors do not fit the recorded sizes: {str(e).splitlines()[0]}") from None
+    return CloudModel(encoder, vae, cat, payload["recipe"], payload.get("meta"))
+
+
+@functools.lru_cache(maxsize=4)
+def load_pretrained(category: str = "chair") -> CloudModel:
+    """The model shipped for ``category`` (:data:`PRETRAINED`), loaded once per process."""
+    if category not in PRETRAINED:
+        raise ValueError(f"no shipped point-cloud model for category {category!r}; shipped: "
+                         f"{', '.join(PRETRAINED)} (train one: configs/pointcloud/)")
+    path = WEIGHTS / PRETRAINED[category]
+    if not path.is_file():
+        raise FileNotFoundError(f"the shipped {category} point-cloud weights {path} are missing from this installation")
+    return load_model(path, category)
+
+
+# ------------------------------------------------------------------------------------------ one cloud
+
+
+def _corners_of(program: Optional[Program]) -> torch.Tensor:
+    if program is None:
+        return torch.zeros(0, 8, 3)
+    try:
+        with torch.no_grad():
+            return execute(program).corners
+    except ValueError:
+        return torch.zeros(0, 8, 3)
+
+
+def align_program(program: Program, diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
+    """Scale ``program`` uniformly so that its executed cuboids' bounding box has ``diagonal``, and the offset
+    ``(3,) float64`` that moves that box's centre to the origin (executed points + offset = aligned shape).
+
+    Raises:
+        ValueError: the program executes to no cuboid.
+    """
+    c = _corners_of(program).double()
+    if len(c) == 0:
+        raise ValueError("the program executes to no cuboid")
+    flat = c.reshape(-1, 3)
+    lo, hi = flat.min(0).values, flat.max(0).values
+    diag = float((hi - lo).norm())
+    if not diag > 0:
+        raise ValueError("the program's cuboids have no extent")
+    k = diagonal / diag
+    return scale_program(program, k), (-(lo + hi) / 2 * k).numpy()
+
+
+def shape_metrics(corners: torch.Tensor, target: torch.Tensor, points: int = METRIC_POINTS, seed: int = 0,
+                  physics: bool = True, stability: bool = True) -> dict:
+    """Chamfer distance (unsquared, both directions, eps 0), F-score at :data:`FSCORE_THRESHOLD`, rooted and
+    stable of cuboids ``(L, 8, 3)`` against a cloud ``(M, 3)`` in the same frame (canonical units).
+
+    ``cd`` is None and ``fscore`` 0 when there is no cuboid; ``rooted`` / ``stable`` are None when not run.
+    """
+    out = {"cd": None, "fscore": 0.0, "rooted": None, "stable": None}
+    if len(corners) == 0:
+        if physics:
+            out["rooted"] = out["stable"] = False
+        return out
+    g = torch.Generator().manual_seed(int(seed))
+    with torch.no_grad():
+        pred, _ = sample_surface(corners.double(), points, generator=g)
+    tgt = torch.as_tensor(target, dtype=torch.float64)
+    out["cd"] = float(chamfer(pred, tgt, eps=0.0))
+    out["fscore"] = float(fscore(pred, tgt, FSCORE_THRESHOLD))
+    if physics:
+        from ..physics import rootedness, stability as stable_fn
+
+        c = corners.detach().double().numpy()
+        out["rooted"] = bool(rootedness(c))
+        out["stable"] = bool(out["rooted"] and stable_fn(c)) if stability else None
+    return out
+
+
+@dataclass
+class Inference:
+    """What :func:`infer` returns.
+
+    Attributes:
+        program: the program at the input's scale (executes y-up, centred near the origin).
+        text: ``to_text(program)`` (3 decimals, the corpus's format).
+        offset, rotation: ``(3,)`` and ``(3, 3) float64``: the executed points ``p`` of :attr:`text` lie on the
+            input at ``p @ rotation + offset`` (:meth:`place`); the rotation is the identity for a y-up input.
+        canonical: the program in the canonical frame (AABB diagonal 2) and ``canonical_offset (3,)``: its
+            executed points + that offset lie on the normalised cloud.
+        transform: the input -> canonical :class:`Transform` of the cloud.
+        metrics: ``cd`` (chamfer, canonical units), ``fscore`` (0-100 at 0.03 canonical units), ``rooted``,
+            ``stable`` of the result against the (normalised) input cloud.
+        before: the same metrics before fitting (``fit=True``), else None.
+        seconds: wall time of ``decode`` (encode + decode + align), ``fit`` and ``metrics``.
+    """
+
+    program: Program
+    text: str
+    offset: np.ndarray
+    rotation: np.ndarray
+    canonical: Program
+    canonical_offset: np.ndarray
+    transform: Transform
+    metrics: dict
+    before: Optional[dict] = None
+    seconds: dict = field(default_factory=dict)
+
+    def place(self, points):
+        """Points of the executed :attr:`program` ``(..., 3)`` -> the input's frame."""
+        return np.asarray(points, dtype=np.float64) @ self.rotation + self.offset
+
+    def corners(self) -> np.ndarray:
+        """The result's leaf cuboids in the input's frame, ``(L, 8, 3) float64``."""
+        return self.place(_corners_of(self.program).double().numpy())
+
+
+def _as_cloud(points) -> np.ndarray:
+    if isinstance(points, torch.Tensor):
+        points = points.detach().cpu().double().numpy()
+    try:
+        x = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise PointCloudError(f"points must be an (N, 3) array of numbers, got {type(points).__name__}",
+                              "points") from None
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise PointCloudError(f"points must have shape (N, 3), got {x.shape}", "points")
+    if len(x) < MIN_POINTS:
+        raise PointCloudError(f"the cloud has {len(x)} points; at least {MIN_POINTS} are needed", "points")
+    if not np.isfinite(x).all():
+        bad = int(np.argwhere(~np.isfinite(x).all(1))[0, 0])
+        raise PointCloudError(f"point {bad} has a NaN or infinite coordinate", "points")
+    return x
+
+
+def infer(points, category: str = "chair", fit: bool = False, model: Optional[CloudModel] = None, up: str = "y",
+          fit_steps: int = FIT_STEPS, fit_lr: float = 5e-3, physics: bool = True, stability: bool = True,
+          seed: int = 0) -> Inference:
+    """A ShapeAssembly program for a point cloud.
+
+    Args:
+        points: ``(N, 3)`` float, NumPy array or torch tensor, ``N >= MIN_POINTS``, any position and scale.
+        category: the shipped model to use (``model`` overrides it).
+        fit: polish the decoded program's continuous numbers against the cloud (the structure is kept).
+        model: a :class:`CloudModel` (default: :func:`load_pretrained` of ``category``).
+        up: the input's up axis (:data:`shapeprog.pointcloud.normalize.UP_AXES`).
+        fit_steps, fit_lr: Adam steps and learning rate of the polish.
+        physics: compute ``rooted`` (and ``stable``) of the result; ``stability``: also the stability test
+            (about 0.5 s).
+        seed: the draws of the encoder's subset, the fitting's samples and the metrics' samples.
+
+    Returns:
+        An :class:`Inference`.
+
+    Raises:
+        PointCloudError: not ``(N, 3)``, fewer than :data:`MIN_POINTS` points, a NaN or infinite coordinate,
+            all points at one place.
+        ValueError: the model decodes no shape (no cuboid) for this cloud.
+    """
+    x = _as_cloud(points)
+    try:
+        unit, t = normalize(x, up=up)
+    except ValueError as e:
+        raise PointCloudError(str(e), "points") from None
+    model = load_pretrained(category) if model is None else model
+    rng = np.random.default_rng(int(seed))
+    pick = rng.choice(len(unit), size=ENCODER_POINTS, replace=len(unit) < ENCODER_POINTS)
+    cloud = torch.from_numpy(unit[np.sort(pick)].astype(np.float32))
+    t0 = time.perf_counter()
+    program = model.decode(model.codes(cloud[None]))[0]
+    if program is None or len(_corners_of(program)) == 0:
+        raise ValueError(f"the {model.category} model decoded no shape for this cloud")
+    canon, off = align_program(program)
+    seconds = {"decode": time.perf_counter() - t0}
+    target = torch.from_numpy(unit)
+    before = None
+    if fit:
+        t1 = time.perf_counter()
+        g = torch.Generator().manual_seed(int(seed))
+        before = shape_metrics(_corners_of(canon) + torch.from_numpy(off).float(), target, seed=seed,
+                               physics=physics, stability=stability)
+        r = fit_program(canon, target.float() - torch.from_numpy(off).float(), steps=fit_steps, lr=fit_lr,
+                        generator=g)
+        canon = r.program
+        seconds["fit"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    metrics = shape_metrics(_corners_of(canon) + torch.from_numpy(off).float(), target, seed=seed,
+                            physics=physics, stability=stability)
+    seconds["metrics"] = time.perf_counter() - t2
+    program_in = t.program_to_input(canon)
+    rotation = t.rotation
+    # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / scale
+    offset = np.asarray(t.center) + (off / t.scale) @ rotation
+    return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics, before,
+                     seconds)

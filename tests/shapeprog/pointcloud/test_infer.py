@@ -1,0 +1,163 @@
+"""shapeprog.pointcloud.infer and ``python -m shapeprog infer``: frames, errors, fitting, the CLI on the real cloud."""
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import shapeprog.pointcloud
+from shapeprog import corpus, execute
+from shapeprog.__main__ import main
+from shapeprog.errors import PointCloudError
+from shapeprog.lang import parse, to_text
+from shapeprog.pointcloud.data import corpus_cloud
+from shapeprog.pointcloud.encoder import PointNet2SSG
+from shapeprog.pointcloud.infer import (PRETRAINED, WEIGHTS, CloudModel, align_program, infer, load_model,
+                                        shape_metrics)
+from shapeprog.vae.pretrained import load_pretrained as load_vae
+
+TINY = dict(npoints=[16, 8], radii=[0.3, 0.6], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
+CHAIR = corpus.ids("chair", "val")[0]
+
+
+@pytest.fixture(scope="module")
+def model():
+    torch.manual_seed(0)
+    return CloudModel(PointNet2SSG(out_dim=256, **TINY), load_vae("chair"), "chair", "latent")
+
+
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory, model):
+    path = tmp_path_factory.mktemp("w") / "tiny.pt"
+    body = {"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
+            "config": model.encoder.config, "hidden_dim": 256, "encoder": model.encoder.state_dict(), "meta": {}}
+    torch.save(body, path)
+    return path
+
+
+def test_the_package_name_is_the_function():
+    assert shapeprog.pointcloud.infer is infer
+
+
+def test_a_moved_and_scaled_cloud_gives_the_same_program_mapped_back(model):
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
+    k, b = 7.5, np.array([10.0, -3.0, 0.5])
+    r1 = infer(cloud, model=model, physics=False)
+    r2 = infer(torch.from_numpy(cloud * k + b), model=model, physics=False)
+    assert to_text(r1.canonical) == to_text(r2.canonical)
+    # the text is at the input's scale, the offset puts it in place
+    assert np.allclose(r2.corners(), r1.corners() * k + b, atol=1e-3 * k)
+    assert r1.metrics["fscore"] == pytest.approx(r2.metrics["fscore"], abs=1e-6)
+    # the text executes to the placed shape
+    placed = r2.place(execute(parse(r2.text)).corners.double().numpy())
+    assert np.allclose(placed, r2.corners(), atol=5e-3 * k)
+
+
+def test_the_result_spans_the_clouds_bounding_box(model):
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000) * 3.0
+    r = infer(cloud, model=model, physics=False)
+    c = r.corners().reshape(-1, 3)
+    lo, hi = cloud.min(0), cloud.max(0)
+    assert np.linalg.norm(c.max(0) - c.min(0)) == pytest.approx(np.linalg.norm(hi - lo), rel=1e-3)
+    assert np.allclose((c.max(0) + c.min(0)) / 2, (hi + lo) / 2, atol=1e-3 * 3)
+
+
+def test_align_program_scales_to_the_diagonal():
+    p = parse(corpus.read("chair", CHAIR))
+    q, off = align_program(p, diagonal=2.0)
+    c = execute(q).corners.double().reshape(-1, 3) + torch.from_numpy(off)
+    assert float((c.max(0).values - c.min(0).values).norm()) == pytest.approx(2.0, rel=1e-5)
+    assert torch.allclose(c.max(0).values + c.min(0).values, torch.zeros(3, dtype=torch.float64), atol=1e-5)
+
+
+def test_fitting_improves_the_chamfer_distance_and_keeps_the_structure(model):
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000)
+    r = infer(cloud, model=model, fit=True, fit_steps=30, physics=False)
+    assert r.before is not None and r.metrics["cd"] < r.before["cd"]
+    plain = infer(cloud, model=model, physics=False)
+    strip = lambda p: [type(s).__name__ for b in p.blocks for s in b.statements]  # noqa: E731
+    assert strip(r.program) == strip(plain.program)
+
+
+def test_metrics_of_a_shape_against_its_own_surface():
+    p = parse(corpus.read("chair", CHAIR))
+    c = execute(p).corners
+    m = shape_metrics(c, torch.from_numpy(corpus_cloud("chair", CHAIR, 10000)).double(), physics=True,
+                      stability=False)
+    assert m["fscore"] > 99.0 and m["cd"] < 0.03 and m["rooted"] is True and m["stable"] is None
+    assert shape_metrics(torch.zeros(0, 8, 3), torch.rand(10, 3))["fscore"] == 0.0
+
+
+@pytest.mark.parametrize("points, match", [
+    (np.zeros((15, 3)), "at least 16"),
+    (np.zeros((20, 2)), r"shape \(N, 3\)"),
+    (np.ones((20, 3)), "one place"),
+    (np.where(np.arange(60).reshape(20, 3) == 7, np.nan, 1.0 * np.arange(60).reshape(20, 3)), "point 2"),
+    ("abc", "array of numbers"),
+])
+def test_bad_clouds_are_refused_with_our_error(model, points, match):
+    with pytest.raises(PointCloudError, match=match):
+        infer(points, model=model)
+
+
+def test_weights_files_are_checked(tmp_path, weights):
+    assert load_model(weights).category == "chair"
+    with pytest.raises(ValueError, match="not 'table'"):
+        load_model(weights, "table")
+    bad = tmp_path / "bad.pt"
+    torch.save({"format": "other"}, bad)
+    with pytest.raises(ValueError, match="bad.pt: not a point-cloud model"):
+        load_model(bad)
+    with pytest.raises(FileNotFoundError, match="missing.pt"):
+        load_model(tmp_path / "missing.pt")
+
+
+def test_cli_on_the_vendored_real_cloud_writes_four_files_and_never_overwrites(tmp_path, weights, capsys):
+    src = tmp_path / "comp_pc.npy"
+    np.save(src, corpus.example_points("comp_pc.obj"))
+    out = tmp_path / "out"
+    args = ["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]
+    assert main(args + ["--fit", "--steps", "5"]) == 0
+    printed = capsys.readouterr().out
+    assert "before fitting: CD x1000" in printed and "after fitting:  CD x1000" in printed
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["comp_pc.json", "comp_pc.obj", "comp_pc.png", "comp_pc.txt"]
+    record = json.loads((out / "comp_pc.json").read_text())
+    assert record["fit"] is True and record["metrics"]["rooted"] in (True, False)
+    parse((out / "comp_pc.txt").read_text())
+    before = (out / "comp_pc.txt").read_bytes()
+    with pytest.raises(SystemExit, match="exists; infer never overwrites"):
+        main(args)
+    assert (out / "comp_pc.txt").read_bytes() == before
+
+
+def test_cli_reads_a_mesh_and_names_bad_files(tmp_path, weights):
+    mesh = tmp_path / "box.obj"
+    verts = [(x, y, z) for x in (0, 1) for y in (0, 2) for z in (0, 1)]
+    faces = [(1, 2, 4), (1, 4, 3), (5, 7, 8), (5, 8, 6), (1, 5, 6), (1, 6, 2), (3, 4, 8), (3, 8, 7),
+             (1, 3, 7), (1, 7, 5), (2, 6, 8), (2, 8, 4)]
+    mesh.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in verts) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces))
+    assert main(["infer", str(mesh), "--weights", str(weights), "--out", str(tmp_path / "o"), "--no-stability"]) == 0
+    assert (tmp_path / "o" / "box.obj").exists()
+    empty = tmp_path / "empty.xyz"
+    empty.write_text("")
+    assert main(["infer", str(empty), "--weights", str(weights), "--out", str(tmp_path / "e")]) == 1
+    assert not (tmp_path / "e").exists()
+
+
+@pytest.mark.skipif(not (WEIGHTS / PRETRAINED["chair"]).is_file(), reason="the chair weights are not shipped")
+def test_the_shipped_chair_model_loads_safely_and_infers():
+    payload = torch.load(WEIGHTS / PRETRAINED["chair"], weights_only=True)
+    assert payload["category"] == "chair" and payload["recipe"] in ("latent", "e2e")
+    r = infer(corpus_cloud("chair", CHAIR, n_points=3000), "chair", physics=False)
+    assert r.text.startswith("Assembly Program_0 {") and 0.0 <= r.metrics["fscore"] <= 100.0
+
+
+def test_a_z_up_cloud_gives_the_same_program_in_its_own_frame(model):
+    from shapeprog.pointcloud.normalize import Transform
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
+    rot = Transform((0.0, 0.0, 0.0), 1.0, "z").rotation  # canonical = rot @ input
+    r_y = infer(cloud, model=model, physics=False)
+    r_z = infer(cloud @ rot, model=model, up="z", physics=False)
+    assert to_text(r_y.canonical) == to_text(r_z.canonical)
+    assert np.allclose(r_z.corners(), r_y.corners() @ rot, atol=1e-3)

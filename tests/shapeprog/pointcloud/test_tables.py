@@ -1,0 +1,63 @@
+"""shapeprog.pointcloud.tables: free cuboid fitting, the protocol's inputs, and both table layouts."""
+import numpy as np
+import pytest
+import torch
+
+from shapeprog import corpus, execute
+from shapeprog.__main__ import main
+from shapeprog.lang import parse
+from shapeprog.metrics import chamfer
+from shapeprog.pointcloud.data import corpus_cloud, corpus_splits, make_clouds
+from shapeprog.pointcloud.tables import _inputs, evaluate, fit_cuboids, write_tables
+
+SPLITS = corpus_splits("chair")
+
+
+def test_free_cuboids_start_where_they_are_and_move_towards_the_cloud():
+    p = parse(corpus.read("chair", SPLITS["test"][0]))
+    c = execute(p).corners
+    assert torch.allclose(fit_cuboids(c, torch.rand(50, 3), steps=0), c, atol=1e-5)
+    target = torch.from_numpy(corpus_cloud("chair", SPLITS["test"][0], 2000)).double() * 1.15
+    g = torch.Generator().manual_seed(0)
+    fitted = fit_cuboids(c, target, steps=60, lr=1e-2, generator=g)
+    assert fitted.shape == c.shape
+
+    def cd(corners):
+        from shapeprog.sampling import sample_surface
+        pts, _ = sample_surface(corners.double(), 4000, generator=torch.Generator().manual_seed(1))
+        return float(chamfer(pts, target))
+    assert cd(fitted) < 0.8 * cd(c)
+
+
+def test_inputs_are_noisy_moved_and_scaled_copies_with_the_transform_given():
+    clean = corpus_cloud("chair", 173, 5000).astype(np.float64)
+    x, k, b = _inputs(clean, 173, seed=0)
+    assert x.shape == (2048, 3) and 0.1 <= k <= 10.0
+    back = (x - b) / k
+    d = np.linalg.norm(back[:, None, :] - clean[None, :500, :], axis=2).min(1)  # near the clean surface
+    assert np.median(np.abs(back - back.mean(0))) > 0.05 and np.quantile(d, 0.5) < 0.1
+    x2, k2, b2 = _inputs(clean, 173, seed=0)
+    assert np.array_equal(x, x2) and k == k2
+
+
+def test_evaluate_and_write_both_layouts(tmp_path):
+    from shapeprog.pointcloud.encoder import PointNet2SSG
+    ids = SPLITS["train"][:4] + SPLITS["test"][:2]
+    make_clouds("chair", tmp_path / "c", n_points=512, workers=1, ids=ids)
+    torch.manual_seed(0)
+    enc = PointNet2SSG(out_dim=256, npoints=[16, 8], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
+    w = tmp_path / "w.pt"
+    torch.save({"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
+                "config": enc.config, "hidden_dim": 256, "encoder": enc.state_dict(), "meta": {}}, w)
+    res = evaluate(tmp_path / "c", "chair", weights=w, limit=2, steps=3, stability=False)
+    assert res.shapes == 2 and set(res.rows) == {"model", "opt_program", "opt_cuboids", "retrieval"}
+    for m in res.rows.values():
+        assert 0.0 <= m["fscore"] <= 100.0 and m["n"] == 2 and m["stable"] is None
+    out = write_tables(res, tmp_path / "t.md", "python -m shapeprog pointcloud-tables ...")
+    text = out.read_text()
+    assert "ShapeMOD Table 3 layout" in text and "ShapeAssembly Table 7 layout" in text
+    assert "| ShapeMOD paper, No Macros | 44.2 | 54.8 | 93.7 | 83.6 |" in text
+    assert "Nearest training shape (retrieval)" in text
+    assert main(["pointcloud-tables", "--clouds", str(tmp_path / "c"), "--weights", str(w), "--limit", "1",
+                 "--steps", "1", "--no-stability", "--no-retrieval", "--quiet", "--out", str(tmp_path / "t2.md")]) == 0
+    assert "--limit 1" in (tmp_path / "t2.md").read_text()
