@@ -40,6 +40,7 @@ SHIPPED = {
     (3, "csgnet", "supervised"): "csgnet3d.pt",
     (2, "csgnetstack", "supervised"): "csgnetstack2d.pt",
     (2, "csgnet", "reinforce"): "rl_csgnet2d.pt",
+    (2, "csgnet", "selftrain"): "st_csgnet2d.pt",
     (2, "csgnetstack", "reinforce"): "rl_csgnetstack2d.pt",
 }
 
