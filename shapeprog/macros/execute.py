@@ -161,16 +161,21 @@ class CompiledHierarchy:
             its cuboids named as the macro program binds them (so ``Program_k`` cuboids are sub-programs).
         sizes: each block's number of free parameters (the whole program's parameters are the blocks'
             in order).
+        orders: per block, the expansion line of each statement of :attr:`program`'s block (declarations
+            come first there).
+        rows: per block, the (S,) indices of the block's compiled numbers in that statement order.
     """
 
     blocks: list
     program: Program
     sizes: list
+    orders: list
+    rows: list
 
     def numbers(self, params: torch.Tensor) -> torch.Tensor:
         """The executor's numbers of :attr:`program` for the concatenated free parameters, differentiable."""
         parts = params.split(self.sizes)
-        return torch.cat([b.numbers(x) for b, x in zip(self.blocks, parts)]) if self.blocks else params
+        return torch.cat([b.numbers(x)[r] for b, x, r in zip(self.blocks, parts, self.rows)])
 
 
 def hierarchy_parameters(h, dtype: torch.dtype = torch.float32, device=None) -> torch.Tensor:
@@ -196,16 +201,27 @@ def _renamed(block: Program, names, block_name: str):
             out.append(replace(s, a=m[s.a]))
     # declarations first, as in the corpus format (the executor's slots assume it: a cuboid declared
     # after a reflect / translate would share the slot of the copy); moves keep their order
-    return Block(block_name, tuple([s for s in out if isinstance(s, Cuboid)] + [s for s in out if not isinstance(s, Cuboid)]))
+    order = [k for k, s in enumerate(out) if isinstance(s, Cuboid)] + [k for k, s in enumerate(out)
+                                                                       if not isinstance(s, Cuboid)]
+    return Block(block_name, tuple(out[k] for k in order)), order
 
 
 def compile_hierarchy(h, library: Library | None = None) -> CompiledHierarchy:
     """Compile every block of a hierarchical macro program (:func:`compile_program`) and join the flat
     programs into one hierarchical ShapeAssembly program (corpus format)."""
     blocks = [compile_program(p, library) for p in h.programs]
-    sa = Program(tuple(_renamed(c.program.blocks[0], c.expansion.names, n) for c, n in zip(blocks, h.names)),
-                 flat=False)
-    return CompiledHierarchy(blocks, sa, [len(parameters(p)) for p in h.programs])
+    renamed = [_renamed(c.program.blocks[0], c.expansion.names, n) for c, n in zip(blocks, h.names)]
+    sa = Program(tuple(b for b, _ in renamed), flat=False)
+    rows = []
+    for c, (_, order) in zip(blocks, renamed):
+        sizes = [_N_NUMBERS[type(st).__name__] for st in c.program.blocks[0].statements]
+        start = [sum(sizes[:k]) for k in range(len(sizes))]
+        rows.append(torch.tensor([start[k] + j for k in order for j in range(sizes[k])], dtype=torch.long))
+    return CompiledHierarchy(blocks, sa, [len(parameters(p)) for p in h.programs], [o for _, o in renamed], rows)
+
+
+#: The executor's numbers per statement kind (translate's count is structure).
+_N_NUMBERS = {"Cuboid": 3, "Attach": 6, "Squeeze": 2, "Reflect": 0, "Translate": 1}
 
 
 def execute_hierarchy(h, library: Library | None = None, params: torch.Tensor | None = None,
