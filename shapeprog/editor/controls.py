@@ -33,7 +33,10 @@ stay equal (as :func:`shapeprog.fit.fit` does).
 Macro program controls are the arguments of its lines (``line:function.parameter``, e.g.
 ``2:four_legs.s``): numbers are floats (base functions' ranges as above; a macro's float parameter
 [min(0, value), max(:data:`MAX_DIM`, value)]), a base translate count an int, booleans, faces and axes
-literals, cuboid arguments choices among ``bbox`` and the names bound by earlier lines.
+literals, cuboid arguments choices among ``bbox`` and the names bound by earlier lines. A hierarchical
+macro program (:class:`~shapeprog.macros.hierarchy.MacroHierarchy`, what ``refactor -o`` writes) has every
+block's macro controls, named ``block:line:function.parameter`` (``Program_1:1:nfunc_14.x0``); a
+sub-program's bbox dims have none (its parent's cuboid sets its extent).
 
 Example:
     >>> from shapeprog.lang import parse, to_text
