@@ -88,7 +88,7 @@ def to_text(h: MacroHierarchy) -> str:
 
 def check(h: MacroHierarchy, file: str = "<string>", header_lines=None) -> None:
     """The block structure: ``Program_0`` first, names unique, each other block bound as a cuboid name by
-    exactly one earlier block.
+    exactly one earlier block, and every ``Program_k`` cuboid name a later block (so the tree has no cycle).
 
     Raises:
         ParseError: at the offending block's header line.
@@ -110,6 +110,8 @@ def check(h: MacroHierarchy, file: str = "<string>", header_lines=None) -> None:
                 if re.fullmatch(r"Program_\d+", r):
                     if r in bound:
                         raise bad(f"cuboid {r} is bound twice")
+                    if r not in h.names[bi + 1:]:
+                        raise bad(f"cuboid {r} has no block after this one (a Program_k cuboid is a sub-program)")
                     bound[r] = bi
 
 
