@@ -52,6 +52,8 @@ def test_hierarchy_executes_as_its_shapeassembly_program():
     (SMALL.replace("# Program_0", "# Program_2"), (1, 1), "the first block must be Program_0"),
     (SMALL.replace("Program_1 = Cuboid", "other = Cuboid"), (6, 1), "no earlier block binds a cuboid named Program_1"),
     (SMALL + SMALL.split("\n\n")[1] + "\n\n", (14, 1), "block Program_1 appears twice"),
+    (SMALL.replace("c = Cuboid", "Program_0 = Cuboid"), (6, 1), "cuboid Program_0 has no block after this one"),
+    (SMALL.replace("Program_1 = Cuboid", "Program_3 = Cuboid"), (1, 1), "cuboid Program_3 has no block after"),
     (SMALL.replace("squeeze(bbox, bbox, top, 0.1, 0.9)", "squeeze(bbox, bbox, up, 0.1, 0.9)"), (12, 21), "face"),
 ])
 def test_structure_errors_are_located_in_the_whole_text(text, where, reason):
