@@ -199,8 +199,9 @@ def _renamed(block: Program, names, block_name: str):
             out.append(replace(s, a=m[s.a], b=m[s.b], c=m[s.c]))
         else:
             out.append(replace(s, a=m[s.a]))
-    # declarations first, as in the corpus format (the executor's slots assume it: a cuboid declared
-    # after a reflect / translate would share the slot of the copy); moves keep their order
+    # declarations first, as in the corpus format: in a flat text, a cuboid the program names ``cube1``
+    # declared after ``reflect(cube0, X)`` loses its leaf to the copy (the executor's implicit copy slots);
+    # declared before, it keeps it. Moves keep their order.
     order = [k for k, s in enumerate(out) if isinstance(s, Cuboid)] + [k for k, s in enumerate(out)
                                                                        if not isinstance(s, Cuboid)]
     return Block(block_name, tuple(out[k] for k in order)), order
