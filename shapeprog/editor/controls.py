@@ -33,7 +33,10 @@ stay equal (as :func:`shapeprog.fit.fit` does).
 Macro program controls are the arguments of its lines (``line:function.parameter``, e.g.
 ``2:four_legs.s``): numbers are floats (base functions' ranges as above; a macro's float parameter
 [min(0, value), max(:data:`MAX_DIM`, value)]), a base translate count an int, booleans, faces and axes
-literals, cuboid arguments choices among ``bbox`` and the names bound by earlier lines.
+literals, cuboid arguments choices among ``bbox`` and the names bound by earlier lines. A hierarchical
+macro program (:class:`~shapeprog.macros.hierarchy.MacroHierarchy`, what ``refactor -o`` writes) has every
+block's macro controls, named ``block:line:function.parameter`` (``Program_1:1:nfunc_14.x0``); a
+sub-program's bbox dims have none (its parent's cuboid sets its extent).
 
 Example:
     >>> from shapeprog.lang import parse, to_text
@@ -377,13 +380,19 @@ def _macro_specs(program, library) -> list[_Spec]:
     return out
 
 
-def _macro_apply(program, library, specs: list[tuple[_Spec, Value]], file: str):
-    from ..macros.lang import Call, Linear, Literal, MacroProgram, Name
-    from ..macros.lang import to_text as macro_text
+def _macro_edit(program, specs: list[tuple[_Spec, Value]], block=None):
+    """The macro program with the values written at the specs' slots (``(line, arg)``, or
+    ``(block, line, arg)`` when ``block`` is given: only that block's slots)."""
+    from ..macros.lang import Call, Linear, MacroProgram, Name, Literal
 
     lines = [list(c.args) for c in program.lines]
     for spec, v in specs:
-        for i, j in spec.slots:
+        for slot in spec.slots:
+            if block is not None:
+                if slot[0] != block:
+                    continue
+                slot = slot[1:]
+            i, j = slot
             a = lines[i][j]
             if isinstance(a, Linear):
                 lines[i][j] = Linear.const(float(v))
@@ -391,13 +400,22 @@ def _macro_apply(program, library, specs: list[tuple[_Spec, Value]], file: str):
                 lines[i][j] = Name(v)
             else:
                 lines[i][j] = Literal(v)
-    edited = MacroProgram(program.defs, tuple(Call(c.func, tuple(a), c.rets) for c, a in zip(program.lines, lines)))
+    return MacroProgram(program.defs, tuple(Call(c.func, tuple(a), c.rets) for c, a in zip(program.lines, lines)))
+
+
+def _refused(e: ParseError, specs) -> EditError:
+    one = specs[0][0].control if len(specs) == 1 else None
+    return EditError(e.reason, e.file, e.line, e.column, e.token, control=None if one is None else one.name,
+                     value=None if one is None else specs[0][1])
+
+
+def _macro_apply(program, library, specs: list[tuple[_Spec, Value]], file: str):
+    from ..macros.lang import to_text as macro_text
+
     try:
-        return library.parse(macro_text(edited), file)
+        return library.parse(macro_text(_macro_edit(program, specs)), file)
     except ParseError as e:
-        one = specs[0][0].control if len(specs) == 1 else None
-        raise EditError(e.reason, e.file, e.line, e.column, e.token, control=None if one is None else one.name,
-                        value=None if one is None else specs[0][1]) from None
+        raise _refused(e, specs) from None
 
 
 def _macro_influence(program, library, specs: list[_Spec]) -> list[tuple[int, ...]]:
@@ -414,13 +432,72 @@ def _macro_influence(program, library, specs: list[_Spec]) -> list[tuple[int, ..
     return _influence(specs, moved, made, lambda spec: spec.slots[0][0], lambda spec: spec.slots[0][0])
 
 
+# ----------------------------------------------------------------------------- hierarchical macro programs
+
+
+def _hier_specs(h, library) -> list[_Spec]:
+    """Every block's macro controls, named ``block:line:function.parameter``; a sub-program's bbox dims
+    have none (the parent's cuboid sets its extent: the executor scales the sub-program into it)."""
+    from ..macros.hierarchy import block_line_offsets
+    from ..macros.lang import parameters
+
+    offsets = block_line_offsets(h)
+    out = []
+    k0 = 0
+    for bi, (name, p) in enumerate(zip(h.names, h.programs)):
+        for spec in _macro_specs(p, library):
+            c = spec.control
+            (i, j), = spec.slots
+            if bi > 0 and i == 0:
+                continue
+            ctl = dataclasses.replace(c, name=f"{name}:{c.name}", label=f"{name} {c.label}", line=c.line + offsets[bi],
+                                      lines=tuple(x + offsets[bi] for x in c.lines))
+            out.append(_Spec(ctl, ((bi, i, j),), tuple(k0 + x for x in spec.params)))
+        k0 += len(parameters(p))
+    return out
+
+
+def _hier_apply(h, library, specs: list[tuple[_Spec, Value]], file: str):
+    from ..macros import hierarchy
+
+    edited = h.replace(_macro_edit(p, specs, bi) for bi, p in enumerate(h.programs))
+    try:
+        return hierarchy.parse(hierarchy.to_text(edited), file, library)
+    except ParseError as e:
+        raise _refused(e, specs) from None
+
+
+def _hier_influence(h, library, specs: list[_Spec]) -> list[tuple[int, ...]]:
+    import torch
+
+    from ..execute import ExecutionPlan
+    from ..macros.execute import compile_hierarchy, hierarchy_parameters
+
+    c = compile_hierarchy(h, library)
+    x = hierarchy_parameters(h, torch.float64).requires_grad_(True)
+    shape = ExecutionPlan([c.program], dtype=torch.float64).run([c.numbers(x)])[0]
+    moved = _moved(shape.corners, x)
+    lines = statement_lines(c.program)
+    where = {lines[bi][si]: (bi, b.expansion.source[k])
+             for bi, (b, order) in enumerate(zip(c.blocks, c.orders)) for si, k in enumerate(order)}
+    made = [where[ln] for ln in shape.line.tolist()]
+    key = lambda spec: spec.slots[0][:2]  # noqa: E731
+    return _influence(specs, moved, made, key, key)
+
+
 # ----------------------------------------------------------------------------- public API
+
+
+def _is_hier(program) -> bool:
+    from ..macros.hierarchy import MacroHierarchy  # standard library only: cheap
+
+    return isinstance(program, MacroHierarchy)
 
 
 def _is_macro(program) -> bool:
     from ..macros.lang import MacroProgram  # standard library only: cheap
 
-    if isinstance(program, MacroProgram):
+    if isinstance(program, MacroProgram) or _is_hier(program):
         return True
     if not isinstance(program, Program):
         raise TypeError(f"expected a ShapeAssembly Program or a MacroProgram, got {type(program).__name__}")
@@ -446,7 +523,8 @@ def _specs_uncached(program, library) -> list[_Spec]:
     if _is_macro(program):
         from ..macros.library import Library
 
-        return _macro_specs(program, Library() if library is None else library)
+        lib = Library() if library is None else library
+        return _hier_specs(program, lib) if _is_hier(program) else _macro_specs(program, lib)
     return _sa_specs(program)
 
 
@@ -470,7 +548,8 @@ def controls(program, library=None, cuboids: bool = True) -> list[Control]:
         if _is_macro(program):
             from ..macros.library import Library
 
-            leaves = _macro_influence(program, Library() if library is None else library, specs)
+            lib = Library() if library is None else library
+            leaves = (_hier_influence if _is_hier(program) else _macro_influence)(program, lib, specs)
         else:
             leaves = _sa_influence(program, specs)
     except ExecutionError:
@@ -514,5 +593,6 @@ def apply(program, values: Mapping[str, Value], library=None, file: str = "<edit
     if _is_macro(program):
         from ..macros.library import Library
 
-        return _macro_apply(program, Library() if library is None else library, chosen, file)
+        lib = Library() if library is None else library
+        return (_hier_apply if _is_hier(program) else _macro_apply)(program, lib, chosen, file)
     return _sa_apply(program, chosen, file)

@@ -36,7 +36,8 @@ from ..execute import ExecutedShape, ExecutionPlan, program_parameters
 from ..lang import Program, parse, replace_numbers, to_text
 from .controls import Control, apply, controls
 
-__all__ = ["EXPORT_KINDS", "EditSession", "corner_distance", "load_program", "read_source"]
+__all__ = ["EXPORT_KINDS", "EditSession", "corner_distance", "is_corpus_text", "load_program", "read_source",
+           "refactor_source"]
 
 #: What :meth:`EditSession.export` can write: the program text, the reference OBJ, a PNG picture.
 EXPORT_KINDS = ("txt", "obj", "png")
@@ -49,17 +50,43 @@ def _is_macro_text(text: str) -> bool:
 
 
 def load_program(text: str, file: str = "<string>", library=None):
-    """Parse a program text: a macro program (:meth:`shapeprog.macros.library.Library.parse`) when a
-    ``library`` is given or a line starts with ``def``, else ShapeAssembly (:func:`shapeprog.lang.parse`).
+    """Parse a program text: a hierarchical macro program (:func:`shapeprog.macros.hierarchy.parse`) when
+    it holds ``# .../Program_k`` block headers (what ``refactor -o`` writes); a macro program
+    (:meth:`shapeprog.macros.library.Library.parse`) when a ``library`` is given or a line starts with
+    ``def``; else ShapeAssembly (:func:`shapeprog.lang.parse`).
 
     Raises:
         ParseError: naming file, line and column.
     """
+    from ..macros.hierarchy import is_hierarchy_text
+
+    if is_hierarchy_text(text):
+        from ..macros import hierarchy
+
+        return hierarchy.parse(text, file, library)
     if library is not None or _is_macro_text(text):
         from ..macros.library import Library
 
         return (Library() if library is None else library).parse(text, file)
     return parse(text, file)
+
+
+def is_corpus_text(text: str) -> bool:
+    """Whether ``text`` is a ShapeAssembly program in the corpus format (``Assembly Program_k {`` blocks)."""
+    return any(re.match(r"\s*Assembly\s+Program_\d+\s*\{", line) for line in text.split("\n"))
+
+
+def refactor_source(text: str, file: str, library, category: str = "", shape_id: int = 0) -> str:
+    """The hierarchical macro program text of a ShapeAssembly program rewritten with ``library``
+    (:func:`shapeprog.macros.refactor`, the text ``refactor -o`` writes).
+
+    Raises:
+        ParseError: the text is not ShapeAssembly.
+        ValueError: a block that the modified grammar cannot hold.
+    """
+    from ..macros.api import refactor
+
+    return refactor(parse(text, file), library, category=category, shape_id=shape_id).text
 
 
 def read_source(spec: str) -> tuple[str, str]:
@@ -150,8 +177,11 @@ class EditSession:
         if self.program is None:
             return ""
         if self.is_macro:
+            from ..macros import hierarchy
             from ..macros.lang import to_text as macro_text
 
+            if isinstance(self.program, hierarchy.MacroHierarchy):
+                return hierarchy.to_text(self.program)
             return macro_text(self.program)
         return to_text(self.program)
 
@@ -163,8 +193,11 @@ class EditSession:
         """Execute, reusing the compiled plan while only numbers change (ShapeAssembly)."""
         with torch.no_grad():
             if not isinstance(program, Program):
-                from ..macros.execute import execute as macro_execute
+                from ..macros.execute import execute as macro_execute, execute_hierarchy
+                from ..macros.hierarchy import MacroHierarchy
 
+                if isinstance(program, MacroHierarchy):
+                    return execute_hierarchy(program, self.library)
                 return macro_execute(program, self.library)
             key = self._structure(program)
             if key != self._plan_key:
@@ -178,8 +211,11 @@ class EditSession:
         """The program with every number zeroed: equal for programs that differ in numbers only."""
         if isinstance(program, Program):
             return replace_numbers(program, iter(lambda: 0.0, None))
+        from ..macros.hierarchy import MacroHierarchy
         from ..macros.lang import parameters, replace_parameters
 
+        if isinstance(program, MacroHierarchy):
+            return program.replace(replace_parameters(p, [0.0] * len(parameters(p))) for p in program.programs)
         return replace_parameters(program, [0.0] * len(parameters(program)))
 
     def controls(self, cuboids: bool = True) -> list[Control]:
@@ -292,8 +328,11 @@ class EditSession:
         parameters); the text itself for a ShapeAssembly program."""
         if not self.is_macro:
             return self.text
-        from ..macros.execute import compile_program
+        from ..macros.execute import compile_hierarchy, compile_program
+        from ..macros.hierarchy import MacroHierarchy
 
+        if isinstance(self.program, MacroHierarchy):
+            return to_text(compile_hierarchy(self.program, self.library).program)
         return to_text(compile_program(self.program, self.library).program)
 
     # -- exports

@@ -10,6 +10,8 @@
 * :mod:`~shapeprog.macros.discover`: discovery rounds (greedy or milp selection), resumable, any executor.
 * :mod:`~shapeprog.macros.baseline`: the paper's baseline macros; :mod:`~shapeprog.macros.table1`: Table 1.
 * :mod:`~shapeprog.macros.api`: :func:`load_library`, :func:`refactor`, :func:`expand`, :func:`collection`.
+* :mod:`~shapeprog.macros.hierarchy`: hierarchical macro programs (one per sub-program), the text
+  ``refactor -o`` writes and the editor reads.
 
 The data decisions and the language: ``docs/shapemod.md``.
 

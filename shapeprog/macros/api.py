@@ -23,7 +23,7 @@ from ..lang import Program
 from .data import SubProgram, convert_program
 from .discover import Nodes, nodes_from_subprograms
 from .grammar import to_shapeassembly
-from .lang import BASE, BOOL, CUBE, FLOAT, MacroProgram, to_text
+from .lang import BASE, BOOL, CUBE, FLOAT, Call, MacroProgram, Name, to_text
 from .library import Library
 from .objective import Result, best_program, templates, to_program
 
@@ -73,6 +73,12 @@ def _used(program: MacroProgram, library: Library) -> list:
     return [m for m in library.macros if m.name in need]
 
 
+def _rename(call: Call, names: dict) -> Call:
+    """``call`` with the cuboid names in ``names`` (old -> new) replaced, in its rets and arguments."""
+    args = tuple(Name(names.get(a.name, a.name)) if isinstance(a, Name) else a for a in call.args)
+    return Call(call.func, args, tuple(names.get(r, r) for r in call.rets))
+
+
 @dataclass(frozen=True)
 class BlockRefactor:
     """One sub-program refactored: its key, macro program (with the definitions it uses), text, f and
@@ -93,7 +99,8 @@ class Refactored:
 
     Attributes:
         blocks: the blocks in program order.
-        text: every block's text under a ``# <block>`` comment line.
+        text: every block's text under a ``# <block>`` header line: a hierarchical macro program
+            (:mod:`shapeprog.macros.hierarchy`; a sub-program's cuboid is named after its block).
         stats: summed :func:`program_stats` plus ``f`` and ``f_base`` (sums over blocks) and ``blocks``.
     """
 
@@ -141,7 +148,12 @@ def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Libr
         r: Result = best_program(orders, library, tpls, mode)
         rb = best_program(orders, base, btpls, mode)
         mp = to_program(orders[r.order], r.calls, library)
-        mp = MacroProgram(tuple(_used(mp, library)), mp.lines)
+        # the cuboid a sub-program fills takes that block's name, as in the corpus format
+        perm = list(s.orders[r.order].cubes)
+        kids = {f"cube{perm.index(c.parent[1])}": c.block for c in subs
+                if c.parent is not None and c.parent[0] == s.block and c.shape_id == s.shape_id
+                and c.category == s.category}
+        mp = MacroProgram(tuple(_used(mp, library)), tuple(_rename(c, kids) for c in mp.lines))
         blocks.append(BlockRefactor(s.key, mp, to_text(mp), r.f, rb.f, program_stats(mp, library),
                                      tuple(orders[r.order])))
     stats = {k: sum(b.stats[k] for b in blocks) for k in blocks[0].stats} if blocks else {}

@@ -23,17 +23,18 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
 from ..execute import ExecutedShape, ExecutionPlan
-from ..lang import Program
+from ..lang import Block, Program
 from .grammar import TranslateLine, to_shapeassembly
 from .lang import MacroProgram, parameters
 from .library import Expansion, Library
 
-__all__ = ["CompiledMacroProgram", "MacroPlan", "compile_program", "execute", "execute_batch", "program_parameters"]
+__all__ = ["CompiledHierarchy", "CompiledMacroProgram", "MacroPlan", "compile_hierarchy", "compile_program", "execute",
+           "execute_batch", "execute_hierarchy", "hierarchy_parameters", "program_parameters"]
 
 
 def program_parameters(program: MacroProgram, dtype: torch.dtype = torch.float32, device=None) -> torch.Tensor:
@@ -147,3 +148,90 @@ def execute(program: MacroProgram, library: Library | None = None, params: torch
         ExecutionError: a cuboid comes out non-finite.
     """
     return execute_batch([program], library, None if params is None else [params], dtype, device)[0]
+
+
+@dataclass
+class CompiledHierarchy:
+    """A hierarchical macro program (:class:`~shapeprog.macros.hierarchy.MacroHierarchy`) ready for the
+    ShapeAssembly executor.
+
+    Attributes:
+        blocks: each block's :class:`CompiledMacroProgram`.
+        program: the hierarchical ShapeAssembly program: block ``k`` is ``blocks[k]``'s flat program with
+            its cuboids named as the macro program binds them (so ``Program_k`` cuboids are sub-programs).
+        sizes: each block's number of free parameters (the whole program's parameters are the blocks'
+            in order).
+        orders: per block, the expansion line of each statement of :attr:`program`'s block (declarations
+            come first there).
+        rows: per block, the (S,) indices of the block's compiled numbers in that statement order.
+    """
+
+    blocks: list
+    program: Program
+    sizes: list
+    orders: list
+    rows: list
+
+    def numbers(self, params: torch.Tensor) -> torch.Tensor:
+        """The executor's numbers of :attr:`program` for the concatenated free parameters, differentiable."""
+        parts = params.split(self.sizes)
+        return torch.cat([b.numbers(x)[r] for b, x, r in zip(self.blocks, parts, self.rows)])
+
+
+def hierarchy_parameters(h, dtype: torch.dtype = torch.float32, device=None) -> torch.Tensor:
+    """The free parameters of a hierarchical macro program: each block's (:func:`program_parameters`) in order."""
+    return torch.cat([program_parameters(p, dtype, device) for p in h.programs])
+
+
+def _renamed(block: Program, names, block_name: str):
+    from ..lang import Attach, Block, Cuboid, Squeeze
+
+    old = [s.name for s in block.statements if isinstance(s, Cuboid)][1:]
+    m = dict(zip(old, names))
+    m["bbox"] = "bbox"
+    out = []
+    for s in block.statements:
+        if isinstance(s, Cuboid):
+            out.append(replace(s, name=m[s.name]))
+        elif isinstance(s, Attach):
+            out.append(replace(s, a=m[s.a], b=m[s.b]))
+        elif isinstance(s, Squeeze):
+            out.append(replace(s, a=m[s.a], b=m[s.b], c=m[s.c]))
+        else:
+            out.append(replace(s, a=m[s.a]))
+    # declarations first, as in the corpus format: in a flat text, a cuboid the program names ``cube1``
+    # declared after ``reflect(cube0, X)`` loses its leaf to the copy (the executor's implicit copy slots);
+    # declared before, it keeps it. Moves keep their order.
+    order = [k for k, s in enumerate(out) if isinstance(s, Cuboid)] + [k for k, s in enumerate(out)
+                                                                       if not isinstance(s, Cuboid)]
+    return Block(block_name, tuple(out[k] for k in order)), order
+
+
+def compile_hierarchy(h, library: Library | None = None) -> CompiledHierarchy:
+    """Compile every block of a hierarchical macro program (:func:`compile_program`) and join the flat
+    programs into one hierarchical ShapeAssembly program (corpus format)."""
+    blocks = [compile_program(p, library) for p in h.programs]
+    renamed = [_renamed(c.program.blocks[0], c.expansion.names, n) for c, n in zip(blocks, h.names)]
+    sa = Program(tuple(b for b, _ in renamed), flat=False)
+    rows = []
+    for c, (_, order) in zip(blocks, renamed):
+        sizes = [_N_NUMBERS[type(st).__name__] for st in c.program.blocks[0].statements]
+        start = [sum(sizes[:k]) for k in range(len(sizes))]
+        rows.append(torch.tensor([start[k] + j for k in order for j in range(sizes[k])], dtype=torch.long))
+    return CompiledHierarchy(blocks, sa, [len(parameters(p)) for p in h.programs], [o for _, o in renamed], rows)
+
+
+#: The executor's numbers per statement kind (translate's count is structure).
+_N_NUMBERS = {"Cuboid": 3, "Attach": 6, "Squeeze": 2, "Reflect": 0, "Translate": 1}
+
+
+def execute_hierarchy(h, library: Library | None = None, params: torch.Tensor | None = None,
+                      dtype: torch.dtype = torch.float32, device=None) -> ExecutedShape:
+    """Execute a hierarchical macro program with the ShapeAssembly executor (sub-programs drawn inside
+    their ``Program_k`` cuboids); differentiable in ``params`` (:func:`hierarchy_parameters`) when given.
+    ``ExecutedShape.line`` indexes the lines of ``to_text(compile_hierarchy(h).program)``."""
+    c = compile_hierarchy(h, library)
+    if params is not None and device is None:
+        device = params.device
+    plan = ExecutionPlan([c.program], dtype, device)
+    return plan.run(None if params is None else [c.numbers(params)])[0]

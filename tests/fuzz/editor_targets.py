@@ -84,3 +84,33 @@ TARGETS = [
            (EditError, ExecutionError), 2.0),
     Target("editor/csg-values", _seeds(_CSG, csg_controls), _run_csg, (CSGEditError,), 1.0),
 ]
+
+
+# -- hierarchical macro programs (what `refactor -o` writes) and their controls
+from shapeprog.errors import ParseError  # noqa: E402
+from shapeprog.macros import hierarchy, load_library, refactor  # noqa: E402
+from shapeprog.macros.execute import execute_hierarchy  # noqa: E402
+
+_LIB = load_library("chair")
+_HTEXT = [refactor(parse(corpus.read("chair", i)), _LIB, category="chair", shape_id=i).text for i in (173, 42220)]
+_H = [hierarchy.parse(t, "m.txt", _LIB) for t in _HTEXT]
+
+
+def _run_htext(data: bytes):
+    from shapeprog.limits import decode
+
+    h = hierarchy.parse(decode(data, "m.txt"), "m.txt")
+    assert hierarchy.parse(hierarchy.to_text(h), "m.txt") == h, "the printed program does not parse back"
+    return execute_hierarchy(h).corners.flatten().tolist()
+
+
+def _run_hvalues(data: bytes):
+    program, values = _read(data, _H)
+    return execute_hierarchy(apply(program, values, _LIB), _LIB).corners.flatten().tolist()
+
+
+TARGETS += [
+    Target("macros/hierarchy-text", [t.encode() for t in _HTEXT], _run_htext, (ParseError, ExecutionError), 2.0),
+    Target("editor/macro-hierarchy-values", _seeds(_H, lambda p: controls(p, _LIB, cuboids=False)), _run_hvalues,
+           (EditError, ExecutionError), 2.0),
+]

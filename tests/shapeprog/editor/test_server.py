@@ -254,3 +254,28 @@ def test_a_websocket_client_receives_the_new_geometry(app):
     texts = [m["updates"]["value"] for m in after if m["type"] == "GuiUpdateMessage"
              and isinstance(m["updates"].get("value"), str) and m["updates"]["value"].startswith("Assembly")]
     assert texts and texts[-1] == app.state["text"]
+
+
+def test_refactored_chair_page_moves_every_leg_and_expands(tmp_path):
+    from shapeprog import corpus, parse
+    from shapeprog.macros import load_library, refactor
+
+    lib = load_library("chair")
+    text = refactor(parse(corpus.read("chair", 173)), lib, category="chair", shape_id=173).text
+    a = EditorApp(EditSession(text, "chair/173_macros.txt", library=lib), port=_free_port(), export_dir=tmp_path)
+    try:
+        assert len(a._handles) == 14
+        name = next(n for n in a._handles if n.startswith("Program_1:1:") and n.endswith(".x0"))  # the legs' width
+        before = a.state["corners"].copy()
+        a.handle(name).value = 0.25
+        assert a.state["error"] is None and "# chair/173/Program_1\n" in a.state["text"]
+        moved = np.abs(a.state["corners"] - before).max(axis=(1, 2)) > 1e-4
+        assert moved.sum() == 4  # the four legs, nothing else
+        corners = a.state["corners"].copy()
+        a.expanded.value = True
+        assert len(a._handles) > 14 and "Assembly Program_1 {" in a.state["text"]
+        assert np.allclose(a.state["corners"], corners, atol=1e-5)
+        a.expanded.value = False
+        assert len(a._handles) == 14
+    finally:
+        a.stop()
