@@ -227,6 +227,7 @@ def test_real_browser_slider_drag_changes_the_geometry(app, tmp_path):
             return view, (view.max(-1) - view.min(-1)) > 60
 
         x, y = browser.until(_FIND.format(t=head))  # the line's folder (folders start closed: 54 controls)
+        thumbs = []
         for _ in range(3):  # a click opens the folder (retried: the panel may still be moving on a slow machine)
             browser.mouse("mousePressed", x, y)
             browser.mouse("mouseReleased", x, y)
