@@ -1,6 +1,6 @@
 """The editor page (viser): it serves HTTP on 127.0.0.1, a control change replaces the geometry, refused
 edits and parse errors show in the page, undo / redo / reset / export. Skipped without viser (the
-``editor`` extra); the real-browser test is skipped without a headless Chromium."""
+``editor`` extra); the real-browser test (a slider dragged in headless Chromium) is skipped without Chromium."""
 import shutil
 import socket
 import urllib.request
@@ -121,35 +121,171 @@ def test_cuboid_edges():
 BROWSERS = [b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)]
 
 
+class _DevTools:
+    """A headless Chromium driven over the Chrome DevTools Protocol (a websocket to its page target)."""
+
+    def __init__(self, browser: str, profile, size=(1200, 800)):
+        import json
+        import subprocess
+        import time
+
+        from websockets.sync.client import connect
+
+        self.json, self.n = json, 0
+        self.proc = subprocess.Popen(
+            [browser, "--headless", "--no-sandbox", "--disable-gpu", "--use-gl=swiftshader",
+             "--enable-unsafe-swiftshader", "--remote-debugging-port=0", f"--user-data-dir={profile}",
+             f"--window-size={size[0]},{size[1]}", "--no-first-run", "about:blank"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        port_file = profile / "DevToolsActivePort"  # the port the browser picked, then its websocket path
+        deadline = time.time() + 60
+        while not (port_file.is_file() and len(port_file.read_text().split()) >= 2):
+            assert self.proc.poll() is None and time.time() < deadline, "headless Chromium did not start"
+            time.sleep(0.1)
+        port = port_file.read_text().split()[0]
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=30) as r:
+            page = next(t for t in json.load(r) if t["type"] == "page")
+        self.ws = connect(page["webSocketDebuggerUrl"], max_size=None, open_timeout=30)
+
+    def call(self, method: str, **params):
+        self.n += 1
+        self.ws.send(self.json.dumps({"id": self.n, "method": method, "params": params}))
+        while True:  # events arrive in between; the answer carries our id
+            m = self.json.loads(self.ws.recv(timeout=60))
+            if m.get("id") == self.n:
+                assert "error" not in m, m
+                return m["result"]
+
+    def js(self, expression: str):
+        r = self.call("Runtime.evaluate", expression=expression, returnByValue=True)
+        assert "exceptionDetails" not in r, r
+        return r["result"].get("value")
+
+    def until(self, expression: str, seconds: float = 60.0):
+        """The value of ``expression`` once it is truthy (polled)."""
+        import time
+        deadline = time.time() + seconds
+        while time.time() < deadline:
+            v = self.js(expression)
+            if v:
+                return v
+            time.sleep(0.25)
+        raise AssertionError(f"the page never satisfied {expression!r}")
+
+    def mouse(self, kind: str, x: float, y: float):
+        self.call("Input.dispatchMouseEvent", type=kind, x=x, y=y, button="left", buttons=1, clickCount=1)
+
+    def screenshot(self) -> np.ndarray:
+        import base64
+        import io
+
+        from PIL import Image
+        data = base64.b64decode(self.call("Page.captureScreenshot", format="png")["data"])
+        return np.asarray(Image.open(io.BytesIO(data)).convert("RGB")).astype(int)
+
+    def close(self):
+        self.ws.close()
+        self.proc.terminate()
+        self.proc.wait(timeout=30)
+
+
+# the deepest element whose text is exactly T, and its centre
+_FIND = """(() => {{ const e = [...document.querySelectorAll('*')].filter(e => (e.innerText || '').trim() === {t!r}).pop();
+  if (!e) return null; const b = e.getBoundingClientRect();
+  return b.width > 0 ? [b.x + b.width / 2, b.y + b.height / 2] : null; }})()"""
+# the visible slider thumbs: value, centre, and the text of their row (its label comes first)
+_THUMBS = """JSON.stringify([...document.querySelectorAll('[role=slider]')].map(e => {
+  const b = e.getBoundingClientRect(); let row = e;
+  for (let k = 0; k < 10 && !/[a-z]/.test(row.innerText || ''); k++) row = row.parentElement;
+  return {value: e.getAttribute('aria-valuenow'), x: b.x + b.width / 2, y: b.y + b.height / 2, w: b.width,
+          label: (row.innerText || '').trim().split('\\n')[0]}; }).filter(t => t.w > 0)).replace(/^\\[\\]$/, '')"""
+
+
 @pytest.mark.skipif(not BROWSERS, reason="no headless browser: install Debian's 'chromium' package to run the "
                                          "real-browser test")
-def test_real_browser_draws_the_shape_and_its_edit(app, tmp_path):
-    """Headless Chromium opens the page, draws the chair in the 3D view, and draws the edited chair after
-    a control change on the server (a new page load receives the current scene)."""
-    import subprocess
+def test_real_browser_slider_drag_changes_the_geometry(app, tmp_path):
+    """Headless Chromium, driven over the DevTools protocol, opens the page and draws the chair in the 3D view;
+    a mouse drag on the slider of the base's height (``Program_0:1:cuboid.h``: ``Program_1``, the legs' box, on
+    line 3) reaches the server, which applies the value the page shows (the geometry equals the edited
+    program's), and the 3D view draws the new chair."""
+    import json
+    import time
 
-    from PIL import Image
+    pytest.importorskip("websockets", reason="the websockets package (a viser dependency) drives the browser")
+    name = "Program_0:1:cuboid.h"
+    control = next(c for c in app.session.controls() if c.name == name)
+    head, label = control.label.rsplit(" ", 1)  # "line 3 Program_1 = Cuboid", "h"
+    (tmp_path / "profile").mkdir()
+    browser = _DevTools(BROWSERS[0], tmp_path / "profile")
+    try:
+        browser.call("Page.navigate", url=app.url)
 
-    def shot(path):
-        subprocess.run([BROWSERS[0], "--headless", "--no-sandbox", "--disable-gpu", "--use-gl=swiftshader",
-                        "--enable-unsafe-swiftshader", "--virtual-time-budget=15000", f"--screenshot={path}",
-                        "--window-size=1200,800", app.url], check=True, timeout=180, capture_output=True)
-        rgb = np.asarray(Image.open(path).convert("RGB")).astype(int)[:, 320:780]  # the 3D view, no panels
-        return rgb, (rgb.max(-1) - rgb.min(-1)) > 60  # saturated pixels: coloured cuboids
+        def coloured():
+            """The 3D view's saturated pixels (the coloured cuboids), left of the control panel."""
+            rgb = browser.screenshot()
+            view = rgb[:, : int(panel_x) - 10]
+            return view, (view.max(-1) - view.min(-1)) > 60
 
-    def drawn(path, tries=3):
-        """A screenshot once the scene has arrived (a loaded machine can take longer than the time budget)."""
-        for _ in range(tries):
-            rgb, parts = shot(path)
-            if parts.sum() > 2000:
-                return rgb, parts
-        return rgb, parts
+        x, y = browser.until(_FIND.format(t=head))  # the line's folder (folders start closed: 54 controls)
+        thumbs = []
+        for _ in range(3):  # a click opens the folder (retried: the panel may still be moving on a slow machine)
+            browser.mouse("mousePressed", x, y)
+            browser.mouse("mouseReleased", x, y)
+            try:
+                thumbs = json.loads(browser.until(_THUMBS, 10))
+                break
+            except AssertionError:
+                x, y = browser.until(_FIND.format(t=head))
+        mine = [t for t in thumbs if t["label"] == label and float(t["value"]) == pytest.approx(control.value)]
+        assert len(mine) == 1, thumbs
+        thumb = mine[0]
+        panel_x = min(t["x"] for t in thumbs) - 150
+        deadline = time.time() + 60  # the scene arrives after the GUI; wait until the cuboids are drawn
+        before, parts_before = coloured()
+        while parts_before.sum() < 2000 and time.time() < deadline:
+            time.sleep(0.5)
+            before, parts_before = coloured()
+        assert parts_before.sum() > 2000, "the 3D view is blank"
+        corners, version = app.state["corners"].copy(), app.state["version"]
 
-    before, parts_before = drawn(tmp_path / "before.png")
-    app.handle("Program_0:1:cuboid.h").value = 0.5  # the seat cuboid's height
-    after, parts_after = drawn(tmp_path / "after.png")
-    assert parts_before.sum() > 2000 and parts_after.sum() > 2000  # the cuboids are drawn
-    assert (np.abs(before - after).sum(-1) > 30).sum() > 500  # and the edit changed the picture
+        # the drag: press on the thumb, move it 60 px to the right in steps, release
+        browser.mouse("mousePressed", thumb["x"], thumb["y"])
+        for dx in range(6, 61, 6):
+            browser.mouse("mouseMoved", thumb["x"] + dx, thumb["y"])
+        browser.mouse("mouseReleased", thumb["x"] + 60, thumb["y"])
+        # the value the slider in the page shows once released: the last one the drag sent to the server
+        shown = json.loads(browser.until(_THUMBS))
+        new = float(next(t["value"] for t in shown if abs(t["y"] - thumb["y"]) < 2))
+        assert new > control.value
+
+        def applied():
+            """The geometry and error once the server has applied the page's last value (a drag sends several
+            values, applied in turn), else None."""
+            with app.lock:
+                if (round(app.handle(name).value, 9) == pytest.approx(new, abs=1e-9)
+                        and f", {new:g}, " in app.state["text"].split("\n")[2]):
+                    return app.state["corners"].copy(), app.state["error"]
+            return None
+
+        deadline = time.time() + 60
+        while not applied() and time.time() < deadline:
+            time.sleep(0.1)
+        assert app.state["version"] > version, "the slider drag never reached the server"
+        assert applied(), (new, app.handle(name).value, app.state["text"].split("\n")[2])
+        moved, error = applied()
+        assert error is None
+        want = execute(apply(parse(CHAIR), {name: new})).corners.numpy()
+        assert np.array_equal(moved, want) and not np.allclose(moved, corners)
+
+        deadline = time.time() + 60  # and the page draws the taller base
+        after, parts_after = coloured()
+        while (np.abs(before - after).sum(-1) > 30).sum() <= 500 and time.time() < deadline:
+            time.sleep(0.5)
+            after, parts_after = coloured()
+        assert parts_after.sum() > 2000
+        assert (np.abs(before - after).sum(-1) > 30).sum() > 500, "the 3D view did not change"
+    finally:
+        browser.close()
 
 
 @pytest.mark.parametrize("argv", [["shapeprog", "edit", "chair/173", "--target", "chair/42220"],
