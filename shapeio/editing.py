@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Generic, TypeVar
 
-__all__ = ["EDITOR_EXTRA", "History", "MAX_HISTORY", "import_viser"]
+__all__ = ["EDITOR_EXTRA", "History", "MAX_HISTORY", "UndoableSession", "import_viser"]
 
 T = TypeVar("T")
 
@@ -100,3 +100,52 @@ class History(Generic[T]):
             raise IndexError("nothing to redo")
         self._i += 1
         return self.current
+
+
+class UndoableSession:
+    """Undo / redo / reset of an edit session over a :class:`History` of states.
+
+    A subclass keeps ``self.history`` (None while nothing valid was loaded) and ``self.error``, and defines
+    ``_sync()``, which sets its attributes from ``self.history.current``. Each move returns False when it
+    cannot be made; a move that is made clears ``error`` (the last operation succeeded).
+    """
+
+    history: "History | None"
+    error: "Exception | None"
+
+    def _sync(self) -> None:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    def _record(self, state) -> None:
+        """Make ``state`` current: the first state of a new history, or pushed onto the existing one."""
+        if self.history is None:
+            self.history = History(state)
+        else:
+            self.history.push(state)
+        self._sync()
+
+    def _moved(self) -> bool:
+        self._sync()
+        self.error = None
+        return True
+
+    def undo(self) -> bool:
+        """Step back (False when there is nothing to undo)."""
+        if self.history is None or not self.history.can_undo:
+            return False
+        self.history.undo()
+        return self._moved()
+
+    def redo(self) -> bool:
+        """Step forward again (False when there is nothing to redo)."""
+        if self.history is None or not self.history.can_redo:
+            return False
+        self.history.redo()
+        return self._moved()
+
+    def reset(self) -> bool:
+        """Back to the first state (an undoable step). False when already there."""
+        if self.history is None or self.history.current is self.history.initial:
+            return False
+        self.history.push(self.history.initial)
+        return self._moved()

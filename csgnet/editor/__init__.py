@@ -35,7 +35,7 @@ from typing import Mapping, Union
 import numpy as np
 
 from shapeio import write_new
-from shapeio.editing import History
+from shapeio.editing import History, UndoableSession
 
 from .. import primitives as P
 from ..lang import OPERATORS, Draw, Op, ParseError, Program, parse
@@ -188,7 +188,7 @@ def render_png_bytes(canvas: np.ndarray, scale: int = PNG_SCALE) -> bytes:
     return buf.getvalue()
 
 
-class CSGEditSession:
+class CSGEditSession(UndoableSession):
     """A CSG program being edited: its render, errors, undo / redo, exports.
 
     Args:
@@ -213,8 +213,7 @@ class CSGEditSession:
         except ParseError as e:
             self.error = e
             return
-        self.history = History((program, self._render(program)))
-        self._sync()
+        self._record((program, self._render(program)))
 
     @staticmethod
     def _guess_dim(text: str) -> int:
@@ -267,33 +266,7 @@ class CSGEditSession:
             self.error = e
             return False
         self.error = None
-        state = (program, self._render(program))
-        if self.history is None:
-            self.history = History(state)
-        else:
-            self.history.push(state)
-        self._sync()
-        return True
-
-    def undo(self) -> bool:
-        if self.history is None or not self.history.can_undo:
-            return False
-        self.history.undo()
-        self._sync()
-        return True
-
-    def redo(self) -> bool:
-        if self.history is None or not self.history.can_redo:
-            return False
-        self.history.redo()
-        self._sync()
-        return True
-
-    def reset(self) -> bool:
-        if self.history is None or self.history.current is self.history.initial:
-            return False
-        self.history.push(self.history.initial)
-        self._sync()
+        self._record((program, self._render(program)))
         return True
 
     def export(self, folder) -> list[Path]:

@@ -28,7 +28,7 @@ from typing import Mapping
 import torch
 
 from shapeio import write_new
-from shapeio.editing import History
+from shapeio.editing import History, UndoableSession
 
 from .. import corpus
 from ..errors import EditError, ExecutionError, ParseError
@@ -130,7 +130,7 @@ class _State:
         self.program, self.shape = program, shape
 
 
-class EditSession:
+class EditSession(UndoableSession):
     """A program being edited.
 
     Args:
@@ -163,8 +163,7 @@ class EditSession:
         except (ParseError, ExecutionError) as e:
             self.error = e
             return
-        self.history = History(_State(program, shape))
-        self._sync()
+        self._record(_State(program, shape))
 
     # -- state
     @property
@@ -269,39 +268,7 @@ class EditSession:
             self.error = e
             return False
         self.error = None
-        if self.history is None:
-            self.history = History(_State(program, shape))
-        else:
-            self.history.push(_State(program, shape))
-        self._sync()
-        return True
-
-    def undo(self) -> bool:
-        """Step back (False when there is nothing to undo)."""
-        if self.history is None or not self.history.can_undo:
-            return False
-        self.history.undo()
-        self._sync()
-        self.error = None
-        return True
-
-    def redo(self) -> bool:
-        """Step forward again (False when there is nothing to redo)."""
-        if self.history is None or not self.history.can_redo:
-            return False
-        self.history.redo()
-        self._sync()
-        self.error = None
-        return True
-
-    def reset(self) -> bool:
-        """Back to the program as opened (an undoable step). False when already there."""
-        if self.history is None or self.history.current is self.history.initial:
-            return False
-        first = self.history.initial
-        self.history.push(_State(first.program, first.shape))
-        self._sync()
-        self.error = None
+        self._record(_State(program, shape))
         return True
 
     # -- goal-directed editing

@@ -39,3 +39,26 @@ def test_import_viser_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "viser", None)  # an import of viser now fails
     with pytest.raises(ImportError, match=rf"pip install -e '\.\[{EDITOR_EXTRA}\]'"):
         import_viser()
+
+
+def test_undoable_session_moves_sync_and_clear_the_error():
+    from shapeio.editing import UndoableSession
+
+    class Counter(UndoableSession):
+        def __init__(self):
+            self.history, self.error, self.value = None, None, None
+
+        def _sync(self):
+            self.value = self.history.current
+
+    s = Counter()
+    assert not s.undo() and not s.redo() and not s.reset()  # nothing loaded yet
+    s._record(1)
+    s._record(2)
+    assert s.value == 2
+    s.error = "last edit failed"
+    assert s.undo() and s.value == 1 and s.error is None and not s.undo()
+    assert s.redo() and s.value == 2 and not s.redo()
+    assert s.reset() and s.value == 1 and s.history.can_undo
+    assert not s.reset()  # already at the first state
+    assert s.undo() and s.value == 2
