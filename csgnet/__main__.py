@@ -420,19 +420,13 @@ def _non_negative(text: str) -> int:
 
 
 def cmd_edit(args) -> int:
-    import time
-
-    from shapeio.editing import import_viser
+    from shapeio.editing import editor_preflight, serve_until_interrupted
 
     from .editor import CSGEditSession
 
-    try:
-        import_viser()
-    except ImportError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    if not Path(args.export_dir).is_dir():
-        print(f"error: {args.export_dir}: the export folder does not exist", file=sys.stderr)
+    problem = editor_preflight(args.export_dir)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 1
     text, name = args.program, "csg"
     path = Path(args.program)
@@ -450,18 +444,7 @@ def cmd_edit(args) -> int:
     from .editor.server import CSGEditorApp
 
     app = CSGEditorApp(session, host=args.host, port=args.port, export_dir=args.export_dir, source_text=text)
-    print(f"editing {text!r} at {app.url} (exports go to {Path(args.export_dir).resolve()}); Ctrl-C stops",
-          flush=True)
-    if not args.no_browser:
-        import webbrowser
-
-        webbrowser.open(app.url)
-    try:
-        while True:
-            time.sleep(3600)
-    except KeyboardInterrupt:
-        app.stop()
-    return 0
+    return serve_until_interrupted(app, repr(text), args.export_dir, not args.no_browser)
 
 
 def main(argv=None) -> int:

@@ -13,9 +13,11 @@ Example:
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Generic, TypeVar
 
-__all__ = ["EDITOR_EXTRA", "History", "MAX_HISTORY", "UndoableSession", "import_viser"]
+__all__ = ["EDITOR_EXTRA", "History", "MAX_HISTORY", "UndoableSession", "editor_preflight", "import_viser",
+           "serve_until_interrupted"]
 
 T = TypeVar("T")
 
@@ -149,3 +151,32 @@ class UndoableSession:
             return False
         self.history.push(self.history.initial)
         return self._moved()
+
+
+def editor_preflight(export_dir) -> str | None:
+    """Why an editor command cannot start (viser missing, no export folder), or None when it can."""
+    try:
+        import_viser()
+    except ImportError as e:
+        return str(e)
+    if not Path(export_dir).is_dir():
+        return f"{export_dir}: the export folder does not exist"
+    return None
+
+
+def serve_until_interrupted(app, what: str, export_dir, open_browser: bool) -> int:
+    """Print where the editor page of ``what`` is served, optionally open it in a browser, and keep it
+    served until Ctrl-C; returns the exit status 0."""
+    import time
+
+    print(f"editing {what} at {app.url} (exports go to {Path(export_dir).resolve()}); Ctrl-C stops", flush=True)
+    if open_browser:
+        import webbrowser
+
+        webbrowser.open(app.url)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        app.stop()
+    return 0

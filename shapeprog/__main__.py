@@ -643,30 +643,16 @@ def _open_for_edit(args):
 
 
 def _cmd_edit(args) -> int:
-    from shapeio.editing import import_viser
+    from shapeio.editing import editor_preflight, serve_until_interrupted
 
-    try:
-        import_viser()
-    except ImportError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    if not Path(args.export_dir).is_dir():
-        raise SystemExit(f"error: {args.export_dir}: the export folder does not exist")
+    problem = editor_preflight(args.export_dir)
+    if problem:
+        raise SystemExit(f"error: {problem}")  # exit status 1, as the argument errors of _open_for_edit
     session, text, file = _open_for_edit(args)
     from .editor.server import EditorApp
 
     app = EditorApp(session, host=args.host, port=args.port, export_dir=args.export_dir, source_text=text)
-    print(f"editing {file} at {app.url} (exports go to {Path(args.export_dir).resolve()}); Ctrl-C stops", flush=True)
-    if not args.no_browser:
-        import webbrowser
-
-        webbrowser.open(app.url)
-    try:
-        while True:
-            time.sleep(3600)
-    except KeyboardInterrupt:
-        app.stop()
-    return 0
+    return serve_until_interrupted(app, file, args.export_dir, not args.no_browser)
 
 
 def _cmd_discover_macros(args) -> int:
