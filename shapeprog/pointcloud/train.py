@@ -42,7 +42,8 @@ from ..vae.decode import decode_latent
 from ..vae.losses import LOSS_WEIGHTS
 from ..vae.model import VAE
 from ..vae.pretrained import load_model, load_pretrained
-from ..vae.train import _corners, load_trees, reconstruction_fscores, target_surfaces
+from ..vae.train import (_corners, check_data_category, load_trees, reconstruction_fscores,
+                         target_surfaces)
 from ..vae.vectors import VectorNode
 from .data import TRAIN_POINTS, CloudDataset, collate_clouds
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
@@ -178,11 +179,7 @@ class _CloudModule(L.LightningModule):
 
     # ------------------------------------------------------------------ checks and checkpoints
     def setup(self, stage: str) -> None:
-        dm = self.trainer.datamodule if self.trainer is not None else None
-        other = getattr(dm, "category", None)
-        if other is not None and other != self.hparams.category:
-            raise ValueError(f"the model is set up for category {self.hparams.category!r} and the data module for "
-                             f"{other!r}; set model.init_args.category and data.init_args.category alike")
+        check_data_category(self)
 
     def _info(self) -> dict:
         return {"format": CHECKPOINT_FORMAT, "recipe": self.recipe, "category": self.hparams.category,

@@ -282,6 +282,16 @@ def _corners(program) -> torch.Tensor:
 # ------------------------------------------------------------------------------------------ module
 
 
+def check_data_category(module: L.LightningModule) -> None:
+    """Refuse a training run whose data module's ``category`` differs from the model's
+    (``hparams.category``); shared by the VAE and the point-cloud modules."""
+    dm = module.trainer.datamodule if module.trainer is not None else None
+    other = getattr(dm, "category", None)
+    if other is not None and other != module.hparams.category:
+        raise ValueError(f"the model is set up for category {module.hparams.category!r} and the data module for "
+                         f"{other!r}; set model.init_args.category and data.init_args.category alike")
+
+
 class VAEModule(L.LightningModule):
     """Teacher-forced training of the ShapeAssembly VAE (spec section (d), "Training hyper-parameters").
 
@@ -349,11 +359,7 @@ class VAEModule(L.LightningModule):
 
     # ------------------------------------------------------------------ checks
     def setup(self, stage: str) -> None:
-        dm = self.trainer.datamodule if self.trainer is not None else None
-        other = getattr(dm, "category", None)
-        if other is not None and other != self.hparams.category:
-            raise ValueError(f"the model is set up for category {self.hparams.category!r} and the data module for "
-                             f"{other!r}; set model.init_args.category and data.init_args.category alike")
+        check_data_category(self)
 
     def on_fit_start(self) -> None:
         n = self.hparams.recon_every_n_epochs
