@@ -30,8 +30,6 @@ __all__ = ["InputError", "load_shape", "fit_to_canvas", "read_checkpoint", "load
            "WEIGHTS", "PRETRAINED", "SHIPPED"]
 
 WEIGHTS = Path(__file__).parent / "weights"
-# the shipped model per dimension (trained with the command recorded in docs/benchmarks.md)
-PRETRAINED = {2: "csgnet2d.pt", 3: "csgnet3d.pt"}
 KINDS = ("csgnet", "csgnetstack")
 TUNINGS = ("supervised", "reinforce", "selftrain")
 # (dim, kind, tuning) -> the shipped file (docs/benchmarks.md says how each was trained)
@@ -43,7 +41,7 @@ SHIPPED = {
     (2, "csgnet", "selftrain"): "st_csgnet2d.pt",
     (2, "csgnetstack", "reinforce"): "rl_csgnetstack2d.pt",
 }
-
+PRETRAINED = {dim: SHIPPED[(dim, "csgnet", "supervised")] for dim in (2, 3)}  # load_pretrained(dim)'s defaults
 
 
 # ------------------------------------------------------------------------------------------------
