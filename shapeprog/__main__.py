@@ -731,19 +731,23 @@ def _cmd_refactor(args) -> int:
     return 0
 
 
+def _size(path: Path) -> str:
+    n = path.stat().st_size if path.is_file() else sum(f.stat().st_size for f in path.iterdir())
+    return f"{n / 1024:.0f} KiB"
+
+
 def _cmd_refactor_corpus(args) -> int:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     from .macros import Library, load_library
-    from .macros.refactored import refactor_corpus, write_refactored
+    from .macros.refactored import check_target, refactor_corpus, write_refactored
 
     out = Path(args.out)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise SystemExit(f"error: {out}: exists and is not an empty folder (refactored corpora are never "
-                         "written over existing files)")
-    if not out.parent.is_dir():
-        raise SystemExit(f"error: {out}: folder {str(out.parent)!r} does not exist")
+    try:
+        check_target(out)
+    except (FileExistsError, FileNotFoundError) as e:
+        raise SystemExit(f"error: {e}") from None
     if Path(args.library).is_file():
         lib = Library.from_text(decode(Path(args.library).read_bytes(), args.library), args.library)
     else:
@@ -777,7 +781,7 @@ def _cmd_refactor_corpus(args) -> int:
               f"{len(s['over_tolerance'])} shape(s) above {s['check_tolerance']}")
     for f in s["failures"]:
         print(f"failed: {args.category}/{f['id']}: {f['reason']}", file=sys.stderr)
-    print(f"wrote {out} ({s['refactored']} programs and summary.json)")
+    print(f"wrote {out} ({s['refactored']} programs and summary.json, {_size(out)})")
     return 0
 
 
@@ -1053,7 +1057,8 @@ def main(argv=None) -> int:
                                     "(<id>.txt) and summary.json into a new folder, atomically.")
     rc.add_argument("--category", required=True, choices=corpus.CATEGORIES)
     rc.add_argument("--library", required=True, help="a shipped library's category or a library file")
-    rc.add_argument("--out", required=True, help="the new folder (must not exist, or be empty)")
+    rc.add_argument("--out", required=True, help="the new folder (must not exist, or be empty), or a new "
+                                                 "FILE.tar.xz archive of the same files")
     rc.add_argument("--split", default="all", choices=("train", "val", "all"))
     rc.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes of the split")
     rc.add_argument("--seed", type=int, default=0, help="seed of --limit's subset")

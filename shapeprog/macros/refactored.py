@@ -8,8 +8,9 @@ does not parse, convert, refactor or execute is a :class:`ShapeRefactor` with an
 others kept. :func:`write_refactored` writes the result as a folder, ``<id>.txt`` per shape (the
 hierarchical macro program of :mod:`shapeprog.macros.hierarchy`, the text ``refactor -o`` writes and
 ``python -m shapeprog edit`` reads) plus ``summary.json``, atomically (a temporary folder renamed into
-place) and never over existing files. :func:`read_refactored` reads such a folder, or a ``.tar.xz`` of
-one, back.
+place) and never over existing files, or the same files as a reproducible ``.tar.xz``.
+:func:`read_refactored` reads either back; :func:`load_refactored` reads the shipped one
+(``shapeprog/data/shapemod_<category>_refactored.tar.xz``, chair).
 
 Example:
     >>> from shapeprog.macros import Library
@@ -38,8 +39,8 @@ import numpy as np
 
 from .lang import MacroError
 
-__all__ = ["CHUNK", "CHECK_TOL", "SUMMARY", "RefactoredCorpus", "ShapeRefactor", "read_refactored",
-           "refactor_corpus", "refactor_texts", "write_refactored"]
+__all__ = ["CHUNK", "CHECK_TOL", "SHIPPED", "SUMMARY", "RefactoredCorpus", "ShapeRefactor", "check_target", "load_refactored",
+           "read_refactored", "refactor_corpus", "refactor_texts", "write_refactored"]
 
 #: Shapes per executor task.
 CHUNK = 25
@@ -252,44 +253,77 @@ def refactor_corpus(category: str, library, library_name: str = "", split: str =
         except KeyError:
             raise ValueError(f"no program {category}/{i} in the corpus") from None
     shapes = refactor_texts(category, items, library, executor, chunk, mode, max_orders, check)
-    meta = {"split": None if given else split, "ids": len(ids) if given else None, "limit": limit, "seed": seed,
+    import hashlib
+
+    meta = {"library_sha256": hashlib.sha256(library.to_text().encode("utf-8")).hexdigest(),
+            "split": None if given else split, "ids": len(ids) if given else None, "limit": limit, "seed": seed,
             "search": mode, "max_orders": max_orders, "library_macros": len(library.macros),
             "library_size": len(library)}
     return RefactoredCorpus(category, library_name, shapes, meta)
 
 
-def _check_target(out: Path) -> None:
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+def check_target(out) -> None:
+    """Refuse an output :func:`write_refactored` would not write: an existing archive, an existing folder
+    that is not empty, a missing parent folder (``FileExistsError`` / ``FileNotFoundError``)."""
+    out = Path(out)
+    if _is_archive(out):
+        if os.path.lexists(out):
+            raise FileExistsError(f"{out}: the file exists; it is not replaced")
+    elif out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise FileExistsError(f"{out}: exists and is not an empty folder; refactored corpora are never written "
                               "over existing files")
     if not out.parent.is_dir():
         raise FileNotFoundError(f"{out}: folder {str(out.parent)!r} does not exist")
 
 
-def write_refactored(result: RefactoredCorpus, out, command: str | None = None) -> Path:
-    """Write ``<id>.txt`` per refactored shape and :data:`SUMMARY` into the new folder ``out``.
+def _is_archive(path: Path) -> bool:
+    return path.name.endswith(".tar.xz")
 
-    Everything is written into a temporary folder beside ``out``, which is then renamed to ``out``: a
-    reader sees all the files or none. ``out`` must not exist, or be an empty folder.
+
+def _files(result: RefactoredCorpus, command: str | None) -> list[tuple[str, bytes]]:
+    summary = result.summary()
+    if command is not None:
+        summary = {"command": command, **summary}
+    files = [(f"{s.shape_id}.txt", s.text.encode("utf-8")) for s in result.shapes if s.text is not None]
+    return files + [(SUMMARY, (json.dumps(summary, indent=1) + "\n").encode("utf-8"))]
+
+
+def _archive_bytes(files: list[tuple[str, bytes]]) -> bytes:
+    """A reproducible ``.tar.xz``: members in the given order, no owners, times or modes of this machine."""
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w:", format=tarfile.PAX_FORMAT) as tar:
+        for name, data in files:
+            info = tarfile.TarInfo(name)
+            info.size, info.mode, info.mtime = len(data), 0o644, 0
+            tar.addfile(info, io.BytesIO(data))
+    return lzma.compress(buf.getvalue(), preset=9 | lzma.PRESET_EXTREME)
+
+
+def write_refactored(result: RefactoredCorpus, out, command: str | None = None) -> Path:
+    """Write ``<id>.txt`` per refactored shape and :data:`SUMMARY` into the new folder ``out``, or into
+    the new archive ``out`` when its name ends in ``.tar.xz`` (members ``<id>.txt`` and the summary).
+
+    A folder is written as a temporary folder beside ``out`` and then renamed to ``out``; an archive is
+    written with :func:`shapeio.write_new`: a reader sees all the files or none. A folder ``out`` must not
+    exist or be empty; an archive must not exist.
 
     Args:
         command: the command line that made it, recorded in the summary.
 
     Raises:
-        FileExistsError: ``out`` exists and is not an empty folder (checked before and at the rename).
+        FileExistsError: ``out`` exists (a folder: is not empty; checked before and at the rename).
         FileNotFoundError: ``out``'s parent folder does not exist.
     """
+    from shapeio import write_new
+
     out = Path(out)
-    _check_target(out)
+    check_target(out)
+    if _is_archive(out):
+        return write_new(out, _archive_bytes(_files(result, command)))
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
     try:
-        for s in result.shapes:
-            if s.text is not None:
-                (tmp / f"{s.shape_id}.txt").write_text(s.text, encoding="utf-8")
-        summary = result.summary()
-        if command is not None:
-            summary = {"command": command, **summary}
-        (tmp / SUMMARY).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+        for name, data in _files(result, command):
+            (tmp / name).write_bytes(data)
         os.chmod(tmp, 0o777 & ~_umask())
         try:
             os.rename(tmp, out)
@@ -309,8 +343,32 @@ def _umask() -> int:
     return mask
 
 
-def read_refactored(path, library=None) -> tuple[dict, dict]:
+#: The shipped refactored corpora (in ``shapeprog/data``), by category.
+SHIPPED = {"chair": "shapemod_chair_refactored.tar.xz"}
+
+
+def load_refactored(category: str, ids: Sequence[int] | None = None) -> tuple[dict, dict]:
+    """The shipped refactored corpus of ``category`` (:func:`read_refactored` of its archive; how it was
+    made: its summary's ``command``).
+
+    Raises:
+        ValueError: none is shipped for ``category``.
+    """
+    from importlib import resources
+
+    if category not in SHIPPED:
+        raise ValueError(f"no shipped refactored corpus for {category!r} (shipped: {', '.join(SHIPPED)})")
+    ref = resources.files("shapeprog").joinpath("data", SHIPPED[category])
+    with resources.as_file(ref) as path:
+        return read_refactored(path, ids=ids)
+
+
+def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tuple[dict, dict]:
     """Read a refactored corpus: a folder :func:`write_refactored` wrote, or a ``.tar.xz`` of one.
+
+    Args:
+        library: functions the programs call without defining them (the written ones define theirs).
+        ids: read only these shapes (default: all).
 
     Returns:
         ``(programs, summary)``: ``{shape id: MacroHierarchy}`` in id order, and the summary (``{}`` when
@@ -338,10 +396,12 @@ def read_refactored(path, library=None) -> tuple[dict, dict]:
     else:
         raise FileNotFoundError(f"{path}: no such folder or archive")
     summary = json.loads(files.pop(SUMMARY).decode("utf-8")) if SUMMARY in files else {}
+    wanted = set() if ids is None else {int(i) for i in ids}
     programs = {}
     for name in sorted(files, key=lambda n: (len(n), n)):
         stem = name[:-4]
-        if not (stem.isascii() and stem.isdigit()):
+        if not (stem.isascii() and stem.isdigit()) or (ids is not None and int(stem) not in wanted):
             continue
-        programs[int(stem)] = hierarchy.parse(decode(files[name], name), file=name, library=library)
+        where = f"{path}/{name}"
+        programs[int(stem)] = hierarchy.parse(decode(files[name], where), file=where, library=library)
     return dict(sorted(programs.items())), summary
