@@ -8,7 +8,8 @@ left out of both. For each sigma, every continuous parameter (not the bbox lines
 gets ``sigma * N(0, 1)`` (``shapeprog.macros.perturb``), the programs are executed, 2,500 surface points
 per shape are sampled and the shipped PointNet classifier's features (``shapeprog/weights/pointnet_cls.pt``,
 the generation tables' FD) are compared with the val split's by the Fréchet distance. ``--repeats`` noise
-draws per sigma give the mean and the spread (min-max) of FD.
+draws per sigma give the mean and the spread (min-max) of FD; the script also counts, per draw, the shapes
+whose bounding-box diagonal grew beyond twice the unperturbed one (FD is dominated by those at large sigma).
 
     python bench/shapemod_perturb.py --category chair --n 500 --repeats 3 \\
         --png docs/figures/shapemod_perturbation.png
@@ -35,6 +36,14 @@ from shapeprog.macros.refactored import refactor_corpus
 from shapeprog.pointnet import load_classifier
 
 SIGMAS = (0.0, 0.01, 0.025, 0.05, 0.1, 0.15, 0.2)
+#: A perturbed shape whose bounding-box diagonal exceeds this many times its unperturbed one is counted as
+#: blown up (FD is dominated by a few such shapes at large sigma).
+BLOWN_UP = 2.0
+
+
+def _diagonals(corners) -> np.ndarray:
+    return np.array([float((c.reshape(-1, 3).max(0).values - c.reshape(-1, 3).min(0).values).norm())
+                     for c in corners])
 
 
 def main(argv=None) -> int:
@@ -88,29 +97,39 @@ def main(argv=None) -> int:
     print(f"FD of the {len(ok)} unperturbed corpus programs to val: {fd_orig:.3f}")
 
     fd = {m: [] for m in programs}
+    blown = {m: [] for m in programs}  # per sigma and draw: shapes grown beyond BLOWN_UP x their diagonal
+    diag0 = {m: _diagonals(pp.perturb(0.0, np.random.default_rng(0))) for m, pp in programs.items()}
     for s_i, sigma in enumerate(args.sigmas):
         for m, pp in programs.items():
-            vals = []
+            vals, big = [], []
             for r in range(args.repeats if sigma > 0 else 1):
                 corners = pp.perturb(sigma, np.random.default_rng([args.seed, s_i, r]))
                 feats = classifier_features(classifier_clouds(corners, seed=args.seed + 2 + r), model)
                 vals.append(frechet_distance(feats, val_fit))
+                big.append(int((_diagonals(corners) > BLOWN_UP * diag0[m]).sum()))
             fd[m].append(vals)
+            blown[m].append(big)
         print(f"sigma {sigma:g}: " + ", ".join(f"{m} {np.mean(fd[m][-1]):.3f}" for m in programs)
               + f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
 
     seconds = time.perf_counter() - t0
     print(f"\n{args.category}: FD to the val split ({len(val_corners)} shapes) of {len(ok)} perturbed train shapes; "
           f"mean over {args.repeats} noise draws (min-max); {seconds:.0f} s\n")
-    print("| sigma | " + " | ".join(programs) + " |\n|---|" + "---|" * len(programs))
+    print("| sigma | " + " | ".join(f"FD {m}" for m in programs) + " | "
+          + " | ".join(f"blown up, {m}" for m in programs) + " |\n|---|" + "---|" * (2 * len(programs)))
     for s_i, sigma in enumerate(args.sigmas):
         cells = []
         for m in programs:
             v = fd[m][s_i]
             cells.append(f"{np.mean(v):.3f}" + (f" ({min(v):.3f}-{max(v):.3f})" if len(v) > 1 else ""))
+        for m in programs:
+            cells.append(" / ".join(str(b) for b in blown[m][s_i]))
         print(f"| {sigma:g} | " + " | ".join(cells) + " |")
+    print(f"\n'blown up': shapes (of {len(ok)}) whose bounding-box diagonal grew beyond {BLOWN_UP:g}x the "
+          "unperturbed one, per noise draw.")
     result = {"category": args.category, "library": name, "n": len(ok), "seed": args.seed, "repeats": args.repeats,
-              "sigmas": args.sigmas, "fd": fd, "fd_unperturbed_corpus": fd_orig, "continuous_per_shape": n_cont,
+              "sigmas": args.sigmas, "fd": fd, "fd_unperturbed_corpus": fd_orig,
+              "blown_up": blown, "blown_up_factor": BLOWN_UP, "continuous_per_shape": n_cont,
               "val_shapes": len(val_corners), "seconds": round(seconds, 1)}
     if args.json:
         from shapeio import atomic_write
@@ -129,7 +148,8 @@ def main(argv=None) -> int:
             ax.plot(args.sigmas, mean, style, ms=4, label=f"{m} ({n_cont[m]:.1f} params/shape)")
             ax.fill_between(args.sigmas, lo, hi, alpha=0.2)
         ax.set_xlabel("sigma (noise std. dev. added to continuous parameters)")
-        ax.set_ylabel("FD to the val set")
+        ax.set_ylabel("FD to the val set (log scale)")
+        ax.set_yscale("log")
         ax.set_title(f"{args.category}: {len(ok)} train shapes, {args.repeats} draws per sigma")
         ax.grid(alpha=0.3)
         ax.legend()
