@@ -1063,7 +1063,8 @@ def main(argv=None) -> int:
     rc.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes of the split")
     rc.add_argument("--seed", type=int, default=0, help="seed of --limit's subset")
     rc.add_argument("--search", choices=("beam", "exact"), default="beam")
-    rc.add_argument("--workers", type=_int_at_least(1), default=1, help="processes (1: none)")
+    rc.add_argument("--workers", type=_int_at_least(1), default=2,
+                    help="processes of the pool (default 2; 1: no pool, everything in this process)")
     rc.add_argument("--no-check", action="store_true", help="skip reading back and executing every result")
     rc.set_defaults(func=_cmd_refactor_corpus, argv=None)
     tb = sub.add_parser("table1", help="ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows",

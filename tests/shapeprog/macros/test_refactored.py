@@ -117,7 +117,7 @@ def test_read_refactored_names_a_bad_file(tmp_path):
 def test_refactor_corpus_command(tmp_path, capsys):
     out = tmp_path / "c"
     argv = ["refactor-corpus", "--category", "chair", "--library", "chair", "--limit", "3", "--split", "val",
-            "--out", str(out)]
+            "--workers", "1", "--out", str(out)]
     assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "3 of 3 shapes refactored" in printed and f"wrote {out}" in printed
