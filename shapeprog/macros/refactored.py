@@ -95,7 +95,8 @@ class RefactoredCorpus:
         totals = {}
         for key in ("f_before", "f_after", "blocks", "leaves") + tuple(f"{c}_{w}" for c in _COUNTS
                                                                       for w in ("before", "after")):
-            totals[key] = round(float(np.mean([s[key] for s in ok])), 4) if ok else None
+            vals = [s[key] for s in ok if s[key] is not None]  # leaves: None without the check
+            totals[key] = round(float(np.mean(vals)), 4) if vals else None
         errs = [s["max_corner_error"] for s in ok if s.get("max_corner_error") is not None]
         return {
             "category": self.category,
@@ -114,8 +115,9 @@ class RefactoredCorpus:
 
 
 def _leaf_error(got, want) -> float:
-    """The largest corner distance between two sets of leaf cuboids ``(L, 8, 3)`` matched one to one
-    (the assignment minimising the summed largest-corner distances; inf when the counts differ)."""
+    """The corner distance between two sets of leaf cuboids ``(L, 8, 3)``: the largest coordinate
+    difference of corresponding corners (L-infinity), over the cuboids matched one to one by the assignment
+    minimising the summed per-cuboid distances; inf when the counts differ."""
     from scipy.optimize import linear_sum_assignment
 
     a, b = got.detach().double().numpy(), want.detach().double().numpy()

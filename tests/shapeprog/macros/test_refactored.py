@@ -89,6 +89,10 @@ def test_a_bad_shape_is_reported_and_the_rest_kept(lib, tmp_path):
     assert [f["id"] for f in summary["failures"]] == [1, 48522]
     assert [s["id"] for s in summary["per_shape"]] == [1, 173, 48522]
     assert summary["per_shape"][0] == {"id": 1, "error": rc.shapes[0].error}
+    # without the check the counts are the same and nothing is executed
+    unchecked = RefactoredCorpus("chair", "chair", refactor_texts("chair", items, lib, check=False)).summary()
+    assert unchecked["per_shape"][1] == {**summary["per_shape"][1], "leaves": None, "max_corner_error": None}
+    assert unchecked["mean_per_shape"]["leaves"] is None and unchecked["max_corner_error"] is None
 
 
 def test_outputs_are_never_overwritten(three, tmp_path):
