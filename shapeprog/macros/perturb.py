@@ -106,7 +106,7 @@ class PerturbablePrograms:
     def numbers(self, sigma: float, rng: np.random.Generator) -> list[torch.Tensor]:
         """Per program, the executor's numbers ``(S,) float64`` after adding ``sigma * N(0, 1)`` to every
         continuous parameter (one draw per parameter from ``rng``, programs in order) and clamping.
-        Numbers that were outside the ranges before (none in the corpus) are clamped only when perturbed."""
+        A number is clamped only when the noise moved it (an unperturbed one stays as the program has it)."""
         if not sigma >= 0:
             raise ValueError(f"`sigma` must be >= 0, got {sigma}")
         out = []

@@ -378,8 +378,11 @@ def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tup
 
     Raises:
         ParseError: a program file that does not parse (named, with line and column).
+        shapeio.InputError: a file that is not such an archive, a summary that is not JSON.
         FileNotFoundError: no such folder or archive.
     """
+    from shapeio import InputError
+
     from ..limits import decode
     from . import hierarchy
 
@@ -390,14 +393,20 @@ def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tup
             if f.name.endswith(".txt") or f.name == SUMMARY:
                 files[f.name] = f.read_bytes()
     elif path.is_file():
-        with tarfile.open(fileobj=io.BytesIO(lzma.decompress(path.read_bytes())), mode="r:") as tar:
-            for m in tar.getmembers():
-                name = m.name.rsplit("/", 1)[-1]
-                if m.isfile() and (name.endswith(".txt") or name == SUMMARY):
-                    files[name] = tar.extractfile(m).read()
+        try:
+            with tarfile.open(fileobj=io.BytesIO(lzma.decompress(path.read_bytes())), mode="r:") as tar:
+                for m in tar.getmembers():
+                    name = m.name.rsplit("/", 1)[-1]
+                    if m.isfile() and (name.endswith(".txt") or name == SUMMARY):
+                        files[name] = tar.extractfile(m).read()
+        except (lzma.LZMAError, tarfile.TarError, EOFError) as e:
+            raise InputError(f"{path}: not a .tar.xz archive of a refactored corpus ({e})") from None
     else:
         raise FileNotFoundError(f"{path}: no such folder or archive")
-    summary = json.loads(files.pop(SUMMARY).decode("utf-8")) if SUMMARY in files else {}
+    try:
+        summary = json.loads(files.pop(SUMMARY).decode("utf-8")) if SUMMARY in files else {}
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"{path}/{SUMMARY}: not a summary JSON ({e})") from None
     wanted = set() if ids is None else {int(i) for i in ids}
     programs = {}
     for name in sorted(files, key=lambda n: (len(n), n)):

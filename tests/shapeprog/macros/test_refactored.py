@@ -11,6 +11,7 @@ import torch
 
 from shapeprog import corpus, parse
 from shapeprog.__main__ import main
+from shapeio import InputError
 from shapeprog.errors import ParseError
 from shapeprog.execute import execute as sa_execute
 from shapeprog.macros import Library, hierarchy, load_library
@@ -116,6 +117,19 @@ def test_read_refactored_names_a_bad_file(tmp_path):
     (tmp_path / "5.txt").write_text("# Program_0\nbbox = Cuboid(1.0, 1.0, 1.0, True)\nc = nope(1.0)\n\n")
     with pytest.raises(ParseError, match=r"5\.txt:3:"):
         read_refactored(tmp_path)
+    (tmp_path / "5.txt").write_bytes(b"# Program_0\nbbox = Cuboid(1.0, 1.0, 1.0, True)\xff\n\n")
+    with pytest.raises(ParseError, match=r"5\.txt:2:.*not UTF-8"):
+        read_refactored(tmp_path)
+    (tmp_path / "5.txt").unlink()
+    (tmp_path / SUMMARY).write_text("{")
+    with pytest.raises(InputError, match="not a summary JSON"):
+        read_refactored(tmp_path)
+    bad = tmp_path / "x.tar.xz"
+    bad.write_bytes(b"not xz")
+    with pytest.raises(InputError, match=r"x\.tar\.xz: not a \.tar\.xz archive"):
+        read_refactored(bad)
+    with pytest.raises(FileNotFoundError):
+        read_refactored(tmp_path / "none")
 
 
 def test_refactor_corpus_command(tmp_path, capsys):
