@@ -25,7 +25,8 @@ import torch.nn.functional as F
 from .model import VAEOutput
 from .vectors import ALIGNED, AXIS, CMD, CUBE1, CUBE2, CUBE3, FACE, VectorNode, l1_mask
 
-__all__ = ["LINE_TERMS", "LOSS_WEIGHTS", "kl_loss", "leaf_loss", "line_losses", "program_loss"]
+__all__ = ["LINE_TERMS", "LOSS_WEIGHTS", "MACRO_LINE_TERMS", "MACRO_LOSS_WEIGHTS", "kl_loss", "leaf_loss", "line_losses",
+           "macro_line_losses", "macro_program_loss", "program_loss"]
 
 #: The weight of each term (the reference's defaults: CE 1, L1 50, KL 0.1).
 LOSS_WEIGHTS = {
@@ -126,6 +127,86 @@ def program_loss(output: VAEOutput, tree: VectorNode, weights: Mapping[str, floa
             terms[k] = terms[k] + v
         rows = node.cuboid_rows
         is_leaf = torch.tensor([float(j >= len(node.children) or node.children[j] is None) for j in range(len(rows))],
+                               dtype=out.leaf.dtype, device=out.leaf.device)
+        terms["leaf"] = terms["leaf"] + leaf_loss(out.leaf, is_leaf)
+    terms["bb"] = (output.bbox_dims - tree.bbox_dims).abs().sum()
+    terms["kl"] = kl_loss(output.mu, output.logvar) if kl else zero
+    total = sum((weights.get(k, 0.0) * v for k, v in terms.items()), zero)
+    return total, terms
+
+
+# ------------------------------------------------------------------------ macro programs (ShapeMOD)
+
+#: The weight of each term of :func:`macro_program_loss` (the base model's: CE 1, L1 50, KL 0.1).
+MACRO_LOSS_WEIGHTS = {"cmd": 1.0, "cube": 1.0, "float": 50.0, "face": 1.0, "axis": 1.0, "bool": 1.0, "leaf": 1.0,
+                      "bb": 50.0, "kl": 0.1}
+#: The terms of :func:`macro_line_losses`.
+MACRO_LINE_TERMS = ("cmd", "cube", "float", "face", "axis", "bool")
+
+
+def macro_line_losses(pred: torch.Tensor, target: torch.Tensor, layout) -> dict[str, torch.Tensor]:
+    """The per-line terms of one node of a macro program, each masked by the *target* line's function.
+
+    Args:
+        pred: (T, width) float, predicted lines (logits for one-hots and booleans).
+        target: (T, width) float, the target lines ``[l1 .. lL, stop]`` (row 0 the bbox line).
+        layout: the :class:`~shapeprog.vae.layout.LineLayout`.
+
+    Returns:
+        Scalar sums named as :data:`MACRO_LINE_TERMS`: ``cmd`` CE over every row; ``cube``, ``face``, ``axis``
+        CE on each slot the row's function uses; ``float`` L1 on each used float; ``bool`` BCE-with-logits on
+        each used boolean of every row but the first (the bbox line's aligned flag is not learnt). A slot the
+        function does not use contributes neither loss nor gradient.
+    """
+    if pred.dim() != 2 or pred.shape != target.shape or pred.shape[1] != layout.width:
+        raise ValueError(f"pred and target must both be (T, {layout.width}), got {tuple(pred.shape)} and "
+                         f"{tuple(target.shape)}")
+    cmds = target[:, layout.slices["cmd"]].argmax(dim=1)
+    zero = pred.new_zeros(())
+    out = {"cmd": F.cross_entropy(pred[:, layout.slices["cmd"]], cmds, reduction="sum")}
+    for t, name in (("cube", "cube"), ("face", "face"), ("axis", "axis")):
+        if not layout.counts[t]:
+            out[name] = zero
+            continue
+        used = layout.masks[t].to(pred.device)[cmds]  # (T, k)
+        logits, want = layout.part(pred, t)[used], layout.part(target, t)[used]
+        out[name] = F.cross_entropy(logits, want.argmax(-1), reduction="sum") if logits.numel() else zero
+    if layout.counts["float"]:
+        used = layout.masks["float"].to(pred.device)[cmds]
+        out["float"] = (pred[:, layout.slices["float"]][used] - target[:, layout.slices["float"]][used]).abs().sum()
+    else:
+        out["float"] = zero
+    if layout.counts["bool"]:
+        used = layout.masks["bool"].to(pred.device)[cmds].clone()
+        used[0] = False
+        p, t_ = pred[:, layout.slices["bool"]][used], target[:, layout.slices["bool"]][used]
+        out["bool"] = F.binary_cross_entropy_with_logits(p, t_, reduction="sum") if p.numel() else zero
+    else:
+        out["bool"] = zero
+    return out
+
+
+def macro_program_loss(output: VAEOutput, tree, layout, weights: Mapping[str, float] | None = None,
+                       kl: bool = True) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """The weighted training loss of one macro program (:meth:`shapeprog.vae.macro_model.MacroVAE.forward`
+    of ``tree``, a :class:`~shapeprog.vae.layout.MacroNode`).
+
+    Returns:
+        ``(total, terms)``: the weighted sum and every unweighted term summed over the nodes
+        (:data:`MACRO_LINE_TERMS`, ``leaf`` the mean BCE of each node's leaf logits per created cuboid,
+        ``bb`` the L1 of the root bbox dims, ``kl``); weights default to :data:`MACRO_LOSS_WEIGHTS`.
+    """
+    weights = MACRO_LOSS_WEIGHTS if weights is None else weights
+    nodes = [n for n, _ in tree.nodes()]
+    if len(nodes) != len(output.nodes):
+        raise ValueError(f"the output has {len(output.nodes)} nodes, the tree {len(nodes)}")
+    zero = output.bbox_dims.new_zeros(())
+    terms = {k: zero for k in MACRO_LINE_TERMS + ("leaf",)}
+    for node, out in zip(nodes, output.nodes):
+        for k, v in macro_line_losses(out.lines, node.target_seq(layout), layout).items():
+            terms[k] = terms[k] + v
+        K = out.leaf.shape[0]
+        is_leaf = torch.tensor([float(j >= len(node.children) or node.children[j] is None) for j in range(K)],
                                dtype=out.leaf.dtype, device=out.leaf.device)
         terms["leaf"] = terms["leaf"] + leaf_loss(out.leaf, is_leaf)
     terms["bb"] = (output.bbox_dims - tree.bbox_dims).abs().sum()
