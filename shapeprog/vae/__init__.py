@@ -8,16 +8,27 @@ validity-checked decoding with the model's entry points (:func:`sample`, :func:`
 :func:`interpolate`), and :mod:`~shapeprog.vae.pretrained` weights files and the shipped models
 (:func:`load_pretrained`). :mod:`shapeprog.vae.train` (PyTorch Lightning; not imported here) trains it.
 See ``docs/shapeassembly_vae.md``.
+
+Macro programs (ShapeMOD, Appendix C): :mod:`~shapeprog.vae.layout` computes a :class:`LineLayout` from a
+macro library and turns hierarchical macro programs into trees and back, :mod:`~shapeprog.vae.macro_model`
+holds the :class:`MacroVAE` sized by it, :func:`macro_program_loss` its masked typed losses, and
+:mod:`~shapeprog.vae.macro_decode` its validity decoding (:func:`sample_macro`, :func:`encode_macro`,
+:func:`decode_macro`). See ``docs/shapemod.md``.
 """
 from __future__ import annotations
 
 from .batch import TreeBatch, batch_forward, batch_loss
 from .decode import Decoded, InvalidSample, decode, decode_latent, encode, interpolate, sample
-from .losses import LOSS_WEIGHTS, program_loss
+from .layout import LineLayout, MacroNode, macro_program_to_tree, tree_to_macro_program
+from .losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS, macro_program_loss, program_loss
+from .macro_decode import MacroDecoded, decode_macro, encode_macro, sample_macro
+from .macro_model import MacroVAE
 from .model import VAE, Decoder, Encoder
 from .pretrained import load_pretrained
 from .vectors import VectorNode, program_to_tree, tree_to_program
 
 __all__ = ["LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch", "VectorNode",
            "batch_forward", "batch_loss", "decode", "decode_latent", "encode", "interpolate", "load_pretrained",
-           "program_loss", "program_to_tree", "sample", "tree_to_program"]
+           "program_loss", "program_to_tree", "sample", "tree_to_program",
+           "LineLayout", "MACRO_LOSS_WEIGHTS", "MacroDecoded", "MacroNode", "MacroVAE", "decode_macro", "encode_macro",
+           "macro_program_loss", "macro_program_to_tree", "sample_macro", "tree_to_macro_program"]

@@ -32,8 +32,8 @@ from .losses import _ALIGN_POS_WEIGHT, LOSS_WEIGHTS
 from .model import VAE, Decoder, Encoder, NodeOutput, VAEOutput
 from .vectors import ALIGNED, AXIS, CMD, CUBE1, CUBE2, CUBE3, DIMS, FACE, LINE_DIM, VectorNode, command_vector, l1_mask
 
-__all__ = ["BatchOutput", "TreeBatch", "batch_forward", "batch_loss", "collate_trees", "decode_batch",
-           "encode_batch"]
+__all__ = ["BatchOutput", "MacroTreeBatch", "TreeBatch", "batch_forward", "batch_loss", "collate_macro_trees",
+           "collate_trees", "decode_batch", "encode_batch", "macro_batch_loss"]
 
 _CUBOID, _ATTACH, _REFLECT, _TRANSLATE, _SQUEEZE = 1, 2, 3, 4, 5
 
@@ -414,3 +414,61 @@ def batch_loss(output: BatchOutput, batch: TreeBatch, weights: Mapping[str, floa
     return total, terms
 
 
+
+
+# ------------------------------------------------------------------------ macro programs (ShapeMOD)
+
+
+class MacroTreeBatch:
+    """B macro-program trees (:class:`~shapeprog.vae.layout.MacroNode`) of one layout, for
+    :func:`macro_batch_loss`. The pass runs tree by tree (:meth:`~shapeprog.vae.macro_model.MacroVAE.forward`);
+    no level-by-level plan yet.
+
+    Attributes:
+        trees: the trees, on the batch's device.
+        size: B.
+    """
+
+    def __init__(self, trees: list):
+        self.trees = list(trees)
+        if not self.trees:
+            raise ValueError("a batch needs at least one tree")
+        self.size = len(self.trees)
+
+    @property
+    def device(self) -> torch.device:
+        return self.trees[0].lines.device
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return self.trees[0].lines.dtype
+
+    def to(self, device=None, dtype: torch.dtype | None = None, **kwargs) -> "MacroTreeBatch":
+        return MacroTreeBatch([t.to(device, dtype) for t in self.trees])
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __repr__(self) -> str:
+        return f"MacroTreeBatch({self.size} trees)"
+
+
+def collate_macro_trees(trees: list) -> MacroTreeBatch:
+    """The DataLoader collate of macro-program trees."""
+    return MacroTreeBatch(trees)
+
+
+def macro_batch_loss(vae, batch: MacroTreeBatch, sample: bool = True, weights: Mapping[str, float] | None = None,
+                     kl: bool = True, generator: torch.Generator | None = None
+                     ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """``(total (B,), terms {name: (B,)})``: :func:`~shapeprog.vae.losses.macro_program_loss` of each tree of
+    the batch under ``vae`` (a :class:`~shapeprog.vae.macro_model.MacroVAE`), z sampled when ``sample``."""
+    from .losses import macro_program_loss
+
+    totals, terms = [], {}
+    for tree in batch.trees:
+        total, t = macro_program_loss(vae(tree, sample=sample, generator=generator), tree, vae.layout, weights, kl)
+        totals.append(total)
+        for k, v in t.items():
+            terms.setdefault(k, []).append(v)
+    return torch.stack(totals), {k: torch.stack(v) for k, v in terms.items()}

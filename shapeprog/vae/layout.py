@@ -26,7 +26,7 @@ Example:
     ...                         "    attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n")
     >>> layout = LineLayout(lib)
     >>> layout.commands[:3], layout.width, layout.used("post")["float"]
-    (('start', 'stop', 'Cuboid'), 83, (True, False, False, False, False, False))
+    (('start', 'stop', 'Cuboid'), 46, (True, False, False, False, False, False))
     >>> h = parse("# Program_0\\nbbox = Cuboid(1.0, 1.0, 1.0, True)\\np = post(0.5, True)\\n\\n", library=lib)
     >>> tree = macro_program_to_tree(h, layout)
     >>> tuple(tree.lines.shape), tree.children

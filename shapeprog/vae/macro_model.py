@@ -26,7 +26,7 @@ Example:
     ...     "c = Cuboid(0.5, 0.25, 0.5, True)\\nattach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n\\n"), layout)
     >>> out = MacroVAE(layout, hidden_dim=32)(tree, sample=False)
     >>> tuple(out.nodes[0].lines.shape), tuple(out.nodes[0].leaf.shape)
-    ((4, 39), (2,))
+    ((4, 45), (2,))
 """
 from __future__ import annotations
 

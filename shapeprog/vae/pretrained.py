@@ -1,7 +1,9 @@
 """Weights files of the ShapeAssembly VAE: export from a training checkpoint, load, and the shipped models.
 
 A weights file is ``{"format", "version", "category", "hidden_dim", "state_dict", "meta"}`` read with
-``torch.load(weights_only=True)``; :func:`read_weights` also reads a Lightning training checkpoint of
+``torch.load(weights_only=True)``, plus ``"library"`` (the macro library's text) for a
+:class:`~shapeprog.vae.macro_model.MacroVAE` trained on macro programs: :func:`load_model` rebuilds its
+:class:`~shapeprog.vae.layout.LineLayout` from that text (a file without it is the base-language VAE); :func:`read_weights` also reads a Lightning training checkpoint of
 :class:`shapeprog.vae.train.VAEModule` (its ``hyper_parameters`` name the category and size). A file of
 another format, version or category is refused with a message naming the file.
 
@@ -40,7 +42,8 @@ CHECKPOINT_PREFIX = "vae."  # the LightningModule's attribute holding the VAE
 def read_weights(path) -> tuple[dict, dict]:
     """``(info, state_dict)`` of a weights file or a Lightning training checkpoint.
 
-    ``info`` holds ``category``, ``hidden_dim`` and ``meta`` (epoch, step, anything recorded at export).
+    ``info`` holds ``category``, ``hidden_dim``, ``meta`` (epoch, step, anything recorded at export) and
+    ``library``: the macro library's text of a macro model, None for the base-language VAE.
 
     Raises:
         FileNotFoundError: no such file.
@@ -63,7 +66,7 @@ def read_weights(path) -> tuple[dict, dict]:
             raise ValueError(f"{path}: weights file version {payload.get('version')!r}; this version of "
                              f"shapeprog reads version {VERSION}")
         info = {"category": payload["category"], "hidden_dim": int(payload["hidden_dim"]),
-                "meta": dict(payload.get("meta", {}))}
+                "meta": dict(payload.get("meta", {})), "library": payload.get("library")}
         return info, payload["state_dict"]
     if "hyper_parameters" in payload and "state_dict" in payload:
         hp = payload["hyper_parameters"]
@@ -73,21 +76,33 @@ def read_weights(path) -> tuple[dict, dict]:
             raise ValueError(f"{path}: a Lightning checkpoint, but not of the ShapeAssembly VAE "
                              f"(hyper-parameters {sorted(hp)[:6]})")
         meta = {"epoch": int(payload.get("epoch", -1)), "global_step": int(payload.get("global_step", -1))}
-        return {"category": hp["category"], "hidden_dim": int(hp["hidden_dim"]), "meta": meta}, state
+        library = (payload.get("shapeprog_vae") or {}).get("library_text")
+        return {"category": hp["category"], "hidden_dim": int(hp["hidden_dim"]), "meta": meta, "library": library}, state
     raise ValueError(f"{path}: neither a ShapeAssembly VAE weights file nor a Lightning checkpoint "
                      f"(keys {sorted(payload)[:6]})")
 
 
-def load_model(path, category: str | None = None, device=None) -> VAE:
-    """The VAE of ``path`` (:func:`read_weights`) in eval mode, as float32.
+def load_model(path, category: str | None = None, device=None):
+    """The VAE of ``path`` (:func:`read_weights`) in eval mode, as float32: a :class:`VAE`, or a
+    :class:`~shapeprog.vae.macro_model.MacroVAE` when the file holds a macro library.
 
     Args:
         category: when given, a file trained on another category is refused.
+
+    Raises:
+        ParseError: the file's library text does not parse (located in ``<path>:library``).
     """
     info, state = read_weights(path)
     if category is not None and info["category"] != category:
         raise ValueError(f"{path}: weights of category {info['category']!r}, not {category!r}")
-    vae = VAE(hidden_dim=info["hidden_dim"])
+    if info.get("library") is not None:
+        from ..macros.library import Library
+        from .layout import LineLayout
+        from .macro_model import MacroVAE
+
+        vae = MacroVAE(LineLayout(Library.from_text(info["library"], f"{path}:library")), hidden_dim=info["hidden_dim"])
+    else:
+        vae = VAE(hidden_dim=info["hidden_dim"])
     state = {k: v.float() if v.is_floating_point() else v for k, v in state.items()}
     try:
         vae.load_state_dict(state)
@@ -100,11 +115,15 @@ def load_model(path, category: str | None = None, device=None) -> VAE:
 
 
 def save_weights(vae: VAE, out, category: str, meta: dict | None = None, half: bool = True) -> Path:
-    """Write ``vae`` as a weights file, atomically (``half`` stores float16 tensors)."""
+    """Write ``vae`` as a weights file, atomically (``half`` stores float16 tensors); a macro model's file
+    also holds its library's text."""
     state = {k: (v.detach().cpu().half() if half and v.is_floating_point() else v.detach().cpu())
              for k, v in vae.state_dict().items()}
     payload = {"format": FORMAT, "version": VERSION, "category": category,
                "hidden_dim": int(vae.decoder.hidden_dim), "state_dict": state, "meta": dict(meta or {})}
+    layout = getattr(vae, "layout", None)
+    if layout is not None:
+        payload["library"] = layout.library.to_text()
     return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
 
 

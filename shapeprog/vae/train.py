@@ -12,6 +12,15 @@
 
 ``python train.py fit --config configs/shapeassembly/vae_chair.yaml`` runs it through the repository's
 LightningCLI; settings and measurements: ``docs/shapeassembly_vae.md`` ("Training").
+
+**Macro programs (ShapeMOD, Appendix C).** Both classes take a ``library`` (a shipped category's, e.g.
+``"chair"``, or a library file): the data module then reads the macro-refactored corpus (the shipped
+archive of :func:`shapeprog.macros.load_refactored`, or ``programs``, a folder or archive of
+:func:`shapeprog.macros.write_refactored`) for the same carved keys, as
+:class:`~shapeprog.vae.layout.MacroNode` trees, and the module trains a
+:class:`~shapeprog.vae.macro_model.MacroVAE` with :func:`~shapeprog.vae.losses.macro_program_loss`; its
+reconstructions and samples are macro programs, expanded and executed for the F-score and the pictures.
+``python train.py fit --config configs/shapeassembly/vae_chair_macros.yaml``; ``docs/shapemod.md``.
 """
 from __future__ import annotations
 
@@ -33,14 +42,18 @@ from ..lang import parse
 from ..metrics import fscore
 from ..picture import render_grid
 from ..sampling import sample_surface
-from .batch import TreeBatch, batch_forward, batch_loss, collate_trees, encode_batch
+from .batch import (MacroTreeBatch, TreeBatch, batch_forward, batch_loss, collate_macro_trees, collate_trees,
+                    encode_batch, macro_batch_loss)
 from .decode import decode_latent, sample
-from .losses import LOSS_WEIGHTS
+from .layout import LineLayout, MacroNode, macro_program_to_tree, tree_to_macro_program
+from .losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
+from .macro_model import MacroVAE
 from .model import VAE
 from .vectors import VectorNode, program_to_tree, tree_to_program
 
-__all__ = ["CATEGORIES", "CHECKPOINT_FORMAT", "VAEDataModule", "VAEModule", "load_trees",
-           "reconstruct", "reconstruction_fscores", "target_surfaces", "validation_split"]
+__all__ = ["CATEGORIES", "CHECKPOINT_FORMAT", "VAEDataModule", "VAEModule", "load_macro_library", "load_macro_trees",
+           "load_trees", "reconstruct", "reconstruction_fscores", "target_surfaces", "tree_program",
+           "validation_split"]
 
 #: The categories a run trains on: one of the corpus's, or all three together.
 CATEGORIES = corpus.CATEGORIES + ("all",)
@@ -108,6 +121,63 @@ def load_trees(keys: list[str], dtype: torch.dtype = torch.float32) -> tuple[lis
     return kept, trees
 
 
+def load_macro_library(library: str):
+    """The macro library a run trains with: a shipped category's (``"chair"``, :func:`shapeprog.macros.load_library`)
+    or a library file (definitions only, :meth:`shapeprog.macros.Library.from_text`).
+
+    Raises:
+        FileNotFoundError: neither a shipped library nor a file.
+        ParseError: the file does not parse (named, with line and column).
+    """
+    from ..macros import Library, load_library
+    from ..macros.api import LIBRARY_CATEGORIES
+
+    if library in LIBRARY_CATEGORIES:
+        return load_library(library)
+    path = Path(library)
+    if not path.is_file():
+        raise FileNotFoundError(f"{library}: neither a shipped macro library ({', '.join(LIBRARY_CATEGORIES)}) nor "
+                                f"a library file")
+    return Library.from_text(path.read_text(encoding="utf-8"), str(path))
+
+
+def load_macro_trees(keys: list[str], layout: LineLayout, programs: dict,
+                     dtype: torch.dtype = torch.float32) -> tuple[list[str], list[MacroNode]]:
+    """The line-vector trees of the macro programs of ``keys`` (``"chair/173"``), taken from ``programs``
+    (``{id: MacroHierarchy}`` of one category, :func:`shapeprog.macros.read_refactored`).
+
+    A key without a program (its refactoring failed) or whose program cannot be encoded is left out and named
+    in a :class:`~shapeprog.corpus.CorpusWarning`.
+
+    Returns:
+        ``(keys, trees)`` of the programs loaded, in the order given.
+    """
+    kept, trees, errors = [], [], []
+    for key in keys:
+        i = int(key.split("/")[1])
+        if i not in programs:
+            errors.append(f"{key}: no macro program")
+            continue
+        try:
+            trees.append(macro_program_to_tree(programs[i], layout, file=f"{key}.txt", dtype=dtype))
+            kept.append(key)
+        except ParseError as e:
+            errors.append(str(e))
+    if errors:
+        warnings.warn(f"{len(errors)} program(s) left out: " + "; ".join(errors[:20])
+                      + (" ..." if len(errors) > 20 else ""), corpus.CorpusWarning, stacklevel=2)
+    return kept, trees
+
+
+def _read_macro_programs(category: str, keys: list[str], programs: str | None, library) -> dict:
+    from ..macros.refactored import load_refactored, read_refactored
+
+    ids = sorted({int(k.split("/")[1]) for k in keys})
+    if programs is None:
+        return load_refactored(category, ids=ids)[0]
+    return read_refactored(programs, library=library, ids=ids)[0]
+
+
 class VAEDataModule(L.LightningDataModule):
     """Corpus programs as line-vector trees for :class:`VAEModule`.
 
@@ -128,13 +198,24 @@ class VAEDataModule(L.LightningDataModule):
         max_train_shapes: train on the first N shapes of the carved train split only (smoke runs,
             overfitting checks); None: all.
         split_file: name of the split file in the log folder.
+        library: train on macro programs calling this library (:func:`load_macro_library`: a shipped
+            category's name or a library file); None: the corpus's ShapeAssembly programs.
+        programs: with ``library``, the macro-refactored corpus to read (a folder or ``.tar.xz`` of
+            :func:`shapeprog.macros.write_refactored`); None: the shipped one of the category.
     """
 
     def __init__(self, category: str = "chair", val_fraction: float = 0.05, val_count: int | None = None,
                  seed: int = 42, batch_shapes: int | None = None, val_batch_shapes: int = 32, num_workers: int = 0,
-                 max_train_shapes: int | None = None, split_file: str = "split.json"):
+                 max_train_shapes: int | None = None, split_file: str = "split.json", library: str | None = None,
+                 programs: str | None = None):
         super().__init__()
         _check_category(category)
+        if library is not None and category == "all":
+            raise ValueError("a macro library belongs to one category; set category to chair, table or storage")
+        if programs is not None and library is None:
+            raise ValueError("`programs` (macro programs) needs a `library`")
+        self.library, self.programs = library, programs
+        self.layout: LineLayout | None = None
         for name, v in (("batch_shapes", batch_shapes), ("val_batch_shapes", val_batch_shapes),
                         ("max_train_shapes", max_train_shapes)):
             if v is not None and int(v) < 1:
@@ -153,8 +234,15 @@ class VAEDataModule(L.LightningDataModule):
             train, val = validation_split(self.category, self.val_fraction, self.val_count, self.seed)
             if self.max_train_shapes is not None:
                 train = train[: int(self.max_train_shapes)]
-            self.train_keys, self.train_trees = load_trees(train)
-            self.val_keys, self.val_trees = load_trees(val)
+            if self.library is None:
+                self.train_keys, self.train_trees = load_trees(train)
+                self.val_keys, self.val_trees = load_trees(val)
+            else:
+                lib = load_macro_library(self.library)
+                self.layout = LineLayout(lib)
+                progs = _read_macro_programs(self.category, train + val, self.programs, lib)
+                self.train_keys, self.train_trees = load_macro_trees(train, self.layout, progs)
+                self.val_keys, self.val_trees = load_macro_trees(val, self.layout, progs)
         if self.trainer is not None and stage in (None, "fit"):
             folder = self.trainer.log_dir or self.trainer.default_root_dir  # log_dir broadcasts: every rank asks
             if self.trainer.is_global_zero:
@@ -165,6 +253,7 @@ class VAEDataModule(L.LightningDataModule):
         return {"category": self.category, "seed": self.seed, "val_fraction": self.val_fraction,
                 "val_count": self.val_count, "max_train_shapes": self.max_train_shapes,
                 "source": "the corpus's train split (its val split is the test split)",
+                "library": self.library, "programs": self.programs,
                 "val": self.val_keys, "train": self.train_keys}
 
     def write_split(self, path: str | Path) -> Path:
@@ -179,12 +268,15 @@ class VAEDataModule(L.LightningDataModule):
         module = self.trainer.lightning_module if self.trainer is not None else None
         return int(module.hparams.get("batch_shapes", 1)) if module is not None else 1
 
+    def _collate(self):
+        return collate_trees if self.library is None else collate_macro_trees
+
     def train_dataloader(self) -> DataLoader:
-        return DataLoader(self.train_trees, batch_size=self._train_batch(), shuffle=True, collate_fn=collate_trees,
+        return DataLoader(self.train_trees, batch_size=self._train_batch(), shuffle=True, collate_fn=self._collate(),
                           num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
 
     def val_dataloader(self) -> DataLoader:
-        return DataLoader(self.val_trees, batch_size=self.val_batch_shapes, shuffle=False, collate_fn=collate_trees,
+        return DataLoader(self.val_trees, batch_size=self.val_batch_shapes, shuffle=False, collate_fn=self._collate(),
                           num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
 
     def state_dict(self) -> dict:
@@ -201,10 +293,32 @@ class VAEDataModule(L.LightningDataModule):
 # ------------------------------------------------------------------------------------------ reconstruction
 
 
+def tree_program(tree, layout: LineLayout | None = None):
+    """The ShapeAssembly program a tree stands for: :func:`~shapeprog.vae.vectors.tree_to_program` of a
+    :class:`VectorNode`; the expansion (:func:`shapeprog.macros.execute.compile_hierarchy`) of the macro
+    program of a :class:`~shapeprog.vae.layout.MacroNode` (``layout`` needed)."""
+    if isinstance(tree, VectorNode):
+        return tree_to_program(tree)
+    from ..macros.execute import compile_hierarchy
+    return compile_hierarchy(tree_to_macro_program(tree, layout), layout.library).program
+
+
 def reconstruct(vae: VAE, trees: list[VectorNode]) -> list:
     """The programs decoded from the mean codes of ``trees``: ``decode_latent(vae.decoder, mu, reject=False)``
-    (:mod:`shapeprog.vae.decode`) of each tree's mu, None where decoding raises a ``ValueError``."""
+    (:mod:`shapeprog.vae.decode`) of each tree's mu, None where decoding raises a ``ValueError``. For a
+    :class:`~shapeprog.vae.macro_model.MacroVAE` and macro trees: the expanded ShapeAssembly program of each
+    decoded macro program (:func:`~shapeprog.vae.macro_decode.decode_macro`)."""
     device, dtype = next(vae.parameters()).device, next(vae.parameters()).dtype
+    if isinstance(vae, MacroVAE):
+        from .macro_decode import decode_macro
+        out = []
+        with torch.no_grad():
+            for t in trees:
+                try:
+                    out.append(decode_macro(vae, vae.encode(t.to(device, dtype))[1]).program)
+                except ValueError:
+                    out.append(None)
+        return out
     with torch.no_grad():
         batch = TreeBatch([t.to("cpu") for t in trees]).to(device, dtype)
         mu, _ = vae.encoder.sampler(encode_batch(vae.encoder, batch))
@@ -217,16 +331,18 @@ def reconstruct(vae: VAE, trees: list[VectorNode]) -> list:
     return out
 
 
-def target_surfaces(trees: list[VectorNode], points: int = 10_000, seed: int = 0) -> list[torch.Tensor]:
-    """``points`` surface samples ``(points, 3)`` of each tree's executed program
-    (:func:`~shapeprog.vae.vectors.tree_to_program`): the targets of :func:`reconstruction_fscores`, drawn
-    once for a fixed set of shapes."""
+def target_surfaces(trees: list[VectorNode], points: int = 10_000, seed: int = 0,
+                    layout: LineLayout | None = None) -> list[torch.Tensor]:
+    """``points`` surface samples ``(points, 3)`` of each tree's executed program (:func:`tree_program`;
+    ``layout`` for macro trees): the targets of :func:`reconstruction_fscores`, drawn once for a fixed set of
+    shapes."""
     gen = torch.Generator().manual_seed(int(seed))
-    return [sample_surface(execute(tree_to_program(t)).corners, points, gen)[0] for t in trees]
+    return [sample_surface(execute(tree_program(t, layout)).corners, points, gen)[0] for t in trees]
 
 
 def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int = 10_000, seed: int = 0,
-                           targets: list[torch.Tensor] | None = None) -> list[float | None]:
+                           targets: list[torch.Tensor] | None = None,
+                           layout: LineLayout | None = None) -> list[float | None]:
     """The F-score (0-100, :func:`shapeprog.metrics.fscore`) of each tree's shape against a program's.
 
     ``points`` surface samples of each executed shape are compared (10,000 in the paper); the target
@@ -245,7 +361,7 @@ def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int 
         cuboid, a non-finite corner).
     """
     if targets is None:
-        targets = target_surfaces(trees, points, seed)
+        targets = target_surfaces(trees, points, seed, layout)
     gen = torch.Generator().manual_seed(int(seed) + 1)
     out: list[float | None] = []
     for target, program in zip(targets, programs):
@@ -317,24 +433,30 @@ class VAEModule(L.LightningModule):
         init: start from these weights (a file of :func:`~shapeprog.vae.pretrained.save_weights` or a training
             checkpoint of the same category and size); the optimiser and the epoch count start afresh
             (``--ckpt_path last`` resumes a run instead).
+        library: train a :class:`~shapeprog.vae.macro_model.MacroVAE` on macro programs calling this library
+            (:func:`load_macro_library`; the data module's ``library`` must be the same); its loss terms are
+            those of :data:`~shapeprog.vae.losses.MACRO_LOSS_WEIGHTS`. None: the base-language VAE.
     """
 
     def __init__(self, category: str = "chair", hidden_dim: int = 256, lr: float = 1e-4, eps: float = 1e-6,
                  loss_weights: dict[str, float] | None = None, kl_weight: float | None = None, batch_shapes: int = 1,
                  recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 10_000,
-                 image_shapes: int = 8, image_size: int = 128, seed: int = 42, init: str | None = None):
+                 image_shapes: int = 8, image_size: int = 128, seed: int = 42, init: str | None = None,
+                 library: str | None = None):
         super().__init__()
         _check_category(category)
         if int(batch_shapes) < 1:
             raise ValueError(f"batch_shapes must be >= 1, got {batch_shapes!r}")
-        unknown = sorted(set(loss_weights or {}) - set(LOSS_WEIGHTS))
+        base_weights = LOSS_WEIGHTS if library is None else MACRO_LOSS_WEIGHTS
+        unknown = sorted(set(loss_weights or {}) - set(base_weights))
         if unknown:
-            raise ValueError(f"unknown loss term(s) {unknown}; the terms are {', '.join(LOSS_WEIGHTS)}")
+            raise ValueError(f"unknown loss term(s) {unknown}; the terms are {', '.join(base_weights)}")
         self.save_hyperparameters()
-        self.weights = {**LOSS_WEIGHTS, **(loss_weights or {})}
+        self.weights = {**base_weights, **(loss_weights or {})}
         if kl_weight is not None:
             self.weights["kl"] = float(kl_weight)
-        self.vae = VAE(hidden_dim)
+        self.layout = None if library is None else LineLayout(load_macro_library(library))
+        self.vae = VAE(hidden_dim) if library is None else MacroVAE(self.layout, hidden_dim)
         if init is not None:
             self._load_init(init)
         self._recon_trees: list[VectorNode] = []
@@ -347,19 +469,32 @@ class VAEModule(L.LightningModule):
         """Start from the weights of ``path`` (a weights file or a training checkpoint) of the same VAE."""
         from .pretrained import read_weights
         info, state = read_weights(path)
-        mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim}
-        theirs = {"category": info["category"], "hidden_dim": info["hidden_dim"]}
+        mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim, "library": self._library_text()}
+        theirs = {"category": info["category"], "hidden_dim": info["hidden_dim"], "library": info.get("library")}
         if theirs != mine:
             raise ValueError(f"{path}: the weights are of a VAE with {theirs}, this run is {mine}")
         self.vae.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
 
+    def _library_text(self) -> str | None:
+        return None if self.layout is None else self.layout.library.to_text()
+
     def forward(self, batch: TreeBatch, sample: bool = True):
-        """:func:`~shapeprog.vae.batch.batch_forward` of the model on ``batch``."""
+        """:func:`~shapeprog.vae.batch.batch_forward` of the model on ``batch`` (base-language model)."""
         return batch_forward(self.vae, batch, sample=sample)
+
+    def _loss(self, batch, sample: bool):
+        """``(total (B,), terms)`` of a batch: the batched pass, or tree by tree for macro programs."""
+        if isinstance(batch, MacroTreeBatch):
+            return macro_batch_loss(self.vae, batch, sample=sample, weights=self.weights)
+        return batch_loss(batch_forward(self.vae, batch, sample=sample), batch, self.weights)
 
     # ------------------------------------------------------------------ checks
     def setup(self, stage: str) -> None:
         check_data_category(self)
+        dm = self.trainer.datamodule if self.trainer is not None else None
+        if dm is not None and hasattr(dm, "library") and dm.library != self.hparams.library:
+            raise ValueError(f"the model's library is {self.hparams.library!r} and the data module's {dm.library!r}; "
+                             f"set model.init_args.library and data.init_args.library alike")
 
     def on_fit_start(self) -> None:
         n = self.hparams.recon_every_n_epochs
@@ -375,6 +510,8 @@ class VAEModule(L.LightningModule):
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint["shapeprog_vae"] = {"format": CHECKPOINT_FORMAT, "category": self.hparams.category,
                                        "hidden_dim": self.hparams.hidden_dim}
+        if self.layout is not None:
+            checkpoint["shapeprog_vae"]["library_text"] = self._library_text()
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
         info = checkpoint.get("shapeprog_vae")
@@ -387,6 +524,8 @@ class VAEModule(L.LightningModule):
         theirs = {k: info.get(k) for k in mine}
         if theirs != mine:
             raise ValueError(f"the checkpoint is of a VAE with {theirs}, this run is {mine}")
+        if info.get("library_text") != self._library_text():
+            raise ValueError("the checkpoint's macro library differs from this run's (or one of them has none)")
 
     # ------------------------------------------------------------------ steps
     def _cast(self, batch: TreeBatch) -> TreeBatch:
@@ -399,7 +538,7 @@ class VAEModule(L.LightningModule):
         (every ``log_every_n_steps``): a ``self.log`` call costs milliseconds, and fifteen of them every
         step slowed one-shape steps by about a third."""
         batch = self._cast(batch)
-        total, terms = batch_loss(batch_forward(self.vae, batch, sample=True), batch, self.weights)
+        total, terms = self._loss(batch, sample=True)
         loss = total.mean()
         self.log("train/loss", loss, prog_bar=True, batch_size=batch.size)
         sums = torch.stack([v.detach().sum() for v in terms.values()])
@@ -414,7 +553,7 @@ class VAEModule(L.LightningModule):
     def validation_step(self, batch: TreeBatch, batch_idx: int) -> None:
         """The loss with z = mu (deterministic); keeps the epoch's first ``recon_shapes`` trees."""
         batch = self._cast(batch)
-        total, terms = batch_loss(batch_forward(self.vae, batch, sample=False), batch, self.weights)
+        total, terms = self._loss(batch, sample=False)
         self.log("val/loss", total.mean(), prog_bar=True, batch_size=batch.size, sync_dist=True)
         for name, value in terms.items():
             self.log(f"val/{name}", value.mean(), batch_size=batch.size, sync_dist=True)
@@ -439,9 +578,10 @@ class VAEModule(L.LightningModule):
             return
         points, seed = self.hparams.recon_points, self.hparams.seed
         if self._recon_targets is None or not _same_trees(self._recon_targets[0], trees):
-            self._recon_targets = (trees, target_surfaces(trees, points, seed))
+            self._recon_targets = (trees, target_surfaces(trees, points, seed, self.layout))
         programs = reconstruct(self.vae, trees)
-        scores = reconstruction_fscores(trees, programs, points, seed, targets=self._recon_targets[1])
+        scores = reconstruction_fscores(trees, programs, points, seed, targets=self._recon_targets[1],
+                                        layout=self.layout)
         self.log("val/fscore", float(np.mean([s or 0.0 for s in scores])), sync_dist=True, prog_bar=True)
         self.log("val/recon_failed", sum(s is None for s in scores) / len(scores), sync_dist=True)
         k = self.hparams.image_shapes
@@ -457,11 +597,15 @@ class VAEModule(L.LightningModule):
         if not hasattr(exp, "add_image"):
             return
         size = self.hparams.image_size
-        pairs = [_corners(p) for t, r in zip(trees, programs) for p in (tree_to_program(t), r)]
+        pairs = [_corners(p) for t, r in zip(trees, programs) for p in (tree_program(t, self.layout), r)]
         exp.add_image("val/reconstructions", render_grid(pairs, cols=4, size=size), self.global_step,
                       dataformats="HWC")
         try:
-            samples = sample(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
+            if self.layout is not None:
+                from .macro_decode import sample_macro
+                samples = sample_macro(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
+            else:
+                samples = sample(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
         except (ValueError, RuntimeError) as e:
             warnings.warn(f"no val/samples grid at step {self.global_step}: {e}", stacklevel=2)
             return

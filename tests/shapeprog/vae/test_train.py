@@ -306,18 +306,21 @@ def test_reconstruction_hook_logs_fscore_and_images(tmp_path, monkeypatch):
 
 
 def test_shipped_configs_parse_through_train_py(train_main):
-    assert [p.name for p in CONFIGS] == ["vae_all.yaml", "vae_chair.yaml", "vae_storage.yaml", "vae_table.yaml"]
+    assert [p.name for p in CONFIGS] == ["vae_all.yaml", "vae_chair.yaml", "vae_chair_macros.yaml", "vae_storage.yaml",
+                                         "vae_table.yaml"]
     for path in CONFIGS:
         cat = path.stem.split("_")[1]
+        run = path.stem
         text = path.read_text()
         assert f"python train.py fit --config configs/shapeassembly/{path.name}" in text
         cli = train_main(["--config", str(path)], run=False)
         assert isinstance(cli.model, VAEModule) and isinstance(cli.datamodule, VAEDataModule)
         assert cli.model.hparams.category == cli.datamodule.category == cat
         assert cli.model.hparams.lr == 1e-4 and cli.model.hparams.eps == 1e-6 and cli.model.hparams.hidden_dim == 256
-        assert cli.trainer.logger.log_dir.startswith(f"runs/vae_{cat}")
+        assert cli.trainer.logger.log_dir.startswith(f"runs/{run}/")
         dirs = {cb.dirpath for cb in cli.trainer.checkpoint_callbacks}
-        assert dirs == {str(ROOT / "runs" / f"vae_{cat}" / "checkpoints")} or dirs == {f"runs/vae_{cat}/checkpoints"}
+        assert dirs == {str(ROOT / "runs" / run / "checkpoints")} or dirs == {f"runs/{run}/checkpoints"}
+        assert cli.model.hparams.library == cli.datamodule.library == ("chair" if run.endswith("_macros") else None)
 
 
 def test_fit_and_resume_through_train_py(tmp_path, train_main):

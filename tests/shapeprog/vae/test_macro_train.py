@@ -1,0 +1,86 @@
+"""Training the VAE on macro programs through the one entry point, resuming, and its weights file."""
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+from shapeprog.macros import load_library
+from shapeprog.macros.execute import execute_hierarchy
+from shapeprog.macros.hierarchy import parse as parse_hierarchy
+from shapeprog.vae.layout import MacroNode
+from shapeprog.vae.macro_decode import sample_macro
+from shapeprog.vae.macro_model import MacroVAE
+from shapeprog.vae.model import VAE
+from shapeprog.vae.pretrained import export_weights, load_model, load_pretrained, read_weights, save_weights
+from shapeprog.vae.train import VAEDataModule, VAEModule
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope="module")
+def train_main():
+    spec = importlib.util.spec_from_file_location("train", ROOT / "train.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main
+
+
+def test_fit_resume_and_export_of_the_chair_macro_config(tmp_path, train_main):
+    config = yaml.safe_load((ROOT / "configs" / "shapeassembly" / "vae_chair_macros.yaml").read_text())
+    config["model"]["init_args"].update(hidden_dim=8, recon_every_n_epochs=1, recon_shapes=2, recon_points=200,
+                                        image_shapes=0)
+    config["data"]["init_args"].update(val_count=2, max_train_shapes=2)  # an epoch of 2 steps
+    config["trainer"].update(max_steps=2, accelerator="cpu", devices=1, enable_progress_bar=False,
+                             enable_model_summary=False, num_sanity_val_steps=0, default_root_dir=str(tmp_path))
+    config["trainer"]["logger"]["init_args"]["save_dir"] = str(tmp_path)
+    for cb in config["trainer"]["callbacks"]:
+        cb["init_args"]["dirpath"] = str(tmp_path / "ckpt")
+        if cb["init_args"].get("monitor") == "val/fscore":
+            cb["init_args"]["every_n_epochs"] = 1
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(config))
+    cli = train_main(["fit", "--config", str(path)])
+    assert isinstance(cli.model.vae, MacroVAE) and all(isinstance(t, MacroNode) for t in cli.datamodule.train_trees)
+    assert cli.trainer.global_step == 2
+    metrics = cli.trainer.callback_metrics
+    assert {"val/loss", "val/fscore", "val/float", "val/cube"} <= set(metrics)
+    assert 0.0 <= float(metrics["val/fscore"]) <= 100.0
+    ckpt = torch.load(tmp_path / "ckpt" / "last.ckpt", map_location="cpu", weights_only=False)
+    assert ckpt["shapeprog_vae"]["library_text"] == load_library("chair").to_text()
+    split = json.loads((tmp_path / "vae_chair_macros" / "version_0" / "split.json").read_text())
+    assert split["library"] == "chair" and split["val"] == cli.datamodule.val_keys
+    resumed = train_main(["fit", "--config", str(path), "--trainer.max_steps", "3", "--ckpt_path", "last"])
+    assert resumed.trainer.global_step == 3
+    # the weights file holds the library; the model comes back as a MacroVAE that samples executable programs
+    out = export_weights(tmp_path / "ckpt" / "last.ckpt", tmp_path / "w.pt", half=False)
+    info, _ = read_weights(out)
+    assert info["library"] == load_library("chair").to_text() and info["category"] == "chair"
+    vae = load_model(out, category="chair")
+    assert isinstance(vae, MacroVAE) and vae.layout.functions == tuple(load_library("chair"))
+    for d in sample_macro(vae, 2, seed=0):
+        shape = execute_hierarchy(parse_hierarchy(d.text, library=vae.library), vae.library)
+        assert shape.corners.shape[0] >= 1
+
+
+def test_a_macro_weights_file_round_trips_and_the_base_files_stay_base(tmp_path):
+    from shapeprog.vae.layout import LineLayout
+    vae = MacroVAE(LineLayout(load_library("chair")), hidden_dim=16)
+    back = load_model(save_weights(vae, tmp_path / "m.pt", "chair", half=False))
+    assert isinstance(back, MacroVAE)
+    assert all(torch.equal(a, b) for a, b in zip(vae.state_dict().values(), back.state_dict().values()))
+    base = load_pretrained("chair")
+    assert type(base) is VAE and read_weights(ROOT / "shapeprog" / "weights" / "vae_chair.pt")[0]["library"] is None
+
+
+def test_model_and_data_must_agree_on_the_library():
+    with pytest.raises(ValueError, match="one category"):
+        VAEDataModule("all", library="chair")
+    with pytest.raises(ValueError, match="needs a `library`"):
+        VAEDataModule("chair", programs="x")
+    with pytest.raises(FileNotFoundError, match="neither a shipped"):
+        VAEModule("chair", hidden_dim=8, library="no/such/library.txt")
+    with pytest.raises(ValueError, match="unknown loss term"):
+        VAEModule("chair", hidden_dim=8, library="chair", loss_weights={"cub_prm": 1.0})
