@@ -30,7 +30,7 @@ Example:
     >>> h = parse("# Program_0\\nbbox = Cuboid(1.0, 1.0, 1.0, True)\\np = post(0.5, True)\\n\\n", library=lib)
     >>> tree = macro_program_to_tree(h, layout)
     >>> tuple(tree.lines.shape), tree.children
-    ((2, 83), (None, None))
+    ((2, 46), (None, None))
     >>> from shapeprog.macros.lang import to_text
     >>> print(to_text(tree_to_macro_program(tree, layout, decimals=3).programs[0]), end="")
     bbox = Cuboid(1.0, 1.0, 1.0, True)
