@@ -462,16 +462,24 @@ def _vae_samples(args) -> tuple[list, str, str]:
     on how often sampling was refused."""
     from .vae import sample
 
+    from .vae.macro_model import MacroVAE
+
     vae = _load_vae(args, args.category)
     t0 = time.perf_counter()
-    results = sample(vae, args.n, seed=args.seed, max_tries=10)
+    if isinstance(vae, MacroVAE):  # macro programs (ShapeMOD): measured through their expansions
+        from .vae.macro_decode import sample_macro
+        results = sample_macro(vae, args.n, seed=args.seed, max_tries=10)
+    else:
+        results = sample(vae, args.n, seed=args.seed, max_tries=10)
     seconds = time.perf_counter() - t0
     where = args.weights or f"the shipped {args.category} model"
     meta = getattr(vae, "meta", {}) or {}
     epoch = f", epoch {meta['epoch']}" if "epoch" in meta else ""
     line = (f"Samples: {len(results)} from {where}{epoch} (seed {args.seed}, validity-checked decoding with "
             f"rejection, at most 10 draws each): {_sampling_report(results, 10, seconds)}. A sample refused 10 "
-            f"times is decoded without rejection and kept.\n\n")
+            f"times is decoded without rejection and kept."
+            + (" The samples are macro programs; the metrics read their expansions (% novel compares those "
+               "with the corpus's ShapeAssembly programs)." if isinstance(vae, MacroVAE) else "") + "\n\n")
     return [r.program for r in results], f"VAE samples ({where})", line
 
 

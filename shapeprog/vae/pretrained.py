@@ -42,8 +42,8 @@ CHECKPOINT_PREFIX = "vae."  # the LightningModule's attribute holding the VAE
 def read_weights(path) -> tuple[dict, dict]:
     """``(info, state_dict)`` of a weights file or a Lightning training checkpoint.
 
-    ``info`` holds ``category``, ``hidden_dim``, ``meta`` (epoch, step, anything recorded at export) and
-    ``library``: the macro library's text of a macro model, None for the base-language VAE.
+    ``info`` holds ``category``, ``hidden_dim``, ``meta`` (epoch, step, anything recorded at export) and, for a
+    macro model only, ``library``: the macro library's text.
 
     Raises:
         FileNotFoundError: no such file.
@@ -66,7 +66,9 @@ def read_weights(path) -> tuple[dict, dict]:
             raise ValueError(f"{path}: weights file version {payload.get('version')!r}; this version of "
                              f"shapeprog reads version {VERSION}")
         info = {"category": payload["category"], "hidden_dim": int(payload["hidden_dim"]),
-                "meta": dict(payload.get("meta", {})), "library": payload.get("library")}
+                "meta": dict(payload.get("meta", {}))}
+        if payload.get("library") is not None:
+            info["library"] = payload["library"]
         return info, payload["state_dict"]
     if "hyper_parameters" in payload and "state_dict" in payload:
         hp = payload["hyper_parameters"]
@@ -76,8 +78,11 @@ def read_weights(path) -> tuple[dict, dict]:
             raise ValueError(f"{path}: a Lightning checkpoint, but not of the ShapeAssembly VAE "
                              f"(hyper-parameters {sorted(hp)[:6]})")
         meta = {"epoch": int(payload.get("epoch", -1)), "global_step": int(payload.get("global_step", -1))}
+        info = {"category": hp["category"], "hidden_dim": int(hp["hidden_dim"]), "meta": meta}
         library = (payload.get("shapeprog_vae") or {}).get("library_text")
-        return {"category": hp["category"], "hidden_dim": int(hp["hidden_dim"]), "meta": meta, "library": library}, state
+        if library is not None:
+            info["library"] = library
+        return info, state
     raise ValueError(f"{path}: neither a ShapeAssembly VAE weights file nor a Lightning checkpoint "
                      f"(keys {sorted(payload)[:6]})")
 
