@@ -84,3 +84,20 @@ def test_model_and_data_must_agree_on_the_library():
         VAEModule("chair", hidden_dim=8, library="no/such/library.txt")
     with pytest.raises(ValueError, match="unknown loss term"):
         VAEModule("chair", hidden_dim=8, library="chair", loss_weights={"cub_prm": 1.0})
+
+
+def test_evaluate_generation_samples_a_macro_model_through_its_expansions(tmp_path):
+    import argparse
+
+    import shapeprog
+    from shapeprog.__main__ import _vae_samples
+    from shapeprog.lang import Program
+    from shapeprog.vae.layout import LineLayout
+
+    torch.manual_seed(0)
+    path = save_weights(MacroVAE(LineLayout(load_library("chair")), hidden_dim=16), tmp_path / "m.pt", "chair")
+    args = argparse.Namespace(weights=str(path), category="chair", n=3, seed=0)
+    programs, name, line = _vae_samples(args)
+    assert len(programs) == 3 and all(isinstance(p, Program) for p in programs)
+    assert all(shapeprog.execute(p).corners.shape[0] >= 1 for p in programs)
+    assert "macro programs" in line and str(path) in name
