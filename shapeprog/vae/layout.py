@@ -190,18 +190,21 @@ class MacroNode:
         children: one entry per cuboid the block creates, in creation order, bbox first: the child
             :class:`MacroNode` of a ``Program_k`` cuboid, else None (always None for bbox).
         name: the block's name in the source (``Program_k``), for messages.
+        float_start: where the layout's float group starts (``layout.slices["float"].start``), so that
+            :attr:`bbox_dims` reads the bbox line's l, h, w without the layout.
     """
 
     lines: torch.Tensor
     children: tuple["MacroNode | None", ...]
     name: str = "Program_0"
+    float_start: int | None = None
 
     @property
     def bbox_dims(self) -> torch.Tensor:
         """(3,) float: the block's bbox dims, the first three floats of its bbox line."""
-        return self.lines[0, self._float_start: self._float_start + 3]
-
-    _float_start: int = 0  # set by the builder: where the float group starts
+        if self.float_start is None:
+            raise ValueError(f"{self.name}: a MacroNode built without float_start has no known bbox dims")
+        return self.lines[0, self.float_start: self.float_start + 3]
 
     def commands(self, layout: LineLayout) -> torch.Tensor:
         """(L,) int64: the command entry of every row."""
@@ -234,7 +237,7 @@ class MacroNode:
     def to(self, device=None, dtype: torch.dtype | None = None) -> "MacroNode":
         """A copy with every tensor moved / cast."""
         kids = tuple(None if c is None else c.to(device, dtype) for c in self.children)
-        return MacroNode(self.lines.to(device=device, dtype=dtype), kids, self.name, self._float_start)
+        return MacroNode(self.lines.to(device=device, dtype=dtype), kids, self.name, self.float_start)
 
 
 def macro_program_to_tree(h: MacroHierarchy, layout: LineLayout, file: str = "<program>",
