@@ -297,13 +297,20 @@ def _cmd_make_clouds(args) -> int:
     return 0
 
 
-def _load_vae(args, category: str | None):
-    """The VAE of ``--weights`` or the shipped model of ``category``; a usage error when neither is known."""
+def _load_vae(args, category: str | None, macro: bool = False):
+    """The VAE of ``--weights`` or the shipped model of ``category``; a usage error when neither is known, or
+    when ``--weights`` is a model of macro programs and the command (``macro`` False) reads ShapeAssembly
+    programs."""
+    from .vae.macro_model import MacroVAE
     from .vae.pretrained import load_model, load_pretrained
 
     try:
         if args.weights:
-            return load_model(args.weights, category=args.category)
+            vae = load_model(args.weights, category=args.category)
+            if isinstance(vae, MacroVAE) and not macro:
+                raise SystemExit(f"error: {args.weights} is a VAE over macro programs (ShapeMOD); this command reads "
+                                 f"ShapeAssembly programs: use `sample` or `evaluate-generation` with it")
+            return vae
         if category is None:
             raise SystemExit("error: name the model's category with --category (or give --weights)")
         return load_pretrained(category)
@@ -354,10 +361,16 @@ def _sampling_report(results, max_tries: int, seconds: float) -> str:
 def _cmd_sample(args) -> int:
     from .vae import sample
 
+    from .vae.macro_model import MacroVAE
+
     _check_outputs(others=[args.png])
-    vae = _load_vae(args, args.category)
+    vae = _load_vae(args, args.category, macro=True)
     t0 = time.perf_counter()
-    results = sample(vae, args.n, seed=args.seed, max_tries=args.max_tries)
+    if isinstance(vae, MacroVAE):  # macro programs: written as macro text, executed through their expansion
+        from .vae.macro_decode import sample_macro
+        results = sample_macro(vae, args.n, seed=args.seed, max_tries=args.max_tries)
+    else:
+        results = sample(vae, args.n, seed=args.seed, max_tries=args.max_tries)
     seconds = time.perf_counter() - t0
     first = sum(r.tries == 1 for r in results)
     within = sum(r.tries <= args.max_tries for r in results)
@@ -464,7 +477,7 @@ def _vae_samples(args) -> tuple[list, str, str]:
 
     from .vae.macro_model import MacroVAE
 
-    vae = _load_vae(args, args.category)
+    vae = _load_vae(args, args.category, macro=True)
     t0 = time.perf_counter()
     if isinstance(vae, MacroVAE):  # macro programs (ShapeMOD): measured through their expansions
         from .vae.macro_decode import sample_macro
