@@ -9,8 +9,9 @@ argmax), breadth first over the blocks, with the grammar's rules applied to the 
   first base line acts on the last declared cuboid (``needs_subject``), the block has declared one;
   ``stop`` once the block has created a cuboid;
 * a cuboid argument is chosen among the slots declared so far;
-* the base ``translate`` count is rounded to a whole number from 1 to the executor's limit, base
-  ``Cuboid`` dims are at least ``MIN_DIM``, base attach and squeeze coordinates are clamped to [0, 1];
+* floats are clamped to their slots' ranges (:func:`float_ranges`: dims at least ``MIN_DIM``, attach and
+  squeeze coordinates and translate distances in [0, 1], a macro's float parameter as the base slots it
+  fills alone), and the base ``translate`` count is rounded to a whole number from 1 to the executor's limit;
 * the chosen call is expanded with the block's lines so far (:meth:`shapeprog.macros.Library.expand`);
   an expansion that raises :class:`~shapeprog.macros.MacroError` (an attach to its own subject, a
   fractional count from a macro's expression, ...) refuses the call.
@@ -31,6 +32,7 @@ Example:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -48,7 +50,7 @@ from .model import one_hot_argmax
 from .validity import InvalidSample
 
 __all__ = ["MAX_DEPTH", "MAX_NODES", "MIN_DIM", "MacroDecoded", "decode_macro", "decode_macro_latent", "encode_macro",
-           "sample_macro"]
+           "float_ranges", "sample_macro"]
 
 #: Block depth of a decoded program (root 0): a cuboid at depth MAX_DEPTH - 1 is a leaf.
 MAX_DEPTH = 4
@@ -80,18 +82,44 @@ class MacroDecoded:
     tries: int = 1
 
 
-def _clean(func: str, row: list[float], lay: LineLayout) -> None:
-    """The base functions' value rules, in place on a line vector."""
+#: The value range of each float slot of the base functions (translate's count is rounded apart).
+_BASE_RANGES = {"Cuboid": ((MIN_DIM, math.inf),) * 3, "attach": ((0.0, 1.0),) * 6, "squeeze": ((0.0, 1.0),) * 2,
+                "translate": ((1.0, float(limits.MAX_TRANSLATE_COPIES)), (0.0, 1.0))}
+
+
+def float_ranges(library, func: str) -> tuple[tuple[float, float], ...]:
+    """The range a decoded float argument of ``func`` is clamped to, per float parameter in order.
+
+    A base function's slots have their own ranges (dims at least :data:`MIN_DIM`, attach and squeeze
+    coordinates and translate distances in [0, 1]). A macro's float parameter takes the intersection of the
+    ranges of the base slots it fills *alone* in the macro's expansion (``Cuboid(x0, bb_y, x1, b0)``: x0 and
+    x1 are dims); a parameter only found in expressions (``0.65 * x0``, ``bb_y - x0``) is not clamped.
+    """
+    f = library[func]
+    names = [p.name for p in f.params if p.type == FLOAT]
+    if f.is_base:
+        return _BASE_RANGES.get(func, ())[: len(names)]
+    lo = {n: -math.inf for n in names}
+    hi = {n: math.inf for n in names}
+    for call in library.expand_macro(func).body:
+        params = [p for p in library[call.func].params if p.type == FLOAT]
+        ranges = _BASE_RANGES.get(call.func, ())
+        floats = [a for a, p in zip(call.args, library[call.func].params) if p.type == FLOAT]
+        for k, (a, _) in enumerate(zip(floats, params)):
+            if k < len(ranges) and len(a.terms) == 1 and a.terms[0][0] == 1.0 and a.terms[0][1] in lo:
+                v = a.terms[0][1]
+                lo[v], hi[v] = max(lo[v], ranges[k][0]), min(hi[v], ranges[k][1])
+    return tuple((lo[n], hi[n]) if lo[n] <= hi[n] else (-math.inf, math.inf) for n in names)
+
+
+def _clean(func: str, row: list[float], lay: LineLayout, ranges) -> None:
+    """Clamp a line vector's floats to their ranges (:func:`float_ranges`), in place; a base translate's
+    count is rounded to a whole number."""
     fs = lay.slices[FLOAT].start
-    if func == "Cuboid":
-        for k in range(3):
-            row[fs + k] = max(row[fs + k], MIN_DIM)
-    elif func in ("attach", "squeeze"):
-        for k in range(6 if func == "attach" else 2):
-            row[fs + k] = min(max(row[fs + k], 0.0), 1.0)
-    elif func == "translate":
-        row[fs] = float(min(max(round(row[fs]), 1), limits.MAX_TRANSLATE_COPIES))
-        row[fs + 1] = min(max(row[fs + 1], 0.0), 1.0)
+    for k, (lo, hi) in enumerate(ranges):
+        row[fs + k] = min(max(row[fs + k], lo), hi)
+    if func == "translate":
+        row[fs] = float(round(row[fs]))
 
 
 def _propose(dec, lay: LineLayout, out: torch.Tensor, c: int, declared: int, bbox_dims: torch.Tensor) -> list[float]:
@@ -125,7 +153,7 @@ def _propose(dec, lay: LineLayout, out: torch.Tensor, c: int, declared: int, bbo
         for k, u in enumerate(used[t]):
             if u:
                 row[s.start + k * w: s.start + (k + 1) * w] = vals[k * w: (k + 1) * w]
-    _clean(func, row, lay)
+    _clean(func, row, lay, float_ranges(lay.library, func))
     return row
 
 

@@ -160,3 +160,15 @@ def test_samples_are_macro_programs_that_execute(overfit):
         assert torch.allclose(_leaves(shape), _leaves(d.shape), atol=1e-5)
     again = sample_macro(vae, 6, seed=3)
     assert [d.text for d in again] == [d.text for d in out]
+
+
+def test_float_ranges_follow_the_base_slots_a_parameter_fills_alone():
+    import math
+
+    from shapeprog.vae.macro_decode import MIN_DIM, float_ranges
+    lib = Library.from_text(LIB_TEXT + "\ndef odd(x: float):\n    c = Cuboid(0.5 * x, 0.2, 0.2, True)\n"
+                            "    attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n")
+    assert float_ranges(lib, "legs") == ((MIN_DIM, math.inf), (0.0, 1.0))  # s a dim; t a squeeze u (1 - t skipped)
+    assert float_ranges(lib, "hang") == ((MIN_DIM, math.inf),) * 3
+    assert float_ranges(lib, "odd") == ((-math.inf, math.inf),)  # only in an expression: not clamped
+    assert float_ranges(lib, "attach") == ((0.0, 1.0),) * 6 and float_ranges(lib, "reflect") == ()
