@@ -30,7 +30,7 @@ Example:
     >>> e = parse("SymRef(Move(Cuboid(0.1,0.5,0.1),-0.4,0.0,0.2),AX)")
     >>> toks, ranks = encode_target(e, scene, vocab)
     >>> [vocab.tokens[t] for t in toks[:3]], ranks[3:7]
-    (['SymRef', 'Move', 'Cuboid'], [2, 5, 2, 2])
+    (['SymRef', 'Move', 'Cuboid'], [2, 5, 2, 0])
     >>> decode_tokens(toks, ranks, scene, vocab) == e
     True
 """
