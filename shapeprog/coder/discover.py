@@ -349,7 +349,8 @@ def train_network(shapes: Sequence, library: Library, cfg: Config = Config(), se
         torch.manual_seed(seed)
         model = RecognitionNet(NetConfig(len(vocab), fields=len(lang.prim_fields), max_prims=lang.max_prims,
                                          dropout=cfg.dropout))
-    tl = train(model, d.pairs, vocab, cfg.train_config(), torch.Generator().manual_seed(seed), device_of(cfg.device))
+    tl = train(model, d.pairs, vocab, cfg.train_config(), torch.Generator().manual_seed(seed), device_of(cfg.device),
+               library=library)
     model.cpu().eval()
     info = {"library": library.to_text(), "pairs": tl.pairs, "epochs": len(tl.train_loss),
             "train_loss": round(tl.train_loss[-1], 4) if tl.train_loss else None,

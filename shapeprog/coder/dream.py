@@ -23,8 +23,9 @@ abandoned).
   error (base functions only); 3 ``Move(Move(`` or ``Union(Union(`` in the text; 4 more primitives than
   the domain's scene limit (16 / 12); 5 a dimension <= 0 after rounding; 6 a corner outside ±:data:`BOUND`;
   7 a total volume (area in 2D) below :data:`MIN_VOLUME`; 8 two primitives whose axis-aligned boxes overlap
-  by more than :data:`MAX_OVERLAP` of the smaller box; 9 a literal that is no primitive value (within
-  :data:`LITERAL_TOL`); 10 not cheaper than the naive program of its primitives (structure cost, then
+  by more than :data:`MAX_OVERLAP` of the smaller box; 9 a literal that is not a primitive value (within
+  :data:`LITERAL_TOL`), except a ``SymTrans`` distance (:func:`distance_literals`), which may be the
+  difference of two values (the network writes it ``Sub(a,b)``); 10 not cheaper than the naive program of its primitives (structure cost, then
   parameter cost, :func:`split_cost`).
 
 :func:`compose` builds scenes from the pools: k ~ U{1..:data:`MAX_SUB`} functions among those with fewer
@@ -61,8 +62,8 @@ from .objective import naive_cost
 
 __all__ = ["BASE_EXCLUDED", "BOUND", "COUNTS", "DISTRACTOR_TRIES", "DREAM_TIMEOUT", "Dream", "DreamPair", "Dreams",
            "FunctionDreams", "LAWS", "LITERAL_TOL", "MAX_DISTRACTORS", "MAX_FAILURES", "MAX_OVERLAP", "MAX_SUB",
-           "MIN_SUCCESSES", "MIN_VOLUME", "N_DREAMS", "REJECTIONS", "ROTATE_PROB", "compose", "dream",
-           "dreamed_functions", "function_dreams", "reject_reason", "sample_dream", "slot_kinds", "split_cost"]
+           "MIN_SUCCESSES", "MIN_VOLUME", "N_DREAMS", "REJECTIONS", "ROTATE_PROB", "compose", "distance_literals",
+           "dream", "dreamed_functions", "function_dreams", "reject_reason", "sample_dream", "slot_kinds", "split_cost"]
 
 #: Valid dreams per function (``num_dreams``).
 N_DREAMS = 10_000
@@ -138,7 +139,7 @@ def split_cost(expr: Expr, library: Library | None = None) -> tuple:
     """The wake's split cost ``(structure, parameters)``: structure counts the shape functions (1.0 each)
     and float operators (0.1); parameters count the *distinct* free float values or Float variables (2.0
     each), the constants 0/1/2 (0.5 per occurrence) and the categoricals (0.5 per occurrence)."""
-    lib = library or Library()
+    lib = library if library is not None else Library()
     struct, floats, param = 0.0, set(), 0.0
     for n in walk(expr):
         if isinstance(n, Call):
@@ -193,11 +194,29 @@ def _overlapping(lo: np.ndarray, hi: np.ndarray) -> bool:
     return bool((share > MAX_OVERLAP).any())
 
 
+def distance_literals(expr: Expr, library: Library | None = None) -> set:
+    """``id()`` of the float literals of ``expr`` that fill a ``SymTrans`` distance, directly or as an
+    abstraction argument whose parameter feeds one (:func:`slot_kinds`)."""
+    lib = library if library is not None else Library()
+    out: set = set()
+    for n in walk(expr):
+        if not isinstance(n, Call):
+            continue
+        if n.fn == "SymTrans" and isinstance(n.args[3], Num):
+            out.add(id(n.args[3]))
+        elif n.fn in lib:
+            kinds = slot_kinds(n.fn, lib)
+            for p, a in zip(lib[n.fn].params, n.args):
+                if isinstance(a, Num) and kinds.get(p.name) == "dist":
+                    out.add(id(a))
+    return out
+
+
 def reject_reason(expr: Expr, library: Library | None = None, base: bool | None = None) -> str | None:
     """Why a dream is rejected (one of :data:`REJECTIONS`, checked in that order), or None when it is
     valid. ``base``: the dreamed function is a base function (soft errors reject it); by default, when
     the expression's root is one."""
-    lib = library or Library()
+    lib = library if library is not None else Library()
     lang = lib.lang
     if base is None:
         base = isinstance(expr, Call) and lang.signature(expr.fn) is not None
@@ -229,9 +248,15 @@ def reject_reason(expr: Expr, library: Library | None = None, base: bool | None 
     if _overlapping(lo, hi):
         return "overlap"
     values = np.unique(p.ravel())
+    diffs, dist = None, distance_literals(expr, lib)
     for n in walk(expr):
         if isinstance(n, Num) and np.abs(values - n.value).min() > LITERAL_TOL + 1e-9:
-            return "literal"
+            if id(n) not in dist:
+                return "literal"
+            if diffs is None:
+                diffs = (values[:, None] - values[None]).ravel()
+            if np.abs(diffs - n.value).min() > LITERAL_TOL + 1e-9:
+                return "literal"
     nc = naive_cost(prims)
     struct, param = split_cost(expr, lib)
     if (struct, param) >= (nc.struct(), nc.param()):
@@ -255,8 +280,8 @@ def slot_kinds(name: str, library: Library) -> dict:
     lib = library
     ab = lib[name]
     out: dict = {}
-    slot = {("Cuboid", 1): "w", ("Cuboid", 2): "h", ("Cuboid", 3): "d", ("Rectangle", 1): "w",
-            ("Rectangle", 2): "h", ("Move", 1): "x", ("Move", 2): "y", ("Move", 3): "z", ("SymTrans", 4): "dist"}
+    slot = {("Cuboid", 0): "w", ("Cuboid", 1): "h", ("Cuboid", 2): "d", ("Rectangle", 0): "w",
+            ("Rectangle", 1): "h", ("Move", 1): "x", ("Move", 2): "y", ("Move", 3): "z", ("SymTrans", 3): "dist"}
 
     def visit(e, kind):
         if isinstance(e, Var) and e.type is Type.FLOAT:
@@ -272,12 +297,12 @@ def slot_kinds(name: str, library: Library) -> dict:
         if sig.kind == FLOAT_FN:
             return
         inner = slot_kinds(e.fn, lib) if e.fn in lib else None
-        for i, (a, t) in enumerate(zip(e.args, sig.params), 1):
+        for i, (a, t) in enumerate(zip(e.args, sig.params)):
             if t is Type.SHAPE:
                 go(a)
             elif t is Type.FLOAT:
                 if inner is not None:
-                    kind = inner.get(lib[e.fn].params[i - 1].name, "x")
+                    kind = inner.get(lib[e.fn].params[i].name, "x")
                 elif e.fn == "Rotate":
                     ax = e.args[1]
                     kind = _ROT[ax.name] if isinstance(ax, AxisConst) else "rot"

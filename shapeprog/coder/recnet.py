@@ -8,9 +8,11 @@ library out, its floats as references to the scene's values. Plain PyTorch; the 
 * **Vocabulary** (:class:`Vocab`): ``<start>``, ``<var>`` (a float that refers to a scene value), the
   library's shape functions (base and abstractions), the float operators, the constants 0, 1, 2, the axes
   and the counts ``INT#1#`` … ``INT#6#``.
-* **Targets** (:func:`encode_target`): the expression in prefix order; every float literal is ``<var>``
-  with the rank of the scene value nearest to it (a dream's literals are scene values, except the
-  positions of a sub-dream that got an extra Move). :func:`decode_tokens` inverts it.
+* **Targets** (:func:`encode_target`): the expression in prefix order; a float literal within
+  :data:`~shapeprog.coder.dream.LITERAL_TOL` of a scene value is ``<var>`` with that value's rank; else,
+  for a ``SymTrans`` distance that is the difference of two scene values, ``Sub <var> <var>``; else
+  ``<var>`` with the nearest value's rank (the positions of a sub-dream that got an extra Move).
+  :func:`decode_tokens` inverts it.
 * **Model** (:class:`RecognitionNet`). Conditioning token i: [a learned 128-d vector of position i ‖
   Embedding(rank) + Embedding(field), 16-d]. Sequence token t: [Embedding(token), 128-d ‖ the rank
   embedding of the referenced value for ``<var>`` tokens, else 0] + a learned positional embedding
@@ -145,20 +147,33 @@ def _nearest(values: tuple, v: float) -> int:
     return int(np.abs(a - v).argmin())
 
 
-def encode_target(expr: Expr, scene_prims, vocab: Vocab) -> tuple:
+def encode_target(expr: Expr, scene_prims, vocab: Vocab, library: Library | None = None) -> tuple:
     """``(tokens, ranks)``: the expression's tokens in prefix order (no start token) and, per token, the
-    referenced rank (``<var>`` tokens) or -1.
+    referenced rank (``<var>`` tokens) or -1. ``library``: the abstractions of ``expr`` (for their
+    ``SymTrans`` distance parameters).
 
     Raises:
         ProgramError: a token outside the vocabulary, or more than :data:`MAX_TOKENS` - 1 tokens.
     """
+    from .dream import LITERAL_TOL, distance_literals
+
     scene = scene_prims if isinstance(scene_prims, Scene) else encode_scene(scene_prims)
+    vals = np.asarray(scene.values)
+    dist = distance_literals(expr, library)
     toks, ranks = [], []
     for n in walk(expr):
         if isinstance(n, Call):
             toks.append(vocab.index(n.fn)), ranks.append(-1)
         elif isinstance(n, Num):
-            toks.append(1), ranks.append(_nearest(scene.values, n.value))
+            r = _nearest(scene.values, n.value)
+            if abs(vals[r] - n.value) > LITERAL_TOL + 1e-9 and id(n) in dist and "Sub" in vocab.tokens:
+                d = np.abs(vals[:, None] - vals[None] - n.value)
+                a, b = np.unravel_index(int(d.argmin()), d.shape)
+                if d[a, b] <= LITERAL_TOL + 1e-9:
+                    toks += [vocab.index("Sub"), 1, 1]
+                    ranks += [-1, int(a), int(b)]
+                    continue
+            toks.append(1), ranks.append(r)
         elif isinstance(n, AxisConst):
             toks.append(vocab.index(n.name)), ranks.append(-1)
         elif isinstance(n, IntConst):

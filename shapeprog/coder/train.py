@@ -98,10 +98,11 @@ class Batch:
         return Batch(*(getattr(self, f).to(device) for f in self.__dataclass_fields__))
 
 
-def tensorize(pairs: Sequence, vocab: Vocab, inputs: int) -> Batch:
+def tensorize(pairs: Sequence, vocab: Vocab, inputs: int, library=None) -> Batch:
     """The :class:`Batch` of ``pairs`` (:class:`~shapeprog.coder.dream.DreamPair`, or ``(scene, target)``
     tuples); ``inputs`` is the network's conditioning length (fields × max primitives). Pairs whose
-    target does not fit the vocabulary or :data:`~shapeprog.coder.recnet.MAX_TOKENS` are skipped."""
+    target does not fit the vocabulary or :data:`~shapeprog.coder.recnet.MAX_TOKENS` are skipped.
+    ``library``: the targets' library (see :func:`~shapeprog.coder.recnet.encode_target`)."""
     rows = []
     for p in pairs:
         scene, target = (p.scene, p.target) if hasattr(p, "scene") else p
@@ -109,7 +110,7 @@ def tensorize(pairs: Sequence, vocab: Vocab, inputs: int) -> Batch:
         if len(sc.ranks) > inputs:
             continue
         try:
-            toks, rks = encode_target(target, sc, vocab)
+            toks, rks = encode_target(target, sc, vocab, library)
         except Exception:  # noqa: BLE001 - a token outside the vocabulary: skip the pair
             continue
         rows.append((sc, toks, rks))
@@ -168,7 +169,7 @@ def device_of(name: str = "auto") -> torch.device:
 
 def train(model: RecognitionNet, pairs, vocab: Vocab, cfg: TrainConfig = PAPER,
           generator: torch.Generator | None = None, device: str | torch.device = "cpu",
-          log: Callable | None = None) -> TrainLog:
+          log: Callable | None = None, library=None) -> TrainLog:
     """Fit ``model`` on ``pairs`` (:class:`~shapeprog.coder.dream.DreamPair` s or a :class:`Batch`); the
     model ends with the weights of the best held-out epoch (the last epoch's without a held-out set)
     and in eval mode.
@@ -177,11 +178,12 @@ def train(model: RecognitionNet, pairs, vocab: Vocab, cfg: TrainConfig = PAPER,
         generator: shuffles the pairs and splits off the held-out share (a CPU generator).
         device: where to train.
         log: called with one line per epoch.
+        library: the targets' library (for :func:`tensorize`).
     """
     t0 = time.perf_counter()
     generator = generator or torch.Generator().manual_seed(0)
     dev = torch.device(device)
-    data = pairs if isinstance(pairs, Batch) else tensorize(pairs, vocab, model.cfg.inputs)
+    data = pairs if isinstance(pairs, Batch) else tensorize(pairs, vocab, model.cfg.inputs, library)
     n = len(data)
     out = TrainLog(pairs=n)
     if n == 0:
