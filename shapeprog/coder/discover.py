@@ -368,7 +368,11 @@ def wake_network(shapes: Sequence, programs: Sequence[Expr] | None, library: Lib
                  progress: Callable | None = None, seed: int = 0) -> tuple:
     """The wake with the recognition network (see the module docstring): ``(programs, costs, errors,
     stores, sources)``, ``stores`` the per-shape store entries and ``sources`` which candidate won per
-    shape (``current``, ``expanded``, ``naive``, ``network``, ``replace``, ``rebuild``)."""
+    shape (``current``, ``expanded``, ``naive``, ``network``, ``replace``, ``rebuild``).
+
+    A process pool for ``executor`` must not fork its workers after this process has run torch (they can
+    hang): use a ``spawn`` or ``forkserver`` context, or a pool whose workers started before.
+    """
     import hashlib
 
     prims = [getattr(s, "prims", s) for s in shapes]
@@ -652,7 +656,12 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     recs = data.load(category)[:shapes]
     stop_at = None if minutes is None else time.time() + 60 * minutes
     if workers > 1:
-        with cf.ProcessPoolExecutor(workers) as ex:
+        import multiprocessing
+
+        # the network wake runs torch in this process: workers forked after that can hang, so they start
+        # from a fresh interpreter
+        ctx = multiprocessing.get_context("forkserver") if cfg.wake == "network" else None
+        with cf.ProcessPoolExecutor(workers, mp_context=ctx) as ex:
             result = discover(recs, cfg, LANG_3D, ex, out, log, progress, stop_at)
     else:
         result = discover(recs, cfg, LANG_3D, None, out, log, progress, stop_at)
