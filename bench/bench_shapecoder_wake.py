@@ -67,6 +67,8 @@ def main(argv=None):
         with cf.ProcessPoolExecutor(args.workers, mp_context=ctx) as ex:
             r = discover(shapes, cfg, executor=ex, log=log)
         s = r.summary()
+        print("# phases: " + "; ".join(f"round {h['round']} {h['phase']} F={h['F']:.1f} at {h['seconds']:.0f} s"
+                                       for h in r.log), flush=True)
         table.append(f"| {name} | {s.F:.1f} | {s.library_size} | {s.num_struct:.1f} | {s.num_param:.1f} | "
                      f"{time.time() - t0:.0f} |")
         print(table[-1], flush=True)
