@@ -16,6 +16,7 @@
     python -m shapeprog edit chair/173 --port 8080 --no-browser --target chair/37982
     python -m shapeprog discover-macros --category chair --rounds 5 --workers 2 --out runs/shapemod_chair
     python -m shapeprog refactor chair/173 --library chair
+    python -m shapeprog refactor-corpus --category chair --library chair --workers 2 --out chair_macros
     python -m shapeprog table1 --category chair --limit 200 --out table1.md
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
@@ -733,6 +734,60 @@ def _cmd_refactor(args) -> int:
     return 0
 
 
+def _size(path: Path) -> str:
+    n = path.stat().st_size if path.is_file() else sum(f.stat().st_size for f in path.iterdir())
+    return f"{n / 1024:.0f} KiB"
+
+
+def _cmd_refactor_corpus(args) -> int:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .macros import Library, load_library
+    from .macros.refactored import check_target, refactor_corpus, write_refactored
+
+    out = Path(args.out)
+    try:
+        check_target(out)
+    except (FileExistsError, FileNotFoundError) as e:
+        raise SystemExit(f"error: {e}") from None
+    if Path(args.library).is_file():
+        lib = Library.from_text(decode(Path(args.library).read_bytes(), args.library), args.library)
+    else:
+        try:
+            lib = load_library(args.library)
+        except ValueError as e:
+            raise SystemExit(f"error: {e}") from None
+    command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
+    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
+            if args.workers > 1 else None)
+    t0 = time.perf_counter()
+    try:
+        rc = refactor_corpus(args.category, lib, args.library, split=args.split, limit=args.limit, seed=args.seed,
+                             executor=pool, mode=args.search, check=not args.no_check)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    seconds = time.perf_counter() - t0
+    rc.meta["seconds"] = round(seconds, 1)
+    rc.meta["workers"] = args.workers
+    write_refactored(rc, out, command)
+    s = rc.summary()
+    m = s["mean_per_shape"]
+    print(f"{args.category}: {s['refactored']} of {s['shapes']} shapes refactored with {args.library} "
+          f"(|L| = {len(lib)}) in {seconds:.0f} s, {s['failed']} failed")
+    if m["f_before"] is not None:
+        print(f"per shape: f {m['f_before']:.2f} -> {m['f_after']:.2f}, lines {m['lines_before']:.2f} -> "
+              f"{m['lines_after']:.2f}, floats {m['float_before']:.2f} -> {m['float_after']:.2f}")
+    if s["max_corner_error"] is not None:
+        print(f"check: largest leaf-corner distance to the original {s['max_corner_error']:.4f}; "
+              f"{len(s['over_tolerance'])} shape(s) above {s['check_tolerance']}")
+    for f in s["failures"]:
+        print(f"failed: {args.category}/{f['id']}: {f['reason']}", file=sys.stderr)
+    print(f"wrote {out} ({s['refactored']} programs and summary.json, {_size(out)})")
+    return 0
+
+
 def _cmd_table1(args) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
@@ -1012,6 +1067,23 @@ def main(argv=None) -> int:
     rf.add_argument("--search", choices=("beam", "exact"), default="beam")
     rf.add_argument("-o", "--output", help="write the macro programs here")
     rf.set_defaults(func=_cmd_refactor)
+    rc = sub.add_parser("refactor-corpus", help="ShapeMOD: rewrite every corpus program of a category with a library",
+                        description="Refactor every corpus program of a category with a ShapeMOD library (process "
+                                    "pool with --workers > 1), check each against its original (parse back, "
+                                    "execute, leaf cuboids matched), and write one macro program per shape "
+                                    "(<id>.txt) and summary.json into a new folder, atomically.")
+    rc.add_argument("--category", required=True, choices=corpus.CATEGORIES)
+    rc.add_argument("--library", required=True, help="a shipped library's category or a library file")
+    rc.add_argument("--out", required=True, help="the new folder (must not exist, or be empty), or a new "
+                                                 "FILE.tar.xz archive of the same files")
+    rc.add_argument("--split", default="all", choices=("train", "val", "all"))
+    rc.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes of the split")
+    rc.add_argument("--seed", type=int, default=0, help="seed of --limit's subset")
+    rc.add_argument("--search", choices=("beam", "exact"), default="beam")
+    rc.add_argument("--workers", type=_int_at_least(1), default=2,
+                    help="processes of the pool (default 2; 1: no pool, everything in this process)")
+    rc.add_argument("--no-check", action="store_true", help="skip reading back and executing every result")
+    rc.set_defaults(func=_cmd_refactor_corpus, argv=None)
     tb = sub.add_parser("table1", help="ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows",
                         description="Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the "
                                     "given categories beside the paper's rows.")

@@ -10,6 +10,9 @@
 * :mod:`~shapeprog.macros.discover`: discovery rounds (greedy or milp selection), resumable, any executor.
 * :mod:`~shapeprog.macros.baseline`: the paper's baseline macros; :mod:`~shapeprog.macros.table1`: Table 1.
 * :mod:`~shapeprog.macros.api`: :func:`load_library`, :func:`refactor`, :func:`expand`, :func:`collection`.
+* :mod:`~shapeprog.macros.refactored`: a category's corpus refactored with a library, written and read
+  back (:func:`refactor_corpus`, ``python -m shapeprog refactor-corpus``); :mod:`~shapeprog.macros.perturb`:
+  perturbed execution of macro programs (the paper's Fig. 7).
 * :mod:`~shapeprog.macros.hierarchy`: hierarchical macro programs (one per sub-program), the text
   ``refactor -o`` writes and the editor reads.
 
@@ -35,6 +38,7 @@ from .api import BlockRefactor, Refactored, collection, expand, load_library, pr
 from .execute import execute, execute_batch, program_parameters
 from .lang import Call, Linear, Literal, MacroDef, MacroError, MacroProgram, Name, Param, from_lines, to_text
 from .library import Library, parse
+from .refactored import load_refactored, read_refactored, refactor_corpus, write_refactored
 
 __all__ = [
     "BlockRefactor",
@@ -66,6 +70,10 @@ __all__ = [
     "parse",
     "program_parameters",
     "program_stats",
+    "load_refactored",
+    "read_refactored",
     "refactor",
+    "refactor_corpus",
     "to_text",
+    "write_refactored",
 ]
