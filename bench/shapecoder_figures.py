@@ -1,10 +1,10 @@
-"""Pictures of a ShapeCoder run's abstractions (as the paper's Fig. 6, usages only: dreams are not built):
-one PNG per abstraction of ``RUN_DIR/library.txt`` with up to ``--count`` of the run's programs that call it,
-the parts its calls make in a second colour.
+"""Pictures of a ShapeCoder run's abstractions (as the paper's Fig. 6): one PNG per abstraction of
+``RUN_DIR/library.txt`` with up to ``--count`` of the run's programs that call it, the parts its calls make in
+a second colour; with ``--dreams N``, a second PNG (``..._dreams.png``) with N random valid dreams of it.
 
 Usage::
 
-    python bench/shapecoder_figures.py RUN_DIR --out FIG_DIR [--count 4]
+    python bench/shapecoder_figures.py RUN_DIR --out FIG_DIR [--count 4] [--dreams 4]
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from shapeprog.coder.lang import Call, Library, parse, walk
-from shapeprog.coder.picture import usage_sheet
+from shapeprog.coder.picture import dream_sheet, usage_sheet
 
 
 def main(argv=None):
@@ -24,6 +24,8 @@ def main(argv=None):
     ap.add_argument("--size", type=int, default=192, help="cell side in pixels")
     ap.add_argument("--top", type=int, help="only the TOP most used abstractions (file names <rank>_<name>.png)")
     ap.add_argument("--prefix", default="", help="prefix of the file names")
+    ap.add_argument("--dreams", type=int, default=0, help="also draw this many random dreams per abstraction")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the dreams")
     args = ap.parse_args(argv)
     print(f"# command: python {' '.join(sys.argv)}")
     run = Path(args.run)
@@ -43,6 +45,13 @@ def main(argv=None):
             print(f"{out / name}: {uses[ab.name]} calls: {ab.to_text()}")
         except ValueError as e:
             print(f"{ab.name}: {e}")
+        if args.dreams:
+            dname = name[:-4] + "_dreams.png"
+            try:
+                dream_sheet(ab.name, lib, out / dname, count=args.dreams, size=args.size, seed=args.seed)
+                print(f"{out / dname}: {args.dreams} dreams")
+            except ValueError as e:
+                print(f"{ab.name}: {e}")
 
 
 if __name__ == "__main__":

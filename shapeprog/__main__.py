@@ -573,7 +573,10 @@ def _cmd_discover_abstractions(args) -> int:
     if not args.quiet:
         from tqdm import tqdm
         progress = lambda it, total, desc: tqdm(it, total=total, desc=desc, leave=False)  # noqa: E731
-    cfg = Config(rounds=args.rounds, n_proposals=args.proposals, n_abstractions=args.abstractions, seed=args.seed)
+    cfg = Config(rounds=args.rounds, n_proposals=args.proposals, n_abstractions=args.abstractions, seed=args.seed,
+                 wake=args.wake, n_dreams=args.dreams, train_seconds=60.0 * args.train_minutes,
+                 train_epochs=args.train_epochs, train_lr=args.train_lr, dropout=args.dropout,
+                 wake_seconds=args.wake_seconds, device=args.device)
     t0 = time.time()
     res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress)
     s = res.summary()
@@ -1004,7 +1007,8 @@ def main(argv=None) -> int:
     t.add_argument("--seed", type=int, default=0, help="seed of the sampling and the training")
     t.set_defaults(func=_cmd_train_classifier)
     d = sub.add_parser("discover-abstractions", help="ShapeCoder: discover a library of abstractions for a category",
-                       description="Run ShapeCoder's discovery (wake by e-graph refactoring, proposal, integration, "
+                       description="Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake "
+                                   "network, with dreams and a recognition network; proposal, integration, "
                                    "removal sweep; a final wake with the library fixed) on the first N discovery "
                                    "shapes of a PartNet category; write library.txt, programs.txt, log.json and a "
                                    "resumable state.json into --out.")
@@ -1018,6 +1022,19 @@ def main(argv=None) -> int:
     d.add_argument("--seed", type=int, default=42, help="seed of the proposals")
     d.add_argument("--workers", type=_int_at_least(1), default=2, help="processes for the per-program refactors")
     d.add_argument("--minutes", type=float, help="start no phase after this many minutes (the run stays resumable)")
+    d.add_argument("--wake", choices=("refactor", "network"), default="refactor",
+                   help="wake search: by refactoring only (default), or with dreams and a recognition network "
+                        "(needs torch)")
+    d.add_argument("--dreams", type=_int_at_least(1), default=10000,
+                   help="network wake: valid dreams per function (N_D, paper: 10,000)")
+    d.add_argument("--train-minutes", type=float, default=200.0,
+                   help="network wake: training budget per round in minutes (paper: 200)")
+    d.add_argument("--train-epochs", type=_int_at_least(1), default=300, help="network wake: epochs at most (300)")
+    d.add_argument("--train-lr", type=float, default=1e-4, help="network wake: Adam learning rate (1e-4)")
+    d.add_argument("--dropout", type=float, default=0.5, help="network wake: the network's dropout (0.5)")
+    d.add_argument("--wake-seconds", type=float, default=1.0,
+                   help="network wake: seconds of sampling per search step (1)")
+    d.add_argument("--device", default="auto", help="network wake: where to train (auto: CUDA when available)")
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     d.set_defaults(func=_cmd_discover_abstractions)
     a = sub.add_parser("abstract-infer", help="ShapeCoder: infer one shape's program with a discovered library",

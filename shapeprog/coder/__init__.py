@@ -2,8 +2,11 @@
 
 Discovery: :mod:`shapeprog.coder.refactor` (e-graph refactoring with egglog),
 :mod:`shapeprog.coder.proposal` (structure signatures, clusters, greedy abstraction),
-:mod:`shapeprog.coder.discover` (wake by refactoring, integration, the rounds) and
-:mod:`shapeprog.coder.infer` (post hoc inference, shipped libraries).
+:mod:`shapeprog.coder.discover` (wake by refactoring or with the recognition network, integration, the
+rounds) and :mod:`shapeprog.coder.infer` (post hoc inference, shipped libraries). The network wake's parts,
+imported on demand (the network needs torch): :mod:`shapeprog.coder.dream` (the dream phase),
+:mod:`shapeprog.coder.recnet` (the recognition network), :mod:`shapeprog.coder.train` (its training loop)
+and :mod:`shapeprog.coder.search` (the network's search per shape, the store of covering expressions).
 
 The foundation: the language (:mod:`shapeprog.coder.lang`: typed expression trees,
 text form, abstractions, libraries, the 3D domain and the 2D toy domain), the executor

@@ -1,13 +1,21 @@
-"""The ShapeCoder discovery loop: wake (search by refactoring), proposal, integration, and a final round
-with the library fixed. Per-program work goes through a ``concurrent.futures.Executor`` from the caller.
+"""The ShapeCoder discovery loop: wake (search by refactoring, or with the recognition network), proposal,
+integration, and a final round with the library fixed. Per-program work goes through a
+``concurrent.futures.Executor`` from the caller.
 
 One round (``rounds`` of them, then a final wake with the library fixed):
 
-1. **Wake** (:func:`wake`): each shape's candidates (its current program, the same with every abstraction
-   expanded, and the naive program) are refactored with the current library
-   (:func:`shapeprog.coder.refactor.refactor`); the cheapest that re-covers the shape's primitives
-   (a valid Hungarian match of every primitive, :func:`shapeprog.coder.objective.match`) is kept. This
-   replaces the paper's recognition network (not built; see docs/shapecoder.md).
+1. **Wake** (:func:`wake`, ``Config.wake="refactor"``, the default): each shape's candidates (its current
+   program, the same with every abstraction expanded, and the naive program) are refactored with the
+   current library (:func:`shapeprog.coder.refactor.refactor`); the cheapest that re-covers the shape's
+   primitives (a valid Hungarian match of every primitive, :func:`shapeprog.coder.objective.match`) is
+   kept. With ``Config.wake="network"`` (:func:`wake_network`) the round first dreams
+   (:func:`shapeprog.coder.dream.dream`) and trains a recognition network on the dreams
+   (:mod:`shapeprog.coder.train`; the weights are written to ``out/recnet_round<k>.pt`` and reused on a
+   resume); each shape is then searched with the network (:func:`shapeprog.coder.search.search_shape`),
+   the covering expressions join the shape's store, and the network's program, the store's
+   replacements (variant iii) and greedy rebuild (variant iv) are refactored together with the
+   refactor-only candidates; the cheapest is kept, so the network wake is never worse than the
+   refactor-only wake for the same program.
 2. **Proposal** (:func:`shapeprog.coder.proposal.propose`): the top ``n_abstractions`` candidates.
 3. **Integration** (:func:`integrate`): for each candidate in rank order, the library plus the candidate
    refactors the programs it covers (input and expanded); it is accepted when F strictly decreases;
@@ -36,11 +44,16 @@ from typing import Callable, Sequence
 from .execute import execute
 from .lang import LANG_3D, Call, Expr, Lang, Library, Num, ProgramError, expand, parse, substitute, to_text, walk
 from .objective import WEIGHTS, match, naive_program, omega, program_cost, token_counts
+from .dream import DREAM_TIMEOUT, N_DREAMS
 from .proposal import propose
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, egglog_program, refactor
+from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
-__all__ = ["Config", "DiscoveryResult", "Summary", "discover", "discover_category", "evaluate", "integrate", "summarize",
-           "wake", "write_outputs"]
+__all__ = ["Config", "DiscoveryResult", "Summary", "WAKES", "discover", "discover_category", "evaluate", "integrate",
+           "summarize", "train_network", "wake", "wake_network", "write_outputs"]
+
+#: The wake searches: by refactoring only, or with the recognition network.
+WAKES = ("refactor", "network")
 
 
 @dataclass(frozen=True)
@@ -57,6 +70,15 @@ class Config:
             covers.
         semantic_rewrites: use the semantic rewrites (False: only the abstraction rules, the paper's
             "no semantic rewrites" ablation).
+        wake: ``"refactor"`` (search by refactoring) or ``"network"`` (dreams, a recognition network, the
+            network search; see the module docstring).
+        n_dreams, dream_timeout: valid dreams per function (N_D, 10,000) and seconds per function (1,800).
+        train_lr, train_batch, train_epochs, train_patience, train_min_delta, train_holdout,
+            train_seconds, dropout: the network's training (:class:`shapeprog.coder.train.TrainConfig`;
+            the paper's values by default, ``train_seconds`` per round).
+        wake_batch, wake_batches, wake_seconds: samples per batch (64), batches per search step at most,
+            and seconds per search step (1 s; None: the search depends only on the seed).
+        device: where the network trains (``"auto"``: CUDA when available).
     """
 
     rounds: int = 4
@@ -68,12 +90,41 @@ class Config:
     time_limit: float = TIME_LIMIT
     refactor_all: bool = False
     semantic_rewrites: bool = True
+    wake: str = "refactor"
+    n_dreams: int = N_DREAMS
+    dream_timeout: float = DREAM_TIMEOUT
+    train_lr: float = 1e-4
+    train_batch: int = 64
+    train_epochs: int = 300
+    train_patience: int = 30
+    train_min_delta: float = 0.025
+    train_holdout: float = 0.1
+    train_seconds: float | None = 12_000.0
+    dropout: float = 0.5
+    wake_batch: int = WAKE_BATCH
+    wake_batches: int = WAKE_BATCHES
+    wake_seconds: float | None = WAKE_SECONDS
+    device: str = "auto"
 
     def __post_init__(self):
-        for name in ("rounds", "n_proposals", "n_abstractions", "iterations", "max_nodes"):
+        for name in ("rounds", "n_proposals", "n_abstractions", "iterations", "max_nodes", "train_epochs"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"Config.{name} must be an int >= 0, got {v!r}")
+        for name in ("n_dreams", "train_batch", "train_patience", "wake_batch", "wake_batches"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"Config.{name} must be an int >= 1, got {v!r}")
+        if self.wake not in WAKES:
+            raise ValueError(f"Config.wake must be one of {', '.join(WAKES)}, got {self.wake!r}")
+
+    def train_config(self):
+        """The :class:`shapeprog.coder.train.TrainConfig` of these settings."""
+        from .train import TrainConfig
+
+        return TrainConfig(lr=self.train_lr, batch=self.train_batch, epochs=self.train_epochs,
+                           patience=self.train_patience, min_delta=self.train_min_delta, holdout=self.train_holdout,
+                           max_seconds=self.train_seconds, dropout=self.dropout)
 
 
 @dataclass(frozen=True)
@@ -185,6 +236,162 @@ def wake(shapes: Sequence, programs: Sequence[Expr] | None, library: Library, cf
         tasks.append((cur, cands, library, p, _limits(cfg)))
     out = _map(executor, _best_of, tasks, progress, "wake")
     return [o[0] for o in out], [o[1] for o in out], [o[2] for o in out]
+
+
+_MODELS: dict = {}
+
+
+def _model_from(payload):
+    """The (model, vocab) of a payload ``(key, config dict, vocab tokens, state_dict)``, cached per process."""
+    key = payload[0]
+    if key not in _MODELS:
+        import multiprocessing
+
+        import torch
+
+        from .recnet import NetConfig, RecognitionNet, Vocab
+
+        if multiprocessing.parent_process() is not None:
+            torch.set_num_threads(1)  # a pool worker: one thread each
+        _MODELS.clear()
+        model = RecognitionNet(NetConfig(**payload[1]))
+        model.load_state_dict(payload[3])
+        model.eval()
+        vocab = payload[2]
+        if not isinstance(vocab, Vocab):
+            raise TypeError("the payload's vocabulary must be a Vocab")
+        _MODELS[key] = (model, vocab)
+    return _MODELS[key]
+
+
+def _network_best(task) -> tuple:
+    """Worker: the network search of one shape, the store's combinations, then the refactor of every
+    candidate; ``(program, cost, error, store entries, source)``."""
+    from .search import Store, naive_piece, search_shape, union
+
+    current, library, prims, payload, entries, limits, search, seed = task
+    model, vocab = _model_from(payload)
+    store = Store(prims, library, entries)
+    found = search_shape(prims, library, model, vocab, seed=seed, **search)
+    for f in found:
+        if f.from_network:
+            store.add(f.expr, f.covered)
+    net_prog = union([f.expr for f in sorted(found, key=lambda f: f.covered)])
+    cands = [("current", current)]
+    ex = expand(current, library)
+    if ex != current:
+        cands.append(("expanded", ex))
+    cands.append(("naive", union([naive_piece(p) for p in prims])))
+    if any(f.from_network for f in found):
+        cands.append(("network", net_prog))
+    parts = store.add_program(current)
+    if parts is not None:
+        cands.append(("replace", store.replace(parts)))
+    cands.append(("rebuild", store.rebuild()))
+    seen, uniq = set(), []
+    for name, c in cands:
+        key = to_text(c)
+        if key not in seen:
+            seen.add(key)
+            uniq.append((name, c))
+    best, best_expr, source = evaluate(current, library, prims), current, "current"
+    rules = _rules(library, limits.get("semantic", True))
+    lim = {k: v for k, v in limits.items() if k != "semantic"}
+    for name, cand in uniq:
+        outs = [cand]
+        try:
+            outs.insert(0, refactor(cand, library, rules=rules, **lim).expr)
+        except RefactorError:
+            pass
+        for e in outs:
+            got = evaluate(e, library, prims)
+            if got is not None and (best is None or got[0] < best[0] - 1e-9):
+                best, best_expr, source = got, e, name
+    store.add_program(best_expr)
+    return (best_expr, None if best is None else best[0], None if best is None else best[1], store.to_dict(), source)
+
+
+def train_network(shapes: Sequence, library: Library, cfg: Config = Config(), seed: int = 42,
+                  executor: cf.Executor | None = None, cache: dict | None = None, log: Callable | None = None,
+                  checkpoint: str | Path | None = None) -> tuple:
+    """The dream phase and the network's training for one round: ``(model, vocab, info)``, the model on
+    the CPU in eval mode. With ``checkpoint``: an existing file written for the same library is loaded
+    instead; otherwise the trained weights are written there (atomically).
+
+    Args:
+        shapes: real primitive sets (the dreams' distractors).
+        cache: abstraction dreams kept across rounds (see :func:`shapeprog.coder.dream.dream`).
+    """
+    import torch
+
+    from .dream import dream
+    from .recnet import NetConfig, RecognitionNet, Vocab, load_checkpoint, save_checkpoint
+    from .train import device_of, train
+
+    log = log or (lambda s: None)
+    if checkpoint is not None and Path(checkpoint).is_file():
+        try:
+            model, vocab, extra = load_checkpoint(checkpoint, library)
+            if extra.get("library") == library.to_text():
+                log(f"network: loaded {checkpoint}")
+                return model.eval(), vocab, extra
+        except (ValueError, RuntimeError, KeyError):
+            pass
+    t0 = time.time()
+    d = dream(library, cfg.n_dreams, seed, [getattr(s, "prims", s) for s in shapes], executor, cache,
+              cfg.dream_timeout)
+    for line in d.summary().splitlines():
+        log(f"dreams: {line}")
+    t1 = time.time()
+    vocab = Vocab.of(library)
+    lang = library.lang
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        model = RecognitionNet(NetConfig(len(vocab), fields=len(lang.prim_fields), max_prims=lang.max_prims,
+                                         dropout=cfg.dropout))
+    tl = train(model, d.pairs, vocab, cfg.train_config(), torch.Generator().manual_seed(seed), device_of(cfg.device),
+               library=library)
+    model.cpu().eval()
+    info = {"library": library.to_text(), "pairs": tl.pairs, "epochs": len(tl.train_loss),
+            "train_loss": round(tl.train_loss[-1], 4) if tl.train_loss else None,
+            "val_loss": round(tl.best, 4) if tl.val_loss else None, "stop": tl.stop,
+            "dream_seconds": round(t1 - t0, 1), "train_seconds": round(tl.seconds, 1)}
+    log(f"network: {tl.pairs} pairs, {len(tl.train_loss)} epochs ({tl.stop}), held-out loss "
+        f"{info['val_loss']}, dreams {t1 - t0:.0f} s, training {tl.seconds:.0f} s")
+    if checkpoint is not None:
+        save_checkpoint(checkpoint, model, vocab, info)
+    return model, vocab, info
+
+
+def wake_network(shapes: Sequence, programs: Sequence[Expr] | None, library: Library, model, vocab,
+                 stores: list | None = None, cfg: Config = Config(), executor: cf.Executor | None = None,
+                 progress: Callable | None = None, seed: int = 0) -> tuple:
+    """The wake with the recognition network (see the module docstring): ``(programs, costs, errors,
+    stores, sources)``, ``stores`` the per-shape store entries and ``sources`` which candidate won per
+    shape (``current``, ``expanded``, ``naive``, ``network``, ``replace``, ``rebuild``).
+
+    A process pool for ``executor`` must not fork its workers after this process has run torch (they can
+    hang): use a ``spawn`` or ``forkserver`` context, or a pool whose workers started before.
+    """
+    import hashlib
+
+    prims = [getattr(s, "prims", s) for s in shapes]
+    stores = [dict() for _ in prims] if stores is None else stores
+    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    digest = hashlib.sha1(b"".join(v.numpy().tobytes() for v in state.values())).hexdigest()
+    payload = (digest, asdict(model.cfg), vocab, state)
+    search = {"batch": cfg.wake_batch, "batches": cfg.wake_batches, "seconds": cfg.wake_seconds}
+    tasks = []
+    for k, p in enumerate(prims):
+        if programs is None:
+            naive, env = naive_program(p)
+            cur = substitute(naive, {n: Num(v) for n, v in env.items()})
+        else:
+            cur = programs[k]
+        tasks.append((cur, library, p, payload, stores[k], _limits(cfg), search, seed * 100_003 + k))
+    out = _map(executor, _network_best, tasks, progress, "wake (network)")
+    return ([o[0] for o in out], [o[1] for o in out], [o[2] for o in out], [o[3] for o in out],
+            [o[4] for o in out])
 
 
 def _uses(programs: Sequence[Expr], name: str) -> int:
@@ -353,13 +560,16 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
     log = log or (lambda s: None)
     st = _load(out, lang)
     t0 = time.time()
+    dream_cache: dict = {}
     if st is None:
         library, programs, costs, errors = Library(lang), None, None, None
         rnd, phase, hist, weights, index = 0, "wake", [], [1.0] * len(shapes), 0
+        stores = None
     else:
         library, programs = st["library_obj"], st["programs"]
         costs, errors, rnd, phase = st["costs"], st["errors"], st["round"], st["phase"]
         hist, weights, index = st["log"], st["weights"], st["index"]
+        stores = st.get("stores")
         log(f"resume at round {rnd}, phase {phase}")
         if hist:
             t0 -= hist[-1]["seconds"]  # the log's seconds count the time of every session
@@ -376,7 +586,8 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
     def save(next_round, next_phase):
         _save(out, {"round": next_round, "phase": next_phase, "library": library.to_text(),
                     "programs": [to_text(p) for p in programs], "costs": costs, "errors": errors, "log": hist,
-                    "weights": weights, "index": index, "config": asdict(cfg), "lang": lang.name})
+                    "weights": weights, "index": index, "config": asdict(cfg), "lang": lang.name,
+                    **({"stores": stores} if stores is not None else {})})
 
     while rnd <= cfg.rounds:
         if phase == "done":
@@ -385,7 +596,16 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
             log("stopping: time is up (resumable)")
             break
         if phase == "wake":
-            programs, costs, errors = wake(shapes, programs, library, cfg, executor, progress)
+            if cfg.wake == "network":
+                ckpt = None if out is None else out / f"recnet_round{rnd}.pt"
+                model, vocab, _ = train_network(shapes, library, cfg, cfg.seed + rnd, executor, dream_cache, log,
+                                                ckpt)
+                programs, costs, errors, stores, sources = wake_network(
+                    shapes, programs, library, model, vocab, stores, cfg, executor, progress, cfg.seed + rnd)
+                counts = {k: sources.count(k) for k in sorted(set(sources))}
+                log(f"round {rnd} wake: best candidate per shape: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+            else:
+                programs, costs, errors = wake(shapes, programs, library, cfg, executor, progress)
             if any(c is None for c in costs):
                 bad = [k for k, c in enumerate(costs) if c is None]
                 raise RefactorError(f"no program re-covers shape(s) {bad[:5]}")
@@ -436,7 +656,12 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     recs = data.load(category)[:shapes]
     stop_at = None if minutes is None else time.time() + 60 * minutes
     if workers > 1:
-        with cf.ProcessPoolExecutor(workers) as ex:
+        import multiprocessing
+
+        # the network wake runs torch in this process: workers forked after that can hang, so they start
+        # from a fresh interpreter
+        ctx = multiprocessing.get_context("forkserver") if cfg.wake == "network" else None
+        with cf.ProcessPoolExecutor(workers, mp_context=ctx) as ex:
             result = discover(recs, cfg, LANG_3D, ex, out, log, progress, stop_at)
     else:
         result = discover(recs, cfg, LANG_3D, None, out, log, progress, stop_at)

@@ -1,6 +1,7 @@
-"""Pictures of ShapeCoder programs: the shapes that use an abstraction, with the parts its calls make in
-one colour and the other parts in another (the paper's Fig. 6 shows usages and dreams; dreams are not
-built here). Uses :func:`shapeprog.picture.render_grid`.
+"""Pictures of ShapeCoder programs, as the paper's Fig. 6: the shapes that use an abstraction, with the
+parts its calls make in one colour and the other parts in another (:func:`usage_sheet`), and random
+dreams of a function (:func:`dream_sheet`, :mod:`shapeprog.coder.dream`). Uses
+:func:`shapeprog.picture.render_grid`.
 
 Example:
     >>> from shapeprog.coder.lang import Library, parse, parse_abstraction
@@ -18,7 +19,7 @@ from .execute import corners, run
 from .lang import Call, Expr, Library, walk
 from .proposal import pieces
 
-__all__ = ["labelled_corners", "usage_sheet"]
+__all__ = ["dream_sheet", "labelled_corners", "usage_sheet"]
 
 
 def labelled_corners(program: Expr, library: Library, name: str) -> tuple:
@@ -52,3 +53,22 @@ def usage_sheet(programs, library: Library, name: str, path=None, count: int = 4
     if not using:
         raise ValueError(f"no program calls {name!r}")
     return render_grid([labelled_corners(p, library, name) for p in using], path, cols=count, size=size)
+
+
+def dream_sheet(name: str, library: Library, path=None, count: int = 4, size: int = 192, seed: int = 0) -> np.ndarray:
+    """A row of ``count`` random valid dreams of function ``name`` (an abstraction of ``library``,
+    ``SymRef`` or ``SymTrans``; :func:`shapeprog.coder.dream.function_dreams` with ``seed``), every part
+    in the second palette colour. Returns the ``(size, count * size, 3) uint8`` picture (written as PNG
+    to ``path`` when given).
+
+    Raises:
+        ValueError: no valid dream was found (the function was abandoned).
+    """
+    from shapeprog.picture import render_grid
+
+    from .dream import function_dreams
+
+    fd = function_dreams(name, library, n=count, seed=seed, timeout=60.0)
+    if not fd.dreams:
+        raise ValueError(f"no valid dream of {name!r} ({sum(fd.failures.values())} rejected)")
+    return render_grid([labelled_corners(d.expr, library, name) for d in fd.dreams], path, cols=count, size=size)

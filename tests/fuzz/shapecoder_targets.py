@@ -18,7 +18,7 @@ from shapeprog.limits import decode
 
 from fuzz.engine import Target, mutate as mutate_bytes
 
-__all__ = ["BOUND_S", "TARGETS", "mutate", "run", "run_refactor", "seeds"]
+__all__ = ["BOUND_S", "TARGETS", "mutate", "run", "run_dream_rules", "run_refactor", "seeds"]
 
 #: The longest one input may take (on a loaded 2-core machine).
 BOUND_S = 3.0
@@ -113,6 +113,23 @@ def run_refactor(data: bytes) -> list:
     return [v for p in got for v in p] + [r.cost]
 
 
+def run_dream_rules(data: bytes) -> list:
+    """Read one data line and check its program against the dream rejection rules
+    (``shapeprog.coder.dream.reject_reason``); the reason must be one of ``REJECTIONS`` or None, and a
+    valid dream must keep every primitive within the bounds. Only ParseError may escape."""
+    from shapeprog.coder.dream import BOUND, REJECTIONS, reject_reason
+    from shapeprog.coder.execute import corners
+
+    rec = scdata.parse_record(decode(data, "fuzz.txt"), "fuzz.txt", 1)
+    why = reject_reason(rec.program)
+    assert why is None or why in REJECTIONS, f"unknown reason {why!r}"
+    if why is None:
+        assert len(rec.prims) <= 16 and abs(corners(rec.prims)).max() <= BOUND + 1e-9, "a valid dream out of bounds"
+    return [REJECTIONS.index(why) if why else -1]
+
+
 TARGETS = [Target("shapecoder/data-line", [t.encode() for t in seeds()], run, (ParseError,), BOUND_S, _mutator),
            Target("shapecoder/refactor", [t.encode() for t in seeds(6)], run_refactor, (ParseError, RefactorError),
-                  BOUND_S, _mutator)]
+                  BOUND_S, _mutator),
+           Target("shapecoder/dream-rules", [t.encode() for t in seeds(6)], run_dream_rules, (ParseError,), BOUND_S,
+                  _mutator)]

@@ -59,8 +59,8 @@ def test_refactor_with_a_hand_made_library_is_exact():
 
 
 def test_load_library_unknown_category():
-    with pytest.raises(ValueError, match="no shipped ShapeMOD library for 'table'"):
-        load_library("table")
+    with pytest.raises(ValueError, match="no shipped ShapeMOD library for 'sofa'"):
+        load_library("sofa")
 
 
 def test_baseline_macros_constants_and_share():

@@ -1,0 +1,545 @@
+"""ShapeCoder's recognition network (mode ``nocontext``): a scene of primitives in, an expression of the
+library out, its floats as references to the scene's values. Plain PyTorch; the training loop is
+:mod:`shapeprog.coder.train`.
+
+* **Values as ranks** (:func:`encode_scene`). The scene's distinct values (2 decimals) are sorted; each
+  slot (primitive p, field j) is the *rank* of its value in that list. Up to P = 16 primitives × 9 fields
+  = 144 conditioning tokens (2D: 12 × 4).
+* **Vocabulary** (:class:`Vocab`): ``<start>``, ``<var>`` (a float that refers to a scene value), the
+  library's shape functions (base and abstractions), the float operators, the constants 0, 1, 2, the axes
+  and the counts ``INT#1#`` … ``INT#6#``.
+* **Targets** (:func:`encode_target`): the expression in prefix order; a float literal within
+  :data:`~shapeprog.coder.dream.LITERAL_TOL` of a scene value is ``<var>`` with that value's rank; else,
+  for a ``SymTrans`` distance that is the difference of two scene values, ``Sub <var> <var>``; else
+  ``<var>`` with the nearest value's rank (the positions of a sub-dream that got an extra Move).
+  :func:`decode_tokens` inverts it.
+* **Model** (:class:`RecognitionNet`). Conditioning token i: [a learned 128-d vector of position i ‖
+  Embedding(rank) + Embedding(field), 16-d]. Sequence token t: [Embedding(token), 128-d ‖ the rank
+  embedding of the referenced value for ``<var>`` tokens, else 0] + a learned positional embedding
+  (144-d). Two post-LayerNorm blocks (8-head attention + residual, LayerNorm; 144→144→144 feed-forward
+  with leaky-ReLU 0.2 + residual, LayerNorm; dropout 0.5): the conditioning tokens attend to each other
+  (padding masked), the sequence tokens to the conditioning tokens and causally to the sequence. Heads:
+  a token MLP over the vocabulary and a variable MLP with one logit per rank (144).
+* **Sampling** (:func:`sample`): batched, prefix order, with type masks (a slot of type Shape takes a
+  shape function, Float a ``<var>``, an operator or a constant, ...); a float sub-expression has at most
+  :data:`MAX_FLOAT_TERMS` terms and contains a ``<var>``; the whole expression fits in
+  :data:`MAX_TOKENS`. Row 0 of a batch is the greedy (arg-max) expression when asked.
+
+Example:
+    >>> from shapeprog.coder.lang import Library, parse
+    >>> scene = ((0.1, 0.5, 0.1, -0.4, 0.0, 0.2, 0.0, 0.0, 0.0), (0.1, 0.5, 0.1, 0.4, 0.0, 0.2, 0.0, 0.0, 0.0))
+    >>> vocab = Vocab.of(Library())
+    >>> e = parse("SymRef(Move(Cuboid(0.1,0.5,0.1),-0.4,0.0,0.2),AX)")
+    >>> toks, ranks = encode_target(e, scene, vocab)
+    >>> [vocab.tokens[t] for t in toks[:3]], ranks[3:7]
+    (['SymRef', 'Move', 'Cuboid'], [2, 5, 2, 0])
+    >>> decode_tokens(toks, ranks, scene, vocab) == e
+    True
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from .lang import (FLOAT_CONSTANTS, FLOAT_FN, AxisConst, Call, Expr, IntConst, Library, Num, ProgramError, Type,
+                   walk)
+
+__all__ = ["COUNT_TOKENS", "MAX_FLOAT_TERMS", "MAX_TOKENS", "NetConfig", "RecognitionNet", "Scene", "Vocab",
+           "decode_tokens", "encode_scene", "encode_target", "load_checkpoint", "sample", "save_checkpoint"]
+
+#: Tokens of one expression at most, the start token included.
+MAX_TOKENS = 32
+#: Terms (leaves) of one float sub-expression at most.
+MAX_FLOAT_TERMS = 3
+#: The counts the network can write.
+COUNT_TOKENS = (1, 2, 3, 4, 5, 6)
+START, VAR = "<start>", "<var>"
+
+
+# ----------------------------------------------------------------------------- vocabulary and tokens
+
+
+@dataclass(frozen=True)
+class Vocab:
+    """The output tokens of a library and their types.
+
+    Attributes:
+        tokens: the token texts; index 0 is ``<start>``, 1 is ``<var>``.
+        returns: each token's type (None for ``<start>``).
+        params: each token's argument types (``()`` for leaves).
+    """
+
+    tokens: tuple
+    returns: tuple
+    params: tuple
+
+    @classmethod
+    def of(cls, library: Library) -> "Vocab":
+        lang = library.lang
+        toks, rets, pars = [START, VAR], [None, Type.FLOAT], [(), ()]
+        for sig in lang.functions:
+            if sig.returns is Type.SHAPE:
+                toks.append(sig.name), rets.append(Type.SHAPE), pars.append(sig.params)
+        for ab in library.abstractions:
+            toks.append(ab.name), rets.append(Type.SHAPE), pars.append(ab.signature.params)
+        for sig in lang.functions:
+            if sig.kind == FLOAT_FN:
+                toks.append(sig.name), rets.append(Type.FLOAT), pars.append(sig.params)
+        for c in FLOAT_CONSTANTS:
+            toks.append(repr(c)), rets.append(Type.FLOAT), pars.append(())
+        for a in lang.axes:
+            toks.append(a), rets.append(Type.AXIS), pars.append(())
+        for k in COUNT_TOKENS:
+            toks.append(f"INT#{k}#"), rets.append(Type.INT), pars.append(())
+        return cls(tuple(toks), tuple(rets), tuple(pars))
+
+    def __len__(self) -> int:
+        return len(self.tokens)
+
+    def index(self, token: str) -> int:
+        try:
+            return self._index()[token]
+        except KeyError:
+            raise ProgramError(f"token {token!r} is not in the vocabulary") from None
+
+    def _index(self) -> dict:
+        d = self.__dict__.get("_idx")
+        if d is None:
+            d = {t: i for i, t in enumerate(self.tokens)}
+            object.__setattr__(self, "_idx", d)
+        return d
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A scene as the network reads it.
+
+    Attributes:
+        values: the sorted distinct values (the rank of a value is its index).
+        ranks: (P·S,) int64, the rank of each slot, primitive by primitive.
+        fields: (P·S,) int64, each slot's field index (0..S-1).
+    """
+
+    values: tuple
+    ranks: np.ndarray
+    fields: np.ndarray
+
+
+def encode_scene(prims: Sequence[Sequence[float]]) -> Scene:
+    """The :class:`Scene` of primitives (values rounded to 2 decimals)."""
+    p = np.round(np.asarray(prims, dtype=np.float64), 2) + 0.0
+    if p.ndim != 2 or len(p) == 0:
+        raise ValueError(f"a scene is a non-empty (P, S) array of primitives, got shape {p.shape}")
+    values = np.unique(p)
+    ranks = np.searchsorted(values, p.ravel())
+    fields = np.tile(np.arange(p.shape[1]), p.shape[0])
+    return Scene(tuple(float(v) for v in values), ranks.astype(np.int64), fields.astype(np.int64))
+
+
+def _nearest(values: tuple, v: float) -> int:
+    a = np.asarray(values)
+    return int(np.abs(a - v).argmin())
+
+
+def encode_target(expr: Expr, scene_prims, vocab: Vocab, library: Library | None = None) -> tuple:
+    """``(tokens, ranks)``: the expression's tokens in prefix order (no start token) and, per token, the
+    referenced rank (``<var>`` tokens) or -1. ``library``: the abstractions of ``expr`` (for their
+    ``SymTrans`` distance parameters).
+
+    Raises:
+        ProgramError: a token outside the vocabulary, or more than :data:`MAX_TOKENS` - 1 tokens.
+    """
+    from .dream import LITERAL_TOL, distance_literals
+
+    scene = scene_prims if isinstance(scene_prims, Scene) else encode_scene(scene_prims)
+    vals = np.asarray(scene.values)
+    dist = distance_literals(expr, library)
+    toks, ranks = [], []
+    for n in walk(expr):
+        if isinstance(n, Call):
+            toks.append(vocab.index(n.fn)), ranks.append(-1)
+        elif isinstance(n, Num):
+            r = _nearest(scene.values, n.value)
+            if abs(vals[r] - n.value) > LITERAL_TOL + 1e-9 and id(n) in dist and "Sub" in vocab.tokens:
+                d = np.abs(vals[:, None] - vals[None] - n.value)
+                a, b = np.unravel_index(int(d.argmin()), d.shape)
+                if d[a, b] <= LITERAL_TOL + 1e-9:
+                    toks += [vocab.index("Sub"), 1, 1]
+                    ranks += [-1, int(a), int(b)]
+                    continue
+            toks.append(1), ranks.append(r)
+        elif isinstance(n, AxisConst):
+            toks.append(vocab.index(n.name)), ranks.append(-1)
+        elif isinstance(n, IntConst):
+            toks.append(vocab.index(f"INT#{n.value}#")), ranks.append(-1)
+        else:
+            raise ProgramError(f"a target has no variables; got {n!r}")
+    if len(toks) > MAX_TOKENS - 1:
+        raise ProgramError(f"the target has {len(toks)} tokens; at most {MAX_TOKENS - 1} (MAX_TOKENS)")
+    return toks, ranks
+
+
+def decode_tokens(tokens: Sequence[int], ranks: Sequence[int], scene_prims, vocab: Vocab) -> Expr:
+    """The expression of prefix ``tokens`` (no start token); ``<var>`` tokens take the value of their
+    rank in the scene.
+
+    Raises:
+        ProgramError: an incomplete or overlong token sequence, or a rank outside the scene.
+    """
+    scene = scene_prims if isinstance(scene_prims, Scene) else encode_scene(scene_prims)
+    pos = [0]
+
+    def go():
+        if pos[0] >= len(tokens):
+            raise ProgramError("the token sequence ends inside an expression")
+        i = pos[0]
+        pos[0] += 1
+        t = int(tokens[i])
+        name = vocab.tokens[t]
+        if t == 1:
+            r = int(ranks[i])
+            if not 0 <= r < len(scene.values):
+                raise ProgramError(f"rank {r} is outside the scene's {len(scene.values)} values")
+            return Num(scene.values[r])
+        if t == 0:
+            raise ProgramError("<start> inside an expression")
+        ret = vocab.returns[t]
+        if ret is Type.AXIS:
+            return AxisConst(name)
+        if ret is Type.INT:
+            return IntConst(int(name[4:-1]))
+        if ret is Type.FLOAT and not vocab.params[t]:
+            return Num(float(name))
+        return Call(name, tuple(go() for _ in vocab.params[t]))
+
+    e = go()
+    if pos[0] != len(tokens):
+        raise ProgramError(f"{len(tokens) - pos[0]} token(s) after the end of the expression")
+    return e
+
+
+# ----------------------------------------------------------------------------- the model
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Sizes of a :class:`RecognitionNet` (the paper's by default).
+
+    Attributes:
+        vocab: tokens of the vocabulary. fields: slots per primitive (9 / 4). max_prims: 16 / 12.
+        token_dim: 128. value_dim: 16. heads: 8. layers: 2. dropout: 0.5. max_tokens: 32.
+    """
+
+    vocab: int
+    fields: int = 9
+    max_prims: int = 16
+    token_dim: int = 128
+    value_dim: int = 16
+    heads: int = 8
+    layers: int = 2
+    dropout: float = 0.5
+    max_tokens: int = MAX_TOKENS
+
+    @property
+    def width(self) -> int:
+        return self.token_dim + self.value_dim
+
+    @property
+    def inputs(self) -> int:
+        return self.fields * self.max_prims
+
+
+class _Block(nn.Module):
+    """Post-LayerNorm attention block; conditioning and sequence parts are computed apart so that the
+    conditioning part can be computed once per scene when sampling."""
+
+    def __init__(self, width: int, heads: int, dropout: float):
+        super().__init__()
+        if width % heads:
+            raise ValueError(f"width {width} is not a multiple of heads {heads}")
+        self.heads = heads
+        self.qkv = nn.Linear(width, 3 * width)
+        self.out = nn.Linear(width, width)
+        self.ln1, self.ln2 = nn.LayerNorm(width), nn.LayerNorm(width)
+        self.ff = nn.Sequential(nn.Linear(width, width), nn.LeakyReLU(0.2), nn.Linear(width, width))
+        self.drop = nn.Dropout(dropout)
+
+    def _split(self, x):
+        b, n, w = x.shape
+        return x.view(b, n, self.heads, w // self.heads).transpose(1, 2)
+
+    def _attend(self, x, keys, mask):
+        q = self._split(F.linear(x, self.qkv.weight[: x.shape[-1]], self.qkv.bias[: x.shape[-1]]))
+        kv = F.linear(keys, self.qkv.weight[x.shape[-1]:], self.qkv.bias[x.shape[-1]:])
+        k, v = kv.chunk(2, -1)
+        k, v = self._split(k), self._split(v)
+        y = F.scaled_dot_product_attention(q, k, v, attn_mask=mask[:, None])
+        y = y.transpose(1, 2).reshape(x.shape)
+        x = self.ln1(x + self.drop(self.out(y)))
+        return self.ln2(x + self.drop(self.ff(x)))
+
+    def cond(self, c, cmask):
+        """c: (B, I, W); cmask: (B, I) bool, True for real slots."""
+        return self._attend(c, c, cmask[:, None, :].expand(-1, c.shape[1], -1))
+
+    def seq(self, s, c, cmask):
+        """s: (B, T, W) attends to c (B, I, W) where cmask, and causally to s."""
+        t = s.shape[1]
+        causal = torch.ones(t, t, dtype=torch.bool, device=s.device).tril()
+        mask = torch.cat([cmask[:, None, :].expand(-1, t, -1), causal[None].expand(s.shape[0], -1, -1)], -1)
+        return self._attend(s, torch.cat([c, s], 1), mask)
+
+
+def _mlp(width: int, out: int) -> nn.Module:
+    return nn.Sequential(nn.Linear(width, width), nn.LeakyReLU(0.2), nn.Linear(width, out))
+
+
+class RecognitionNet(nn.Module):
+    """The recognition network (see the module docstring).
+
+    Args:
+        cfg: the :class:`NetConfig`.
+    """
+
+    def __init__(self, cfg: NetConfig):
+        super().__init__()
+        self.cfg = cfg
+        w = cfg.width
+        self.slot_const = nn.Parameter(torch.randn(cfg.inputs, cfg.token_dim) * 0.02)
+        self.rank_emb = nn.Embedding(cfg.inputs, cfg.value_dim)
+        self.field_emb = nn.Embedding(cfg.fields, cfg.value_dim)
+        self.tok_emb = nn.Embedding(cfg.vocab, cfg.token_dim)
+        self.pos_emb = nn.Parameter(torch.randn(cfg.max_tokens, w) * 0.02)
+        self.blocks = nn.ModuleList(_Block(w, cfg.heads, cfg.dropout) for _ in range(cfg.layers))
+        self.tok_head = _mlp(w, cfg.vocab)
+        self.var_head = _mlp(w, cfg.inputs)
+
+    def encode(self, ranks: torch.Tensor, fields: torch.Tensor, cmask: torch.Tensor) -> list:
+        """The conditioning states at the input of every block and after the last.
+
+        Args:
+            ranks, fields: (B, I) int64 (padding: any value where ``cmask`` is False); cmask: (B, I) bool.
+
+        Returns:
+            list of ``layers + 1`` tensors (B, I, W).
+        """
+        b, i = ranks.shape
+        if i > self.cfg.inputs:
+            raise ValueError(f"{i} conditioning tokens; the network takes at most {self.cfg.inputs}")
+        val = self.rank_emb(ranks.clamp(0, self.cfg.inputs - 1)) + self.field_emb(fields.clamp(0, self.cfg.fields - 1))
+        c = torch.cat([self.slot_const[:i].expand(b, -1, -1), val], -1)
+        out = [c]
+        for blk in self.blocks:
+            c = blk.cond(c, cmask)
+            out.append(c)
+        return out
+
+    def decode(self, conds: list, cmask: torch.Tensor, tokens: torch.Tensor, tok_ranks: torch.Tensor) -> tuple:
+        """Logits for the next token after each sequence position.
+
+        Args:
+            conds: from :meth:`encode`. tokens: (B, T) int64 starting with ``<start>``. tok_ranks: (B, T)
+            int64, the rank of ``<var>`` tokens (else ignored).
+
+        Returns:
+            ``(token_logits (B, T, V), var_logits (B, T, I))``; the variable logits of ranks beyond a
+            scene's values are not masked here (see :func:`var_mask`).
+        """
+        t = tokens.shape[1]
+        if t > self.cfg.max_tokens:
+            raise ValueError(f"{t} sequence tokens; the network takes at most {self.cfg.max_tokens}")
+        val = self.rank_emb(tok_ranks.clamp(0, self.cfg.inputs - 1)) * (tokens == 1)[..., None]
+        s = torch.cat([self.tok_emb(tokens), val], -1) + self.pos_emb[:t]
+        for blk, c in zip(self.blocks, conds):
+            s = blk.seq(s, c, cmask)
+        return self.tok_head(s), self.var_head(s)
+
+    def forward(self, ranks, fields, cmask, tokens, tok_ranks):
+        """:meth:`encode` then :meth:`decode` (shapes as there)."""
+        return self.decode(self.encode(ranks, fields, cmask), cmask, tokens, tok_ranks)
+
+
+def var_mask(n_values: torch.Tensor, inputs: int) -> torch.Tensor:
+    """(B, inputs) bool: rank r is allowed when r < the scene's number of values (``n_values`` (B,))."""
+    return torch.arange(inputs, device=n_values.device)[None] < n_values[:, None]
+
+
+def save_checkpoint(path, model: RecognitionNet, vocab: Vocab, extra: dict | None = None) -> None:
+    """Write the model's ``state_dict``, its :class:`NetConfig` and the vocabulary atomically."""
+    import io
+
+    from shapeio import atomic_write
+
+    buf = io.BytesIO()
+    torch.save({"format": "shapeprog-coder-recnet", "version": 1, "config": asdict(model.cfg),
+                "vocab": list(vocab.tokens), "state_dict": model.state_dict(), "extra": extra or {}}, buf)
+    atomic_write(path, buf.getvalue(), mkdir=True)
+
+
+def load_checkpoint(path, library: Library, map_location="cpu") -> tuple:
+    """``(model, vocab, extra)`` from :func:`save_checkpoint`; the vocabulary must be the library's.
+
+    Raises:
+        ValueError: not such a checkpoint, or written for another library.
+    """
+    ck = torch.load(path, map_location=map_location, weights_only=True)
+    if not isinstance(ck, dict) or ck.get("format") != "shapeprog-coder-recnet":
+        raise ValueError(f"{path}: not a recognition network checkpoint")
+    vocab = Vocab.of(library)
+    if tuple(ck["vocab"]) != vocab.tokens:
+        raise ValueError(f"{path}: the checkpoint's vocabulary is not the library's")
+    model = RecognitionNet(NetConfig(**ck["config"]))
+    model.load_state_dict(ck["state_dict"])
+    return model, vocab, ck.get("extra", {})
+
+
+# ----------------------------------------------------------------------------- sampling
+
+
+def _min_lengths(vocab: Vocab) -> dict:
+    """Fewest tokens that complete a slot of each type."""
+    inf = 10 ** 6
+    best = {Type.FLOAT: 1, Type.AXIS: 1, Type.INT: 1, Type.SHAPE: inf}
+    for _ in range(8):
+        for t, ret in enumerate(vocab.returns):
+            if ret is Type.SHAPE:
+                best[Type.SHAPE] = min(best[Type.SHAPE], 1 + sum(best[p] for p in vocab.params[t]))
+    return best
+
+
+class _Grammar:
+    """The type masks of one sample (prefix order)."""
+
+    def __init__(self, vocab: Vocab, minlen: dict, max_len: int):
+        self.vocab, self.minlen, self.max_len = vocab, minlen, max_len
+        self.stack = [(Type.SHAPE, None)]  # (type, float group) of the pending slots, top last
+        self.length = 0
+        self.prev_inv = False
+
+    @property
+    def done(self) -> bool:
+        return not self.stack
+
+    def allowed(self) -> np.ndarray:
+        v = self.vocab
+        out = np.zeros(len(v), dtype=bool)
+        if not self.stack:
+            return out
+        want, group = self.stack[-1]
+        rest = sum(self.minlen[t] for t, _ in self.stack[:-1])
+        room = self.max_len - 1 - self.length - rest  # tokens left for this slot
+        for t in range(1, len(v)):
+            if v.returns[t] is not want:
+                continue
+            need = 1 + sum(self.minlen[p] for p in v.params[t])
+            if need > room:
+                continue
+            if want is Type.FLOAT:
+                g = group or {"used": 0, "open": 1, "var": False}
+                nargs = len(v.params[t])
+                if t == 1:
+                    pass
+                elif nargs == 0:  # a constant: not the last leaf of a group without a variable
+                    if g["open"] == 1 and not g["var"]:
+                        continue
+                elif nargs == 2:
+                    if g["used"] + g["open"] + 1 > MAX_FLOAT_TERMS:
+                        continue
+                elif self.prev_inv:  # no Inv(Inv(...))
+                    continue
+            out[t] = True
+        return out
+
+    def push(self, t: int) -> None:
+        v = self.vocab
+        want, group = self.stack.pop()
+        self.length += 1
+        self.prev_inv = False
+        if want is Type.FLOAT:
+            g = group or {"used": 0, "open": 1, "var": False}
+            nargs = len(v.params[t])
+            g["open"] += nargs - 1
+            if nargs == 0:
+                g["used"] += 1
+                g["var"] = g["var"] or t == 1
+            self.prev_inv = nargs == 1
+            for p in reversed(v.params[t]):
+                self.stack.append((p, g))
+            return
+        for p in reversed(v.params[t]):
+            self.stack.append((p, None))
+
+
+@torch.no_grad()
+def sample(model: RecognitionNet, vocab: Vocab, prims, n: int = 64, generator: torch.Generator | None = None,
+           greedy_first: bool = True, temperature: float = 1.0) -> list:
+    """``n`` expressions for a scene, sampled token by token under the type masks.
+
+    Args:
+        prims: the scene's primitives (at most ``model.cfg.max_prims``).
+        greedy_first: row 0 takes the arg-max token and rank at every step.
+
+    Returns:
+        list of ``n`` expressions (floats as the scene's values); a row that cannot complete within
+        :data:`MAX_TOKENS` (never, with the masks) is left out.
+    """
+    cfg = model.cfg
+    scene = encode_scene(prims)
+    if len(prims) > cfg.max_prims or len(prims[0]) != cfg.fields:
+        raise ValueError(f"the network takes at most {cfg.max_prims} primitives of {cfg.fields} fields, "
+                         f"got {len(prims)} of {len(prims[0])}")
+    dev = next(model.parameters()).device
+    was_training = model.training
+    model.eval()
+    try:
+        ranks = torch.as_tensor(scene.ranks, device=dev)[None]
+        fields = torch.as_tensor(scene.fields, device=dev)[None]
+        cmask = torch.ones_like(ranks, dtype=torch.bool)
+        conds = [c.expand(n, -1, -1) for c in model.encode(ranks, fields, cmask)]
+        cmask = cmask.expand(n, -1)
+        vmask = torch.arange(cfg.inputs, device=dev) < len(scene.values)
+        minlen = _min_lengths(vocab)
+        gram = [_Grammar(vocab, minlen, cfg.max_tokens) for _ in range(n)]
+        tokens = torch.zeros(n, 1, dtype=torch.long, device=dev)
+        tranks = torch.zeros(n, 1, dtype=torch.long, device=dev)
+        out_t = [[] for _ in range(n)]
+        out_r = [[] for _ in range(n)]
+        for _step in range(cfg.max_tokens - 1):
+            if all(g.done for g in gram):
+                break
+            tl, vl = model.decode(conds, cmask, tokens, tranks)
+            tl, vl = tl[:, -1].float(), vl[:, -1].float()
+            allow = torch.as_tensor(np.stack([g.allowed() for g in gram]), device=dev)
+            tl = tl.masked_fill(~allow, -math.inf)
+            vl = vl.masked_fill(~vmask[None], -math.inf)
+            dead = ~allow.any(1)
+            tl[dead, 0] = 0.0  # finished rows: a dummy token
+            if temperature != 1.0:
+                tl, vl = tl / temperature, vl / temperature
+            tk = torch.multinomial(tl.softmax(-1), 1, generator=generator)[:, 0]
+            rk = torch.multinomial(vl.softmax(-1), 1, generator=generator)[:, 0]
+            if greedy_first:
+                tk[0], rk[0] = tl[0].argmax(), vl[0].argmax()
+            tk_l, rk_l = tk.tolist(), rk.tolist()
+            for i, g in enumerate(gram):
+                if g.done:
+                    continue
+                g.push(tk_l[i])
+                out_t[i].append(tk_l[i])
+                out_r[i].append(rk_l[i] if tk_l[i] == 1 else -1)
+            tokens = torch.cat([tokens, tk[:, None]], 1)
+            tranks = torch.cat([tranks, rk[:, None]], 1)
+    finally:
+        model.train(was_training)
+    exprs = []
+    for i, g in enumerate(gram):
+        if g.done:
+            exprs.append(decode_tokens(out_t[i], out_r[i], scene, vocab))
+    return exprs
+
