@@ -346,7 +346,7 @@ def _umask() -> int:
 
 
 #: The shipped refactored corpora (in ``shapeprog/data``), by category.
-SHIPPED = {"chair": "shapemod_chair_refactored.tar.xz"}
+SHIPPED = {"chair": "shapemod_chair_refactored.tar.xz", "table": "shapemod_table_refactored.tar.xz"}
 
 
 def load_refactored(category: str, ids: Sequence[int] | None = None) -> tuple[dict, dict]:

@@ -154,8 +154,17 @@ def test_shipped_refactored_chairs_match_the_shipped_library(lib, three):
         "summary's command")
     assert summary["refactored"] + summary["failed"] == summary["shapes"] == len(corpus.ids("chair", "all"))
     assert [hierarchy.to_text(programs[i]) for i in IDS] == [s.text for s in three.shapes]
-    with pytest.raises(ValueError, match="no shipped refactored corpus for 'table'"):
-        load_refactored("table")
+    with pytest.raises(ValueError, match="no shipped refactored corpus for 'storage'"):
+        load_refactored("storage")
+
+
+def test_shipped_refactored_tables_match_the_shipped_table_library():
+    lib = load_library("table")
+    ids = corpus.ids("table", "all")[:2]
+    programs, summary = load_refactored("table", ids=ids)
+    assert summary["library_sha256"] == hashlib.sha256(lib.to_text().encode()).hexdigest()
+    assert summary["refactored"] + summary["failed"] == summary["shapes"] == len(corpus.ids("table", "all"))
+    assert sorted(programs) == sorted(ids)
 
 
 # --------------------------------------------------------------------------------------------------
