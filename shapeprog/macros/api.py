@@ -31,7 +31,7 @@ __all__ = ["BlockRefactor", "LIBRARY_CATEGORIES", "Refactored", "collection", "e
            "program_stats"]
 
 #: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
-LIBRARY_CATEGORIES = ("chair", "table")
+LIBRARY_CATEGORIES = ("chair", "table", "storage")
 
 
 def load_library(category: str) -> Library:
