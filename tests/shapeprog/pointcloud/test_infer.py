@@ -145,11 +145,13 @@ def test_cli_reads_a_mesh_and_names_bad_files(tmp_path, weights):
     assert not (tmp_path / "e").exists()
 
 
-@pytest.mark.skipif(not (WEIGHTS / PRETRAINED["chair"]).is_file(), reason="the chair weights are not shipped")
-def test_the_shipped_chair_model_loads_safely_and_infers():
-    payload = torch.load(WEIGHTS / PRETRAINED["chair"], weights_only=True)
-    assert payload["category"] == "chair" and payload["recipe"] in ("latent", "e2e")
-    r = infer(corpus_cloud("chair", CHAIR, n_points=3000), "chair", physics=False)
+@pytest.mark.parametrize("category", sorted(PRETRAINED))
+def test_each_shipped_model_loads_safely_and_infers(category):
+    from shapeprog import corpus
+    payload = torch.load(WEIGHTS / PRETRAINED[category], weights_only=True)
+    assert payload["category"] == category and payload["recipe"] in ("latent", "e2e")
+    shape = CHAIR if category == "chair" else corpus.ids(category, "val")[0]
+    r = infer(corpus_cloud(category, shape, n_points=3000), category, physics=False)
     assert r.text.startswith("Assembly Program_0 {") and 0.0 <= r.metrics["fscore"] <= 100.0
 
 
