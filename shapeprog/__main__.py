@@ -622,15 +622,7 @@ def _open_for_edit(args):
 
     library = None
     if args.library:
-        from .macros import Library, load_library
-
-        if Path(args.library).is_file():
-            library = Library.from_text(decode(Path(args.library).read_bytes(), args.library), args.library)
-        else:
-            try:
-                library = load_library(args.library)
-            except ValueError as e:
-                raise SystemExit(f"error: --library: {e} (or give a library file)") from None
+        library = _macro_library(args.library, "--library: ")
     if args.sample:
         from .vae import load_pretrained, sample
 
@@ -719,17 +711,24 @@ def _cmd_discover_macros(args) -> int:
     return 0
 
 
+def _macro_library(name: str, option: str = ""):
+    """The ShapeMOD library ``name``: a library file when one exists at that path, else a shipped category;
+    SystemExit with the reason otherwise."""
+    from .macros import Library, load_library
+
+    if Path(name).is_file():
+        return Library.from_text(decode(Path(name).read_bytes(), name), name)
+    try:
+        return load_library(name)
+    except ValueError as e:
+        raise SystemExit(f"error: {option}{e}" + (" (or give a library file)" if option else "")) from None
+
+
 def _cmd_refactor(args) -> int:
-    from .macros import Library, from_lines, load_library, refactor, to_text
+    from .macros import from_lines, refactor, to_text
 
     prog = _Program(args.program)
-    if Path(args.library).is_file():
-        lib = Library.from_text(decode(Path(args.library).read_bytes(), args.library), args.library)
-    else:
-        try:
-            lib = load_library(args.library)
-        except ValueError as e:
-            raise SystemExit(f"error: {e}") from None
+    lib = _macro_library(args.library)
     cat, _, ident = args.program.partition("/")
     named = cat in corpus.CATEGORIES and ident.isdigit() and not Path(args.program).is_file()
     r = refactor(prog.program, lib, mode=args.search, category=cat if named else Path(args.program).stem,
@@ -764,7 +763,6 @@ def _cmd_refactor_corpus(args) -> int:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from .macros import Library, load_library
     from .macros.refactored import check_target, refactor_corpus, write_refactored
 
     out = Path(args.out)
@@ -772,13 +770,7 @@ def _cmd_refactor_corpus(args) -> int:
         check_target(out)
     except (FileExistsError, FileNotFoundError) as e:
         raise SystemExit(f"error: {e}") from None
-    if Path(args.library).is_file():
-        lib = Library.from_text(decode(Path(args.library).read_bytes(), args.library), args.library)
-    else:
-        try:
-            lib = load_library(args.library)
-        except ValueError as e:
-            raise SystemExit(f"error: {e}") from None
+    lib = _macro_library(args.library)
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
     pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
             if args.workers > 1 else None)
