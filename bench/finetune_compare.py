@@ -14,6 +14,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from shapeio.files import atomic_write
+
 
 def load(run: Path, tag: str) -> list[tuple[float, float]]:
     """``(minutes since the logger started, value)`` of every ``tag`` event of ``run``, in order."""
@@ -68,9 +70,7 @@ def main(argv=None) -> int:
         ax.legend()
         fig.tight_layout()
         args.png.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.png.with_name(args.png.name + ".tmp.png")
-        fig.savefig(tmp)
-        tmp.replace(args.png)
+        atomic_write(args.png, lambda f: fig.savefig(f, format="png"))
         print(f"\nwrote {args.png}")
     return 0
 

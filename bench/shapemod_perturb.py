@@ -34,6 +34,7 @@ from shapeprog.macros import Library, hierarchy, load_library
 from shapeprog.macros.perturb import PerturbablePrograms
 from shapeprog.macros.refactored import refactor_corpus
 from shapeprog.pointnet import load_classifier
+from shapeio.files import atomic_write
 
 SIGMAS = (0.0, 0.01, 0.025, 0.05, 0.1, 0.15, 0.2)
 #: A perturbed shape whose bounding-box diagonal exceeds this many times its unperturbed one is counted as
@@ -155,9 +156,7 @@ def main(argv=None) -> int:
         ax.legend()
         fig.tight_layout()
         args.png.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.png.with_name(args.png.name + ".tmp.png")
-        fig.savefig(tmp)
-        tmp.replace(args.png)
+        atomic_write(args.png, lambda f: fig.savefig(f, format="png"))
         print(f"wrote {args.png}")
     return 0
 

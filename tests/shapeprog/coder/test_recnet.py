@@ -207,3 +207,11 @@ def test_discovery_with_the_network_wake_writes_and_reuses_its_checkpoint(tmp_pa
     assert r2.summary().F <= r.summary().F + 1e-9
     with pytest.raises(ValueError, match="wake"):
         Config(wake="dreams")
+
+
+def test_discovery_defaults_train_with_the_papers_settings():
+    # discover.Config keeps torch-free copies of TrainConfig's defaults; they must stay the paper's
+    from shapeprog.coder.discover import Config
+    from shapeprog.coder.train import PAPER
+
+    assert Config().train_config() == PAPER
