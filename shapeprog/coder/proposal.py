@@ -216,41 +216,31 @@ def abstract(s: Structure, members: Sequence[int], library: Library | None = Non
         new_base = 1 + 2 * len(floats) + 0.5 * len(cats)
         best = None
         if t is Type.FLOAT:
-            old += 2.0
+            weight, pool, prefix = 2.0, floats, "F"
             col = np.array([r[i] for r in rows], dtype=np.float64)
-            for expr, hit in _options(col, floats, tol):
-                cov = covered & hit
-                if cov.sum() < min_cover:
-                    continue
-                score = (old - new_base) * cov.sum() / m
-                if best is None or score > best[0] + 1e-12:
-                    best = (score, expr, cov)
-            score_new = (old - new_base - 2) * covered.sum() / m
-            if best is None or score_new > best[0] + 1e-12:
-                name = f"F{len(floats)}"
-                floats.append((name, col))
-                best = (score_new, Var(name), covered)
+            options = list(_options(col, floats, tol))
         else:
-            old += 0.5
+            weight, pool, prefix = 0.5, cats, "C"
             col = [r[i] for r in rows]
-            options = []
-            for name, v in cats:
-                options.append((Var(name, t), np.array([a == b for a, b in zip(col, v)])))
+            options = [(Var(name, t), np.array([a == b for a, b in zip(col, v)])) for name, v in cats]
             vals = [col[k] for k in range(m) if covered[k]]
             common = max(set(vals), key=lambda v: (vals.count(v), str(v)))
             options.append((AxisConst(common) if t is Type.AXIS else IntConst(common), np.array([v == common for v in col])))
-            for expr, hit in options:
-                cov = covered & hit
-                if cov.sum() < min_cover or (isinstance(expr, Var) and cov.sum() <= 0.75 * covered.sum()):
-                    continue
-                score = (old - new_base) * cov.sum() / m
-                if best is None or score > best[0] + 1e-12:
-                    best = (score, expr, cov)
-            score_new = (old - new_base - 0.5) * covered.sum() / m
-            if best is None or score_new > best[0] + 1e-12:
-                name = f"C{len(cats)}"
-                cats.append((name, col))
-                best = (score_new, Var(name, t), covered)
+        old += weight
+        for expr, hit in options:
+            cov = covered & hit
+            if cov.sum() < min_cover:
+                continue
+            if t is not Type.FLOAT and isinstance(expr, Var) and cov.sum() <= 0.75 * covered.sum():
+                continue
+            score = (old - new_base) * cov.sum() / m
+            if best is None or score > best[0] + 1e-12:
+                best = (score, expr, cov)
+        score_new = (old - new_base - weight) * covered.sum() / m
+        if best is None or score_new > best[0] + 1e-12:
+            name = f"{prefix}{len(pool)}"
+            pool.append((name, col))
+            best = (score_new, Var(name) if t is Type.FLOAT else Var(name, t), covered)
         fill[f"P_{'F' if t is Type.FLOAT else 'C'}_{i}_"] = best[1]
         covered = best[2]
     if not floats and not cats:
