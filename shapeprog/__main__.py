@@ -201,6 +201,7 @@ def _cmd_infer(args) -> int:
     from .errors import PointCloudError
     from .picture import render_grid
     from .pointcloud.infer import cloud_corners, infer, load_model
+    from .pointcloud.search import parse_schedule
 
     src = Path(args.file)
     out = Path(args.out)
@@ -214,8 +215,10 @@ def _cmd_infer(args) -> int:
     points = read_cloud(src)
     model = load_model(args.weights, args.category) if args.weights else None
     try:
+        schedule = parse_schedule(args.search_schedule) if args.search_schedule else None
         r = infer(points, args.category, fit=args.fit, model=model, up=args.up, fit_steps=args.steps,
-                  stability=not args.no_stability, seed=args.seed)
+                  stability=not args.no_stability, seed=args.seed, search=args.search or schedule is not None,
+                  search_schedule=schedule)
     except PointCloudError as e:
         raise SystemExit(f"error: {src}: {e}") from None
     except ValueError as e:
@@ -230,10 +233,14 @@ def _cmd_infer(args) -> int:
     record = {"input": str(src), "category": args.category if model is None else model.category,
               "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
-              "before_fit": r.before, "seconds": r.seconds,
+              "before_fit": r.before, "search": r.search, "seconds": r.seconds,
               "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
                       "canonical units (bounding-box diagonal 2)"}
     atomic_write(files["json"], json.dumps(record, indent=1) + "\n")
+    if r.search is not None:
+        s = r.search
+        start = "none" if s["start_cd"] is None else f"{1000 * s['start_cd']:.1f}"
+        print(f"latent search: {s['decodes']} decodes, chamfer to the cloud x1000 {start} -> {1000 * s['cd']:.1f}")
     if r.before is not None:
         print(f"before fitting: {_fmt_metrics(r.before)}")
     print(("after fitting:  " if r.before is not None else "") + _fmt_metrics(r.metrics))
@@ -258,7 +265,7 @@ def _cmd_pointcloud_tables(args) -> int:
     try:
         result = evaluate(args.clouds, args.category, weights=args.weights, limit=args.limit, steps=args.steps,
                           stability=not args.no_stability, retrieval=not args.no_retrieval, executor=executor,
-                          seed=args.seed, progress=progress)
+                          seed=args.seed, progress=progress, search=args.search)
     finally:
         if executor is not None:
             executor.shutdown()
@@ -869,6 +876,11 @@ def main(argv=None) -> int:
     i.add_argument("--weights", help="a point-cloud weights file instead of the shipped one")
     i.add_argument("--fit", action="store_true", help="polish the program's numbers against the cloud")
     i.add_argument("--steps", type=_int_at_least(0), default=150, help="fitting steps (with --fit)")
+    i.add_argument("--search", action="store_true",
+                   help="latent search: decode 96 more codes around the predicted one and keep the program closest "
+                        "to the cloud (about 1 s; before --fit)")
+    i.add_argument("--search-schedule", metavar="N:SIGMA,...",
+                   help="the search's steps, e.g. 16:0.75,16:0.5 (implies --search)")
     i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x"), help="the input's up axis")
     i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
     i.add_argument("--size", type=_int_at_least(8), default=256, help="picture cell size in pixels")
@@ -887,6 +899,7 @@ def main(argv=None) -> int:
     pt.add_argument("--steps", type=_int_at_least(0), default=150, help="fitting steps of the optimisation rows")
     pt.add_argument("--no-stability", action="store_true", help="skip the stability test")
     pt.add_argument("--no-retrieval", action="store_true", help="leave out the retrieval row")
+    pt.add_argument("--search", action="store_true", help="also measure the latent-search rows (ours, not the papers')")
     pt.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the per-shape work")
     pt.add_argument("--seed", type=int, default=0, help="seed of the inputs' noise, subsets, scales and positions")
     pt.add_argument("--quiet", action="store_true", help="no progress lines")

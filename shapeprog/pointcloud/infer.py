@@ -245,7 +245,11 @@ class Inference:
         metrics: ``cd`` (chamfer, canonical units), ``fscore`` (0-100 at 0.03 canonical units), ``rooted``,
             ``stable`` of the result against the (normalised) input cloud.
         before: the same metrics before fitting (``fit=True``), else None.
-        seconds: wall time of ``decode`` (encode + decode + align), ``fit`` and ``metrics``.
+        seconds: wall time of ``decode`` (encode + decode + align; ``search`` in its place with ``search=True``),
+            ``fit`` and ``metrics``.
+        search: with ``search=True``: ``start_cd`` and ``cd`` (the selection chamfer of the predicted code's
+            program and of the one kept), ``decodes`` and ``improved`` (steps that found a better program);
+            else None.
     """
 
     program: Program
@@ -258,6 +262,7 @@ class Inference:
     metrics: dict
     before: Optional[dict] = None
     seconds: dict = field(default_factory=dict)
+    search: Optional[dict] = None
 
     def place(self, points):
         """Points of the executed :attr:`program` ``(..., 3)`` -> the input's frame."""
@@ -288,7 +293,7 @@ def _as_cloud(points) -> np.ndarray:
 
 def infer(points, category: str = "chair", fit: bool = False, model: Optional[CloudModel] = None, up: str = "y",
           fit_steps: int = FIT_STEPS, fit_lr: float = 5e-3, physics: bool = True, stability: bool = True,
-          seed: int = 0) -> Inference:
+          seed: int = 0, search: bool = False, search_schedule=None) -> Inference:
     """A ShapeAssembly program for a point cloud.
 
     Args:
@@ -301,6 +306,11 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         physics: compute ``rooted`` (and ``stable``) of the result; ``stability``: also the stability test
             (about 0.5 s).
         seed: the draws of the encoder's subset, the fitting's samples and the metrics' samples.
+        search: decode more codes around the predicted one and keep the program closest to the cloud
+            (:func:`shapeprog.pointcloud.search.latent_search`, about 1 s), before any fitting; the
+            papers' protocol is ``search=False``.
+        search_schedule: the search's ``(samples, sigma)`` steps (default
+            :data:`~shapeprog.pointcloud.search.SEARCH_SCHEDULE`).
 
     Returns:
         An :class:`Inference`.
@@ -308,7 +318,8 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     Raises:
         PointCloudError: not ``(N, 3)``, fewer than :data:`MIN_POINTS` points, a NaN or infinite coordinate,
             all points at one place.
-        ValueError: the model decodes no shape (no cuboid) for this cloud.
+        ValueError: the model decodes no shape (no cuboid) for this cloud (nor does the search find one), or a
+            bad ``search_schedule``.
     """
     x = _as_cloud(points)
     try:
@@ -320,11 +331,22 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     pick = rng.choice(len(unit), size=ENCODER_POINTS, replace=len(unit) < ENCODER_POINTS)
     cloud = torch.from_numpy(unit[np.sort(pick)].astype(np.float32))
     t0 = time.perf_counter()
-    program = model.decode(model.codes(cloud[None]))[0]
+    code = model.codes(cloud[None])[0]
+    searched = None
+    if search:
+        from .search import SEARCH_SCHEDULE, latent_search
+
+        schedule = SEARCH_SCHEDULE if search_schedule is None else search_schedule
+        r = latent_search(model, code, torch.from_numpy(unit), schedule, seed=seed)
+        program = r.program
+        searched = {"start_cd": None if np.isinf(r.start_cd) else r.start_cd, "cd": None if np.isinf(r.cd) else r.cd,
+                    "decodes": r.decodes, "improved": r.improved}
+    else:
+        program = model.decode(code[None])[0]
     if program is None or len(_corners_of(program)) == 0:
         raise ValueError(f"the {model.category} model decoded no shape for this cloud")
     canon, off = align_program(program)
-    seconds = {"decode": time.perf_counter() - t0}
+    seconds = {"search" if search else "decode": time.perf_counter() - t0}
     target = torch.from_numpy(unit)
     before = None
     if fit:
@@ -345,4 +367,4 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / scale
     offset = np.asarray(t.center) + (off / t.scale) @ rotation
     return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics, before,
-                     seconds)
+                     seconds, searched)

@@ -61,3 +61,19 @@ def test_evaluate_and_write_both_layouts(tmp_path):
     assert main(["pointcloud-tables", "--clouds", str(tmp_path / "c"), "--weights", str(w), "--limit", "1",
                  "--steps", "1", "--no-stability", "--no-retrieval", "--quiet", "--out", str(tmp_path / "t2.md")]) == 0
     assert "--limit 1" in (tmp_path / "t2.md").read_text()
+
+
+def test_the_latent_search_rows_are_measured_on_request(tmp_path):
+    from shapeprog.pointcloud.encoder import PointNet2SSG
+    ids = SPLITS["train"][:3] + SPLITS["test"][:1]
+    make_clouds("chair", tmp_path / "c", n_points=512, workers=1, ids=ids)
+    torch.manual_seed(0)
+    enc = PointNet2SSG(out_dim=256, npoints=[16, 8], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
+    w = tmp_path / "w.pt"
+    torch.save({"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
+                "config": enc.config, "hidden_dim": 256, "encoder": enc.state_dict(), "meta": {}}, w)
+    res = evaluate(tmp_path / "c", "chair", weights=w, limit=1, steps=2, stability=False, search=True)
+    assert {"search", "search_opt_program"} <= set(res.rows) and res.settings["search"] is True
+    text = write_tables(res, tmp_path / "t.md").read_text()
+    assert "Ours + latent search (not the papers' protocol; no fitting)" in text
+    assert "With latent search the model" in text

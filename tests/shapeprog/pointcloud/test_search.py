@@ -1,0 +1,133 @@
+"""shapeprog.pointcloud.search: the latent search never does worse than the predicted code, is seeded, and
+checks its schedule; ``infer(..., search=True)`` and ``python -m shapeprog infer --search`` use it."""
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from shapeprog import corpus
+from shapeprog.__main__ import main
+from shapeprog.lang import to_text
+from shapeprog.pointcloud.data import corpus_cloud
+from shapeprog.pointcloud.encoder import PointNet2SSG
+from shapeprog.pointcloud.infer import CloudModel, align_program, infer, shape_metrics, _corners_of
+from shapeprog.pointcloud.normalize import normalize
+from shapeprog.pointcloud.search import (MAX_SEARCH_DECODES, SEARCH_SCHEDULE, check_schedule, latent_search,
+                                         parse_schedule)
+from shapeprog.vae.pretrained import load_pretrained as load_vae
+
+TINY = dict(npoints=[16, 8], radii=[0.3, 0.6], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
+CHAIR = corpus.ids("chair", "val")[0]
+SHORT = ((4, 0.75), (4, 0.4))
+
+
+@pytest.fixture(scope="module")
+def model():
+    torch.manual_seed(0)
+    return CloudModel(PointNet2SSG(out_dim=256, **TINY), load_vae("chair"), "chair", "latent")
+
+
+@pytest.fixture(scope="module")
+def unit():
+    cloud, _ = normalize(corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64))
+    return torch.from_numpy(cloud)
+
+
+class Counting:
+    """A model whose decode counts the codes it is given."""
+
+    def __init__(self, model):
+        self.model, self.codes = model, []
+
+    def decode(self, codes):
+        self.codes.extend(codes)
+        return self.model.decode(codes)
+
+
+def test_the_result_is_never_worse_than_the_predicted_code_and_is_seeded(model, unit):
+    code = model.codes(unit[None, :2048].float())[0]
+    counted = Counting(model)
+    r = latent_search(counted, code, unit, SHORT, seed=3)
+    assert r.decodes == len(counted.codes) == 1 + 4 + 4
+    assert torch.equal(counted.codes[0], code)  # the predicted code is the first candidate
+    assert r.cd <= r.start_cd and math.isfinite(r.cd)
+    # the reported chamfer is the kept program's, scored the way the search scores
+    again = latent_search(model, code, unit, SHORT, seed=3)
+    assert to_text(again.program) == to_text(r.program) and again.cd == r.cd and torch.equal(again.code, r.code)
+    assert to_text(model.decode(r.code[None])[0]) == to_text(r.program)
+
+
+def test_every_step_samples_around_the_best_code_so_far(model, unit):
+    code = model.codes(unit[None, :2048].float())[0]
+    counted = Counting(model)
+    r = latent_search(counted, code, unit, ((3, 0.5), (3, 1e-4)), seed=0)
+    # the second step's sigma is tiny: its codes sit around the best code of the first step
+    first = [code] + counted.codes[1:4]
+    second = torch.stack(counted.codes[4:7])
+    assert any(torch.allclose(second, c[None].expand_as(second), atol=1e-2) for c in first)
+    assert r.improved <= 2
+
+
+def test_the_kept_program_has_the_lowest_selection_chamfer_among_the_candidates(model, unit):
+    code = model.codes(unit[None, :2048].float())[0]
+    counted = Counting(model)
+    r = latent_search(counted, code, unit, ((6, 0.8),), seed=1)
+    target = unit[torch.randperm(len(unit), generator=torch.Generator().manual_seed(1))[:1024]]
+    scores = []
+    for p in model.decode(torch.stack(counted.codes)):
+        if p is None:
+            continue
+        canon, off = align_program(p)
+        corners = _corners_of(canon).double() + torch.from_numpy(off)
+        scores.append(shape_metrics(corners, target, points=1024, seed=1, physics=False)["cd"])
+    # shape_metrics draws the surface samples with the search's seed: the same chamfer, exactly
+    assert len(scores) >= 2 and r.cd == pytest.approx(min(scores), rel=1e-12)
+
+
+@pytest.mark.parametrize("schedule, match", [
+    ((), "no step"), (((0, 0.5),), "samples must be"), (((2, 0.0),), "sigma must"), (((2, float("nan")),), "sigma"),
+    (((True, 0.5),), "samples"), ((3,), r"expected \(samples, sigma\)"), (((MAX_SEARCH_DECODES + 1, 0.5),), "at most"),
+])
+def test_bad_schedules_are_refused(schedule, match):
+    with pytest.raises(ValueError, match=match):
+        check_schedule(schedule)
+
+
+def test_schedules_parse_from_text():
+    assert parse_schedule("16:0.75, 8:0.5") == ((16, 0.75), (8, 0.5))
+    assert check_schedule(SEARCH_SCHEDULE) == SEARCH_SCHEDULE
+    for bad in ("16", "a:0.5", "16:0.5:1", ""):
+        with pytest.raises(ValueError, match="search step 0"):
+            parse_schedule(bad)
+
+
+def test_infer_with_search_reports_it_and_keeps_the_frame(model):
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
+    k, b = 4.0, np.array([1.0, 2.0, -3.0])
+    plain = infer(cloud, model=model, physics=False)
+    r = infer(cloud, model=model, physics=False, search=True, search_schedule=SHORT)
+    moved = infer(cloud * k + b, model=model, physics=False, search=True, search_schedule=SHORT)
+    assert r.search["decodes"] == 9 and r.search["cd"] <= r.search["start_cd"]
+    assert "search" in r.seconds and plain.search is None
+    assert to_text(moved.canonical) == to_text(r.canonical)
+    assert np.allclose(moved.corners(), r.corners() * k + b, atol=1e-3 * k)
+    with pytest.raises(ValueError, match="sigma"):
+        infer(cloud, model=model, physics=False, search=True, search_schedule=((2, -1.0),))
+
+
+def test_cli_search_prints_and_records_it(tmp_path, model, capsys):
+    path = tmp_path / "tiny.pt"
+    torch.save({"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
+                "config": model.encoder.config, "hidden_dim": 256, "encoder": model.encoder.state_dict(),
+                "meta": {}}, path)
+    cloud = tmp_path / "c.npy"
+    np.save(cloud, corpus_cloud("chair", CHAIR, n_points=2000))
+    assert main(["infer", str(cloud), "--weights", str(path), "--search-schedule", "3:0.5", "--no-stability",
+                 "--out", str(tmp_path / "o")]) == 0
+    assert "latent search: 4 decodes" in capsys.readouterr().out
+    record = json.loads((tmp_path / "o" / "c.json").read_text())
+    assert record["search"]["decodes"] == 4
+    with pytest.raises(SystemExit, match="search step 0"):
+        main(["infer", str(cloud), "--weights", str(path), "--search-schedule", "3", "--out", str(tmp_path / "p")])
