@@ -4,7 +4,8 @@ Inputs are 2,048-point clouds of corpus test shapes (the corpus val split) with 
 canonical units), scaled by 3.7 and moved, as a user's cloud would be. For each of ``--shapes`` shapes the
 script times :func:`~shapeprog.pointcloud.infer` three ways after one warm-up call: ``decode`` (encode +
 decode + align, no metrics: what a user waits for), ``+ metrics`` (chamfer, F-score, rooted, no stability
-test) and ``--fit`` (``fit_steps`` Adam steps, metrics before and after, no stability test). It prints the
+test), ``--fit`` (``fit_steps`` Adam steps, metrics before and after, no stability test), ``--search``
+(the latent search of :mod:`shapeprog.pointcloud.search`, no metrics) and ``--search --fit``. It prints the
 median and the maximum wall seconds and the process's CPU seconds of each, and the command line.
 
 Usage::
@@ -43,7 +44,9 @@ def main(argv=None) -> int:
         clouds.append((c + rng.normal(0, 0.005, c.shape)) * 3.7 + np.array([1.0, -2.0, 0.5]))
     infer(clouds[0], model=model, physics=False)  # warm-up
     modes = {"decode": dict(physics=False), "+ metrics": dict(physics=True, stability=False),
-             "--fit": dict(fit=True, fit_steps=args.fit_steps, physics=True, stability=False)}
+             "--fit": dict(fit=True, fit_steps=args.fit_steps, physics=True, stability=False),
+             "--search": dict(search=True, physics=False),
+             "--search --fit": dict(search=True, fit=True, fit_steps=args.fit_steps, physics=True, stability=False)}
     print(f"# {platform.processor() or platform.machine()}, torch {torch.__version__}, {args.threads} thread(s), "
           f"{len(clouds)} chairs of 2048 points")
     for name, kw in modes.items():
@@ -53,7 +56,7 @@ def main(argv=None) -> int:
             infer(x, model=model, **kw)
             wall.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
-        print(f"{name:10s} wall median {statistics.median(wall):.3f} s, max {max(wall):.3f} s; "
+        print(f"{name:15s} wall median {statistics.median(wall):.3f} s, max {max(wall):.3f} s; "
               f"CPU median {statistics.median(cpu):.3f} s")
     print("command: " + " ".join([sys.executable.split("/")[-1]] + sys.argv))
     return 0
