@@ -10,7 +10,7 @@ hierarchical macro program of :mod:`shapeprog.macros.hierarchy`, the text ``refa
 ``python -m shapeprog edit`` reads) plus ``summary.json``, atomically (a temporary folder renamed into
 place) and never over existing files, or the same files as a reproducible ``.tar.xz``.
 :func:`read_refactored` reads either back; :func:`load_refactored` reads the shipped one
-(``shapeprog/data/shapemod_<category>_refactored.tar.xz``, chair).
+(``shapeprog/data/shapemod_<category>_refactored.tar.xz``: chair, table, storage).
 
 Example:
     >>> from shapeprog.macros import Library
@@ -346,7 +346,8 @@ def _umask() -> int:
 
 
 #: The shipped refactored corpora (in ``shapeprog/data``), by category.
-SHIPPED = {"chair": "shapemod_chair_refactored.tar.xz", "table": "shapemod_table_refactored.tar.xz"}
+SHIPPED = {"chair": "shapemod_chair_refactored.tar.xz", "table": "shapemod_table_refactored.tar.xz",
+           "storage": "shapemod_storage_refactored.tar.xz"}
 
 
 def load_refactored(category: str, ids: Sequence[int] | None = None) -> tuple[dict, dict]:
