@@ -872,7 +872,7 @@ def main(argv=None) -> int:
                                    "(offset, rotation, metrics). Existing files are never overwritten.")
     i.add_argument("file", help="point cloud or mesh file")
     i.add_argument("--category", default="chair", choices=corpus.CATEGORIES,
-                   help="the shipped model to use (shipped: chair)")
+                   help="the shipped model to use (chair, table or storage)")
     i.add_argument("--weights", help="a point-cloud weights file instead of the shipped one")
     i.add_argument("--fit", action="store_true", help="polish the program's numbers against the cloud")
     i.add_argument("--steps", type=_int_at_least(0), default=150, help="fitting steps (with --fit)")
