@@ -40,15 +40,20 @@ def test_inputs_are_noisy_moved_and_scaled_copies_with_the_transform_given():
     assert np.array_equal(x, x2) and k == k2
 
 
-def test_evaluate_and_write_both_layouts(tmp_path):
+def _tiny_cache_and_weights(tmp_path, train: int, test: int):
+    """A cloud cache of ``train`` + ``test`` chairs and a tiny untrained encoder's weights file."""
     from shapeprog.pointcloud.encoder import PointNet2SSG
-    ids = SPLITS["train"][:4] + SPLITS["test"][:2]
-    make_clouds("chair", tmp_path / "c", n_points=512, workers=1, ids=ids)
+    make_clouds("chair", tmp_path / "c", n_points=512, workers=1, ids=SPLITS["train"][:train] + SPLITS["test"][:test])
     torch.manual_seed(0)
     enc = PointNet2SSG(out_dim=256, npoints=[16, 8], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
     w = tmp_path / "w.pt"
     torch.save({"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
                 "config": enc.config, "hidden_dim": 256, "encoder": enc.state_dict(), "meta": {}}, w)
+    return w
+
+
+def test_evaluate_and_write_both_layouts(tmp_path):
+    w = _tiny_cache_and_weights(tmp_path, 4, 2)
     res = evaluate(tmp_path / "c", "chair", weights=w, limit=2, steps=3, stability=False)
     assert res.shapes == 2 and set(res.rows) == {"model", "opt_program", "opt_cuboids", "retrieval"}
     for m in res.rows.values():
@@ -64,14 +69,7 @@ def test_evaluate_and_write_both_layouts(tmp_path):
 
 
 def test_the_latent_search_rows_are_measured_on_request(tmp_path):
-    from shapeprog.pointcloud.encoder import PointNet2SSG
-    ids = SPLITS["train"][:3] + SPLITS["test"][:1]
-    make_clouds("chair", tmp_path / "c", n_points=512, workers=1, ids=ids)
-    torch.manual_seed(0)
-    enc = PointNet2SSG(out_dim=256, npoints=[16, 8], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
-    w = tmp_path / "w.pt"
-    torch.save({"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
-                "config": enc.config, "hidden_dim": 256, "encoder": enc.state_dict(), "meta": {}}, w)
+    w = _tiny_cache_and_weights(tmp_path, 3, 1)
     res = evaluate(tmp_path / "c", "chair", weights=w, limit=1, steps=2, stability=False, search=True)
     assert {"search", "search_opt_program"} <= set(res.rows) and res.settings["search"] is True
     text = write_tables(res, tmp_path / "t.md").read_text()
