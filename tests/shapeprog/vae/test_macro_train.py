@@ -1,5 +1,4 @@
 """Training the VAE on macro programs through the one entry point, resuming, and its weights file."""
-import importlib.util
 import json
 from pathlib import Path
 
@@ -18,14 +17,6 @@ from shapeprog.vae.pretrained import export_weights, load_model, load_pretrained
 from shapeprog.vae.train import VAEDataModule, VAEModule
 
 ROOT = Path(__file__).resolve().parents[3]
-
-
-@pytest.fixture(scope="module")
-def train_main():
-    spec = importlib.util.spec_from_file_location("train", ROOT / "train.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main
 
 
 def test_fit_resume_and_export_of_the_chair_macro_config(tmp_path, train_main):

@@ -1,6 +1,5 @@
 """VAE training: the batched pass against the per-tree one, the data split, a tiny overfit, the Lightning
 module and data module, and ``train.py`` with the shipped configs."""
-import importlib.util
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,14 +29,6 @@ MIXED = SMALL + [("chair", 173), ("table", 18933), ("chair", 2498), ("storage", 
 
 def _tree(cat, i, dtype=torch.float32):
     return program_to_tree(shapeprog.parse(corpus.read(cat, i), f"{cat}/{i}.txt"), dtype=dtype)
-
-
-@pytest.fixture(scope="module")
-def train_main():
-    spec = importlib.util.spec_from_file_location("train", ROOT / "train.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main
 
 
 # ------------------------------------------------------------------------------------------ batched pass
