@@ -36,7 +36,7 @@ from torch import nn
 
 from ..macros.lang import AXIS, BOOL, CUBE, FACE, FLOAT, TYPES
 from .layout import GROUPS, LineLayout, MacroNode
-from .model import MLP, NodeOutput, Sampler, VAEOutput, one_hot_argmax
+from .model import MLP, NodeOutput, Sampler, VAEOutput, one_hot_argmax, reparameterize
 
 __all__ = ["MacroDecoder", "MacroEncoder", "MacroVAE"]
 
@@ -198,10 +198,7 @@ class MacroVAE(nn.Module):
     def encode(self, tree: MacroNode, sample: bool = False, generator: torch.Generator | None = None):
         """``(z, mu, logvar)``, each (H,): ``z = mu + eps * exp(logvar / 2)`` when ``sample``, else ``mu``."""
         mu, logvar = self.encoder(tree)
-        if not sample:
-            return mu, mu, logvar
-        eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
-        return mu + eps * torch.exp(0.5 * logvar), mu, logvar
+        return reparameterize(mu, logvar, sample, generator), mu, logvar
 
     def forward(self, tree: MacroNode, sample: bool = True, generator: torch.Generator | None = None) -> VAEOutput:
         """Encode ``tree`` and decode it teacher-forced (scored by :func:`~shapeprog.vae.losses.macro_program_loss`)."""

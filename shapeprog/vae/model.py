@@ -275,6 +275,15 @@ class VAEOutput:
     z: torch.Tensor
 
 
+def reparameterize(mu: torch.Tensor, logvar: torch.Tensor, sample: bool,
+                   generator: torch.Generator | None = None) -> torch.Tensor:
+    """``mu + eps * exp(logvar / 2)`` with ``eps ~ N(0, 1)`` drawn by ``generator`` when ``sample``, else ``mu``."""
+    if not sample:
+        return mu
+    eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
+    return mu + eps * torch.exp(0.5 * logvar)
+
+
 class VAE(nn.Module):
     """The encoder and decoder together.
 
@@ -294,10 +303,7 @@ class VAE(nn.Module):
         ``generator`` (on the model's device) draws ``eps``.
         """
         mu, logvar = self.encoder(tree)
-        if not sample:
-            return mu, mu, logvar
-        eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
-        return mu + eps * torch.exp(0.5 * logvar), mu, logvar
+        return reparameterize(mu, logvar, sample, generator), mu, logvar
 
     def forward(self, tree: VectorNode, sample: bool = True, generator: torch.Generator | None = None) -> VAEOutput:
         """Encode ``tree`` and decode it teacher-forced: the training pass, scored by
