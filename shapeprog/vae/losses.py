@@ -116,19 +116,31 @@ def program_loss(output: VAEOutput, tree: VectorNode, weights: Mapping[str, floa
         ``(total, terms)``: the weighted sum (scalar) and every unweighted term, each summed over the
         nodes (:data:`LINE_TERMS`, ``leaf``, ``bb`` the L1 of the root bbox dims, ``kl``).
     """
-    weights = LOSS_WEIGHTS if weights is None else weights
+    def node_terms(node, out):
+        return {**line_losses(out.lines, node.target_seq()), "leaf": _leaf_term(node, out, len(node.cuboid_rows))}
+
+    return _tree_loss(output, tree, LINE_TERMS, node_terms, LOSS_WEIGHTS if weights is None else weights, kl)
+
+
+def _leaf_term(node, out, count: int) -> torch.Tensor:
+    """:func:`leaf_loss` of a node's first ``count`` leaf logits: a cuboid without a child program is a leaf."""
+    is_leaf = torch.tensor([float(j >= len(node.children) or node.children[j] is None) for j in range(count)],
+                           dtype=out.leaf.dtype, device=out.leaf.device)
+    return leaf_loss(out.leaf, is_leaf)
+
+
+def _tree_loss(output: VAEOutput, tree, line_terms: tuple, node_terms, weights: Mapping[str, float],
+               kl: bool) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """The loss of a tree shared by :func:`program_loss` and :func:`macro_program_loss`: ``node_terms(node,
+    out)`` (the line terms and ``leaf`` of one node) summed over the nodes, then ``bb``, ``kl`` and the total."""
     nodes = [n for n, _ in tree.nodes()]
     if len(nodes) != len(output.nodes):
         raise ValueError(f"the output has {len(output.nodes)} nodes, the tree {len(nodes)}")
     zero = output.bbox_dims.new_zeros(())
-    terms = {k: zero for k in LINE_TERMS + ("leaf",)}
+    terms = {k: zero for k in line_terms + ("leaf",)}
     for node, out in zip(nodes, output.nodes):
-        for k, v in line_losses(out.lines, node.target_seq()).items():
+        for k, v in node_terms(node, out).items():
             terms[k] = terms[k] + v
-        rows = node.cuboid_rows
-        is_leaf = torch.tensor([float(j >= len(node.children) or node.children[j] is None) for j in range(len(rows))],
-                               dtype=out.leaf.dtype, device=out.leaf.device)
-        terms["leaf"] = terms["leaf"] + leaf_loss(out.leaf, is_leaf)
     terms["bb"] = (output.bbox_dims - tree.bbox_dims).abs().sum()
     terms["kl"] = kl_loss(output.mu, output.logvar) if kl else zero
     total = sum((weights.get(k, 0.0) * v for k, v in terms.items()), zero)
@@ -196,20 +208,9 @@ def macro_program_loss(output: VAEOutput, tree, layout, weights: Mapping[str, fl
         (:data:`MACRO_LINE_TERMS`, ``leaf`` the mean BCE of each node's leaf logits per created cuboid,
         ``bb`` the L1 of the root bbox dims, ``kl``); weights default to :data:`MACRO_LOSS_WEIGHTS`.
     """
-    weights = MACRO_LOSS_WEIGHTS if weights is None else weights
-    nodes = [n for n, _ in tree.nodes()]
-    if len(nodes) != len(output.nodes):
-        raise ValueError(f"the output has {len(output.nodes)} nodes, the tree {len(nodes)}")
-    zero = output.bbox_dims.new_zeros(())
-    terms = {k: zero for k in MACRO_LINE_TERMS + ("leaf",)}
-    for node, out in zip(nodes, output.nodes):
-        for k, v in macro_line_losses(out.lines, node.target_seq(layout), layout).items():
-            terms[k] = terms[k] + v
-        K = out.leaf.shape[0]
-        is_leaf = torch.tensor([float(j >= len(node.children) or node.children[j] is None) for j in range(K)],
-                               dtype=out.leaf.dtype, device=out.leaf.device)
-        terms["leaf"] = terms["leaf"] + leaf_loss(out.leaf, is_leaf)
-    terms["bb"] = (output.bbox_dims - tree.bbox_dims).abs().sum()
-    terms["kl"] = kl_loss(output.mu, output.logvar) if kl else zero
-    total = sum((weights.get(k, 0.0) * v for k, v in terms.items()), zero)
-    return total, terms
+    def node_terms(node, out):
+        return {**macro_line_losses(out.lines, node.target_seq(layout), layout),
+                "leaf": _leaf_term(node, out, out.leaf.shape[0])}
+
+    return _tree_loss(output, tree, MACRO_LINE_TERMS, node_terms, MACRO_LOSS_WEIGHTS if weights is None else weights,
+                      kl)
