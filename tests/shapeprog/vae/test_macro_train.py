@@ -4,7 +4,6 @@ from pathlib import Path
 
 import pytest
 import torch
-import yaml
 
 from shapeprog.macros import load_library
 from shapeprog.macros.execute import execute_hierarchy
@@ -19,20 +18,9 @@ from shapeprog.vae.train import VAEDataModule, VAEModule
 ROOT = Path(__file__).resolve().parents[3]
 
 
-def test_fit_resume_and_export_of_the_chair_macro_config(tmp_path, train_main):
-    config = yaml.safe_load((ROOT / "configs" / "shapeassembly" / "vae_chair_macros.yaml").read_text())
-    config["model"]["init_args"].update(hidden_dim=8, recon_every_n_epochs=1, recon_shapes=2, recon_points=200,
-                                        image_shapes=0)
-    config["data"]["init_args"].update(val_count=2, max_train_shapes=2)  # an epoch of 2 steps
-    config["trainer"].update(max_steps=2, accelerator="cpu", devices=1, enable_progress_bar=False,
-                             enable_model_summary=False, num_sanity_val_steps=0, default_root_dir=str(tmp_path))
-    config["trainer"]["logger"]["init_args"]["save_dir"] = str(tmp_path)
-    for cb in config["trainer"]["callbacks"]:
-        cb["init_args"]["dirpath"] = str(tmp_path / "ckpt")
-        if cb["init_args"].get("monitor") == "val/fscore":
-            cb["init_args"]["every_n_epochs"] = 1
-    path = tmp_path / "tiny.yaml"
-    path.write_text(yaml.safe_dump(config))
+def test_fit_resume_and_export_of_the_chair_macro_config(tmp_path, train_main, tiny_vae_config):
+    path = tiny_vae_config("vae_chair_macros", dict(hidden_dim=8, recon_every_n_epochs=1, recon_shapes=2,
+                                                    recon_points=200, image_shapes=0), dict(every_n_epochs=1))
     cli = train_main(["fit", "--config", str(path)])
     assert isinstance(cli.model.vae, MacroVAE) and all(isinstance(t, MacroNode) for t in cli.datamodule.train_trees)
     assert cli.trainer.global_step == 2

@@ -7,7 +7,6 @@ from pathlib import Path
 import lightning as L
 import pytest
 import torch
-import yaml
 
 import shapeprog
 from shapeprog import corpus
@@ -314,19 +313,10 @@ def test_shipped_configs_parse_through_train_py(train_main):
         assert cli.model.hparams.library == cli.datamodule.library == ("chair" if run.endswith("_macros") else None)
 
 
-def test_fit_and_resume_through_train_py(tmp_path, train_main):
-    config = yaml.safe_load((ROOT / "configs" / "shapeassembly" / "vae_storage.yaml").read_text())
-    config["model"]["init_args"].update(hidden_dim=8, recon_every_n_epochs=0)
-    config["data"]["init_args"].update(val_count=2, max_train_shapes=2)  # an epoch of 2 steps
-    config["trainer"].update(max_steps=2, accelerator="cpu", devices=1, enable_progress_bar=False,
-                             enable_model_summary=False, num_sanity_val_steps=0, default_root_dir=str(tmp_path))
-    config["trainer"]["logger"]["init_args"]["save_dir"] = str(tmp_path)
-    for cb in config["trainer"]["callbacks"]:
-        cb["init_args"]["dirpath"] = str(tmp_path / "ckpt")
-        if cb["init_args"].get("monitor") == "val/fscore":  # no decoder here: the loss picks the best
-            cb["init_args"].update(monitor="val/loss", mode="min", every_n_epochs=1)
-    path = tmp_path / "tiny.yaml"
-    path.write_text(yaml.safe_dump(config))
+def test_fit_and_resume_through_train_py(tmp_path, train_main, tiny_vae_config):
+    # no decoder pass here: the loss picks the best checkpoint
+    path = tiny_vae_config("vae_storage", dict(hidden_dim=8, recon_every_n_epochs=0),
+                           dict(monitor="val/loss", mode="min", every_n_epochs=1))
     cli = train_main(["fit", "--config", str(path)])
     assert cli.trainer.global_step == 2 and "val/loss" in cli.trainer.callback_metrics
     ckpt = torch.load(tmp_path / "ckpt" / "last.ckpt", map_location="cpu", weights_only=False)
