@@ -48,6 +48,7 @@ from ..vae.vectors import VectorNode
 from .data import TRAIN_POINTS, CloudDataset, collate_clouds
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
 from .infer import cloud_corners
+from .infer import load_model as load_cloud_model
 
 __all__ = ["CHECKPOINT_FORMAT", "RECIPES", "WEIGHTS_FORMAT", "CloudDataModule", "EndToEndModule",
            "LatentRegressionModule", "export_weights"]
@@ -345,6 +346,9 @@ class EndToEndModule(_CloudModule):
         category, vae_weights, npoints, radii, nsamples, widths, lr, weight_decay, recon_every_n_epochs,
             recon_shapes, recon_points, image_shapes, image_size, seed: as :class:`LatentRegressionModule`.
         init_decoder: start the decoder from the VAE's weights (False: from scratch).
+        init_encoder: a point-cloud weights file (:func:`export_weights`, e.g. the shipped latent-regression
+            model ``shapeprog/weights/pointcloud_latent_<category>.pt``) to start the encoder from; its
+            category, latent size and encoder sizes must equal this run's. None (the paper): from scratch.
         loss_weights: weights by term name that replace those of :data:`~shapeprog.vae.losses.LOSS_WEIGHTS`.
     """
 
@@ -353,7 +357,7 @@ class EndToEndModule(_CloudModule):
     def __init__(self, category: str = "chair", vae_weights: Optional[str] = None,
                  npoints: Sequence[int] = NPOINTS, radii: Sequence[float] = RADII, nsamples: Sequence[int] = NSAMPLES,
                  widths: Sequence[Sequence[int]] = WIDTHS, lr: float = 1e-4, weight_decay: float = 0.0,
-                 init_decoder: bool = True, loss_weights: Optional[dict] = None,
+                 init_decoder: bool = True, init_encoder: Optional[str] = None, loss_weights: Optional[dict] = None,
                  recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 2048,
                  image_shapes: int = 8, image_size: int = 128, seed: int = 0):
         unknown = sorted(set(loss_weights or {}) - set(LOSS_WEIGHTS))
@@ -365,7 +369,16 @@ class EndToEndModule(_CloudModule):
         if not init_decoder:
             self.vae = VAE(self.vae.decoder.hidden_dim)
         self.vae.encoder.requires_grad_(False)
+        if init_encoder is not None:
+            self._init_encoder(init_encoder)
         self.weights = {**LOSS_WEIGHTS, **(loss_weights or {})}
+
+    def _init_encoder(self, path) -> None:
+        start = load_cloud_model(path, category=self.hparams.category)
+        if start.encoder.config != self.encoder.config:
+            raise ValueError(f"{path}: its encoder has sizes {start.encoder.config}, this run's are "
+                             f"{self.encoder.config}")
+        self.encoder.load_state_dict(start.encoder.state_dict())
 
     def losses(self, z: torch.Tensor, trees: TreeBatch) -> tuple[torch.Tensor, dict]:
         lines, leaf = decode_batch(self.vae.decoder, trees, z)

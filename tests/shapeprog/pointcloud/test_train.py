@@ -135,6 +135,26 @@ def test_fit_logs_images_and_resumes_from_last(clouds, tmp_path, cls):
     assert load_model(tmp_path / "cli.pt").recipe == cls.recipe
 
 
+def test_end_to_end_starts_its_encoder_from_a_weights_file(clouds, tmp_path):
+    L.seed_everything(0)
+    latent = _module(LatentRegressionModule)
+    _trainer(tmp_path, 1).fit(latent, datamodule=_data(clouds))
+    path = export_weights(tmp_path / "ck" / "last.ckpt", tmp_path / "latent.pt", half=False)
+    start = load_model(path, "chair")
+    m = _module(EndToEndModule, init_encoder=str(path))
+    for name, value in start.encoder.state_dict().items():
+        assert torch.equal(m.encoder.state_dict()[name], value), name
+    assert not torch.equal(_module(EndToEndModule).encoder.state_dict()["fc.weight"],
+                           m.encoder.state_dict()["fc.weight"])
+    # another encoder size or category is refused, naming the file
+    with pytest.raises(ValueError, match="latent.pt: its encoder has sizes"):
+        _module(EndToEndModule, init_encoder=str(path), nsamples=[4, 4])
+    with pytest.raises(ValueError, match="not 'table'"):
+        EndToEndModule("table", init_encoder=str(path), **TINY)
+    with pytest.raises(FileNotFoundError, match="missing.pt"):
+        _module(EndToEndModule, init_encoder=str(tmp_path / "missing.pt"))
+
+
 def test_latent_regression_overfits_a_handful_of_clouds(clouds):
     L.seed_everything(0)
     dm = _data(clouds, batch_size=6)
