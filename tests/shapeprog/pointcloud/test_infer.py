@@ -145,13 +145,22 @@ def test_cli_reads_a_mesh_and_names_bad_files(tmp_path, weights):
     assert not (tmp_path / "e").exists()
 
 
-@pytest.mark.parametrize("category", sorted(PRETRAINED))
-def test_each_shipped_model_loads_safely_and_infers(category):
+SHIPPED = sorted(p.name for p in WEIGHTS.glob("pointcloud_*.pt"))
+
+
+def test_every_category_has_a_shipped_default():
+    assert set(PRETRAINED.values()) <= set(SHIPPED) and sorted(PRETRAINED) == ["chair", "storage", "table"]
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_each_shipped_model_loads_safely_and_infers(name):
     from shapeprog import corpus
-    payload = torch.load(WEIGHTS / PRETRAINED[category], weights_only=True)
-    assert payload["category"] == category and payload["recipe"] in ("latent", "e2e")
+    payload = torch.load(WEIGHTS / name, weights_only=True)
+    category, recipe = payload["category"], payload["recipe"]
+    assert name == f"pointcloud_{recipe}_{category}.pt" and ("decoder" in payload) == (recipe == "e2e")
     shape = CHAIR if category == "chair" else corpus.ids(category, "val")[0]
-    r = infer(corpus_cloud(category, shape, n_points=3000), category, physics=False)
+    model = load_model(WEIGHTS / name, category)
+    r = infer(corpus_cloud(category, shape, n_points=3000), category, model=model, physics=False)
     assert r.text.startswith("Assembly Program_0 {") and 0.0 <= r.metrics["fscore"] <= 100.0
 
 
