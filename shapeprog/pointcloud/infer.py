@@ -345,7 +345,8 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     else:
         program = model.decode(code[None])[0]
     if program is None or len(_corners_of(program)) == 0:
-        raise ValueError(f"the {model.category} model decoded no shape for this cloud")
+        hint = "" if search else "; the latent search (search=True, CLI --search) looks for one near the predicted code"
+        raise ValueError(f"the {model.category} model decoded no shape for this cloud{hint}")
     canon, off = align_program(program)
     seconds = {"search" if search else "decode": time.perf_counter() - t0}
     target = torch.from_numpy(unit)

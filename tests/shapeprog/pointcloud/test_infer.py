@@ -172,3 +172,10 @@ def test_a_z_up_cloud_gives_the_same_program_in_its_own_frame(model):
     r_z = infer(cloud @ rot, model=model, up="z", physics=False)
     assert to_text(r_y.canonical) == to_text(r_z.canonical)
     assert np.allclose(r_z.corners(), r_y.corners() @ rot, atol=1e-3)
+
+
+def test_a_code_that_decodes_to_nothing_is_a_clear_error_naming_the_search(model, monkeypatch):
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000)
+    monkeypatch.setattr(model, "decode", lambda codes: [None] * len(codes))
+    with pytest.raises(ValueError, match="decoded no shape for this cloud; the latent search"):
+        infer(cloud, model=model, physics=False)
