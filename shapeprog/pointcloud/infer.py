@@ -62,7 +62,7 @@ FSCORE_THRESHOLD = 0.03
 METRIC_POINTS = 10_000
 #: The weights files shipped under ``shapeprog/weights`` (docs/benchmarks.md names the command of each).
 PRETRAINED = {"chair": "pointcloud_e2e_chair.pt", "table": "pointcloud_latent_table.pt",
-              "storage": "pointcloud_latent_storage.pt"}
+              "storage": "pointcloud_e2e_storage.pt"}
 WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
 _FORMAT, _VERSION = "shapeprog-pointcloud", 1
 #: Cloud points drawn as cubes in pictures, and the cubes' side (canonical units).
