@@ -48,7 +48,7 @@ from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 
 __all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MIN_POINTS", "PRETRAINED", "CloudModel", "Inference",
-           "align_program", "cloud_corners", "infer", "load_model", "load_pretrained", "shape_metrics"]
+           "align_program", "cloud_corners", "infer", "load_encoder", "load_model", "load_pretrained", "shape_metrics"]
 
 #: Fewest points :func:`infer` takes.
 MIN_POINTS = 16
@@ -124,13 +124,8 @@ class CloudModel(torch.nn.Module):
         return out
 
 
-def load_model(path, category: Optional[str] = None) -> CloudModel:
-    """The :class:`CloudModel` of a weights file (:func:`shapeprog.pointcloud.train.export_weights`).
-
-    Raises:
-        FileNotFoundError: no such file.
-        ValueError: naming the file, for an unreadable file, another format or version, another category.
-    """
+def _read_weights(path, category: Optional[str] = None) -> tuple[dict, PointNet2SSG]:
+    """The checked payload of a weights file and its encoder (float32, its recorded sizes)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such weights file")
@@ -145,11 +140,34 @@ def load_model(path, category: Optional[str] = None) -> CloudModel:
     cat = payload["category"]
     if category is not None and cat != category:
         raise ValueError(f"{path}: a model of category {cat!r}, not {category!r}")
-    cfg = dict(payload["config"])
-    encoder = PointNet2SSG(**cfg)
+    encoder = PointNet2SSG(**dict(payload["config"]))
     floats = {k: v.float() if v.is_floating_point() else v for k, v in payload["encoder"].items()}
     try:
         encoder.load_state_dict(floats)
+    except RuntimeError as e:
+        raise ValueError(f"{path}: tensors do not fit the recorded sizes: {str(e).splitlines()[0]}") from None
+    return payload, encoder
+
+
+def load_encoder(path, category: Optional[str] = None) -> PointNet2SSG:
+    """The encoder of a weights file alone (no decoder is built), e.g. to start a training run from it.
+
+    Raises:
+        FileNotFoundError, ValueError: as :func:`load_model`.
+    """
+    return _read_weights(path, category)[1]
+
+
+def load_model(path, category: Optional[str] = None) -> CloudModel:
+    """The :class:`CloudModel` of a weights file (:func:`shapeprog.pointcloud.train.export_weights`).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file, for an unreadable file, another format or version, another category.
+    """
+    payload, encoder = _read_weights(path, category)
+    cat = payload["category"]
+    try:
         if payload["recipe"] == "e2e":
             vae = VAE(int(payload["hidden_dim"]))
             vae.decoder.load_state_dict({k: v.float() for k, v in payload["decoder"].items()})

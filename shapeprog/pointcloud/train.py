@@ -47,8 +47,7 @@ from ..vae.train import (_corners, check_data_category, load_trees, reconstructi
 from ..vae.vectors import VectorNode
 from .data import TRAIN_POINTS, CloudDataset, collate_clouds
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
-from .infer import cloud_corners
-from .infer import load_model as load_cloud_model
+from .infer import cloud_corners, load_encoder
 
 __all__ = ["CHECKPOINT_FORMAT", "RECIPES", "WEIGHTS_FORMAT", "CloudDataModule", "EndToEndModule",
            "LatentRegressionModule", "export_weights"]
@@ -374,11 +373,10 @@ class EndToEndModule(_CloudModule):
         self.weights = {**LOSS_WEIGHTS, **(loss_weights or {})}
 
     def _init_encoder(self, path) -> None:
-        start = load_cloud_model(path, category=self.hparams.category)
-        if start.encoder.config != self.encoder.config:
-            raise ValueError(f"{path}: its encoder has sizes {start.encoder.config}, this run's are "
-                             f"{self.encoder.config}")
-        self.encoder.load_state_dict(start.encoder.state_dict())
+        start = load_encoder(path, category=self.hparams.category)
+        if start.config != self.encoder.config:
+            raise ValueError(f"{path}: its encoder has sizes {start.config}, this run's are {self.encoder.config}")
+        self.encoder.load_state_dict(start.state_dict())
 
     def losses(self, z: torch.Tensor, trees: TreeBatch) -> tuple[torch.Tensor, dict]:
         lines, leaf = decode_batch(self.vae.decoder, trees, z)
