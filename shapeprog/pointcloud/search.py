@@ -34,9 +34,9 @@ __all__ = ["MAX_SEARCH_DECODES", "SEARCH_POINTS", "SEARCH_SCHEDULE", "SearchResu
            "latent_search", "parse_schedule"]
 
 #: ``(samples, sigma)`` per step: ``samples`` codes drawn around the best code so far with standard deviation
-#: ``sigma`` (the VAE's prior has unit variance). Chosen on 30 chair test shapes of the cloud cache (F-score
-#: without fitting): 45.6 for the predicted code alone, 60.9 for four steps of 8, 64.4 for four steps of 16,
-#: 66.9 for these six steps of 16 (docs/pointcloud.md, "Latent search").
+#: ``sigma`` (the VAE's prior has unit variance). Chosen on 30 chair test shapes of the cloud cache with the
+#: latent-regression chair model (F-score without fitting): 45.6 for the predicted code alone, 60.9 for four
+#: steps of 8, 64.4 for four steps of 16, 66.9 for these six steps of 16 (docs/pointcloud.md, "Latent search").
 SEARCH_SCHEDULE = ((16, 0.75), (16, 0.5), (16, 0.35), (16, 0.25), (16, 0.18), (16, 0.12))
 #: Points of the input cloud, and surface samples of each candidate, in the selection chamfer.
 SEARCH_POINTS = 1024
