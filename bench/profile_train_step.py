@@ -33,9 +33,11 @@ MODELS = {
     "csgnetstack2d_small": (2, True, "small", {"input_pool": 2, "channels": [8, 16, 32]}, 96),
     "csgnet2d_paper": (2, False, "paper", {}, 100),
     "csgnetstack2d_paper": (2, True, "paper", {}, 100),
+    "csgnetstack2d_medium": (2, True, "small", {"hidden": 384, "channels": [8, 16, 32]}, 300),
     "csgnet3d_small": (3, False, "small", {}, 48),
     "csgnetstack3d_small": (3, True, "small", {}, 48),
     "csgnet3d_paper": (3, False, "paper", {}, 48),
+    "csgnetstack3d_paper": (3, True, "paper", {}, 48),
 }
 PHASES = ("data", "render", "jitter", "stack", "forward", "backward", "optimiser")
 
