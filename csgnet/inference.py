@@ -36,7 +36,7 @@ TUNINGS = ("supervised", "reinforce", "selftrain")
 SHIPPED = {
     (2, "csgnet", "supervised"): "csgnet2d.pt",
     (3, "csgnet", "supervised"): "csgnet3d.pt",
-    (2, "csgnetstack", "supervised"): "csgnetstack2d.pt",
+    (2, "csgnetstack", "supervised"): "csgnetstack2d_medium.pt",
     (2, "csgnet", "reinforce"): "rl_csgnet2d.pt",
     (2, "csgnet", "selftrain"): "st_csgnet2d.pt",
     (2, "csgnetstack", "reinforce"): "rl_csgnetstack2d.pt",
