@@ -28,13 +28,11 @@ def jitter(images, generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
     Returns:
         (B, 64, 64) bool, the same type (and device) as ``images``.
     """
-    from scipy.ndimage import affine_transform  # lazy: scipy is only needed when augmenting
-
     is_torch = isinstance(images, torch.Tensor)
-    arr = images.detach().cpu().numpy() if is_torch else np.asarray(images)
-    if arr.ndim != 3 or arr.shape[1:] != (64, 64):
-        raise ValueError(f"images must be (B, 64, 64), got shape {tuple(arr.shape)}")
-    B = arr.shape[0]
+    shape = tuple(images.shape) if is_torch else np.shape(images)
+    if len(shape) != 3 or tuple(shape[1:]) != (64, 64):
+        raise ValueError(f"images must be (B, 64, 64), got shape {tuple(shape)}")
+    B = shape[0]
     if isinstance(generator, torch.Generator):
         u = torch.rand((B, 4), generator=generator, dtype=torch.float64).numpy()
     elif isinstance(generator, np.random.Generator):
@@ -43,10 +41,17 @@ def jitter(images, generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
         raise TypeError(f"generator must be a numpy.random.Generator or torch.Generator, got {type(generator).__name__}")
     t = -shift + 2.0 * shift * u[:, :2]
     z = (1.0 - zoom) + 2.0 * zoom * u[:, 2:]
-    c = np.array([_CENTRE, _CENTRE])
-    src = arr.astype(np.uint8)
-    out = np.empty_like(src)
-    for b in range(B):
-        affine_transform(src[b], z[b], offset=t[b] + c - z[b] * c, output=out[b], order=0, mode="nearest")
-    out = out.astype(bool)
-    return torch.from_numpy(out).to(images.device) if is_torch else out
+    offset = t + _CENTRE - z * _CENTRE
+    # The transform is diagonal, so each output row (column) reads one source row (column): the source
+    # index is computed per image and axis, in float64 on the CPU exactly as scipy's affine_transform does
+    # (z * p + offset, nearest = floor(x + 0.5), clamped for mode 'nearest'), and the pixels are gathered
+    # where the images are (on the GPU during GPU training), in one indexing operation for the batch.
+    p = np.arange(64, dtype=np.float64)
+    src = np.clip(np.floor(z[:, :, None] * p + offset[:, :, None] + 0.5), 0, 63).astype(np.int64)  # (B, 2, 64)
+    if is_torch:
+        idx = torch.from_numpy(src).to(images.device)
+        b = torch.arange(B, device=images.device)[:, None, None]
+        return images.bool()[b, idx[:, 0, :, None], idx[:, 1, None, :]]
+    arr = np.asarray(images).astype(bool)
+    return arr[np.arange(B)[:, None, None], src[:, 0, :, None], src[:, 1, None, :]]
+
