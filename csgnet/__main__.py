@@ -321,8 +321,9 @@ def _write_table(text: str, out) -> None:
         print(f"wrote {out}")
 
 
-# The shipped 2D models, supervised and RL-tuned on the silhouettes (docs/benchmarks.md says how each
-# was trained): Table 4's rows when no --weights are given.
+# The shipped CSGNet and small CSGNetStack (csgnetstack2d.pt, the starting point of the RL run), supervised and
+# RL-tuned on the silhouettes (docs/benchmarks.md says how each was trained): Table 4's rows when no --weights
+# are given. The medium CSGNetStack (load_pretrained(2, kind="csgnetstack")) is added with --weights.
 TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2d.pt"),
                  ("CSGNetStack supervised", "csgnetstack2d.pt"), ("CSGNetStack RL", "rl_csgnetstack2d.pt"))
 

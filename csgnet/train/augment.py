@@ -43,15 +43,15 @@ def jitter(images, generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
     z = (1.0 - zoom) + 2.0 * zoom * u[:, 2:]
     offset = t + _CENTRE - z * _CENTRE
     # The transform is diagonal, so each output row (column) reads one source row (column): the source
-    # index is computed per image and axis, in float64 on the CPU exactly as scipy's affine_transform does
-    # (z * p + offset, nearest = floor(x + 0.5), clamped for mode 'nearest'), and the pixels are gathered
-    # where the images are (on the GPU during GPU training), in one indexing operation for the batch.
+    # index is computed per image and axis in float64 on the CPU (z * p + offset, nearest = floor(x + 0.5),
+    # clamped for mode 'nearest'; pixel for pixel what scipy's affine_transform(order=0) gives, tested), and
+    # the pixels are gathered where the images are (on the GPU during GPU training), in one indexing
+    # operation for the batch. Inputs are cast through uint8 to bool, as the scipy version did.
     p = np.arange(64, dtype=np.float64)
     src = np.clip(np.floor(z[:, :, None] * p + offset[:, :, None] + 0.5), 0, 63).astype(np.int64)  # (B, 2, 64)
     if is_torch:
         idx = torch.from_numpy(src).to(images.device)
         b = torch.arange(B, device=images.device)[:, None, None]
-        return images.bool()[b, idx[:, 0, :, None], idx[:, 1, None, :]]
-    arr = np.asarray(images).astype(bool)
+        return images.to(torch.uint8).bool()[b, idx[:, 0, :, None], idx[:, 1, None, :]]
+    arr = np.asarray(images).astype(np.uint8).astype(bool)
     return arr[np.arange(B)[:, None, None], src[:, 0, :, None], src[:, 1, None, :]]
-

@@ -62,3 +62,22 @@ def test_jitter_equals_scipy_affine_transform_pixel_for_pixel():
         assert got.dtype == bool and (got == want).all()
         got_t = jitter(torch.from_numpy(imgs), np.random.default_rng(3), shift=shift, zoom=zoom)
         assert got_t.dtype == torch.bool and torch.equal(got_t, torch.from_numpy(want))
+    # the torch.Generator draws go through the same path: the same 4 uniforms per image as float64
+    g = torch.Generator().manual_seed(9)
+    u = torch.rand((300, 4), generator=torch.Generator().manual_seed(9), dtype=torch.float64).numpy()
+    t, z = -3.0 + 6.0 * u[:, :2], (1 - 2 / 64) + (4 / 64) * u[:, 2:]
+    want = np.stack([affine_transform(imgs[b].astype(np.uint8), z[b], offset=t[b] + 32.5 - z[b] * 32.5,
+                                      order=0, mode="nearest") for b in range(300)]).astype(bool)
+    assert torch.equal(jitter(torch.from_numpy(imgs), g), torch.from_numpy(want))
+
+
+def test_jitter_of_an_empty_batch_and_of_non_bool_images():
+    assert jitter(np.zeros((0, 64, 64), bool), np.random.default_rng(0)).shape == (0, 64, 64)
+    assert jitter(torch.zeros((0, 64, 64), dtype=torch.bool), np.random.default_rng(0)).shape == (0, 64, 64)
+    # non-bool values are cast through uint8 (0.25 and 0.5 -> 0 -> False, 3 -> True)
+    vals = np.full((3, 64, 64), 3.0)
+    vals[0], vals[1] = 0.25, 0.5
+    out = jitter(vals, np.random.default_rng(0))
+    assert out.dtype == bool and not out[0].any() and not out[1].any() and out[2].all()
+    out_t = jitter(torch.from_numpy(vals), np.random.default_rng(0))
+    assert torch.equal(out_t, torch.from_numpy(out))
