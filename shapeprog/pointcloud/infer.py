@@ -61,7 +61,7 @@ FSCORE_THRESHOLD = 0.03
 #: Surface samples of the result for the metrics.
 METRIC_POINTS = 10_000
 #: The weights files shipped under ``shapeprog/weights`` (docs/benchmarks.md names the command of each).
-PRETRAINED = {"chair": "pointcloud_e2e_chair.pt", "table": "pointcloud_latent_table.pt",
+PRETRAINED = {"chair": "pointcloud_e2e_chair.pt", "table": "pointcloud_e2e_table.pt",
               "storage": "pointcloud_e2e_storage.pt"}
 WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
 _FORMAT, _VERSION = "shapeprog-pointcloud", 1
