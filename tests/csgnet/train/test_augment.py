@@ -81,3 +81,11 @@ def test_jitter_of_an_empty_batch_and_of_non_bool_images():
     assert out.dtype == bool and not out[0].any() and not out[1].any() and out[2].all()
     out_t = jitter(torch.from_numpy(vals), np.random.default_rng(0))
     assert torch.equal(out_t, torch.from_numpy(out))
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no GPU")
+def test_jitter_on_the_gpu_equals_the_cpu():
+    imgs = torch.from_numpy(np.random.default_rng(4).random((64, 64, 64)) < 0.5)
+    cpu = jitter(imgs, np.random.default_rng(2))
+    gpu = jitter(imgs.cuda(), np.random.default_rng(2))
+    assert gpu.device.type == "cuda" and torch.equal(gpu.cpu(), cpu)
