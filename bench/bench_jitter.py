@@ -1,5 +1,6 @@
 """Speed of the 2D training jitter: the batched gather (:func:`csgnet.train.augment.jitter`) against the
-per-image ``scipy.ndimage.affine_transform`` loop it replaced, on the same images and draws, in one run.
+per-image ``scipy.ndimage.affine_transform`` loop it replaced (:func:`~csgnet.train.augment.jitter_reference`),
+on the same images and draws, in one run.
 
     python bench/bench_jitter.py --threads 1
     python bench/bench_jitter.py --device cuda --batch 300
@@ -18,23 +19,11 @@ import time
 import numpy as np
 import torch
 
-from csgnet.train.augment import jitter
-
-
-def scipy_jitter(images: torch.Tensor, rng: np.random.Generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
-    """The per-image scipy version (the executable definition of the jitter)."""
-    from scipy.ndimage import affine_transform
-
-    arr = images.cpu().numpy().astype(np.uint8)
-    u = rng.random((arr.shape[0], 4))
-    t, z = -shift + 2 * shift * u[:, :2], (1 - zoom) + 2 * zoom * u[:, 2:]
-    out = np.empty_like(arr)
-    for b in range(arr.shape[0]):
-        affine_transform(arr[b], z[b], offset=t[b] + 32.5 - z[b] * 32.5, output=out[b], order=0, mode="nearest")
-    return torch.from_numpy(out.astype(bool)).to(images.device)
+from csgnet.train.augment import jitter, jitter_reference
 
 
 def _time(fn, images, repeats: int, device: str) -> float:
+    """Median seconds of ``fn(images, rng)`` over ``repeats`` calls after one warm-up."""
     times = []
     for i in range(repeats + 1):
         rng = np.random.default_rng(i)
@@ -58,8 +47,9 @@ def main(argv=None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     images = torch.from_numpy(np.random.default_rng(0).random((args.batch, 64, 64)) < 0.5).to(args.device)
-    assert torch.equal(jitter(images, np.random.default_rng(1)), scipy_jitter(images, np.random.default_rng(1)))
-    old = _time(scipy_jitter, images, args.repeats, args.device)
+    assert torch.equal(jitter(images, np.random.default_rng(1)).cpu(),
+                       torch.from_numpy(jitter_reference(images, np.random.default_rng(1))))
+    old = _time(jitter_reference, images, args.repeats, args.device)
     new = _time(jitter, images, args.repeats, args.device)
     print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
           f"threads {torch.get_num_threads()}, device {args.device}, load average {os.getloadavg()[0]:.2f}")

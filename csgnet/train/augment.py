@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["jitter"]
+__all__ = ["jitter", "jitter_reference"]
 
 _CENTRE = 32.5  # Keras' centre h / 2 + 0.5
 
@@ -33,15 +33,7 @@ def jitter(images, generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
     if len(shape) != 3 or tuple(shape[1:]) != (64, 64):
         raise ValueError(f"images must be (B, 64, 64), got shape {tuple(shape)}")
     B = shape[0]
-    if isinstance(generator, torch.Generator):
-        u = torch.rand((B, 4), generator=generator, dtype=torch.float64).numpy()
-    elif isinstance(generator, np.random.Generator):
-        u = generator.random((B, 4))
-    else:
-        raise TypeError(f"generator must be a numpy.random.Generator or torch.Generator, got {type(generator).__name__}")
-    t = -shift + 2.0 * shift * u[:, :2]
-    z = (1.0 - zoom) + 2.0 * zoom * u[:, 2:]
-    offset = t + _CENTRE - z * _CENTRE
+    z, offset = _draws(B, generator, shift, zoom)
     # The transform is diagonal, so each output row (column) reads one source row (column): the source
     # index is computed per image and axis in float64 on the CPU (z * p + offset, nearest = floor(x + 0.5),
     # clamped for mode 'nearest'; pixel for pixel what scipy's affine_transform(order=0) gives, tested), and
@@ -55,3 +47,34 @@ def jitter(images, generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
         return images.to(torch.uint8).bool()[b, idx[:, 0, :, None], idx[:, 1, None, :]]
     arr = np.asarray(images).astype(np.uint8).astype(bool)
     return arr[np.arange(B)[:, None, None], src[:, 0, :, None], src[:, 1, None, :]]
+
+
+def _draws(B: int, generator, shift: float, zoom: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per image, the zooms ``z`` and offsets (``t + c - z c``), both ``(B, 2)`` float64 in (row, col) order,
+    from 4 uniforms per image drawn in the order ``t_row, t_col, z_row, z_col``."""
+    if isinstance(generator, torch.Generator):
+        u = torch.rand((B, 4), generator=generator, dtype=torch.float64).numpy()
+    elif isinstance(generator, np.random.Generator):
+        u = generator.random((B, 4))
+    else:
+        raise TypeError(f"generator must be a numpy.random.Generator or torch.Generator, got {type(generator).__name__}")
+    t = -shift + 2.0 * shift * u[:, :2]
+    z = (1.0 - zoom) + 2.0 * zoom * u[:, 2:]
+    return z, t + _CENTRE - z * _CENTRE
+
+
+def jitter_reference(images, generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
+    """:func:`jitter` as its executable definition: ``scipy.ndimage.affine_transform(order=0,
+    mode='nearest')`` image by image on the CPU, with the same draws. Slow; for tests and benchmarks.
+
+    Returns:
+        (B, 64, 64) bool NumPy array.
+    """
+    from scipy.ndimage import affine_transform
+
+    arr = (images.detach().cpu().numpy() if isinstance(images, torch.Tensor) else np.asarray(images)).astype(np.uint8)
+    z, offset = _draws(arr.shape[0], generator, shift, zoom)
+    out = np.empty_like(arr)
+    for b in range(arr.shape[0]):
+        affine_transform(arr[b], z[b], offset=offset[b], output=out[b], order=0, mode="nearest")
+    return out.astype(bool)

@@ -5,7 +5,7 @@ import torch
 
 from csgnet.renderer.reference import render_np
 from csgnet.synth import sample_programs
-from csgnet.train.augment import jitter
+from csgnet.train.augment import jitter, jitter_reference
 from csgnet.vocab import vocabulary
 
 
@@ -48,27 +48,18 @@ def test_jitter_matches_the_affine_formula_and_draw_order():
 
 
 def test_jitter_equals_scipy_affine_transform_pixel_for_pixel():
-    # the executable definition: scipy.ndimage.affine_transform(order=0, mode='nearest') per image with the
-    # same draws; the batched gather must give the same pixels, for NumPy and torch inputs alike
-    from scipy.ndimage import affine_transform
-
+    # the executable definition (jitter_reference): scipy.ndimage.affine_transform(order=0, mode='nearest')
+    # per image with the same draws; the batched gather must give the same pixels, for NumPy and torch inputs
     imgs = np.random.default_rng(11).random((300, 64, 64)) < 0.5
     for shift, zoom in ((3.0, 2.0 / 64.0), (7.5, 0.2), (0.5, 0.0)):
-        u = np.random.default_rng(3).random((300, 4))
-        t, z = -shift + 2 * shift * u[:, :2], (1 - zoom) + 2 * zoom * u[:, 2:]
-        want = np.stack([affine_transform(imgs[b].astype(np.uint8), z[b], offset=t[b] + 32.5 - z[b] * 32.5,
-                                          order=0, mode="nearest") for b in range(300)]).astype(bool)
+        want = jitter_reference(imgs, np.random.default_rng(3), shift=shift, zoom=zoom)
         got = jitter(imgs, np.random.default_rng(3), shift=shift, zoom=zoom)
         assert got.dtype == bool and (got == want).all()
         got_t = jitter(torch.from_numpy(imgs), np.random.default_rng(3), shift=shift, zoom=zoom)
         assert got_t.dtype == torch.bool and torch.equal(got_t, torch.from_numpy(want))
     # the torch.Generator draws go through the same path: the same 4 uniforms per image as float64
-    g = torch.Generator().manual_seed(9)
-    u = torch.rand((300, 4), generator=torch.Generator().manual_seed(9), dtype=torch.float64).numpy()
-    t, z = -3.0 + 6.0 * u[:, :2], (1 - 2 / 64) + (4 / 64) * u[:, 2:]
-    want = np.stack([affine_transform(imgs[b].astype(np.uint8), z[b], offset=t[b] + 32.5 - z[b] * 32.5,
-                                      order=0, mode="nearest") for b in range(300)]).astype(bool)
-    assert torch.equal(jitter(torch.from_numpy(imgs), g), torch.from_numpy(want))
+    want = jitter_reference(imgs, torch.Generator().manual_seed(9))
+    assert torch.equal(jitter(torch.from_numpy(imgs), torch.Generator().manual_seed(9)), torch.from_numpy(want))
 
 
 def test_jitter_of_an_empty_batch_and_of_non_bool_images():
