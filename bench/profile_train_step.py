@@ -9,7 +9,9 @@ target render, jitter, stack trace, then :func:`~csgnet.train.supervised.teacher
 optimiser step is timed on its own
 (median over ``--steps`` steps after one warm-up), on one mixed-length batch drawn from the training stream
 (``MixedLengthBatches``, programs sampled on the fly). "data" is the time to draw that batch. The table shows
-milliseconds per phase, the model's share (forward + backward + optimiser) of the step, and samples/s.
+milliseconds per phase, the model's share (forward + backward + optimiser) of the step, samples/s, and
+samples/s without the data phase (what a training run reading a dataset folder with DataLoader workers steps at;
+on a GPU, the GPU side of the step).
 """
 from __future__ import annotations
 
@@ -110,14 +112,16 @@ def main(argv=None) -> int:
     print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
           f"{torch.__version__}, threads {torch.get_num_threads()}, device {args.device}, "
           f"load average {os.getloadavg()[0]:.2f}")
-    print("| model | batch | " + " | ".join(f"{p} ms" for p in PHASES) + " | model share | samples/s |")
-    print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|")
+    print("| model | batch | " + " | ".join(f"{p} ms" for p in PHASES)
+          + " | model share | samples/s | samples/s without data |")
+    print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|---:|")
     for name in args.models:
         r = profile(name, args.steps, args.device)
         total = sum(r[p] for p in PHASES)
         model = r["forward"] + r["backward"] + r["optimiser"]
         print(f"| {name} | {r['batch']} | " + " | ".join(f"{1000 * r[p]:.1f}" for p in PHASES)
-              + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} |", flush=True)
+              + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} | {r['batch'] / (total - r['data']):.1f} |",
+              flush=True)
     print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
     return 0
 
