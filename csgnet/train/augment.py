@@ -44,8 +44,10 @@ def jitter(images, generator, shift: float = 3.0, zoom: float = 2.0 / 64.0):
     if is_torch:
         idx = torch.from_numpy(src).to(images.device)
         b = torch.arange(B, device=images.device)[:, None, None]
-        return images.to(torch.uint8).bool()[b, idx[:, 0, :, None], idx[:, 1, None, :]]
-    arr = np.asarray(images).astype(np.uint8).astype(bool)
+        img = images if images.dtype == torch.bool else images.to(torch.uint8).bool()
+        return img[b, idx[:, 0, :, None], idx[:, 1, None, :]]
+    arr = np.asarray(images)
+    arr = arr if arr.dtype == bool else arr.astype(np.uint8).astype(bool)
     return arr[np.arange(B)[:, None, None], src[:, 0, :, None], src[:, 1, None, :]]
 
 
