@@ -97,3 +97,16 @@ def test_the_sample_command_writes_macro_programs_and_others_refuse_a_macro_mode
         assert execute_hierarchy(h, lib).corners.shape[0] >= 1 and (out / f"sample_{i:04d}.obj").is_file()
     with pytest.raises(SystemExit, match="macro programs"):
         main(["reconstruct", "chair/173", "--weights", weights])
+
+
+def test_the_shipped_macro_chair_model_samples_valid_macro_programs():
+    path = ROOT / "shapeprog" / "weights" / "vae_chair_macros.pt"
+    info, _ = read_weights(path)
+    assert info["category"] == "chair" and {"epoch", "global_step", "command"} <= set(info["meta"])
+    vae = load_model(path)
+    assert isinstance(vae, MacroVAE) and vae.layout.functions == tuple(load_library("chair"))
+    out = sample_macro(vae, 4, seed=0)
+    assert [d.text for d in out] == [d.text for d in sample_macro(vae, 4, seed=0)]  # deterministic under a seed
+    for d in out:
+        shape = execute_hierarchy(parse_hierarchy(d.text, library=vae.library), vae.library)
+        assert shape.corners.shape[0] >= 2  # a trained model writes parts, not a lone bbox
