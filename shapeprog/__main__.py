@@ -206,14 +206,16 @@ def _cmd_infer(args) -> int:
     src = Path(args.file)
     out = Path(args.out)
     stem = src.stem
-    files = {k: out / f"{stem}{suffix}" for k, suffix in
-             (("program", ".txt"), ("mesh", ".obj"), ("png", ".png"), ("json", ".json"))}
+    model = load_model(args.weights, args.category) if args.weights else None
+    kinds = [("program", ".txt"), ("mesh", ".obj"), ("png", ".png"), ("json", ".json")]
+    if model is not None and model.layout is not None:
+        kinds.append(("macros", "_macros.txt"))  # the decoded macro program (ShapeMOD)
+    files = {k: out / f"{stem}{suffix}" for k, suffix in kinds}
     _refuse_overwrite(list(files.values()), [args.file])
     for path in files.values():
         if path.exists():
             raise SystemExit(f"error: {path}: exists; infer never overwrites a file (choose another --out)")
     points = read_cloud(src)
-    model = load_model(args.weights, args.category) if args.weights else None
     try:
         schedule = parse_schedule(args.search_schedule) if args.search_schedule else None
         r = infer(points, args.category, fit=args.fit, model=model, up=args.up, fit_steps=args.steps,
@@ -225,6 +227,8 @@ def _cmd_infer(args) -> int:
         raise SystemExit(f"error: {src}: {e}") from None
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(files["program"], r.text)
+    if "macros" in files and r.macro_text is not None:
+        atomic_write(files["macros"], r.macro_text)
     io.write_obj(files["mesh"], torch.from_numpy(r.corners()))
     unit = r.transform.apply(points)
     canon = execute(r.canonical).corners + torch.from_numpy(r.canonical_offset).float()
@@ -246,6 +250,9 @@ def _cmd_infer(args) -> int:
     print(("after fitting:  " if r.before is not None else "") + _fmt_metrics(r.metrics))
     print(f"wrote {files['program']}, {files['mesh']}, {files['png']} and {files['json']} "
           f"(offset {np.round(r.offset, 4).tolist()})")
+    if "macros" in files and r.macro_text is not None:
+        print(f"wrote {files['macros']}: the decoded macro program (library calls; in the decoder's frame, before "
+              f"alignment and fitting; {files['program']} is its expansion in the input's frame)")
     return 0
 
 

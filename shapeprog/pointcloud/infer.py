@@ -94,9 +94,12 @@ class CloudModel(torch.nn.Module):
 
     Attributes:
         encoder: the :class:`PointNet2SSG` (eval mode).
-        vae: the VAE whose decoder decodes (the shipped VAE for a latent-regression model).
+        vae: the VAE whose decoder decodes (the shipped VAE for a latent-regression model); a
+            :class:`~shapeprog.vae.macro_model.MacroVAE` for a model that writes macro programs.
         category, recipe: what it was trained on and how (``"latent"`` or ``"e2e"``).
         meta: what the weights file records (epoch, step, command, ...).
+        layout: the macro library's line layout of a macro-program model (``layout.library``); None for the base
+            language.
     """
 
     def __init__(self, encoder: PointNet2SSG, vae: VAE, category: str, recipe: str, meta: Optional[dict] = None):
@@ -106,6 +109,7 @@ class CloudModel(torch.nn.Module):
                              f"{vae.decoder.hidden_dim}")
         self.encoder, self.vae = encoder.eval(), vae.eval()
         self.category, self.recipe, self.meta = category, recipe, dict(meta or {})
+        self.layout = getattr(vae, "layout", None)
 
     def codes(self, clouds: torch.Tensor) -> torch.Tensor:
         """Latents ``(B, H)`` of canonical clouds ``(B, N, 3)``."""
@@ -114,13 +118,35 @@ class CloudModel(torch.nn.Module):
             return self.encoder(clouds.to(p.device, p.dtype))
 
     def decode(self, codes: torch.Tensor) -> list[Optional[Program]]:
-        """Programs (corpus frame) of latents ``(B, H)``; None where decoding fails."""
+        """Programs (corpus frame) of latents ``(B, H)``; None where decoding fails. A macro-program model's
+        programs are the expansions of its macro programs (:meth:`decode_macros` keeps the macro text)."""
+        if self.layout is not None:
+            return [None if d is None else d.program for d in self.decode_macros(codes)]
         out = []
         for z in codes:
             try:
                 out.append(decode_latent(self.vae.decoder, z, reject=False).program)
             except ValueError:
                 out.append(None)
+        return out
+
+    def decode_macros(self, codes: torch.Tensor) -> list:
+        """The :class:`~shapeprog.vae.macro_decode.MacroDecoded` (macro program, its text, its expansion) of
+        latents ``(B, H)`` of a macro-program model; None where decoding fails.
+
+        Raises:
+            ValueError: the model writes base-language programs.
+        """
+        if self.layout is None:
+            raise ValueError(f"the {self.category} {self.recipe} model writes ShapeAssembly programs, not macro programs")
+        from ..vae.macro_decode import decode_macro
+        out = []
+        with torch.no_grad():
+            for z in codes:
+                try:
+                    out.append(decode_macro(self.vae, z))
+                except ValueError:
+                    out.append(None)
         return out
 
 
@@ -169,7 +195,15 @@ def load_model(path, category: Optional[str] = None) -> CloudModel:
     cat = payload["category"]
     try:
         if payload["recipe"] == "e2e":
-            vae = VAE(int(payload["hidden_dim"]))
+            if payload.get("library") is not None:
+                from ..macros.library import Library
+                from ..vae.layout import LineLayout
+                from ..vae.macro_model import MacroVAE
+
+                library = Library.from_text(payload["library"], f"{path}:library")
+                vae = MacroVAE(LineLayout(library), int(payload["hidden_dim"]))
+            else:
+                vae = VAE(int(payload["hidden_dim"]))
             vae.decoder.load_state_dict({k: v.float() for k, v in payload["decoder"].items()})
         else:
             vae = load_vae(cat)
@@ -269,6 +303,9 @@ class Inference:
         search: with ``search=True``: ``start_cd`` and ``cd`` (the selection chamfer of the predicted code's
             program and of the one kept), ``decodes`` and ``improved`` (steps that found a better program);
             else None.
+        macro_text: for a model that writes macro programs (ShapeMOD), the decoded macro program's text, in
+            the decoder's frame, before the alignment and any fitting (:attr:`program` is its expansion, aligned
+            and fitted); None for a base-language model.
     """
 
     program: Program
@@ -282,6 +319,7 @@ class Inference:
     before: Optional[dict] = None
     seconds: dict = field(default_factory=dict)
     search: Optional[dict] = None
+    macro_text: Optional[str] = None
 
     def place(self, points):
         """Points of the executed :attr:`program` ``(..., 3)`` -> the input's frame."""
@@ -360,8 +398,13 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         program = r.program
         searched = {"start_cd": None if np.isinf(r.start_cd) else r.start_cd, "cd": None if np.isinf(r.cd) else r.cd,
                     "decodes": r.decodes, "improved": r.improved}
+        code = r.code
     else:
         program = model.decode(code[None])[0]
+    macro_text = None
+    if model.layout is not None and program is not None:
+        decoded = model.decode_macros(code[None])[0]  # the kept code's macro program (decoding is deterministic)
+        macro_text = None if decoded is None else decoded.text
     if program is None or len(_corners_of(program)) == 0:
         hint = "" if search else "; the latent search (search=True, CLI --search) looks for one near the predicted code"
         raise ValueError(f"the {model.category} model decoded no shape for this cloud{hint}")
@@ -387,4 +430,4 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / scale
     offset = np.asarray(t.center) + (off / t.scale) @ rotation
     return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics, before,
-                     seconds, searched)
+                     seconds, searched, macro_text)

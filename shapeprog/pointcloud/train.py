@@ -12,6 +12,13 @@ VAE's decoder (:mod:`shapeprog.vae`):
   (:func:`shapeprog.vae.batch.batch_loss`, no KL term). The decoder starts from the shipped VAE's by
   default.
 
+**Macro programs (ShapeMOD's point-cloud experiment).** With ``macros=True`` (or ``vae_weights`` naming a
+macro-program VAE, :class:`~shapeprog.vae.macro_model.MacroVAE`) the decoder writes programs that call the
+category's ShapeMOD library; the data module then takes the same ``library`` and serves each cloud's program
+from the macro-refactored corpus (:func:`shapeprog.macros.load_refactored`), and the loss is
+:func:`~shapeprog.vae.losses.macro_program_loss` without KL. Decoded macro programs are expanded and executed
+for the F-score and the pictures. ``configs/pointcloud/e2e_chair_macros.yaml``.
+
 :class:`CloudDataModule` serves the clouds of a :func:`~shapeprog.pointcloud.data.make_clouds` cache: the
 ``train`` split to train on and the seeded ``val`` carve-out to validate on (both from the corpus's train
 split; the cache's ``test`` split, the corpus's val split, is never read here). Each batch carries the
@@ -37,15 +44,17 @@ from torch.utils.data import DataLoader, Dataset
 from shapeio import atomic_write
 
 from ..picture import render_grid
-from ..vae.batch import BatchOutput, TreeBatch, batch_loss, decode_batch, encode_batch
+from ..vae.batch import BatchOutput, MacroTreeBatch, TreeBatch, batch_loss, decode_batch, encode_batch
 from ..vae.decode import decode_latent
-from ..vae.losses import LOSS_WEIGHTS
-from ..vae.model import VAE
+from ..vae.layout import LineLayout
+from ..vae.losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS, macro_program_loss
+from ..vae.macro_model import MacroVAE
+from ..vae.model import VAE, VAEOutput
 from ..vae.pretrained import load_model, load_pretrained
-from ..vae.train import (_corners, check_data_category, load_trees, reconstruction_fscores,
-                         target_surfaces)
+from ..vae.train import (_corners, _read_macro_programs, check_data_category, load_macro_library, load_macro_trees,
+                         load_trees, reconstruction_fscores, target_surfaces)
 from ..vae.vectors import VectorNode
-from .data import TRAIN_POINTS, CloudDataset, collate_clouds
+from .data import TRAIN_POINTS, CloudDataset, collate_clouds, read_split
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
 from .infer import cloud_corners, load_encoder
 
@@ -88,6 +97,13 @@ def _collate(items: Sequence[dict]) -> dict:
     return out
 
 
+def _collate_macros(items: Sequence[dict]) -> dict:
+    """:func:`collate_clouds` plus ``trees``, a :class:`MacroTreeBatch` of the items' macro programs."""
+    out = collate_clouds(items)
+    out["trees"] = MacroTreeBatch([it["tree"] for it in items])
+    return out
+
+
 class CloudDataModule(L.LightningDataModule):
     """Clouds of a :func:`~shapeprog.pointcloud.data.make_clouds` cache with their programs' trees.
 
@@ -103,12 +119,22 @@ class CloudDataModule(L.LightningDataModule):
         max_train_shapes: the first N training clouds only (smoke runs, overfitting checks).
         max_val_shapes: the first N validation clouds only.
         seed: the subsets' and the noise's draws.
+        library: serve macro programs calling this ShapeMOD library (a shipped category's name or a library
+            file, :func:`shapeprog.vae.train.load_macro_library`); it must be the decoder's. None: the
+            corpus's ShapeAssembly programs.
+        programs: with ``library``, the macro-refactored corpus to read (a folder or ``.tar.xz`` of
+            :func:`shapeprog.macros.write_refactored`); None: the shipped one of the category.
     """
 
     def __init__(self, root: str = "clouds", category: str = "chair", points=TRAIN_POINTS, noise: float = 0.0,
                  val_points: int = TRAIN_POINTS, batch_size: int = 16, num_workers: int = 0,
-                 max_train_shapes: Optional[int] = None, max_val_shapes: Optional[int] = None, seed: int = 0):
+                 max_train_shapes: Optional[int] = None, max_val_shapes: Optional[int] = None, seed: int = 0,
+                 library: Optional[str] = None, programs: Optional[str] = None):
         super().__init__()
+        if programs is not None and library is None:
+            raise ValueError("`programs` (macro programs) needs a `library`")
+        self.library, self.programs = library, programs
+        self.layout: Optional[LineLayout] = None
         for name, v in (("batch_size", batch_size), ("max_train_shapes", max_train_shapes),
                         ("max_val_shapes", max_val_shapes)):
             if v is not None and int(v) < 1:
@@ -127,28 +153,44 @@ class CloudDataModule(L.LightningDataModule):
             keep = np.arange(min(int(limit), len(clouds)))
             clouds.ids, clouds.clouds = clouds.ids[keep], clouds.clouds[keep]
             clouds.center, clouds.scale = clouds.center[keep], clouds.scale[keep]
-        keys, trees = load_trees([clouds.program_name(i) for i in range(len(clouds))])
+        names = [clouds.program_name(i) for i in range(len(clouds))]
+        if self.library is None:
+            keys, trees = load_trees(names)
+        else:
+            keys, trees = load_macro_trees(names, self.layout, self._macro_programs)
         return _CloudTrees(clouds, dict(zip(keys, trees)))
 
     def setup(self, stage: Optional[str] = None) -> None:
         if self.train_set is None:
+            if self.library is not None:
+                self.layout = LineLayout(load_macro_library(self.library))
+                split = read_split(self.root, self.category)
+                keys = [f"{self.category}/{i}" for part in ("train", "val") for i in split[part]]
+                self._macro_programs = _read_macro_programs(self.category, keys, self.programs, self.layout.library)
             self.train_set = self._set("train", self.points, self.noise, self.max_train_shapes)
             self.val_set = self._set("val", self.val_points, 0.0, self.max_val_shapes)
+            self._macro_programs = None
+
+    def _collate(self):
+        return _collate if self.library is None else _collate_macros
 
     def train_dataloader(self) -> DataLoader:
-        return DataLoader(self.train_set, batch_size=self.batch_size, shuffle=True, collate_fn=_collate,
+        return DataLoader(self.train_set, batch_size=self.batch_size, shuffle=True, collate_fn=self._collate(),
                           num_workers=self.num_workers, persistent_workers=self.num_workers > 0, drop_last=False)
 
     def val_dataloader(self) -> DataLoader:
-        return DataLoader(self.val_set, batch_size=self.batch_size, shuffle=False, collate_fn=_collate,
+        return DataLoader(self.val_set, batch_size=self.batch_size, shuffle=False, collate_fn=self._collate(),
                           num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
 
     def state_dict(self) -> dict:
-        return {"category": self.category, "val": None if self.val_set is None else
+        return {"category": self.category, "library": self.library, "val": None if self.val_set is None else
                 [int(i) for i in self.val_set.clouds.ids]}
 
     def load_state_dict(self, state: dict) -> None:
         """Refuse to resume a run that validated on other shapes."""
+        if state.get("library", self.library) != self.library:
+            raise ValueError(f"the checkpoint's run trained on programs of library {state.get('library')!r}, this "
+                             f"one on {self.library!r}")
         mine = None if self.val_set is None else [int(i) for i in self.val_set.clouds.ids]
         if mine is not None and state.get("val") is not None and state["val"] != mine:
             raise ValueError(f"the checkpoint's run validated on other {state.get('category')} shapes "
@@ -166,12 +208,20 @@ class _CloudModule(L.LightningModule):
 
     def __init__(self, category: str, vae_weights: Optional[str], npoints, radii, nsamples, widths, lr: float,
                  weight_decay: float, recon_every_n_epochs: int, recon_shapes: int, recon_points: int,
-                 image_shapes: int, image_size: int, seed: int):
+                 image_shapes: int, image_size: int, seed: int, macros: bool = False):
         super().__init__()
         if int(recon_every_n_epochs) < 0:
             raise ValueError(f"recon_every_n_epochs must be >= 0, got {recon_every_n_epochs!r}")
-        self.vae = load_pretrained(category) if vae_weights is None else load_model(vae_weights, category=category)
+        if vae_weights is None:
+            self.vae = load_pretrained(category, macros=macros)
+        else:
+            self.vae = load_model(vae_weights, category=category)
+            if macros and not isinstance(self.vae, MacroVAE):
+                raise ValueError(f"{vae_weights}: macros=True needs a VAE trained on macro programs; this file holds "
+                                 f"a base-language VAE")
         self.vae.train()
+        #: the macro library's line layout of a macro-program decoder; None for the base language
+        self.layout: Optional[LineLayout] = getattr(self.vae, "layout", None)
         hidden = self.vae.decoder.hidden_dim
         self.encoder = PointNet2SSG(out_dim=hidden, npoints=npoints, radii=radii, nsamples=nsamples, widths=widths)
         self._recon: list[tuple[torch.Tensor, VectorNode]] = []
@@ -180,10 +230,24 @@ class _CloudModule(L.LightningModule):
     # ------------------------------------------------------------------ checks and checkpoints
     def setup(self, stage: str) -> None:
         check_data_category(self)
+        dm = self.trainer.datamodule if self.trainer is not None else None
+        if dm is not None and hasattr(dm, "library"):
+            theirs = None if dm.library is None else load_macro_library(dm.library).to_text()
+            if theirs != self.library_text():
+                mine = "a base-language decoder" if self.layout is None else "a macro-program decoder"
+                raise ValueError(f"the model has {mine} and the data module serves "
+                                 f"{'ShapeAssembly programs' if dm.library is None else 'macro programs of library ' + repr(dm.library)}"
+                                 f" of another library; set data.init_args.library to the decoder's library "
+                                 f"(None for the base language)")
+
+    def library_text(self) -> Optional[str]:
+        """The macro library's text of a macro-program decoder; None for the base language."""
+        return None if self.layout is None else self.layout.library.to_text()
 
     def _info(self) -> dict:
         return {"format": CHECKPOINT_FORMAT, "recipe": self.recipe, "category": self.hparams.category,
-                "encoder": self.encoder.config, "hidden_dim": int(self.vae.decoder.hidden_dim)}
+                "encoder": self.encoder.config, "hidden_dim": int(self.vae.decoder.hidden_dim),
+                "library": self.library_text()}
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint["shapeprog_pointcloud"] = self._info()
@@ -197,7 +261,8 @@ class _CloudModule(L.LightningModule):
                              f"{CHECKPOINT_FORMAT}")
         mine = self._info()
         if {k: info.get(k) for k in mine} != mine:
-            raise ValueError(f"the checkpoint is of a model with {info}, this run is {mine}")
+            short = lambda d: {k: ("<macro library>" if k == "library" and v else v) for k, v in d.items()}
+            raise ValueError(f"the checkpoint is of a model with {short(info)}, this run is {short(mine)}")
 
     def on_train_epoch_start(self) -> None:
         dm = self.trainer.datamodule if self.trainer is not None else None
@@ -246,7 +311,11 @@ class _CloudModule(L.LightningModule):
         out = []
         for code in z.detach():
             try:
-                out.append(decode_latent(self.vae.decoder, code, reject=False).program)
+                if self.layout is not None:
+                    from ..vae.macro_decode import decode_macro
+                    out.append(decode_macro(self.vae, code).program)
+                else:
+                    out.append(decode_latent(self.vae.decoder, code, reject=False).program)
             except ValueError:
                 out.append(None)
         return out
@@ -266,7 +335,7 @@ class _CloudModule(L.LightningModule):
             self.encoder.train(was)
         n, seed = self.hparams.recon_points, self.hparams.seed
         if self._recon_targets is None or len(self._recon_targets) != len(trees):
-            self._recon_targets = target_surfaces(trees, n, seed)
+            self._recon_targets = target_surfaces(trees, n, seed, self.layout)
         scores = reconstruction_fscores(trees, programs, n, seed, targets=self._recon_targets)
         self.log("val/fscore", float(np.mean([s or 0.0 for s in scores])), sync_dist=True, prog_bar=True)
         self.log("val/recon_failed", sum(s is None for s in scores) / len(scores), sync_dist=True)
@@ -314,6 +383,9 @@ class LatentRegressionModule(_CloudModule):
                  image_shapes: int = 8, image_size: int = 128, seed: int = 0):
         super().__init__(category, vae_weights, npoints, radii, nsamples, widths, lr, weight_decay,
                          recon_every_n_epochs, recon_shapes, recon_points, image_shapes, image_size, seed)
+        if self.layout is not None:
+            raise ValueError(f"{vae_weights}: a macro-program VAE; the latent recipe is built for the base "
+                             f"language (train macro programs end to end: EndToEndModule with macros=True)")
         self.save_hyperparameters()
         self.vae.eval()
         self.vae.requires_grad_(False)
@@ -348,7 +420,11 @@ class EndToEndModule(_CloudModule):
         init_encoder: a point-cloud weights file (:func:`export_weights`, e.g. the shipped latent-regression
             model ``shapeprog/weights/pointcloud_latent_<category>.pt``) to start the encoder from; its
             category, latent size and encoder sizes must equal this run's. None (the paper): from scratch.
-        loss_weights: weights by term name that replace those of :data:`~shapeprog.vae.losses.LOSS_WEIGHTS`.
+        loss_weights: weights by term name that replace those of :data:`~shapeprog.vae.losses.LOSS_WEIGHTS`
+            (:data:`~shapeprog.vae.losses.MACRO_LOSS_WEIGHTS` for a macro-program decoder).
+        macros: decode macro programs: the decoder is the shipped macro-program VAE's of the category
+            (:data:`shapeprog.vae.pretrained.PRETRAINED_MACROS`) unless ``vae_weights`` names one; the data
+            module's ``library`` must be its library.
     """
 
     recipe = "e2e"
@@ -358,19 +434,21 @@ class EndToEndModule(_CloudModule):
                  widths: Sequence[Sequence[int]] = WIDTHS, lr: float = 1e-4, weight_decay: float = 0.0,
                  init_decoder: bool = True, init_encoder: Optional[str] = None, loss_weights: Optional[dict] = None,
                  recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 2048,
-                 image_shapes: int = 8, image_size: int = 128, seed: int = 0):
-        unknown = sorted(set(loss_weights or {}) - set(LOSS_WEIGHTS))
-        if unknown:
-            raise ValueError(f"unknown loss term(s) {unknown}; the terms are {', '.join(LOSS_WEIGHTS)}")
+                 image_shapes: int = 8, image_size: int = 128, seed: int = 0, macros: bool = False):
         super().__init__(category, vae_weights, npoints, radii, nsamples, widths, lr, weight_decay,
-                         recon_every_n_epochs, recon_shapes, recon_points, image_shapes, image_size, seed)
+                         recon_every_n_epochs, recon_shapes, recon_points, image_shapes, image_size, seed, macros)
+        base = LOSS_WEIGHTS if self.layout is None else MACRO_LOSS_WEIGHTS
+        unknown = sorted(set(loss_weights or {}) - set(base))
+        if unknown:
+            raise ValueError(f"unknown loss term(s) {unknown}; the terms are {', '.join(base)}")
         self.save_hyperparameters()
         if not init_decoder:
-            self.vae = VAE(self.vae.decoder.hidden_dim)
+            hidden = self.vae.decoder.hidden_dim
+            self.vae = VAE(hidden) if self.layout is None else MacroVAE(self.layout, hidden)
         self.vae.encoder.requires_grad_(False)
         if init_encoder is not None:
             self._init_encoder(init_encoder)
-        self.weights = {**LOSS_WEIGHTS, **(loss_weights or {})}
+        self.weights = {**base, **(loss_weights or {})}
 
     def _init_encoder(self, path) -> None:
         start = load_encoder(path, category=self.hparams.category)
@@ -379,10 +457,25 @@ class EndToEndModule(_CloudModule):
         self.encoder.load_state_dict(start.state_dict())
 
     def losses(self, z: torch.Tensor, trees: TreeBatch) -> tuple[torch.Tensor, dict]:
+        if self.layout is not None:
+            return self._macro_losses(z, trees)
         lines, leaf = decode_batch(self.vae.decoder, trees, z)
         out = BatchOutput(lines, leaf, self.vae.decoder.bbox(z), z, torch.zeros_like(z), z)
         total, terms = batch_loss(out, trees, self.weights, kl=False)
         return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
+
+    def _macro_losses(self, z: torch.Tensor, trees: MacroTreeBatch) -> tuple[torch.Tensor, dict]:
+        """:func:`~shapeprog.vae.losses.macro_program_loss` (no KL) of each tree decoded teacher-forced from its
+        cloud's code, averaged over the batch (the macro decoder runs tree by tree)."""
+        dec = self.vae.decoder
+        totals, terms = [], {}
+        for code, tree in zip(z, trees.trees):
+            out = VAEOutput(dec.teacher_forced(tree, code), dec.bbox(code), code, torch.zeros_like(code), code)
+            total, t = macro_program_loss(out, tree, self.layout, self.weights, kl=False)
+            totals.append(total)
+            for k, v in t.items():
+                terms.setdefault(k, []).append(v)
+        return torch.stack(totals).mean(), {k: torch.stack(v).mean() for k, v in terms.items() if k != "kl"}
 
 
 # ------------------------------------------------------------------------------------------ export
@@ -418,6 +511,8 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
                      **(meta or {})}}
     if info["recipe"] == "e2e":
         body["decoder"] = part("vae.decoder.")
+    if info.get("library") is not None:
+        body["library"] = info["library"]
     return atomic_write(out, lambda f: torch.save(body, f), mkdir=True)
 
 

@@ -28,7 +28,7 @@ from shapeio import atomic_write
 
 from .model import VAE
 
-__all__ = ["FORMAT", "PRETRAINED", "VERSION", "WEIGHTS", "export_weights", "load_model", "load_pretrained",
+__all__ = ["FORMAT", "PRETRAINED", "PRETRAINED_MACROS", "VERSION", "WEIGHTS", "export_weights", "load_model", "load_pretrained",
            "read_weights", "save_weights"]
 
 FORMAT = "shapeprog-vae"
@@ -36,6 +36,8 @@ VERSION = 1
 WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
 # category -> file shipped under shapeprog/weights (docs/benchmarks.md names the command that trained each)
 PRETRAINED = {"chair": "vae_chair.pt", "table": "vae_table.pt", "storage": "vae_storage.pt"}
+# category -> the shipped VAE on macro programs calling the shipped ShapeMOD library of the category
+PRETRAINED_MACROS = {"chair": "vae_chair_macros.pt"}
 CHECKPOINT_PREFIX = "vae."  # the LightningModule's attribute holding the VAE
 
 
@@ -138,11 +140,15 @@ def export_weights(checkpoint, out, half: bool = True, meta: dict | None = None)
     return save_weights(vae, out, vae.category, {**vae.meta, **(meta or {})}, half)
 
 
-def load_pretrained(category: str = "chair", device=None) -> VAE:
-    """The model shipped with the package for ``category`` ('chair', 'table' or 'storage')."""
-    if category not in PRETRAINED:
-        raise ValueError(f"category must be one of {', '.join(PRETRAINED)}, got {category!r}")
-    path = WEIGHTS / PRETRAINED[category]
+def load_pretrained(category: str = "chair", device=None, macros: bool = False) -> VAE:
+    """The model shipped with the package for ``category`` ('chair', 'table' or 'storage'); with ``macros``
+    the :class:`~shapeprog.vae.macro_model.MacroVAE` on the category's macro programs
+    (:data:`PRETRAINED_MACROS`: chairs only so far)."""
+    shipped = PRETRAINED_MACROS if macros else PRETRAINED
+    if category not in shipped:
+        kind = "macro-program VAE" if macros else "VAE"
+        raise ValueError(f"no shipped {kind} for category {category!r}; shipped: {', '.join(shipped)}")
+    path = WEIGHTS / shipped[category]
     if not path.is_file():
         raise FileNotFoundError(f"the shipped {category} VAE weights {path} are missing from this installation")
     return load_model(path, category=category, device=device)

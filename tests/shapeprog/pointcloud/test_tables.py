@@ -63,6 +63,12 @@ def test_evaluate_and_write_both_layouts(tmp_path):
     assert "ShapeMOD Table 3 layout" in text and "ShapeAssembly Table 7 layout" in text
     assert "| ShapeMOD paper, No Macros | 44.2 | 54.8 | 93.7 | 83.6 |" in text
     assert "Nearest training shape (retrieval)" in text
+    assert res.settings["macros"] is False and "ShapeMOD (macros)" not in text
+    # a model of macro programs labels its rows and shows the paper's ShapeMOD row beside them
+    res.settings["macros"] = True
+    text = write_tables(res, tmp_path / "m.md").read_text()
+    assert "| ShapeMOD paper, ShapeMOD (macros) | 41.7 | 56.1 | 96.9 | 88.0 |" in text
+    assert "| Ours, ShapeMOD macros: PointNet++" in text and "| Ours: PointNet++" not in text
     assert main(["pointcloud-tables", "--clouds", str(tmp_path / "c"), "--weights", str(w), "--limit", "1",
                  "--steps", "1", "--no-stability", "--no-retrieval", "--quiet", "--out", str(tmp_path / "t2.md")]) == 0
     assert "--limit 1" in (tmp_path / "t2.md").read_text()

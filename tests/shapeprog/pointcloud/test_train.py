@@ -7,11 +7,13 @@ import torch
 
 import train as train_cli
 from csgnet.train.checkpoint import AtomicCheckpointIO
+from shapeprog.lang import to_text
 from shapeprog.pointcloud.data import corpus_splits, make_clouds
 from shapeprog.pointcloud.infer import load_model
 from shapeprog.pointcloud.train import CloudDataModule, EndToEndModule, LatentRegressionModule, export_weights
-from shapeprog.vae.batch import TreeBatch
-from shapeprog.vae.losses import program_loss
+from shapeprog.vae.batch import MacroTreeBatch, TreeBatch
+from shapeprog.vae.losses import macro_program_loss, program_loss
+from shapeprog.vae.macro_model import MacroVAE
 from shapeprog.vae.model import VAEOutput
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -183,7 +185,81 @@ def test_categories_must_agree(clouds, tmp_path):
 def test_every_config_parses_and_builds(config, tmp_path):
     cli = train_cli.main(["--config", str(config), "--data.root", str(tmp_path),
                           "--trainer.logger.init_args.save_dir", str(tmp_path)], run=False)
-    recipe, category = config.stem.split("_")
+    recipe, category, *macros = config.stem.split("_")
     assert cli.model.recipe == recipe and cli.model.hparams.category == category == cli.datamodule.category
     assert cli.model.encoder.config["out_dim"] == cli.model.vae.decoder.hidden_dim == 256
-    assert len(CONFIGS) == 6
+    assert isinstance(cli.model.vae, MacroVAE) == (macros == ["macros"])
+    assert cli.datamodule.library == (category if macros else None)
+    assert len(CONFIGS) == 7
+
+
+# ------------------------------------------------------------------ macro programs (ShapeMOD's Table 3)
+
+
+def test_macro_end_to_end_loss_is_the_macro_program_loss_of_the_cloud_code(clouds):
+    dm = _data(clouds, library="chair")
+    dm.setup("fit")
+    assert len(dm.train_set) == 6 and len(dm.val_set) == 2  # every carved shape has its macro program
+    batch = next(iter(dm.val_dataloader()))
+    assert isinstance(batch["trees"], MacroTreeBatch)
+    m = _module(EndToEndModule, macros=True)
+    assert isinstance(m.vae, MacroVAE) and m.library_text() == m.vae.layout.library.to_text()
+    z = torch.randn(batch["trees"].size, 256)
+    loss, terms = m.losses(z, batch["trees"])
+    ref = []
+    for zi, tree in zip(z, batch["trees"].trees):
+        out = VAEOutput(m.vae.decoder.teacher_forced(tree, zi), m.vae.decoder.bbox(zi), zi, zi * 0, zi)
+        ref.append(macro_program_loss(out, tree, m.layout, m.weights, kl=False)[0])
+    assert torch.allclose(loss, torch.stack(ref).mean(), rtol=1e-4)
+    assert "kl" not in terms and "cmd" in terms
+    # the gradient reaches the encoder through the code
+    m.losses(m.code(batch["points"]), batch["trees"])[0].backward()
+    assert m.encoder.fc.weight.grad is not None and m.encoder.fc.weight.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match="unknown loss term"):
+        _module(EndToEndModule, macros=True, loss_weights={"sym_cub": 1.0})
+    with pytest.raises(ValueError, match="latent recipe is built for the base language"):
+        _module(LatentRegressionModule, vae_weights=str(ROOT / "shapeprog" / "weights" / "vae_chair_macros.pt"))
+    with pytest.raises(ValueError, match="macros=True needs a VAE trained on macro programs"):
+        _module(EndToEndModule, macros=True, vae_weights=str(ROOT / "shapeprog" / "weights" / "vae_chair.pt"))
+
+
+def test_macro_model_trains_exports_and_infers_macro_programs(clouds, tmp_path):
+    L.seed_everything(0)
+    m = _module(EndToEndModule, macros=True)
+    # a data module serving other programs than the decoder writes is refused
+    with pytest.raises(ValueError, match="set data.init_args.library"):
+        _trainer(tmp_path / "x", 1).fit(_module(EndToEndModule, macros=True), datamodule=_data(clouds))
+    _trainer(tmp_path, 1).fit(m, datamodule=_data(clouds, library="chair"))
+    last = tmp_path / "ck" / "last.ckpt"
+    # a base-language run does not resume from it
+    with pytest.raises(ValueError, match="checkpoint is of a model"):
+        _trainer(tmp_path / "o", 2).fit(_module(EndToEndModule), datamodule=_data(clouds), ckpt_path=str(last))
+    path = export_weights(last, tmp_path / "w.pt", half=False)
+    model = load_model(path, "chair")
+    assert model.layout is not None and model.layout.library.to_text() == m.library_text()
+    x = torch.rand(2, 64, 3) - 0.5
+    m.eval()
+    with torch.no_grad():
+        assert torch.allclose(model.codes(x), m.encoder(x), atol=1e-5)
+        for name, value in m.vae.decoder.state_dict().items():
+            assert torch.equal(model.vae.decoder.state_dict()[name], value), name
+    codes = model.codes(x)
+    decoded = model.decode_macros(codes)
+    programs = model.decode(codes)
+    for d, prog in zip(decoded, programs):
+        assert (d is None) == (prog is None)
+        if d is not None:  # the expansion is what decode gives; the macro text calls the library
+            assert to_text(d.program) == to_text(prog)
+    from shapeprog.pointcloud import infer
+    from shapeprog.pointcloud.data import corpus_cloud
+    cloud = corpus_cloud("chair", SPLITS["val"][0], n_points=500)
+    try:
+        r = infer(cloud * 3.0 + 1.0, model=model, physics=False)
+    except ValueError as e:  # a one-epoch model may decode nothing; it must say so
+        assert "decoded no shape" in str(e)
+    else:
+        assert r.macro_text is not None and r.macro_text.strip()
+        text = infer(cloud, "chair", physics=False).macro_text  # the shipped base model writes no macros
+        assert text is None
+    with pytest.raises(ValueError, match="not macro programs"):
+        load_model(ROOT / "shapeprog" / "weights" / "pointcloud_e2e_chair.pt").decode_macros(codes)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from shapeprog.macros import load_library
 from shapeprog.vae import VAE
 from shapeprog.vae.pretrained import (FORMAT, VERSION, export_weights, load_model, load_pretrained, read_weights,
                                       save_weights)
@@ -62,8 +63,12 @@ def test_refusals_name_the_file(vae, tmp_path):
         read_weights(tmp_path / "csg.ckpt")
     with pytest.raises(FileNotFoundError, match="no such weights file"):
         read_weights(tmp_path / "missing.pt")
-    with pytest.raises(ValueError, match="category must be one of chair, table, storage"):
+    with pytest.raises(ValueError, match="no shipped VAE for category 'lamp'; shipped: chair, table, storage"):
         load_pretrained("lamp")
+    with pytest.raises(ValueError, match="no shipped macro-program VAE for category 'table'; shipped: chair"):
+        load_pretrained("table", macros=True)
+    macro = load_pretrained("chair", macros=True)
+    assert macro.category == "chair" and macro.layout.library.to_text() == load_library("chair").to_text()
 
 
 @pytest.mark.parametrize("category", ["chair", "table", "storage"])
