@@ -625,7 +625,11 @@ def _cmd_abstract_infer(args) -> int:
         shape = data.parse_record(text[0], spec, 1).prims
     else:
         shape = spec
-    r = infer(shape, lib)
+    try:
+        r = infer(shape, lib, passes=args.passes, iterations=args.iterations, max_nodes=args.max_nodes,
+                  time_limit=args.time_limit)
+    except ValueError as e:
+        raise SystemExit(f"error: {args.shape}: {e}") from None
     print(f"program:  {r.text}\nexpanded: {r.expanded}\ncost: {r.cost:.2f}  error: {r.error:.4f}  e-graph: {r.stop}")
     return 0
 
@@ -1055,6 +1059,15 @@ def main(argv=None) -> int:
     a.add_argument("shape", help="a PN_<category>.txt line, a file with one such line, or <category>/<line number> "
                                  "of the vendored data (e.g. chair/401)")
     a.add_argument("--library", required=True, help="a shipped category (chair) or a library.txt file")
+    from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
+    a.add_argument("--iterations", type=int, default=MAX_ITERATIONS,
+                   help=f"e-graph iterations per refactor call (default {MAX_ITERATIONS}, the paper's)")
+    a.add_argument("--max-nodes", type=int, default=MAX_ENODES,
+                   help=f"e-node limit per refactor call (default {MAX_ENODES}, the paper's); larger limits find "
+                        f"cheaper programs at more time (docs/shapecoder.md)")
+    a.add_argument("--time-limit", type=float, default=TIME_LIMIT,
+                   help=f"seconds per refactor call (default {TIME_LIMIT:g}, the paper's)")
+    a.add_argument("--passes", type=int, default=3, help="refactor calls at most, each on the previous result")
     a.set_defaults(func=_cmd_abstract_infer)
     d = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",
                        description="Serve an editor page for a program: the shape in 3D, one control per free "

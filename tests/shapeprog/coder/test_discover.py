@@ -118,6 +118,13 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
     assert main(["abstract-infer", "chair/401", "--library", str(lib)]) == 0
     out = capsys.readouterr().out
     assert out.startswith("program:") and "expanded:" in out and "cost:" in out
+    cost = lambda text: float(text.split("cost: ")[1].split()[0])  # noqa: E731
+    # larger e-graph limits (ours) grow the same e-graph further: the program is never dearer
+    assert main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "8", "--max-nodes",
+                 "40000", "--time-limit", "30"]) == 0
+    assert cost(capsys.readouterr().out) <= cost(out) + 1e-9
+    with pytest.raises(SystemExit, match="chair/401: iterations must be an int"):
+        main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "-1"])
     bad = tmp_path / "bad.txt"
     bad.write_text("Legs(w: Float) = Cubiod(w,w,w)\n")
     assert main(["abstract-infer", "chair/401", "--library", str(bad)]) == 2
