@@ -590,7 +590,8 @@ def _cmd_discover_abstractions(args) -> int:
     cfg = Config(rounds=args.rounds, n_proposals=args.proposals, n_abstractions=args.abstractions, seed=args.seed,
                  wake=args.wake, n_dreams=args.dreams, train_seconds=60.0 * args.train_minutes,
                  train_epochs=args.train_epochs, train_lr=args.train_lr, dropout=args.dropout,
-                 wake_seconds=args.wake_seconds, device=args.device)
+                 wake_seconds=args.wake_seconds, device=args.device, iterations=args.iterations,
+                 max_nodes=args.max_nodes, time_limit=args.time_limit)
     t0 = time.time()
     res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress)
     s = res.summary()
@@ -1051,6 +1052,14 @@ def main(argv=None) -> int:
     d.add_argument("--wake-seconds", type=float, default=1.0,
                    help="network wake: seconds of sampling per search step (1)")
     d.add_argument("--device", default="auto", help="network wake: where to train (auto: CUDA when available)")
+    from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
+    d.add_argument("--iterations", type=_int_at_least(1), default=MAX_ITERATIONS,
+                   help=f"e-graph iterations per refactor call (paper: {MAX_ITERATIONS})")
+    d.add_argument("--max-nodes", type=_int_at_least(1), default=MAX_ENODES,
+                   help=f"e-node limit per refactor call (paper: {MAX_ENODES}); larger e-graphs find cheaper "
+                        f"programs at more time (docs/shapecoder.md)")
+    d.add_argument("--time-limit", type=float, default=TIME_LIMIT,
+                   help=f"seconds per refactor call (paper: {TIME_LIMIT:g})")
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     d.set_defaults(func=_cmd_discover_abstractions)
     a = sub.add_parser("abstract-infer", help="ShapeCoder: infer one shape's program with a discovered library",

@@ -668,7 +668,8 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     s = result.summary()
     last = result.log[-1] if result.log else {"round": 0, "phase": "none", "seconds": 0}
     header = (f"# ShapeCoder library discovered on the first {len(recs)} {category} shapes: rounds={cfg.rounds}, "
-              f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, seed={cfg.seed}; last finished phase: "
+              f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, seed={cfg.seed}, e-graph limits "
+              f"{cfg.iterations} iterations / {cfg.max_nodes} e-nodes / {cfg.time_limit:g} s; last finished phase: "
               f"round {last['round']} {last['phase']} after {last['seconds']:.0f} s; F={s.F:.2f}, |L|={s.library_size}\n")
     write_outputs(out, result, [r.key for r in recs], header)
     return result
