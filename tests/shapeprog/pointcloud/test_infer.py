@@ -157,11 +157,31 @@ def test_each_shipped_model_loads_safely_and_infers(name):
     from shapeprog import corpus
     payload = torch.load(WEIGHTS / name, weights_only=True)
     category, recipe = payload["category"], payload["recipe"]
-    assert name == f"pointcloud_{recipe}_{category}.pt" and ("decoder" in payload) == (recipe == "e2e")
+    macros = "library" in payload
+    assert name == f"pointcloud_{recipe}_{category}{'_macros' if macros else ''}.pt"
+    assert ("decoder" in payload) == (recipe == "e2e")
     shape = CHAIR if category == "chair" else corpus.ids(category, "val")[0]
     model = load_model(WEIGHTS / name, category)
     r = infer(corpus_cloud(category, shape, n_points=3000), category, model=model, physics=False)
     assert r.text.startswith("Assembly Program_0 {") and 0.0 <= r.metrics["fscore"] <= 100.0
+    assert (r.macro_text is not None) == macros
+    if macros:  # the shipped macro model writes calls of the shipped ShapeMOD library of its category
+        from shapeprog.macros import load_library
+        assert model.layout.library.to_text() == load_library(category).to_text()
+        assert any(f"{m.name}(" in r.macro_text for m in load_library(category).macros)
+
+
+def test_cli_writes_the_macro_program_of_a_macro_model(tmp_path, capsys):
+    src = tmp_path / "comp_pc.npy"
+    np.save(src, corpus.example_points("comp_pc.obj"))
+    out = tmp_path / "out"
+    assert main(["infer", str(src), "--weights", str(WEIGHTS / "pointcloud_e2e_chair_macros.pt"), "--out", str(out),
+                 "--no-stability"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["comp_pc.json", "comp_pc.obj", "comp_pc.png", "comp_pc.txt",
+                                                     "comp_pc_macros.txt"]
+    assert "the decoded macro program" in capsys.readouterr().out
+    parse((out / "comp_pc.txt").read_text())
+    assert (out / "comp_pc_macros.txt").read_text().strip()
 
 
 def test_a_z_up_cloud_gives_the_same_program_in_its_own_frame(model):
