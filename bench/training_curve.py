@@ -1,7 +1,8 @@
 """Print a training run's validation curve (per epoch) from its TensorBoard event files, as markdown.
 
 Every run of ``train.py`` alike: supervised runs and REINFORCE runs (validation reward, and the policy
-entropy per counted step of the last training step logged). Below each table: the learning-rate
+entropy per counted step of the last training step logged), and the VAE and point-cloud runs (``val/mse``,
+``val/fscore``; "-" where a validation did not compute a column). Below each table: the learning-rate
 changes (when a ``LearningRateMonitor`` logged them) and the first and last logged policy entropy.
 
     python bench/training_curve.py runs/csgnet2d_small/version_0
@@ -21,7 +22,7 @@ def curve(run: Path, every: int = 1) -> str:
     ea.Reload()
     tags = ea.Tags()["scalars"]
     epochs = {e.step: int(e.value) for e in ea.Scalars("epoch")} if "epoch" in tags else {}
-    cols = [t for t in ("val/loss", "val/reward", "val/iou", "val/chamfer", "val/valid") if t in tags]
+    cols = [t for t in ("val/loss", "val/reward", "val/iou", "val/chamfer", "val/valid", "val/mse", "val/fscore") if t in tags]
     train = ea.Scalars("train/loss") if "train/loss" in tags else []
     entropy = ea.Scalars("train/entropy") if "train/entropy" in tags else []
     rows = {}
@@ -45,7 +46,7 @@ def curve(run: Path, every: int = 1) -> str:
         ent = [f"{seen[-1] if seen else float('nan'):.3f}"] if entropy else []
         lines.append(f"| {epochs.get(step, '')} | {step + 1} | {(r['wall'] - t0) / 60:.1f} | "
                      f"{tl[-1] if tl else float('nan'):.3f} | "
-                     + " | ".join(ent + [f"{r.get(t, float('nan')):.4f}" for t in cols]) + " |")
+                     + " | ".join(ent + [f"{r[t]:.4f}" if t in r else "-" for t in cols]) + " |")
     lines += _schedule(ea, tags, entropy)
     return "\n".join(lines)
 
