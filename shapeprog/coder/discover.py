@@ -571,6 +571,11 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
         hist, weights, index = st["log"], st["weights"], st["index"]
         stores = st.get("stores")
         log(f"resume at round {rnd}, phase {phase}")
+        before = st.get("config") or {}
+        changed = {k: (before[k], v) for k, v in asdict(cfg).items() if k in before and before[k] != v}
+        if changed:  # allowed (e.g. more rounds, larger e-graphs for the later rounds), but said
+            log("resumed with other settings than the saved state's: "
+                + ", ".join(f"{k} {a!r} -> {b!r}" for k, (a, b) in sorted(changed.items())))
         if hist:
             t0 -= hist[-1]["seconds"]  # the log's seconds count the time of every session
     if len(weights) != len(shapes):

@@ -1,5 +1,6 @@
 """Proposal, integration and the discovery loop on a synthetic collection with a planted structure; post hoc
 inference and the shipped libraries."""
+import dataclasses
 import json
 import random
 
@@ -68,6 +69,10 @@ def test_discovery_finds_and_uses_a_planted_structure(tmp_path):
     assert state["phase"] == "done" and state["library"] == res.library.to_text()
     again = discover(shapes, cfg, out=tmp_path, log=None)
     assert again.library == res.library and again.programs == res.programs
+    # resuming with other settings is allowed and said
+    lines = []
+    discover(shapes, dataclasses.replace(cfg, max_nodes=20_000), out=tmp_path, log=lines.append)
+    assert any("max_nodes 10000 -> 20000" in line for line in lines), lines
     # deterministic under the seed
     other = discover(shapes, cfg, log=None)
     assert other.library.to_text() == res.library.to_text() and other.programs == res.programs
