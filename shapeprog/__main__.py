@@ -237,7 +237,7 @@ def _cmd_infer(args) -> int:
     record = {"input": str(src), "category": args.category if model is None else model.category,
               "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
-              "before_fit": r.before, "search": r.search, "seconds": r.seconds,
+              "before_fit": r.before, "search": r.search, "seconds": r.seconds, "macro_text": r.macro_text,
               "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
                       "canonical units (bounding-box diagonal 2)"}
     atomic_write(files["json"], json.dumps(record, indent=1) + "\n")
@@ -629,6 +629,8 @@ def _cmd_abstract_infer(args) -> int:
     try:
         r = infer(shape, lib, passes=args.passes, iterations=args.iterations, max_nodes=args.max_nodes,
                   time_limit=args.time_limit)
+    except ParseError:
+        raise  # located in the shape's text; main reports it
     except ValueError as e:
         raise SystemExit(f"error: {args.shape}: {e}") from None
     print(f"program:  {r.text}\nexpanded: {r.expanded}\ncost: {r.cost:.2f}  error: {r.error:.4f}  e-graph: {r.stop}")

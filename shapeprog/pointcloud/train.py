@@ -14,7 +14,8 @@ VAE's decoder (:mod:`shapeprog.vae`):
 
 **Macro programs (ShapeMOD's point-cloud experiment).** With ``macros=True`` (or ``vae_weights`` naming a
 macro-program VAE, :class:`~shapeprog.vae.macro_model.MacroVAE`) the decoder writes programs that call the
-category's ShapeMOD library; the data module then takes the same ``library`` and serves each cloud's program
+VAE's macro library (the category's shipped ShapeMOD library for the shipped VAE); the data module's
+``library`` must be set to the same library (checked at setup), and it serves each cloud's program
 from the macro-refactored corpus (:func:`shapeprog.macros.load_refactored`), and the loss is
 :func:`~shapeprog.vae.losses.macro_program_loss` without KL. Decoded macro programs are expanded and executed
 for the F-score and the pictures. ``configs/pointcloud/e2e_chair_macros.yaml``.
@@ -182,15 +183,19 @@ class CloudDataModule(L.LightningDataModule):
         return DataLoader(self.val_set, batch_size=self.batch_size, shuffle=False, collate_fn=self._collate(),
                           num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
 
+    def _library_text(self) -> Optional[str]:
+        return None if self.library is None else (self.layout.library.to_text() if self.layout is not None
+                                                  else load_macro_library(self.library).to_text())
+
     def state_dict(self) -> dict:
-        return {"category": self.category, "library": self.library, "val": None if self.val_set is None else
-                [int(i) for i in self.val_set.clouds.ids]}
+        return {"category": self.category, "library": self.library, "library_text": self._library_text(),
+                "val": None if self.val_set is None else [int(i) for i in self.val_set.clouds.ids]}
 
     def load_state_dict(self, state: dict) -> None:
         """Refuse to resume a run that validated on other shapes."""
-        if state.get("library", self.library) != self.library:
+        if state.get("library_text", self._library_text()) != self._library_text():  # the same library, by text
             raise ValueError(f"the checkpoint's run trained on programs of library {state.get('library')!r}, this "
-                             f"one on {self.library!r}")
+                             f"one on {self.library!r}, and the two differ")
         mine = None if self.val_set is None else [int(i) for i in self.val_set.clouds.ids]
         if mine is not None and state.get("val") is not None and state["val"] != mine:
             raise ValueError(f"the checkpoint's run validated on other {state.get('category')} shapes "
@@ -235,10 +240,10 @@ class _CloudModule(L.LightningModule):
             theirs = None if dm.library is None else load_macro_library(dm.library).to_text()
             if theirs != self.library_text():
                 mine = "a base-language decoder" if self.layout is None else "a macro-program decoder"
-                raise ValueError(f"the model has {mine} and the data module serves "
-                                 f"{'ShapeAssembly programs' if dm.library is None else 'macro programs of library ' + repr(dm.library)}"
-                                 f" of another library; set data.init_args.library to the decoder's library "
-                                 f"(None for the base language)")
+                served = ("ShapeAssembly programs" if dm.library is None
+                          else f"macro programs of library {dm.library!r}, not the decoder's")
+                raise ValueError(f"the model has {mine} and the data module serves {served}; set "
+                                 f"data.init_args.library to the decoder's library (None for the base language)")
 
     def library_text(self) -> Optional[str]:
         """The macro library's text of a macro-program decoder; None for the base language."""
@@ -411,7 +416,8 @@ class EndToEndModule(_CloudModule):
     """The ShapeMOD recipe: encoder and VAE decoder trained together on the VAE's program losses.
 
     The encoder's code is the decoder's latent; the loss is :func:`~shapeprog.vae.batch.batch_loss` without
-    the KL term (mean over the clouds). The VAE's encoder is not used (and not trained).
+    the KL term (mean over the clouds), or :func:`~shapeprog.vae.losses.macro_program_loss` without KL for a
+    macro-program decoder. The VAE's encoder is not used (and not trained).
 
     Args:
         category, vae_weights, npoints, radii, nsamples, widths, lr, weight_decay, recon_every_n_epochs,

@@ -69,6 +69,9 @@ def test_discovery_finds_and_uses_a_planted_structure(tmp_path):
     assert state["phase"] == "done" and state["library"] == res.library.to_text()
     again = discover(shapes, cfg, out=tmp_path, log=None)
     assert again.library == res.library and again.programs == res.programs
+    # bad e-graph limits are refused when the settings are made, not in a worker
+    with pytest.raises(ValueError, match="time_limit must be seconds"):
+        Config(time_limit=0.0)
     # resuming with other settings is allowed and said
     lines = []
     discover(shapes, dataclasses.replace(cfg, max_nodes=20_000), out=tmp_path, log=lines.append)
@@ -124,7 +127,7 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
     out = capsys.readouterr().out
     assert out.startswith("program:") and "expanded:" in out and "cost:" in out
     cost = lambda text: float(text.split("cost: ")[1].split()[0])  # noqa: E731
-    # larger e-graph limits (ours) grow the same e-graph further: the program is never dearer
+    # larger e-graph limits (ours) grow the same e-graph further; on this shape the program is no dearer
     assert main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "8", "--max-nodes",
                  "40000", "--time-limit", "30"]) == 0
     assert cost(capsys.readouterr().out) <= cost(out) + 1e-9
