@@ -45,12 +45,13 @@ from torch.utils.data import DataLoader, Dataset
 from shapeio import atomic_write
 
 from ..picture import render_grid
-from ..vae.batch import BatchOutput, MacroTreeBatch, TreeBatch, batch_loss, decode_batch, encode_batch
+from ..vae.batch import (BatchOutput, MacroTreeBatch, TreeBatch, batch_loss, decode_batch, encode_batch,
+                         macro_batch_loss)
 from ..vae.decode import decode_latent
 from ..vae.layout import LineLayout
-from ..vae.losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS, macro_program_loss
+from ..vae.losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
 from ..vae.macro_model import MacroVAE
-from ..vae.model import VAE, VAEOutput
+from ..vae.model import VAE
 from ..vae.pretrained import load_model, load_pretrained
 from ..vae.train import (_corners, _read_macro_programs, check_data_category, load_macro_library, load_macro_trees,
                          load_trees, reconstruction_fscores, target_surfaces)
@@ -471,17 +472,10 @@ class EndToEndModule(_CloudModule):
         return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
 
     def _macro_losses(self, z: torch.Tensor, trees: MacroTreeBatch) -> tuple[torch.Tensor, dict]:
-        """:func:`~shapeprog.vae.losses.macro_program_loss` (no KL) of each tree decoded teacher-forced from its
-        cloud's code, averaged over the batch (the macro decoder runs tree by tree)."""
-        dec = self.vae.decoder
-        totals, terms = [], {}
-        for code, tree in zip(z, trees.trees):
-            out = VAEOutput(dec.teacher_forced(tree, code), dec.bbox(code), code, torch.zeros_like(code), code)
-            total, t = macro_program_loss(out, tree, self.layout, self.weights, kl=False)
-            totals.append(total)
-            for k, v in t.items():
-                terms.setdefault(k, []).append(v)
-        return torch.stack(totals).mean(), {k: torch.stack(v).mean() for k, v in terms.items() if k != "kl"}
+        """:func:`~shapeprog.vae.batch.macro_batch_loss` (no KL) of the trees decoded teacher-forced from their
+        clouds' codes, averaged over the batch (the macro decoder runs tree by tree)."""
+        total, terms = macro_batch_loss(self.vae, trees, weights=self.weights, kl=False, codes=z)
+        return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
 
 
 # ------------------------------------------------------------------------------------------ export

@@ -459,15 +459,27 @@ def collate_macro_trees(trees: list) -> MacroTreeBatch:
 
 
 def macro_batch_loss(vae, batch: MacroTreeBatch, sample: bool = True, weights: Mapping[str, float] | None = None,
-                     kl: bool = True, generator: torch.Generator | None = None
+                     kl: bool = True, generator: torch.Generator | None = None, codes: torch.Tensor | None = None
                      ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """``(total (B,), terms {name: (B,)})``: :func:`~shapeprog.vae.losses.macro_program_loss` of each tree of
-    the batch under ``vae`` (a :class:`~shapeprog.vae.macro_model.MacroVAE`), z sampled when ``sample``."""
+    the batch under ``vae`` (a :class:`~shapeprog.vae.macro_model.MacroVAE`), z sampled when ``sample``.
+
+    With ``codes`` (B, H) each tree is decoded teacher-forced from its row instead of its own encoding (a
+    point-cloud encoder's codes, :mod:`shapeprog.pointcloud.train`); there is no posterior then, so ``kl``
+    must be False.
+    """
     from .losses import macro_program_loss
 
+    if codes is not None and kl:
+        raise ValueError("codes given: there is no posterior to take a KL term of; pass kl=False")
     totals, terms = [], {}
-    for tree in batch.trees:
-        total, t = macro_program_loss(vae(tree, sample=sample, generator=generator), tree, vae.layout, weights, kl)
+    for i, tree in enumerate(batch.trees):
+        if codes is None:
+            out = vae(tree, sample=sample, generator=generator)
+        else:
+            z = codes[i]
+            out = VAEOutput(vae.decoder.teacher_forced(tree, z), vae.decoder.bbox(z), z, torch.zeros_like(z), z)
+        total, t = macro_program_loss(out, tree, vae.layout, weights, kl)
         totals.append(total)
         for k, v in t.items():
             terms.setdefault(k, []).append(v)

@@ -11,7 +11,7 @@ from shapeprog.lang import to_text
 from shapeprog.pointcloud.data import corpus_splits, make_clouds
 from shapeprog.pointcloud.infer import load_model
 from shapeprog.pointcloud.train import CloudDataModule, EndToEndModule, LatentRegressionModule, export_weights
-from shapeprog.vae.batch import MacroTreeBatch, TreeBatch
+from shapeprog.vae.batch import MacroTreeBatch, TreeBatch, macro_batch_loss
 from shapeprog.vae.losses import macro_program_loss, program_loss
 from shapeprog.vae.macro_model import MacroVAE
 from shapeprog.vae.model import VAEOutput
@@ -224,6 +224,8 @@ def test_macro_end_to_end_loss_is_the_macro_program_loss_of_the_cloud_code(cloud
         ref.append(macro_program_loss(out, tree, m.layout, m.weights, kl=False)[0])
     assert torch.allclose(loss, torch.stack(ref).mean(), rtol=1e-4)
     assert "kl" not in terms and "cmd" in terms
+    with pytest.raises(ValueError, match="no posterior"):  # codes from elsewhere have no KL term
+        macro_batch_loss(m.vae, batch["trees"], codes=z)
     # the gradient reaches the encoder through the code
     m.losses(m.code(batch["points"]), batch["trees"])[0].backward()
     assert m.encoder.fc.weight.grad is not None and m.encoder.fc.weight.grad.abs().sum() > 0
