@@ -48,7 +48,7 @@ from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 
 __all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MIN_POINTS", "PRETRAINED", "CloudModel", "Inference",
-           "align_program", "cloud_corners", "infer", "load_encoder", "load_model", "load_pretrained", "shape_metrics"]
+           "align_program", "cloud_corners", "decode_codes", "infer", "load_encoder", "load_model", "load_pretrained", "shape_metrics"]
 
 #: Fewest points :func:`infer` takes.
 MIN_POINTS = 16
@@ -89,6 +89,28 @@ def cloud_corners(points, count: int = _PICTURE_POINTS, side: float = _PICTURE_C
 
 
 
+def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
+    """Decode latents ``(B, H)`` with ``vae``'s decoder (non-rejecting validity decoding), None where decoding
+    fails: programs (corpus frame); for a :class:`~shapeprog.vae.macro_model.MacroVAE` the expansions of its
+    macro programs, or with ``macros`` the :class:`~shapeprog.vae.macro_decode.MacroDecoded` themselves
+    (macro program, text and expansion). Shared by :class:`CloudModel` and the training modules' validation."""
+    layout = getattr(vae, "layout", None)
+    if layout is not None:
+        from ..vae.macro_decode import decode_macro
+    out = []
+    with torch.no_grad():
+        for z in codes:
+            try:
+                if layout is not None:
+                    d = decode_macro(vae, z)
+                    out.append(d if macros else d.program)
+                else:
+                    out.append(decode_latent(vae.decoder, z, reject=False).program)
+            except ValueError:
+                out.append(None)
+    return out
+
+
 class CloudModel(torch.nn.Module):
     """A trained cloud encoder and the decoder of its latents.
 
@@ -120,15 +142,7 @@ class CloudModel(torch.nn.Module):
     def decode(self, codes: torch.Tensor) -> list[Optional[Program]]:
         """Programs (corpus frame) of latents ``(B, H)``; None where decoding fails. A macro-program model's
         programs are the expansions of its macro programs (:meth:`decode_macros` keeps the macro text)."""
-        if self.layout is not None:
-            return [None if d is None else d.program for d in self.decode_macros(codes)]
-        out = []
-        for z in codes:
-            try:
-                out.append(decode_latent(self.vae.decoder, z, reject=False).program)
-            except ValueError:
-                out.append(None)
-        return out
+        return decode_codes(self.vae, codes)
 
     def decode_macros(self, codes: torch.Tensor) -> list:
         """The :class:`~shapeprog.vae.macro_decode.MacroDecoded` (macro program, its text, its expansion) of
@@ -139,15 +153,7 @@ class CloudModel(torch.nn.Module):
         """
         if self.layout is None:
             raise ValueError(f"the {self.category} {self.recipe} model writes ShapeAssembly programs, not macro programs")
-        from ..vae.macro_decode import decode_macro
-        out = []
-        with torch.no_grad():
-            for z in codes:
-                try:
-                    out.append(decode_macro(self.vae, z))
-                except ValueError:
-                    out.append(None)
-        return out
+        return decode_codes(self.vae, codes, macros=True)
 
 
 def _read_weights(path, category: Optional[str] = None) -> tuple[dict, PointNet2SSG]:
@@ -399,12 +405,14 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         searched = {"start_cd": None if np.isinf(r.start_cd) else r.start_cd, "cd": None if np.isinf(r.cd) else r.cd,
                     "decodes": r.decodes, "improved": r.improved}
         code = r.code
-    else:
+    macro = None
+    if model.layout is not None and (not search or program is not None):
+        # the kept code's macro program: decoded once here (the search keeps programs, not macro texts)
+        macro = model.decode_macros(code[None])[0]
+        program = None if macro is None else macro.program
+    elif not search:
         program = model.decode(code[None])[0]
-    macro_text = None
-    if model.layout is not None and program is not None:
-        decoded = model.decode_macros(code[None])[0]  # the kept code's macro program (decoding is deterministic)
-        macro_text = None if decoded is None else decoded.text
+    macro_text = None if macro is None else macro.text
     if program is None or len(_corners_of(program)) == 0:
         hint = "" if search else "; the latent search (search=True, CLI --search) looks for one near the predicted code"
         raise ValueError(f"the {model.category} model decoded no shape for this cloud{hint}")

@@ -47,7 +47,6 @@ from shapeio import atomic_write
 from ..picture import render_grid
 from ..vae.batch import (BatchOutput, MacroTreeBatch, TreeBatch, batch_loss, decode_batch, encode_batch,
                          macro_batch_loss)
-from ..vae.decode import decode_latent
 from ..vae.layout import LineLayout
 from ..vae.losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
 from ..vae.macro_model import MacroVAE
@@ -58,7 +57,7 @@ from ..vae.train import (_corners, _read_macro_programs, check_data_category, lo
 from ..vae.vectors import VectorNode
 from .data import TRAIN_POINTS, CloudDataset, collate_clouds, read_split
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
-from .infer import cloud_corners, load_encoder
+from .infer import cloud_corners, decode_codes, load_encoder
 
 __all__ = ["CHECKPOINT_FORMAT", "RECIPES", "WEIGHTS_FORMAT", "CloudDataModule", "EndToEndModule",
            "LatentRegressionModule", "export_weights"]
@@ -313,18 +312,9 @@ class _CloudModule(L.LightningModule):
         return bool(n) and not self.trainer.sanity_checking and (self.current_epoch + 1) % n == 0
 
     def decode(self, z: torch.Tensor) -> list:
-        """Programs decoded from latents ``(B, H)`` (non-rejecting validity decoding), None where decoding fails."""
-        out = []
-        for code in z.detach():
-            try:
-                if self.layout is not None:
-                    from ..vae.macro_decode import decode_macro
-                    out.append(decode_macro(self.vae, code).program)
-                else:
-                    out.append(decode_latent(self.vae.decoder, code, reject=False).program)
-            except ValueError:
-                out.append(None)
-        return out
+        """Programs decoded from latents ``(B, H)`` (:func:`~shapeprog.pointcloud.infer.decode_codes`), None
+        where decoding fails."""
+        return decode_codes(self.vae, z.detach())
 
     def on_validation_epoch_end(self) -> None:
         """On :meth:`recon_epoch` epochs: ``val/fscore`` (mean over the kept validation shapes, a failed decode
