@@ -148,29 +148,30 @@ class CloudDataModule(L.LightningDataModule):
         self.train_set: Optional[_CloudTrees] = None
         self.val_set: Optional[_CloudTrees] = None
 
-    def _set(self, split: str, points, noise: float, limit: Optional[int]) -> _CloudTrees:
+    def _set(self, split: str, points, noise: float, limit: Optional[int],
+             macro_programs: Optional[dict] = None) -> _CloudTrees:
         clouds = CloudDataset(self.root, self.category, split, points=points, noise=noise, seed=self.seed)
         if limit is not None:
             keep = np.arange(min(int(limit), len(clouds)))
             clouds.ids, clouds.clouds = clouds.ids[keep], clouds.clouds[keep]
             clouds.center, clouds.scale = clouds.center[keep], clouds.scale[keep]
         names = [clouds.program_name(i) for i in range(len(clouds))]
-        if self.library is None:
+        if macro_programs is None:
             keys, trees = load_trees(names)
         else:
-            keys, trees = load_macro_trees(names, self.layout, self._macro_programs)
+            keys, trees = load_macro_trees(names, self.layout, macro_programs)
         return _CloudTrees(clouds, dict(zip(keys, trees)))
 
     def setup(self, stage: Optional[str] = None) -> None:
         if self.train_set is None:
-            if self.library is not None:
+            programs = None
+            if self.library is not None:  # the macro programs of both splits, read from the archive once
                 self.layout = LineLayout(load_macro_library(self.library))
                 split = read_split(self.root, self.category)
                 keys = [f"{self.category}/{i}" for part in ("train", "val") for i in split[part]]
-                self._macro_programs = _read_macro_programs(self.category, keys, self.programs, self.layout.library)
-            self.train_set = self._set("train", self.points, self.noise, self.max_train_shapes)
-            self.val_set = self._set("val", self.val_points, 0.0, self.max_val_shapes)
-            self._macro_programs = None
+                programs = _read_macro_programs(self.category, keys, self.programs, self.layout.library)
+            self.train_set = self._set("train", self.points, self.noise, self.max_train_shapes, programs)
+            self.val_set = self._set("val", self.val_points, 0.0, self.max_val_shapes, programs)
 
     def _collate(self):
         return _collate if self.library is None else _collate_macros
@@ -183,17 +184,18 @@ class CloudDataModule(L.LightningDataModule):
         return DataLoader(self.val_set, batch_size=self.batch_size, shuffle=False, collate_fn=self._collate(),
                           num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
 
-    def _library_text(self) -> Optional[str]:
+    def library_text(self) -> Optional[str]:
+        """The text of the macro library whose programs are served; None for ShapeAssembly programs."""
         return None if self.library is None else (self.layout.library.to_text() if self.layout is not None
                                                   else load_macro_library(self.library).to_text())
 
     def state_dict(self) -> dict:
-        return {"category": self.category, "library": self.library, "library_text": self._library_text(),
+        return {"category": self.category, "library": self.library, "library_text": self.library_text(),
                 "val": None if self.val_set is None else [int(i) for i in self.val_set.clouds.ids]}
 
     def load_state_dict(self, state: dict) -> None:
         """Refuse to resume a run that validated on other shapes."""
-        if state.get("library_text", self._library_text()) != self._library_text():  # the same library, by text
+        if state.get("library_text", self.library_text()) != self.library_text():  # the same library, by text
             raise ValueError(f"the checkpoint's run trained on programs of library {state.get('library')!r}, this "
                              f"one on {self.library!r}, and the two differ")
         mine = None if self.val_set is None else [int(i) for i in self.val_set.clouds.ids]
@@ -236,9 +238,8 @@ class _CloudModule(L.LightningModule):
     def setup(self, stage: str) -> None:
         check_data_category(self)
         dm = self.trainer.datamodule if self.trainer is not None else None
-        if dm is not None and hasattr(dm, "library"):
-            theirs = None if dm.library is None else load_macro_library(dm.library).to_text()
-            if theirs != self.library_text():
+        if dm is not None and hasattr(dm, "library_text"):
+            if dm.library_text() != self.library_text():
                 mine = "a base-language decoder" if self.layout is None else "a macro-program decoder"
                 served = ("ShapeAssembly programs" if dm.library is None
                           else f"macro programs of library {dm.library!r}, not the decoder's")
