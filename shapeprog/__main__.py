@@ -587,17 +587,34 @@ def _cmd_discover_abstractions(args) -> int:
     if not args.quiet:
         from tqdm import tqdm
         progress = lambda it, total, desc: tqdm(it, total=total, desc=desc, leave=False)  # noqa: E731
-    cfg = Config(rounds=args.rounds, n_proposals=args.proposals, n_abstractions=args.abstractions, seed=args.seed,
-                 wake=args.wake, n_dreams=args.dreams, train_seconds=60.0 * args.train_minutes,
-                 train_epochs=args.train_epochs, train_lr=args.train_lr, dropout=args.dropout,
-                 wake_seconds=args.wake_seconds, device=args.device, iterations=args.iterations,
-                 max_nodes=args.max_nodes, time_limit=args.time_limit)
+    try:
+        cfg = Config(rounds=args.rounds, n_proposals=args.proposals, n_abstractions=args.abstractions,
+                     seed=args.seed, wake=args.wake, n_dreams=args.dreams, train_seconds=60.0 * args.train_minutes,
+                     train_epochs=args.train_epochs, train_lr=args.train_lr, dropout=args.dropout,
+                     wake_seconds=args.wake_seconds, device=args.device, iterations=args.iterations,
+                     max_nodes=args.max_nodes, time_limit=args.time_limit)
+    except ValueError as e:  # a setting out of range, named
+        raise SystemExit(f"error: {e}") from None
     t0 = time.time()
     res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress)
     s = res.summary()
     print(f"{category}: F={s.F:.2f} |L|={s.library_size} struct={s.num_struct:.2f} param={s.num_param:.2f} "
           f"shapes={s.shapes} ({time.time() - t0:.0f} s); wrote {args.out}/library.txt, programs.txt, log.json")
     return 0
+
+
+def _add_egraph_limits(parser) -> None:
+    """``--iterations --max-nodes --time-limit``: the e-graph limits of each ShapeCoder refactor call (default
+    the paper's; checked by :mod:`shapeprog.coder.refactor` before any work)."""
+    from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
+
+    parser.add_argument("--iterations", type=int, default=MAX_ITERATIONS,
+                        help=f"e-graph iterations per refactor call (paper: {MAX_ITERATIONS})")
+    parser.add_argument("--max-nodes", type=int, default=MAX_ENODES,
+                        help=f"e-node limit per refactor call (paper: {MAX_ENODES}); larger e-graphs find cheaper "
+                             f"programs at more time (docs/shapecoder.md)")
+    parser.add_argument("--time-limit", type=float, default=TIME_LIMIT,
+                        help=f"seconds per refactor call (paper: {TIME_LIMIT:g})")
 
 
 def _cmd_abstract_infer(args) -> int:
@@ -1054,14 +1071,7 @@ def main(argv=None) -> int:
     d.add_argument("--wake-seconds", type=float, default=1.0,
                    help="network wake: seconds of sampling per search step (1)")
     d.add_argument("--device", default="auto", help="network wake: where to train (auto: CUDA when available)")
-    from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
-    d.add_argument("--iterations", type=_int_at_least(1), default=MAX_ITERATIONS,
-                   help=f"e-graph iterations per refactor call (paper: {MAX_ITERATIONS})")
-    d.add_argument("--max-nodes", type=_int_at_least(1), default=MAX_ENODES,
-                   help=f"e-node limit per refactor call (paper: {MAX_ENODES}); larger e-graphs find cheaper "
-                        f"programs at more time (docs/shapecoder.md)")
-    d.add_argument("--time-limit", type=float, default=TIME_LIMIT,
-                   help=f"seconds per refactor call (paper: {TIME_LIMIT:g})")
+    _add_egraph_limits(d)
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     d.set_defaults(func=_cmd_discover_abstractions)
     a = sub.add_parser("abstract-infer", help="ShapeCoder: infer one shape's program with a discovered library",
@@ -1070,14 +1080,7 @@ def main(argv=None) -> int:
     a.add_argument("shape", help="a PN_<category>.txt line, a file with one such line, or <category>/<line number> "
                                  "of the vendored data (e.g. chair/401)")
     a.add_argument("--library", required=True, help="a shipped category (chair) or a library.txt file")
-    from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
-    a.add_argument("--iterations", type=int, default=MAX_ITERATIONS,
-                   help=f"e-graph iterations per refactor call (default {MAX_ITERATIONS}, the paper's)")
-    a.add_argument("--max-nodes", type=int, default=MAX_ENODES,
-                   help=f"e-node limit per refactor call (default {MAX_ENODES}, the paper's); larger limits find "
-                        f"cheaper programs at more time (docs/shapecoder.md)")
-    a.add_argument("--time-limit", type=float, default=TIME_LIMIT,
-                   help=f"seconds per refactor call (default {TIME_LIMIT:g}, the paper's)")
+    _add_egraph_limits(a)
     a.add_argument("--passes", type=int, default=3, help="refactor calls at most, each on the previous result")
     a.set_defaults(func=_cmd_abstract_infer)
     d = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",

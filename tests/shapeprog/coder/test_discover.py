@@ -133,6 +133,9 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
     assert cost(capsys.readouterr().out) <= cost(out) + 1e-9
     with pytest.raises(SystemExit, match="chair/401: iterations must be an int"):
         main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "-1"])
+    with pytest.raises(SystemExit, match="error: Config.iterations must be an int >= 0"):
+        main(["discover-abstractions", "chair", "--out", str(tmp_path / "neg"), "--iterations", "-3", "--quiet"])
+    assert not (tmp_path / "neg").exists()
     bad = tmp_path / "bad.txt"
     bad.write_text("Legs(w: Float) = Cubiod(w,w,w)\n")
     assert main(["abstract-infer", "chair/401", "--library", str(bad)]) == 2
