@@ -18,6 +18,7 @@
     python -m shapeprog refactor chair/173 --library chair
     python -m shapeprog refactor-corpus --category chair --library chair --workers 2 --out chair_macros
     python -m shapeprog table1 --category chair --limit 200 --out table1.md
+    python -m shapeprog table2-coder --categories chair table storage --workers 2 --out shapecoder_tables.md
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
 path of a UTF-8 ShapeAssembly file (corpus format with ``Assembly`` blocks, or the flat format).
@@ -859,6 +860,40 @@ def _cmd_table1(args) -> int:
     return 0
 
 
+def _cmd_table2_coder(args) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .coder import tables
+
+    runs = dict(x.split("=", 1) for x in args.library or ())
+    unknown = sorted(set(runs) - set(args.categories))
+    if unknown:
+        raise SystemExit(f"error: --library {unknown[0]}=...: {unknown[0]} is not among --categories")
+    _check_outputs(others=[args.out])
+    limits = {"iterations": args.iterations, "max_nodes": args.max_nodes, "time_limit": args.time_limit}
+    command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
+    parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    try:
+        for cat in args.categories:
+            try:
+                run = tables.from_run(runs[cat], cat) if cat in runs else tables.shipped(cat)
+                t2 = tables.table2(run)
+            except ValueError as e:
+                raise SystemExit(f"error: {e}") from None
+            progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+            t3 = tables.table3(run, train=args.train, heldout=args.heldout, executor=pool, progress=progress, **limits)
+            parts.append(tables.format_tables(run, t2, t3, **limits))
+            print(parts[-1] + "\n", flush=True)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    if args.out:
+        atomic_write(args.out, "\n\n".join(parts) + "\n")
+        print(f"wrote {args.out}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="shapeprog", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -1156,6 +1191,23 @@ def main(argv=None) -> int:
     tb.add_argument("--out", help="also write the table (markdown) here")
     tb.add_argument("--quiet", action="store_true")
     tb.set_defaults(func=_cmd_table1)
+    t2 = sub.add_parser("table2-coder", help="ShapeCoder Tables 2 and 3 of discovered libraries",
+                        description="Write the ShapeCoder paper's Table 2 (Input Prims and ShapeCoder rows: F, |L|, "
+                                    "Num Struct, Num Param on the discovery shapes) and Table 3 (F of the discovered "
+                                    "programs, and post hoc inference on the first --train discovery and --heldout "
+                                    "held-out shapes) for the shipped libraries or discover-abstractions folders, "
+                                    "beside the paper's rows.")
+    t2.add_argument("--categories", nargs="+", default=["chair"], choices=("chair", "table", "storage"))
+    t2.add_argument("--library", action="append",
+                    help="CATEGORY=FOLDER: a discover-abstractions output folder instead of the shipped library")
+    t2.add_argument("--train", type=_int_at_least(1), default=100, help="train-PHI: the first N discovery shapes")
+    t2.add_argument("--heldout", type=_int_at_least(1), default=100, help="validation-PHI: the first N held-out shapes")
+    t2.add_argument("--workers", type=_int_at_least(1), default=2,
+                    help="processes for the per-shape inference (1: everything in this process)")
+    _add_egraph_limits(t2)
+    t2.add_argument("--out", help="also write the tables (markdown) here, atomically")
+    t2.add_argument("--quiet", action="store_true")
+    t2.set_defaults(func=_cmd_table2_coder, argv=None)
     args = ap.parse_args(argv)
     if getattr(args, "argv", False) is None:  # commands that record their own command line
         args.argv = list(argv) if argv is not None else None

@@ -1,0 +1,231 @@
+"""ShapeCoder's Tables 2 and 3 for a discovered library, beside the paper's rows.
+
+Table 2 (discovery): the "Input Prims" row (the naive programs of the library's discovery shapes) and the
+library's row (F, |L|, Num Struct, Num Param of its discovered programs). Table 3: F of the discovered
+programs ("train"), and of post hoc inference (:func:`shapeprog.coder.infer.infer`, the library fixed) on
+the first discovery shapes ("train-PHI") and the first held-out shapes ("validation-PHI"), with the number of
+abstractions the programs use.
+
+A library comes either from the package (:func:`shipped`: ``shapeprog/data/coder_libraries/<category>.txt``
+with its ``<category>_programs.txt``) or from a ``discover-abstractions`` output folder (:func:`from_run`:
+``library.txt`` and ``programs.txt``). The per-shape inference goes through the caller's
+``concurrent.futures.Executor`` (None: in this process); the result does not depend on the executor.
+
+Example (``python -m shapeprog table2-coder --categories chair --train 20 --heldout 20``):
+    >>> from shapeprog.coder import tables
+    >>> run = tables.shipped("chair")
+    >>> t2 = tables.table2(run)
+    >>> round(t2.naive.F, 1), round(t2.ours.F, 1), t2.ours.library_size
+    (146.5, 79.6, 27)
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Callable, Sequence
+
+from ..limits import decode
+from . import data
+from .discover import Summary, evaluate, summarize
+from .infer import infer, shipped_libraries
+from .lang import LANG_3D, Call, Library, parse, walk
+from .objective import naive_summary, omega
+from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
+
+__all__ = ["PAPER_TABLE2", "PAPER_TABLE3", "Phi", "Run", "Table2", "format_tables", "from_run", "phi", "shipped",
+           "table2", "table3"]
+
+#: The paper's Table 2 rows per category: (row, F, |L|, Num Struct, Num Param), 400 discovery shapes.
+PAPER_TABLE2 = {"chair": [("Input Prims", 146.0, 6, 29, 61), ("ShapeCoder", 63.6, 33, 10, 27)],
+                "table": [("Input Prims", 125.0, 6, 25, 51), ("ShapeCoder", 40.9, 37, 8, 18)],
+                "storage": [("Input Prims", 154.0, 6, 30, 62), ("ShapeCoder", 71.3, 31, 11, 33)]}
+#: The paper's post hoc inference F (chairs only are reported): train shapes and validation shapes.
+PAPER_TABLE3 = {"chair": {"train": 63.6, "train-PHI": 67.5, "validation-PHI": 70.6}}
+
+
+@dataclass(frozen=True)
+class Run:
+    """A library with the programs discovery wrote for its shapes.
+
+    Attributes:
+        category: 'chair', 'table' or 'storage'.
+        library: the abstractions.
+        keys: the shape keys of the programs (``<id>_0_<index>``), in file order.
+        programs: the discovered programs, parsed with ``library``.
+        source: where they were read from (for the table's header).
+    """
+
+    category: str
+    library: Library
+    keys: tuple
+    programs: tuple
+    source: str
+
+
+def _read_run(category: str, lib_text: str, lib_name: str, prog_text: str, prog_name: str, source: str) -> Run:
+    lib = Library.from_text(lib_text, LANG_3D, file=lib_name)
+    keys, progs = [], []
+    for i, line in enumerate(prog_text.splitlines()):
+        if not line.strip():
+            continue
+        key, sep, text = line.partition(":")
+        if not sep:
+            raise ValueError(f"{prog_name}:{i + 1}: expected '<key>:<program>', got {line[:40]!r}")
+        keys.append(key)
+        progs.append(parse(text, lib, file=prog_name, line=i + 1))
+    if not progs:
+        raise ValueError(f"{prog_name}: no programs")
+    return Run(category, lib, tuple(keys), tuple(progs), source)
+
+
+def shipped(category: str) -> Run:
+    """The shipped library of ``category`` with its discovered programs.
+
+    Raises:
+        ValueError: no library is shipped for ``category``.
+    """
+    if category not in shipped_libraries():
+        raise ValueError(f"no shipped library for {category!r}; shipped: {', '.join(shipped_libraries()) or 'none'}")
+    folder = resources.files("shapeprog").joinpath("data", "coder_libraries")
+    return _read_run(category, folder.joinpath(f"{category}.txt").read_text(encoding="utf-8"), f"{category}.txt",
+                     folder.joinpath(f"{category}_programs.txt").read_text(encoding="utf-8"),
+                     f"{category}_programs.txt", f"shapeprog/data/coder_libraries/{category}.txt")
+
+
+def from_run(folder, category: str) -> Run:
+    """The library and programs of a ``discover-abstractions`` output folder.
+
+    Raises:
+        OSError: ``library.txt`` or ``programs.txt`` is missing (the message names it).
+        ParseError: a malformed line (file, line, column).
+    """
+    folder = Path(folder)
+    lib_path, prog_path = folder / "library.txt", folder / "programs.txt"
+    for p in (lib_path, prog_path):
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: not found (a discover-abstractions output folder has library.txt and "
+                                    "programs.txt)")
+    return _read_run(category, decode(lib_path.read_bytes(), str(lib_path)), str(lib_path),
+                     decode(prog_path.read_bytes(), str(prog_path)), str(prog_path), str(folder))
+
+
+def _used(programs, library: Library) -> int:
+    names = {ab.name for ab in library.abstractions}
+    return len({node.fn for p in programs for node in walk(p) if isinstance(node, Call) and node.fn in names})
+
+
+@dataclass(frozen=True)
+class Table2:
+    """Table 2 of one run: ``naive`` (Input Prims) and ``ours`` (the run's programs) as
+    :class:`~shapeprog.coder.discover.Summary`, and ``used``, the abstractions the programs call."""
+
+    naive: Summary
+    ours: Summary
+    used: int
+
+
+def table2(run: Run) -> Table2:
+    """Input Prims and the run's row, on the run's own shapes (each program checked against its shape).
+
+    Raises:
+        ValueError: a key not among the category's shapes, or a program that does not re-cover its shape.
+    """
+    recs = {r.key: r for r in data.load(run.category, "all")}
+    errors = []
+    for key, prog in zip(run.keys, run.programs):
+        if key not in recs:
+            raise ValueError(f"{run.source}: {key!r} is not a {run.category} shape")
+        got = evaluate(prog, run.library, recs[key].prims)
+        if got is None:
+            raise ValueError(f"{run.source}: the program of {key} does not re-cover its primitives")
+        errors.append(got[1])
+    naive = naive_summary(recs[k].prims for k in run.keys)
+    return Table2(naive, summarize(run.programs, run.library, errors), _used(run.programs, run.library))
+
+
+@dataclass(frozen=True)
+class Phi:
+    """One post hoc inference row.
+
+    Attributes:
+        split: 'train-PHI' or 'validation-PHI'.
+        shapes: shapes inferred; ``skipped`` the shapes of the slice left out for having more primitives than
+            the language allows (16).
+        F: mean program cost (tokens + 10 x error) plus the library's preference cost, as Table 2's F.
+        used: abstractions called by the inferred programs.
+        cpu: mean CPU seconds per shape (in the process that inferred it); ``wall`` the row's wall time.
+    """
+
+    split: str
+    shapes: int
+    skipped: int
+    F: float
+    used: int
+    cpu: float
+    wall: float
+
+
+def _infer_one(task):
+    prims, lib_text, limits = task
+    lib = Library.from_text(lib_text, LANG_3D)
+    t0 = time.process_time()
+    r = infer(prims, lib, **limits)
+    return r.cost, time.process_time() - t0, r.text
+
+
+def phi(split: str, records: Sequence, library: Library, *, executor=None, iterations: int = MAX_ITERATIONS,
+        max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT) -> Phi:
+    """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed."""
+    limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit}
+    kept = [r for r in records if len(r.prims) <= library.lang.max_prims]
+    if not kept:
+        raise ValueError(f"{split}: no shape with at most {library.lang.max_prims} primitives")
+    tasks = [(r.prims, library.to_text(), limits) for r in kept]
+    t0 = time.time()
+    out = list(executor.map(_infer_one, tasks)) if executor is not None else [_infer_one(t) for t in tasks]
+    wall = time.time() - t0
+    lib_cost = sum(omega(ab, library) for ab in library.abstractions)
+    progs = [parse(text, library) for _, _, text in out]
+    return Phi(split, len(kept), len(records) - len(kept), sum(c for c, _, _ in out) / len(out) + lib_cost,
+               _used(progs, library), sum(c for _, c, _ in out) / len(out), wall)
+
+
+def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
+           progress: Callable[[str], None] | None = None, **limits) -> list:
+    """The two post hoc inference rows: the first ``train`` discovery shapes and the first ``heldout``
+    held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit`` as :func:`phi`)."""
+    rows = []
+    for split, recs in (("train-PHI", data.load(run.category)[:train]),
+                        ("validation-PHI", data.load(run.category, "heldout")[:heldout])):
+        if progress is not None:
+            progress(f"{run.category} {split}: {len(recs)} shapes")
+        rows.append(phi(split, recs, run.library, executor=executor, **limits))
+    return rows
+
+
+def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
+                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT) -> str:
+    """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours."""
+    cat = run.category
+    out = [f"## Table 2 ({cat}, {t2.ours.shapes} discovery shapes; library {run.source})", "",
+           "| row | F | \\|L\\| | Num Struct | Num Param |", "| --- | --- | --- | --- | --- |",
+           f"| Input Prims (ours) | {t2.naive.F:.1f} | 6 | {t2.naive.num_struct:.1f} | {t2.naive.num_param:.1f} |",
+           f"| ShapeCoder (ours) | {t2.ours.F:.1f} | {t2.ours.library_size} | {t2.ours.num_struct:.1f} | "
+           f"{t2.ours.num_param:.1f} |"]
+    out += [f"| {name} (paper, 400 shapes) | {f} | {size} | {ns} | {npar} |" for name, f, size, ns, npar in PAPER_TABLE2[cat]]
+    paper_limits = (iterations, max_nodes, time_limit) == (MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT)
+    which = "the paper's" if paper_limits else "ours, not the paper's"
+    out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions; e-graph limits "
+            f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which})", "",
+            "| split | shapes | F | abstractions used | CPU s / shape | wall s | paper F |",
+            "| --- | --- | --- | --- | --- | --- | --- |"]
+    paper = PAPER_TABLE3.get(cat, {})
+    out.append(f"| train (discovery programs) | {t2.ours.shapes} | {t2.ours.F:.1f} | {t2.used} | - | - | "
+               f"{paper.get('train', '-')} |")
+    for r in t3:
+        shapes = f"{r.shapes}" + (f" ({r.skipped} over 16 primitives left out)" if r.skipped else "")
+        out.append(f"| {r.split} | {shapes} | {r.F:.1f} | {r.used} | {r.cpu:.2f} | {r.wall:.0f} | "
+                   f"{paper.get(r.split, '-')} |")
+    return "\n".join(out)

@@ -1,0 +1,102 @@
+"""ShapeCoder Tables 2 and 3 (shapeprog.coder.tables) and the table2-coder command."""
+import dataclasses
+from concurrent.futures import ThreadPoolExecutor
+from importlib import resources
+
+import pytest
+
+from shapeprog.coder import data, tables
+from shapeprog.coder.discover import evaluate
+from shapeprog.coder.infer import infer
+from shapeprog.coder.lang import Library, parse_abstraction, to_text
+from shapeprog.coder.objective import naive_program, naive_summary
+
+LEGS = "Legs(w: Float, h: Float, x: Float, y: Float, z: Float) = SymRef(Move(Cuboid(w,h,w),x,y,z),AX)"
+
+
+def _run_folder(tmp_path, n=3, lib_text=LEGS + "\n"):
+    """A discover-abstractions-like folder whose programs are the first n chairs' inferred programs."""
+    lib = Library.from_text(lib_text)
+    recs = data.load("chair")[:n]
+    lines = [f"{r.key}:{infer(r.prims, lib).text}\n" for r in recs]
+    (tmp_path / "library.txt").write_text(lib_text)
+    (tmp_path / "programs.txt").write_text("".join(lines))
+    return recs
+
+
+def test_shipped_table2_matches_the_library_header_and_the_naive_cost():
+    run = tables.shipped("chair")
+    t2 = tables.table2(run)
+    assert t2.ours.shapes == len(run.programs) == 400
+    assert t2.naive.F == pytest.approx(naive_summary(r.prims for r in data.load("chair")).F)
+    assert abs(t2.naive.F - 146.0) / 146.0 < 0.01  # the paper's Input Prims row
+    assert t2.ours.library_size == 6 + len(run.library)
+    # the library file's first line records the discovery's own F for the same programs
+    header = resources.files("shapeprog").joinpath("data", "coder_libraries", "chair.txt").read_text().splitlines()[0]
+    assert f"F={t2.ours.F:.2f}" in header
+    assert 1 <= t2.used <= len(run.library)
+
+
+def test_phi_is_the_inference_cost_plus_the_library_and_skips_large_shapes(tmp_path):
+    lib = Library().add(parse_abstraction(LEGS))
+    recs = data.load("chair")[:3]
+    big = dataclasses.replace(recs[0], key="big_0_0",
+                              prims=tuple((0.1, 0.1, 0.1, 0.1 * i, 0.0, 0.0, 0.0, 0.0, 0.0) for i in range(17)))
+    row = tables.phi("train-PHI", [*recs, big], lib)
+    costs = [infer(r.prims, lib).cost for r in recs]
+    from shapeprog.coder.objective import omega
+    assert row.shapes == 3 and row.skipped == 1
+    assert row.F == pytest.approx(sum(costs) / 3 + omega(lib.abstractions[0], lib))
+    with ThreadPoolExecutor(2) as ex:  # the executor does not change the result
+        assert tables.phi("train-PHI", recs, lib, executor=ex).F == pytest.approx(row.F)
+    with pytest.raises(ValueError, match="no shape with at most 16"):
+        tables.phi("train-PHI", [big], lib)
+
+
+def test_table2_of_a_run_folder_and_its_errors(tmp_path):
+    recs = _run_folder(tmp_path)
+    run = tables.from_run(tmp_path, "chair")
+    assert run.keys == tuple(r.key for r in recs)
+    t2 = tables.table2(run)
+    naive = naive_summary(r.prims for r in recs)
+    assert t2.naive.F == pytest.approx(naive.F) and t2.ours.F < t2.naive.F
+    # a program that does not re-cover its shape is an error naming it
+    (tmp_path / "programs.txt").write_text(f"{recs[1].key}:{to_text(naive_program(recs[0].prims)[0])}\n")
+    with pytest.raises(ValueError, match=recs[1].key):
+        tables.table2(tables.from_run(tmp_path, "chair"))
+    (tmp_path / "programs.txt").write_text("nope_0_0:Cuboid(0.1,0.1,0.1)\n")
+    with pytest.raises(ValueError, match="'nope_0_0' is not a chair shape"):
+        tables.table2(tables.from_run(tmp_path, "chair"))
+    (tmp_path / "programs.txt").write_text("172_0_0 Cuboid(0.1,0.1,0.1)\n")
+    with pytest.raises(ValueError, match=r"programs.txt:1: expected '<key>:<program>'"):
+        tables.from_run(tmp_path, "chair")
+    (tmp_path / "programs.txt").write_text("172_0_0:Cubiod(0.1,0.1,0.1)\n")
+    with pytest.raises(Exception, match=r"programs.txt:1:"):
+        tables.from_run(tmp_path, "chair")
+    (tmp_path / "programs.txt").unlink()
+    with pytest.raises(FileNotFoundError, match="programs.txt: not found"):
+        tables.from_run(tmp_path, "chair")
+    with pytest.raises(ValueError, match="no shipped library for 'sofa'"):
+        tables.shipped("sofa")
+
+
+def test_cli_table2_coder(tmp_path, capsys):
+    from shapeprog.__main__ import main
+
+    run = tmp_path / "run"
+    run.mkdir()
+    _run_folder(run, n=2)
+    out = tmp_path / "t.md"
+    assert main(["table2-coder", "--categories", "chair", "--library", f"chair={run}", "--train", "2",
+                 "--heldout", "2", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "# command: python -m shapeprog table2-coder" in text
+    assert "| ShapeCoder (paper, 400 shapes) | 63.6 |" in text and "| validation-PHI | 2 |" in text
+    assert "| train (discovery programs) | 2 |" in text
+    assert "e-graph limits 5 iterations / 10000 e-nodes / 5 s: the paper's" in text
+    with pytest.raises(SystemExit, match="table is not among --categories"):
+        main(["table2-coder", "--categories", "chair", "--library", f"table={run}"])
+    with pytest.raises(SystemExit, match="does not exist"):
+        main(["table2-coder", "--out", str(tmp_path / "missing" / "t.md")])
+    assert main(["table2-coder", "--library", f"chair={tmp_path / 'none'}", "--quiet"]) == 1
+    assert "library.txt: not found" in capsys.readouterr().err
