@@ -865,6 +865,9 @@ def _cmd_table2_coder(args) -> int:
 
     from .coder import tables
 
+    bad = [x for x in args.library or () if "=" not in x]
+    if bad:
+        raise SystemExit(f"error: --library {bad[0]!r}: expected CATEGORY=FOLDER")
     runs = dict(x.split("=", 1) for x in args.library or ())
     unknown = sorted(set(runs) - set(args.categories))
     if unknown:

@@ -96,6 +96,8 @@ def test_cli_table2_coder(tmp_path, capsys):
     assert "e-graph limits 5 iterations / 10000 e-nodes / 5 s: the paper's" in text
     with pytest.raises(SystemExit, match="table is not among --categories"):
         main(["table2-coder", "--categories", "chair", "--library", f"table={run}"])
+    with pytest.raises(SystemExit, match="expected CATEGORY=FOLDER"):
+        main(["table2-coder", "--library", str(run)])
     with pytest.raises(SystemExit, match="does not exist"):
         main(["table2-coder", "--out", str(tmp_path / "missing" / "t.md")])
     assert main(["table2-coder", "--library", f"chair={tmp_path / 'none'}", "--quiet"]) == 1
