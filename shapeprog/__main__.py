@@ -840,6 +840,14 @@ def _cmd_refactor_corpus(args) -> int:
     return 0
 
 
+def _category_pairs(values, form: str) -> dict:
+    """``--library CATEGORY=PATH`` values as a dict; a value without '=' stops with the expected form."""
+    bad = [x for x in values or () if "=" not in x]
+    if bad:
+        raise SystemExit(f"error: --library {bad[0]!r}: expected {form}")
+    return dict(x.split("=", 1) for x in values or ())
+
+
 def _cmd_table1(args) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
@@ -848,7 +856,7 @@ def _cmd_table1(args) -> int:
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     try:
         text = table1(args.categories, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
-                      library_files=dict(x.split("=", 1) for x in args.library or ()),
+                      library_files=_category_pairs(args.library, "CATEGORY=FILE"),
                       log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
     finally:
         if pool is not None:
@@ -865,10 +873,7 @@ def _cmd_table2_coder(args) -> int:
 
     from .coder import tables
 
-    bad = [x for x in args.library or () if "=" not in x]
-    if bad:
-        raise SystemExit(f"error: --library {bad[0]!r}: expected CATEGORY=FOLDER")
-    runs = dict(x.split("=", 1) for x in args.library or ())
+    runs = _category_pairs(args.library, "CATEGORY=FOLDER")
     unknown = sorted(set(runs) - set(args.categories))
     if unknown:
         raise SystemExit(f"error: --library {unknown[0]}=...: {unknown[0]} is not among --categories")

@@ -33,3 +33,10 @@ def test_refactor_bad_library_file(tmp_path, capsys):
     assert main(["refactor", "chair/173", "--library", str(lib)]) == 2
     err = capsys.readouterr().err
     assert f"{lib}:2:" in err and "unknown function 'Cubiod'" in err
+
+
+def test_table1_library_option_form(tmp_path):
+    import pytest
+
+    with pytest.raises(SystemExit, match=r"--library 'lib.txt': expected CATEGORY=FILE"):
+        main(["table1", "--categories", "chair", "--limit", "2", "--library", "lib.txt", "--quiet"])
