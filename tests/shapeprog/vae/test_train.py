@@ -297,7 +297,7 @@ def test_reconstruction_hook_logs_fscore_and_images(tmp_path, monkeypatch):
 
 def test_shipped_configs_parse_through_train_py(train_main):
     assert [p.name for p in CONFIGS] == ["vae_all.yaml", "vae_chair.yaml", "vae_chair_macros.yaml", "vae_storage.yaml",
-                                         "vae_table.yaml"]
+                                         "vae_storage_macros.yaml", "vae_table.yaml", "vae_table_macros.yaml"]
     for path in CONFIGS:
         cat = path.stem.split("_")[1]
         run = path.stem
@@ -310,7 +310,7 @@ def test_shipped_configs_parse_through_train_py(train_main):
         assert cli.trainer.logger.log_dir.startswith(f"runs/{run}/")
         dirs = {cb.dirpath for cb in cli.trainer.checkpoint_callbacks}
         assert dirs == {str(ROOT / "runs" / run / "checkpoints")} or dirs == {f"runs/{run}/checkpoints"}
-        assert cli.model.hparams.library == cli.datamodule.library == ("chair" if run.endswith("_macros") else None)
+        assert cli.model.hparams.library == cli.datamodule.library == (cat if run.endswith("_macros") else None)
 
 
 def test_fit_and_resume_through_train_py(tmp_path, train_main, tiny_vae_config):
