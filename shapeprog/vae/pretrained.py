@@ -37,7 +37,7 @@ WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
 # category -> file shipped under shapeprog/weights (docs/benchmarks.md names the command that trained each)
 PRETRAINED = {"chair": "vae_chair.pt", "table": "vae_table.pt", "storage": "vae_storage.pt"}
 # category -> the shipped VAE on macro programs calling the shipped ShapeMOD library of the category
-PRETRAINED_MACROS = {"chair": "vae_chair_macros.pt", "storage": "vae_storage_macros.pt"}
+PRETRAINED_MACROS = {"chair": "vae_chair_macros.pt", "table": "vae_table_macros.pt", "storage": "vae_storage_macros.pt"}
 CHECKPOINT_PREFIX = "vae."  # the LightningModule's attribute holding the VAE
 
 
@@ -143,7 +143,7 @@ def export_weights(checkpoint, out, half: bool = True, meta: dict | None = None)
 def load_pretrained(category: str = "chair", device=None, macros: bool = False) -> VAE:
     """The model shipped with the package for ``category`` ('chair', 'table' or 'storage'); with ``macros``
     the :class:`~shapeprog.vae.macro_model.MacroVAE` on the category's macro programs
-    (:data:`PRETRAINED_MACROS`: chairs and storage units so far)."""
+    (:data:`PRETRAINED_MACROS`)."""
     shipped = PRETRAINED_MACROS if macros else PRETRAINED
     if category not in shipped:
         kind = "macro-program VAE" if macros else "VAE"
