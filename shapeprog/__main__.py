@@ -881,6 +881,7 @@ def _cmd_table2_coder(args) -> int:
     limits = {"iterations": args.iterations, "max_nodes": args.max_nodes, "time_limit": args.time_limit}
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
     parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]
+    progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     try:
         for cat in args.categories:
@@ -889,7 +890,6 @@ def _cmd_table2_coder(args) -> int:
                 t2 = tables.table2(run)
             except ValueError as e:
                 raise SystemExit(f"error: {e}") from None
-            progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
             t3 = tables.table3(run, train=args.train, heldout=args.heldout, executor=pool, progress=progress, **limits)
             parts.append(tables.format_tables(run, t2, t3, **limits))
             print(parts[-1] + "\n", flush=True)

@@ -46,7 +46,7 @@ from .lang import LANG_3D, Call, Expr, Lang, Library, Num, ProgramError, expand,
 from .objective import WEIGHTS, match, naive_program, omega, program_cost, token_counts
 from .dream import DREAM_TIMEOUT, N_DREAMS
 from .proposal import propose
-from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, _check_limits, egglog_program, refactor
+from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, check_limits, egglog_program, refactor
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
 __all__ = ["Config", "DiscoveryResult", "Summary", "WAKES", "discover", "discover_category", "evaluate", "integrate",
@@ -117,7 +117,7 @@ class Config:
                 raise ValueError(f"Config.{name} must be an int >= 1, got {v!r}")
         if self.wake not in WAKES:
             raise ValueError(f"Config.wake must be one of {', '.join(WAKES)}, got {self.wake!r}")
-        _check_limits(self.iterations, self.max_nodes, self.time_limit)  # before any work, not in a worker
+        check_limits(self.iterations, self.max_nodes, self.time_limit)  # before any work, not in a worker
 
     def train_config(self):
         """The :class:`shapeprog.coder.train.TrainConfig` of these settings."""

@@ -47,6 +47,7 @@ __all__ = [
     "ABSTRACTION_TOL",
     "COSTS",
     "RefactorError",
+    "check_limits",
     "Refactored",
     "SEMANTIC_TOL",
     "abstraction_rule",
@@ -399,7 +400,9 @@ _LOG = logging.getLogger(__name__)
 MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT = 5, 10_000, 5.0
 
 
-def _check_limits(iterations, max_nodes, time_limit):
+def check_limits(iterations, max_nodes, time_limit):
+    """Raise :class:`RefactorError` naming the first e-graph limit out of range (shared by refactor and
+    discovery's Config, which checks before any work)."""
     if isinstance(iterations, bool) or not isinstance(iterations, int) or not 0 <= iterations <= 1000:
         raise RefactorError(f"iterations must be an int from 0 to 1000, got {iterations!r}")
     if isinstance(max_nodes, bool) or not isinstance(max_nodes, int) or not 1 <= max_nodes <= 10_000_000:
@@ -439,7 +442,7 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
 
     t0 = time.perf_counter()
     lib = _library(library)
-    _check_limits(iterations, max_nodes, time_limit)
+    check_limits(iterations, max_nodes, time_limit)
     try:
         check(expr, lib, Type.SHAPE)
     except ProgramError as e:
