@@ -190,7 +190,7 @@ def test_every_config_parses_and_builds(config, tmp_path):
     assert cli.model.encoder.config["out_dim"] == cli.model.vae.decoder.hidden_dim == 256
     assert isinstance(cli.model.vae, MacroVAE) == (macros == ["macros"])
     assert cli.datamodule.library == (category if macros else None)
-    assert len(CONFIGS) == 8
+    assert len(CONFIGS) == 9
 
 
 # ------------------------------------------------------------------ macro programs (ShapeMOD's Table 3)
