@@ -74,7 +74,7 @@ class Config:
             network search; see the module docstring).
         n_dreams, dream_timeout: valid dreams per function (N_D, 10,000) and seconds per function (1,800).
         train_lr, train_batch, train_epochs, train_patience, train_min_delta, train_holdout,
-            train_seconds, dropout: the network's training (:class:`shapeprog.coder.train.TrainConfig`;
+            train_seconds, dropout, train_bucket: the network's training (:class:`shapeprog.coder.train.TrainConfig`;
             the paper's values by default, ``train_seconds`` per round).
         wake_batch, wake_batches, wake_seconds: samples per batch (64), batches per search step at most,
             and seconds per search step (1 s; None: the search depends only on the seed).
@@ -101,6 +101,7 @@ class Config:
     train_holdout: float = 0.1
     train_seconds: float | None = 12_000.0
     dropout: float = 0.5
+    train_bucket: bool = True
     wake_batch: int = WAKE_BATCH
     wake_batches: int = WAKE_BATCHES
     wake_seconds: float | None = WAKE_SECONDS
@@ -125,7 +126,8 @@ class Config:
 
         return TrainConfig(lr=self.train_lr, batch=self.train_batch, epochs=self.train_epochs,
                            patience=self.train_patience, min_delta=self.train_min_delta, holdout=self.train_holdout,
-                           max_seconds=self.train_seconds, dropout=self.dropout)
+                           max_seconds=self.train_seconds, dropout=self.dropout,
+                           bucket=self.train_bucket)
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,8 @@ import torch
 
 from .recnet import MAX_TOKENS, RecognitionNet, Vocab, encode_scene, encode_target
 
-__all__ = ["CPU", "PAPER", "Batch", "TrainConfig", "TrainLog", "batch_loss", "device_of", "tensorize", "train"]
+__all__ = ["BUCKET_GROUP", "CPU", "PAPER", "Batch", "TrainConfig", "TrainLog", "batch_loss", "batches", "device_of",
+           "tensorize", "train"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,10 @@ class TrainConfig:
         improvement of ``min_delta`` in the held-out loss before stopping. holdout: share of the pairs held
         out (at least one pair when there are two or more). max_seconds: wall-clock budget (None: none).
         dropout: the network's dropout (used by :func:`shapeprog.coder.discover` when it builds one).
+        bucket: batches of scenes of similar length (each epoch: the shuffled pairs are cut into groups of
+            :data:`BUCKET_GROUP` batches, each group sorted by scene length and cut into batches, the batches
+            shuffled); False: plain shuffled batches. The loss of a batch is computed on its longest
+            scene's conditioning tokens only, so bucketing makes an epoch several times cheaper.
     """
 
     lr: float = 1e-4
@@ -56,10 +61,36 @@ class TrainConfig:
     holdout: float = 0.1
     max_seconds: float | None = 12_000.0
     dropout: float = 0.5
+    bucket: bool = True
 
     def __post_init__(self):
         if not self.lr > 0 or self.batch < 1 or self.epochs < 0 or self.patience < 1 or not 0 <= self.holdout < 1:
             raise ValueError(f"bad TrainConfig: {self}")
+
+
+#: Batches per group sorted by scene length when :attr:`TrainConfig.bucket` is set.
+BUCKET_GROUP = 16
+
+
+def batches(lengths: torch.Tensor, batch: int, generator: torch.Generator, bucket: bool = True) -> list:
+    """Index tensors of one epoch's batches over ``len(lengths)`` pairs (see :attr:`TrainConfig.bucket`);
+    every pair is in exactly one batch.
+
+    >>> bs = batches(torch.tensor([5, 1, 9, 2, 7, 3]), 2, torch.Generator().manual_seed(0))
+    >>> sorted(int(i) for b in bs for i in b)
+    [0, 1, 2, 3, 4, 5]
+    """
+    order = torch.randperm(len(lengths), generator=generator)
+    if not bucket:
+        return [order[s:s + batch] for s in range(0, len(order), batch)]
+    out = []
+    group = batch * BUCKET_GROUP
+    for g in range(0, len(order), group):
+        idx = order[g:g + group]
+        idx = idx[torch.sort(lengths[idx], stable=True).indices]
+        out.extend(idx[s:s + batch] for s in range(0, len(idx), batch))
+    perm = torch.randperm(len(out), generator=generator)
+    return [out[k] for k in perm.tolist()]
 
 
 #: The paper's settings.
@@ -134,9 +165,11 @@ def tensorize(pairs: Sequence, vocab: Vocab, inputs: int, library=None) -> Batch
 
 
 def batch_loss(model: RecognitionNet, b: Batch) -> torch.Tensor:
-    """Mean token cross-entropy plus mean variable cross-entropy of a batch (scalar)."""
+    """Mean token cross-entropy plus mean variable cross-entropy of a batch (scalar). The padding after the
+    batch's longest scene and longest target is cut off first (the masks make this exact)."""
     t = int((b.targets != -100).sum(1).max().item()) if len(b) else 1
-    tl, vl = model(b.ranks, b.fields, b.cmask, b.tokens[:, :t], b.tok_ranks[:, :t])
+    i = max(int(b.cmask.sum(1).max().item()), 1) if len(b) else 1
+    tl, vl = model(b.ranks[:, :i], b.fields[:, :i], b.cmask[:, :i], b.tokens[:, :t], b.tok_ranks[:, :t])
     vmask = torch.arange(vl.shape[-1], device=vl.device)[None] < b.n_values[:, None]
     vl = vl.masked_fill(~vmask[:, None, :], -1e9)
     loss = torch.nn.functional.cross_entropy(tl.reshape(-1, tl.shape[-1]), b.targets[:, :t].reshape(-1),
@@ -192,16 +225,18 @@ def train(model: RecognitionNet, pairs, vocab: Vocab, cfg: TrainConfig = PAPER,
     n_val = int(round(cfg.holdout * n))
     if cfg.holdout > 0 and n >= 2:
         n_val = max(1, n_val)
-    val, tr = data.take(perm[:n_val]).to(dev), data.take(perm[n_val:]).to(dev)
+    val, tr = data.take(perm[:n_val]), data.take(perm[n_val:])
+    val = val.take(torch.sort(val.cmask.sum(1), stable=True).indices).to(dev)  # short scenes batch together
+    tr_len = tr.cmask.sum(1)
+    tr = tr.to(dev)
     model.to(dev)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     best_state, since = None, 0
     for epoch in range(cfg.epochs):
         model.train()
-        order = torch.randperm(len(tr), generator=generator).to(dev)
         total, count = 0.0, 0
-        for s in range(0, len(tr), cfg.batch):
-            b = tr.take(order[s:s + cfg.batch])
+        for idx in batches(tr_len, cfg.batch, generator, cfg.bucket):
+            b = tr.take(idx.to(dev))
             loss = batch_loss(model, b)
             opt.zero_grad()
             loss.backward()

@@ -13,7 +13,7 @@ from shapeprog.coder.objective import match  # noqa: E402
 from shapeprog.coder.lang import Call, Library, ProgramError, parse, parse_abstraction, to_text, walk  # noqa: E402
 from shapeprog.coder.recnet import (MAX_TOKENS, NetConfig, RecognitionNet, Vocab, decode_tokens,  # noqa: E402
                                     encode_scene, encode_target, load_checkpoint, sample, save_checkpoint)
-from shapeprog.coder.train import TrainConfig, batch_loss, tensorize, train  # noqa: E402
+from shapeprog.coder.train import BUCKET_GROUP, TrainConfig, batch_loss, batches, tensorize, train  # noqa: E402
 
 LEGS = "SymRef(Move(Cuboid(0.06,0.5,0.06),-0.3,-0.25,-0.3),AX)"
 SLATS = "SymTrans(Move(Cuboid(0.1,0.3,0.04),-0.3,0.4,0.3),AX,INT#3#,0.6)"
@@ -82,6 +82,38 @@ def test_forward_shapes_causality_and_padding():
     with pytest.raises(ValueError, match="at most"):
         model(torch.zeros(1, 200, dtype=torch.long), torch.zeros(1, 200, dtype=torch.long),
               torch.ones(1, 200, dtype=torch.bool), b.tokens[:1], b.tok_ranks[:1])
+
+
+def test_the_loss_cut_to_the_longest_scene_equals_the_padded_loss():
+    vocab = Vocab.of(Library())
+    torch.manual_seed(0)
+    model = _small(vocab).eval()
+    b = tensorize(dream(Library(), n=6, seed=2).pairs[:8], vocab, model.cfg.inputs)
+    assert int(b.cmask.sum(1).max()) < model.cfg.inputs  # there is padding to cut
+    t = int((b.targets != -100).sum(1).max())
+    tl, vl = model(b.ranks, b.fields, b.cmask, b.tokens[:, :t], b.tok_ranks[:, :t])
+    vl = vl.masked_fill(~(torch.arange(vl.shape[-1])[None] < b.n_values[:, None])[:, None, :], -1e9)
+    ce = torch.nn.functional.cross_entropy
+    full = ce(tl.reshape(-1, tl.shape[-1]), b.targets[:, :t].reshape(-1), ignore_index=-100) + ce(
+        vl.reshape(-1, vl.shape[-1]), b.target_ranks[:, :t].reshape(-1), ignore_index=-100)
+    assert torch.allclose(batch_loss(model, b), full, atol=1e-5)
+
+
+def test_bucketed_batches_cover_every_pair_once_and_group_similar_lengths():
+    g = torch.Generator().manual_seed(3)
+    lengths = torch.randint(1, 145, (1000,), generator=g)
+    for bucket in (True, False):
+        bs = batches(lengths, 8, torch.Generator().manual_seed(1), bucket)
+        got = torch.cat(bs)
+        assert sorted(got.tolist()) == list(range(1000)) and all(len(b) <= 8 for b in bs)
+        spread = sum(int(lengths[b].max() - lengths[b].min()) for b in bs) / len(bs)
+        if bucket:  # sorted within groups of BUCKET_GROUP batches: a batch spans a few lengths only
+            assert spread < 144 / BUCKET_GROUP * 2
+        else:
+            assert spread > 80
+    a = batches(lengths, 8, torch.Generator().manual_seed(1))
+    b = batches(lengths, 8, torch.Generator().manual_seed(1))
+    assert all(torch.equal(x, y) for x, y in zip(a, b))  # determined by the generator
 
 
 def test_a_handful_of_pairs_is_overfit_and_sampled_back(tmp_path):
