@@ -23,7 +23,9 @@ library out, its floats as references to the scene's values. Plain PyTorch; the 
 * **Sampling** (:func:`sample`): batched, prefix order, with type masks (a slot of type Shape takes a
   shape function, Float a ``<var>``, an operator or a constant, ...); a float sub-expression has at most
   :data:`MAX_FLOAT_TERMS` terms and contains a ``<var>``; the whole expression fits in
-  :data:`MAX_TOKENS`. Row 0 of a batch is the greedy (arg-max) expression when asked.
+  :data:`MAX_TOKENS`. Row 0 of a batch is the greedy (arg-max) expression when asked. Decoding is
+  incremental (:meth:`RecognitionNet.step`): the keys and values of the conditioning tokens are computed
+  once per scene and those of the sequence once per token.
 
 Example:
     >>> from shapeprog.coder.lang import Library, parse
@@ -284,6 +286,26 @@ class _Block(nn.Module):
         x = self.ln1(x + self.drop(self.out(y)))
         return self.ln2(x + self.drop(self.ff(x)))
 
+    def kv(self, x):
+        """The keys and values of states ``x`` (B, N, W), each (B, heads, N, W / heads)."""
+        w = x.shape[-1]
+        k, v = F.linear(x, self.qkv.weight[w:], self.qkv.bias[w:]).chunk(2, -1)
+        return self._split(k), self._split(v)
+
+    def step(self, s, keys, values, n):
+        """One new sequence state ``s`` (B, 1, W) attending to the first ``n`` cached ``keys`` / ``values``
+        (B, heads, capacity, ·: the conditioning tokens, then the earlier sequence tokens) and to itself,
+        whose key and value are written at index ``n``. No padding: every cached key is attended (a sampling
+        scene has no padded slots)."""
+        w = s.shape[-1]
+        q = self._split(F.linear(s, self.qkv.weight[:w], self.qkv.bias[:w]))
+        k, v = self.kv(s)
+        keys[:, :, n:n + 1], values[:, :, n:n + 1] = k, v
+        y = F.scaled_dot_product_attention(q, keys[:, :, :n + 1], values[:, :, :n + 1])
+        y = y.transpose(1, 2).reshape(s.shape)
+        x = self.ln1(s + self.drop(self.out(y)))
+        return self.ln2(x + self.drop(self.ff(x)))
+
     def cond(self, c, cmask):
         """c: (B, I, W); cmask: (B, I) bool, True for real slots."""
         return self._attend(c, c, cmask[:, None, :].expand(-1, c.shape[1], -1))
@@ -360,6 +382,35 @@ class RecognitionNet(nn.Module):
             s = blk.seq(s, c, cmask)
         return self.tok_head(s), self.var_head(s)
 
+    def start(self, conds: list, n: int) -> list:
+        """A decoding cache for ``n`` rows of one unpadded scene (``conds`` from :meth:`encode` with batch 1):
+        per block, the keys and values of the conditioning tokens, computed once and shared by the rows."""
+        cache = []
+        for blk, c in zip(self.blocks, conds):
+            k, v = blk.kv(c[:1])
+            i = k.shape[2]
+            keys = k.new_empty(n, k.shape[1], i + self.cfg.max_tokens, k.shape[3])
+            values = torch.empty_like(keys)
+            keys[:, :, :i], values[:, :, :i] = k, v
+            cache.append((keys, values, i))
+        return cache
+
+    def step(self, cache: list, position: int, tokens: torch.Tensor, tok_ranks: torch.Tensor) -> tuple:
+        """The logits after one more token per row, given the cache of :meth:`start` filled by the steps at
+        the earlier positions (this one writes its keys and values there); the same values as the last
+        position of :meth:`decode` on the whole sequence.
+
+        Args:
+            position: the token's index in the sequence (0 for ``<start>``). tokens, tok_ranks: (B,) int64.
+        """
+        if position >= self.cfg.max_tokens:
+            raise ValueError(f"position {position}; the network takes at most {self.cfg.max_tokens} tokens")
+        val = self.rank_emb(tok_ranks.clamp(0, self.cfg.inputs - 1)) * (tokens == 1)[..., None]
+        s = (torch.cat([self.tok_emb(tokens), val], -1) + self.pos_emb[position])[:, None]
+        for blk, (keys, values, i) in zip(self.blocks, cache):
+            s = blk.step(s, keys, values, i + position)
+        return self.tok_head(s[:, 0]), self.var_head(s[:, 0])
+
     def forward(self, ranks, fields, cmask, tokens, tok_ranks):
         """:meth:`encode` then :meth:`decode` (shapes as there)."""
         return self.decode(self.encode(ranks, fields, cmask), cmask, tokens, tok_ranks)
@@ -416,8 +467,9 @@ def _min_lengths(vocab: Vocab) -> dict:
 class _Grammar:
     """The type masks of one sample (prefix order)."""
 
-    def __init__(self, vocab: Vocab, minlen: dict, max_len: int):
+    def __init__(self, vocab: Vocab, minlen: dict, max_len: int, masks: dict | None = None):
         self.vocab, self.minlen, self.max_len = vocab, minlen, max_len
+        self.masks = {} if masks is None else masks  # mask per grammar state, shareable between samples
         self.stack = [(Type.SHAPE, None)]  # (type, float group) of the pending slots, top last
         self.length = 0
         self.prev_inv = False
@@ -427,13 +479,22 @@ class _Grammar:
         return not self.stack
 
     def allowed(self) -> np.ndarray:
-        v = self.vocab
-        out = np.zeros(len(v), dtype=bool)
+        """The tokens allowed next (a read-only mask)."""
         if not self.stack:
-            return out
+            return np.zeros(len(self.vocab), dtype=bool)
         want, group = self.stack[-1]
         rest = sum(self.minlen[t] for t, _ in self.stack[:-1])
         room = self.max_len - 1 - self.length - rest  # tokens left for this slot
+        key = (want, room, self.prev_inv, None if group is None else (group["used"], group["open"], group["var"]))
+        out = self.masks.get(key)
+        if out is None:
+            out = self.masks[key] = self._allowed(want, group, room)
+            out.flags.writeable = False
+        return out
+
+    def _allowed(self, want, group, room) -> np.ndarray:
+        v = self.vocab
+        out = np.zeros(len(v), dtype=bool)
         for t in range(1, len(v)):
             if v.returns[t] is not want:
                 continue
@@ -478,12 +539,14 @@ class _Grammar:
 
 @torch.no_grad()
 def sample(model: RecognitionNet, vocab: Vocab, prims, n: int = 64, generator: torch.Generator | None = None,
-           greedy_first: bool = True, temperature: float = 1.0) -> list:
+           greedy_first: bool = True, temperature: float = 1.0, incremental: bool = True) -> list:
     """``n`` expressions for a scene, sampled token by token under the type masks.
 
     Args:
         prims: the scene's primitives (at most ``model.cfg.max_prims``).
         greedy_first: row 0 takes the arg-max token and rank at every step.
+        incremental: decode with the cache of :meth:`RecognitionNet.step` (False: run :meth:`RecognitionNet.decode`
+            on the whole sequence at every step; the same samples, several times slower).
 
     Returns:
         list of ``n`` expressions (floats as the scene's values); a row that cannot complete within
@@ -501,20 +564,30 @@ def sample(model: RecognitionNet, vocab: Vocab, prims, n: int = 64, generator: t
         ranks = torch.as_tensor(scene.ranks, device=dev)[None]
         fields = torch.as_tensor(scene.fields, device=dev)[None]
         cmask = torch.ones_like(ranks, dtype=torch.bool)
-        conds = [c.expand(n, -1, -1) for c in model.encode(ranks, fields, cmask)]
-        cmask = cmask.expand(n, -1)
+        conds = model.encode(ranks, fields, cmask)
+        if incremental:
+            cache = model.start(conds, n)
+        else:
+            conds, cmask = [c.expand(n, -1, -1) for c in conds], cmask.expand(n, -1)
+            seq_t, seq_r = [], []
         vmask = torch.arange(cfg.inputs, device=dev) < len(scene.values)
         minlen = _min_lengths(vocab)
-        gram = [_Grammar(vocab, minlen, cfg.max_tokens) for _ in range(n)]
-        tokens = torch.zeros(n, 1, dtype=torch.long, device=dev)
-        tranks = torch.zeros(n, 1, dtype=torch.long, device=dev)
+        masks: dict = {}
+        gram = [_Grammar(vocab, minlen, cfg.max_tokens, masks) for _ in range(n)]
+        tk = torch.zeros(n, dtype=torch.long, device=dev)  # <start>
+        rk = torch.zeros(n, dtype=torch.long, device=dev)
         out_t = [[] for _ in range(n)]
         out_r = [[] for _ in range(n)]
         for _step in range(cfg.max_tokens - 1):
             if all(g.done for g in gram):
                 break
-            tl, vl = model.decode(conds, cmask, tokens, tranks)
-            tl, vl = tl[:, -1].float(), vl[:, -1].float()
+            if incremental:
+                tl, vl = model.step(cache, _step, tk, rk)
+            else:
+                seq_t.append(tk)
+                seq_r.append(rk)
+                tl, vl = (x[:, -1] for x in model.decode(conds, cmask, torch.stack(seq_t, 1), torch.stack(seq_r, 1)))
+            tl, vl = tl.float(), vl.float()
             allow = torch.as_tensor(np.stack([g.allowed() for g in gram]), device=dev)
             tl = tl.masked_fill(~allow, -math.inf)
             vl = vl.masked_fill(~vmask[None], -math.inf)
@@ -533,8 +606,6 @@ def sample(model: RecognitionNet, vocab: Vocab, prims, n: int = 64, generator: t
                 g.push(tk_l[i])
                 out_t[i].append(tk_l[i])
                 out_r[i].append(rk_l[i] if tk_l[i] == 1 else -1)
-            tokens = torch.cat([tokens, tk[:, None]], 1)
-            tranks = torch.cat([tranks, rk[:, None]], 1)
     finally:
         model.train(was_training)
     exprs = []

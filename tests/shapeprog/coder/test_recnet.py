@@ -84,6 +84,34 @@ def test_forward_shapes_causality_and_padding():
               torch.ones(1, 200, dtype=torch.bool), b.tokens[:1], b.tok_ranks[:1])
 
 
+def test_incremental_decoding_equals_decoding_the_whole_sequence():
+    vocab = Vocab.of(Library())
+    torch.manual_seed(0)
+    model = _small(vocab).eval()
+    scene = execute(parse(f"Union({LEGS},{SLATS})"))
+    sc = encode_scene(scene)
+    ranks, fields = torch.as_tensor(sc.ranks)[None], torch.as_tensor(sc.fields)[None]
+    cmask = torch.ones_like(ranks, dtype=torch.bool)
+    n, t = 3, 12
+    g = torch.Generator().manual_seed(0)
+    tokens = torch.randint(1, len(vocab), (n, t), generator=g)
+    tokens[:, 0] = 0
+    tok_ranks = torch.randint(0, len(sc.values), (n, t), generator=g)
+    with torch.no_grad():
+        conds = model.encode(ranks, fields, cmask)
+        tl, vl = model.decode([c.expand(n, -1, -1) for c in conds], cmask.expand(n, -1), tokens, tok_ranks)
+        cache = model.start(conds, n)
+        for k in range(t):
+            stl, svl = model.step(cache, k, tokens[:, k], tok_ranks[:, k])
+            assert torch.allclose(stl, tl[:, k], atol=1e-5) and torch.allclose(svl, vl[:, k], atol=1e-5)
+        with pytest.raises(ValueError, match="at most"):
+            model.step(cache, model.cfg.max_tokens, tokens[:, 0], tok_ranks[:, 0])
+    # sampling with the cache and by decoding the whole sequence at every step: the same samples
+    a = sample(model, vocab, scene, n=16, generator=torch.Generator().manual_seed(4))
+    b = sample(model, vocab, scene, n=16, generator=torch.Generator().manual_seed(4), incremental=False)
+    assert [to_text(x) for x in a] == [to_text(x) for x in b] and len(a) == 16
+
+
 def test_the_loss_cut_to_the_longest_scene_equals_the_padded_loss():
     vocab = Vocab.of(Library())
     torch.manual_seed(0)

@@ -1,12 +1,17 @@
-"""ShapeCoder's recognition network: training pairs per second on the dreams of a shipped library, three ways in
-one run: every batch padded to the network's full conditioning length (144 tokens, the code before the
+"""ShapeCoder's recognition network: training and sampling speed on a shipped library.
+
+Training: pairs per second on the dreams of the library, three ways in one run: every batch padded to the network's full conditioning length (144 tokens, the code before the
 padding was cut), each batch cut to its longest scene (plain shuffled batches, ``TrainConfig(bucket=False)``),
 and cut batches of scenes of similar length (``bucket=True``, the default). Also the held-out loss after
 the same number of seconds of training each way, from the same initial weights.
 
+Sampling (the wake's search): samples per second of batches of 64 for the first ``--scenes`` discovery shapes,
+with the network trained above, incremental decoding (the default) against decoding the whole sequence at
+every step (``sample(..., incremental=False)``); both give the same samples (counted).
+
 Usage::
 
-    python bench/bench_recnet_train.py [--category chair] [--dreams 400] [--seconds 60] [--threads 1]
+    python bench/bench_recnet.py [--category chair] [--dreams 400] [--seconds 60] [--threads 1] [--scenes 20]
 """
 from __future__ import annotations
 
@@ -20,7 +25,8 @@ import torch
 
 from shapeprog.coder import data, load_library
 from shapeprog.coder.dream import dream
-from shapeprog.coder.recnet import NetConfig, RecognitionNet, Vocab
+from shapeprog.coder.lang import to_text
+from shapeprog.coder.recnet import NetConfig, RecognitionNet, Vocab, sample
 from shapeprog.coder.train import TrainConfig, batch_loss, batches, tensorize
 
 
@@ -41,6 +47,7 @@ def main(argv=None):
     ap.add_argument("--seconds", type=float, default=60.0, help="training seconds per way")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--scenes", type=int, default=20, help="scenes to sample from")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     print(f"# command: python {' '.join(sys.argv)}")
@@ -87,6 +94,19 @@ def main(argv=None):
     print("\n| batches | pairs / s | ratio | epochs in the budget | held-out loss |\n|---|---:|---:|---:|---:|")
     for name, rate, ep, vl in rows:
         print(f"| {name} | {rate:.0f} | {rate / rows[0][1]:.2f} | {ep:.2f} | {vl:.3f} |")
+    shapes = [s.prims for s in data.load(args.category)[:args.scenes] if len(s.prims) <= model.cfg.max_prims]
+    got, secs = {}, {}
+    for incremental in (False, True):
+        t0 = time.perf_counter()
+        got[incremental] = [to_text(e) for k, p in enumerate(shapes)
+                            for e in sample(model, vocab, p, 64, torch.Generator().manual_seed(k),
+                                            incremental=incremental)]
+        secs[incremental] = time.perf_counter() - t0
+    same = sum(a == b for a, b in zip(got[False], got[True]))
+    print(f"\n| sampling ({len(shapes)} scenes x 64) | samples / s | ratio |\n|---|---:|---:|")
+    print(f"| whole sequence every step | {len(got[False]) / secs[False]:.0f} | 1.00 |")
+    print(f"| incremental (default) | {len(got[True]) / secs[True]:.0f} | {secs[False] / secs[True]:.2f} |")
+    print(f"\n# identical samples: {same} of {len(got[True])}")
 
 
 if __name__ == "__main__":
