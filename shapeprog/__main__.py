@@ -596,8 +596,34 @@ def _cmd_discover_abstractions(args) -> int:
                      max_nodes=args.max_nodes, time_limit=args.time_limit)
     except ValueError as e:  # a setting out of range, named
         raise SystemExit(f"error: {e}") from None
+    start = None
+    if args.start_round is not None and not args.start_from:
+        raise SystemExit("error: --start-round needs --start-from")
+    if args.start_from:
+        from .coder import tables
+
+        import json
+        from importlib import resources
+
+        src = Path(args.start_from)
+        try:
+            run = tables.from_run(src, category) if src.is_dir() else tables.shipped(args.start_from)
+        except (OSError, ValueError) as e:
+            raise SystemExit(f"error: --start-from: {e}") from None
+        log_file = (src / "log.json" if src.is_dir() else
+                    resources.files("shapeprog").joinpath("data", "coder_libraries", f"{args.start_from}_log.json"))
+        hist = json.loads(log_file.read_text())["log"] if log_file.is_file() else []
+        n = min(args.shapes, len(run.programs))
+        if n < args.shapes:
+            raise SystemExit(f"error: {args.start_from} has {len(run.programs)} programs, fewer than --shapes "
+                             f"{args.shapes}")
+        start = (run.library, list(run.programs[:n]), hist)
     t0 = time.time()
-    res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress)
+    try:
+        res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress,
+                                start=start, start_round=args.start_round)
+    except ValueError as e:  # a start that does not fit the shapes, named
+        raise SystemExit(f"error: {e}") from None
     s = res.summary()
     print(f"{category}: F={s.F:.2f} |L|={s.library_size} struct={s.num_struct:.2f} param={s.num_param:.2f} "
           f"shapes={s.shapes} ({time.time() - t0:.0f} s); wrote {args.out}/library.txt, programs.txt, log.json")
@@ -1114,6 +1140,13 @@ def main(argv=None) -> int:
     d.add_argument("--wake-seconds", type=float, default=1.0,
                    help="network wake: seconds of sampling per search step (1)")
     d.add_argument("--device", default="auto", help="network wake: where to train (auto: CUDA when available)")
+    d.add_argument("--start-from", metavar="LIBRARY",
+                   help="begin with an earlier run's library and programs: a shipped category (chair) or a "
+                        "discover-abstractions output folder; e.g. with --wake network, the final wake again with "
+                        "the recognition network")
+    d.add_argument("--start-round", type=_int_at_least(0),
+                   help="with --start-from: the round whose wake comes first (default --rounds: only the final "
+                        "wake)")
     _add_egraph_limits(d)
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     d.set_defaults(func=_cmd_discover_abstractions)

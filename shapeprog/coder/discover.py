@@ -50,7 +50,7 @@ from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, che
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
 __all__ = ["Config", "DiscoveryResult", "Summary", "WAKES", "discover", "discover_category", "evaluate", "integrate",
-           "summarize", "train_network", "wake", "wake_network", "write_outputs"]
+           "start_from", "summarize", "train_network", "wake", "wake_network", "write_outputs"]
 
 #: The wake searches: by refactoring only, or with the recognition network.
 WAKES = ("refactor", "network")
@@ -545,6 +545,39 @@ def _load(out: Path | None, lang: Lang):
     return st
 
 
+def start_from(out: str | Path, shapes: Sequence, library: Library, programs: Sequence[Expr], cfg: Config = Config(),
+               lang: Lang = LANG_3D, round: int | None = None, log: Sequence[dict] = ()) -> None:
+    """Write ``out/state.json`` so that :func:`discover` on ``out`` starts at the wake of ``round`` (default
+    ``cfg.rounds``: only the final wake) with ``library`` and the programs of an earlier run, e.g. to run
+    the final wake again with the network (``Config(wake="network")``) on a library discovered with the
+    refactor-only wake. ``log``, the earlier run's F per phase, is carried over (its seconds continue).
+
+    Raises:
+        FileExistsError: ``out`` already holds a run's state.
+        ValueError: another number of programs than shapes, a round beyond ``cfg.rounds``, or a program that
+            does not re-cover its shape (named by its index).
+    """
+    out = Path(out)
+    if (out / "state.json").exists():
+        raise FileExistsError(f"{out / 'state.json'} exists: resume that run without a start, or choose another --out")
+    round = cfg.rounds if round is None else round
+    if not 0 <= round <= cfg.rounds:
+        raise ValueError(f"the start round must be in 0..{cfg.rounds} (the run's rounds), got {round}")
+    if len(programs) != len(shapes):
+        raise ValueError(f"{len(programs)} programs for {len(shapes)} shapes")
+    costs, errors = [], []
+    for k, (p, sh) in enumerate(zip(programs, shapes)):
+        got = evaluate(p, library, getattr(sh, "prims", sh))
+        if got is None:
+            raise ValueError(f"program {k} ({getattr(sh, 'key', k)}) does not re-cover its shape")
+        costs.append(got[0])
+        errors.append(got[1])
+    names = [int(a.name[1:]) for a in library.abstractions if a.name[1:].isdigit()]
+    _save(out, {"round": round, "phase": "wake", "library": library.to_text(), "programs": [to_text(p) for p in programs],
+                "costs": costs, "errors": errors, "log": list(log), "weights": [1.0] * len(shapes),
+                "index": 1 + max(names, default=-1), "config": None, "lang": lang.name})
+
+
 def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, executor: cf.Executor | None = None,
              out: str | Path | None = None, log: Callable | None = print, progress: Callable | None = None,
              stop_at: float | None = None) -> DiscoveryResult:
@@ -647,11 +680,13 @@ def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str],
 
 def discover_category(category: str, out: str | Path, cfg: Config = Config(), shapes: int = 400, workers: int = 2,
                       minutes: float | None = None, log: Callable | None = print,
-                      progress: Callable | None = None) -> DiscoveryResult:
+                      progress: Callable | None = None, start: tuple | None = None,
+                      start_round: int | None = None) -> DiscoveryResult:
     """:func:`discover` on the first ``shapes`` discovery shapes of ``category`` with a process pool of
     ``workers`` (1: none), then :func:`write_outputs`. ``out`` may hold the ``state.json`` of an earlier
     run (it resumes); a folder with a ``library.txt`` but no state is refused (user files are never
-    overwritten).
+    overwritten). ``start``: ``(library, programs, log)`` of an earlier run on the same shapes, to begin at
+    the wake of ``start_round`` (see :func:`start_from`).
 
     Raises:
         FileExistsError: ``out`` has outputs of something else.
@@ -662,6 +697,8 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     if (out / "library.txt").exists() and not (out / "state.json").exists():
         raise FileExistsError(f"{out / 'library.txt'} exists and is not from a resumable run; choose another --out")
     recs = data.load(category)[:shapes]
+    if start is not None:
+        start_from(out, recs, start[0], start[1], cfg, LANG_3D, start_round, start[2])
     stop_at = None if minutes is None else time.time() + 60 * minutes
     if workers > 1:
         import multiprocessing
@@ -676,7 +713,12 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     s = result.summary()
     last = result.log[-1] if result.log else {"round": 0, "phase": "none", "seconds": 0}
     header = (f"# ShapeCoder library discovered on the first {len(recs)} {category} shapes: rounds={cfg.rounds}, "
-              f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, seed={cfg.seed}, e-graph limits "
+              f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, seed={cfg.seed}, wake={cfg.wake}"
+              + (f" (dreams={cfg.n_dreams}, training {cfg.train_seconds or 0:g} s, lr={cfg.train_lr:g}, "
+                 f"dropout={cfg.dropout:g})" if cfg.wake == "network" else "")
+              + ("" if start is None else f", started at round {cfg.rounds if start_round is None else start_round}"
+                 " from an earlier library and its programs")
+              + f", e-graph limits "
               f"{cfg.iterations} iterations / {cfg.max_nodes} e-nodes / {cfg.time_limit:g} s; last finished phase: "
               f"round {last['round']} {last['phase']} after {last['seconds']:.0f} s; F={s.F:.2f}, |L|={s.library_size}\n")
     write_outputs(out, result, [r.key for r in recs], header)

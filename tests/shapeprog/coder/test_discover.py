@@ -3,13 +3,14 @@ inference and the shipped libraries."""
 import dataclasses
 import json
 import random
+from importlib import resources
 
 import pytest
 
 pytest.importorskip("egglog")
 
 from shapeprog.coder import data
-from shapeprog.coder.discover import Config, discover, evaluate, summarize
+from shapeprog.coder.discover import Config, discover, evaluate, start_from, summarize
 from shapeprog.coder.execute import execute
 from shapeprog.coder.infer import infer, load_library, shipped_libraries
 from shapeprog.coder.lang import Call, Library, parse, parse_abstraction, to_text, walk
@@ -79,6 +80,52 @@ def test_discovery_finds_and_uses_a_planted_structure(tmp_path):
     # deterministic under the seed
     other = discover(shapes, cfg, log=None)
     assert other.library.to_text() == res.library.to_text() and other.programs == res.programs
+
+
+def test_a_run_starts_from_an_earlier_library_and_its_programs(tmp_path, capsys):
+    shapes = _chairs(8, seed=5)
+    cfg = Config(rounds=1, n_proposals=60, n_abstractions=4, seed=1)
+    res = discover(shapes, cfg, log=None)
+    # only the final wake, again, on the earlier library: its programs are kept or improved, the log continues
+    start_from(tmp_path / "again", shapes, res.library, res.programs, cfg, log=res.log)
+    again = discover(shapes, cfg, out=tmp_path / "again", log=None)
+    assert again.library == res.library and all(a <= b + 1e-9 for a, b in zip(again.costs, res.costs))
+    assert [(h["round"], h["phase"]) for h in again.log] == [(0, "wake"), (0, "integrate"), (1, "wake"), (1, "wake")]
+    # from round 0 of a two-round run: wake, integrate, wake, integrate, final wake
+    two = dataclasses.replace(cfg, rounds=2)
+    start_from(tmp_path / "more", shapes, res.library, res.programs, two, round=0)
+    more = discover(shapes, two, out=tmp_path / "more", log=None)
+    assert [h["phase"] for h in more.log] == ["wake", "integrate", "wake", "integrate", "wake"]
+    assert more.summary().F <= again.summary().F + 1e-9
+    with pytest.raises(FileExistsError, match="state.json exists"):
+        start_from(tmp_path / "again", shapes, res.library, res.programs, cfg)
+    with pytest.raises(ValueError, match="start round must be in 0..1"):
+        start_from(tmp_path / "x", shapes, res.library, res.programs, cfg, round=2)
+    with pytest.raises(ValueError, match="program 0 .* does not re-cover"):
+        start_from(tmp_path / "x", shapes, res.library, res.programs[1:] + res.programs[:1], cfg)
+    with pytest.raises(ValueError, match="7 programs for 8 shapes"):
+        start_from(tmp_path / "x", shapes, res.library, res.programs[1:], cfg)
+    assert not (tmp_path / "x").exists()
+    # the command line: the shipped chair library, the final wake on its first three shapes
+    from shapeprog.__main__ import main
+
+    out = tmp_path / "cli"
+    # (one worker: a process forked after this process ran egglog can hang)
+    assert main(["discover-abstractions", "chair", "--start-from", "chair", "--shapes", "3", "--workers", "1",
+                 "--out", str(out), "--quiet"]) == 0
+    log = json.loads((out / "log.json").read_text())["log"]
+    shipped_log = json.loads(resources.files("shapeprog").joinpath("data", "coder_libraries", "chair_log.json")
+                             .read_text())["log"]
+    assert log[:-1] == shipped_log and (log[-1]["round"], log[-1]["phase"]) == (4, "wake")
+    assert (out / "library.txt").read_text().splitlines()[1:] == load_library("chair").to_text().splitlines()
+    capsys.readouterr()
+    with pytest.raises(SystemExit, match="--start-round needs --start-from"):
+        main(["discover-abstractions", "chair", "--start-round", "2", "--out", str(tmp_path / "y"), "--quiet"])
+    assert main(["discover-abstractions", "chair", "--start-from", "chair", "--shapes", "3", "--out", str(out),
+                 "--quiet"]) == 1
+    assert "state.json exists" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="no shipped library for 'sofa'"):
+        main(["discover-abstractions", "chair", "--start-from", "sofa", "--out", str(tmp_path / "z"), "--quiet"])
 
 
 def test_propose_ranks_candidates_and_respects_frequency():
