@@ -895,6 +895,7 @@ def _cmd_table1(args) -> int:
 
 
 def _cmd_table2_coder(args) -> int:
+    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     from .coder import tables
@@ -908,7 +909,9 @@ def _cmd_table2_coder(args) -> int:
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
     parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]
     progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
-    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    # workers forked after this process ran torch can hang: with a network they start from a fresh interpreter
+    ctx = multiprocessing.get_context("forkserver") if args.phi_network else None
+    pool = ProcessPoolExecutor(args.workers, mp_context=ctx) if args.workers > 1 else None
     try:
         for cat in args.categories:
             try:
@@ -916,8 +919,13 @@ def _cmd_table2_coder(args) -> int:
                 t2 = tables.table2(run)
             except ValueError as e:
                 raise SystemExit(f"error: {e}") from None
-            t3 = tables.table3(run, train=args.train, heldout=args.heldout, executor=pool, progress=progress, **limits)
-            parts.append(tables.format_tables(run, t2, t3, **limits))
+            try:
+                network = tables.network_of(run) if args.phi_network else None
+            except ValueError as e:
+                raise SystemExit(f"error: --phi-network: {e}") from None
+            t3 = tables.table3(run, train=args.train, heldout=args.heldout, executor=pool, progress=progress,
+                               network=network, **limits)
+            parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None))
             print(parts[-1] + "\n", flush=True)
     finally:
         if pool is not None:
@@ -1246,6 +1254,10 @@ def main(argv=None) -> int:
     t2.add_argument("--workers", type=_int_at_least(1), default=2,
                     help="processes for the per-shape inference (1: everything in this process)")
     _add_egraph_limits(t2)
+    t2.add_argument("--phi-network", action="store_true",
+                    help="post hoc inference with the library's recognition network as well (the paper's; the "
+                         "shipped <category>_recnet.pt, or a run folder's last recnet_round<k>.pt); default: "
+                         "refactoring only")
     t2.add_argument("--out", help="also write the tables (markdown) here, atomically")
     t2.add_argument("--quiet", action="store_true")
     t2.set_defaults(func=_cmd_table2_coder, argv=None)

@@ -50,7 +50,8 @@ from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, che
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
 __all__ = ["Config", "DiscoveryResult", "Summary", "WAKES", "discover", "discover_category", "evaluate", "integrate",
-           "start_from", "summarize", "train_network", "wake", "wake_network", "write_outputs"]
+           "network_best", "network_payload", "start_from", "summarize", "train_network", "wake",
+           "wake_network", "write_outputs"]
 
 #: The wake searches: by refactoring only, or with the recognition network.
 WAKES = ("refactor", "network")
@@ -267,6 +268,30 @@ def _model_from(payload):
     return _MODELS[key]
 
 
+def network_payload(model, vocab) -> tuple:
+    """A picklable ``(key, config dict, vocab, state_dict)`` of a network for worker processes (each
+    builds the model once per key)."""
+    import hashlib
+
+    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    digest = hashlib.sha1(b"".join(v.numpy().tobytes() for v in state.values())).hexdigest()
+    return (digest, asdict(model.cfg), vocab, state)
+
+
+def network_best(current: Expr, library: Library, prims, payload, limits: dict, search: dict | None = None,
+                 seed: int = 0) -> tuple:
+    """The network search of one shape, then the refactor of every candidate (see :func:`wake_network`)
+    with an empty store: ``(program, cost, error, source)``, never dearer than ``current``.
+
+    Args:
+        payload: from :func:`network_payload`. limits: ``iterations``, ``max_nodes``, ``time_limit``.
+        search: ``batch``, ``batches``, ``seconds`` of the search (default the wake's).
+    """
+    search = search or {"batch": WAKE_BATCH, "batches": WAKE_BATCHES, "seconds": WAKE_SECONDS}
+    expr, cost, error, _, source = _network_best((current, library, prims, payload, {}, dict(limits), search, seed))
+    return expr, cost, error, source
+
+
 def _network_best(task) -> tuple:
     """Worker: the network search of one shape, the store's combinations, then the refactor of every
     candidate; ``(program, cost, error, store entries, source)``."""
@@ -376,13 +401,9 @@ def wake_network(shapes: Sequence, programs: Sequence[Expr] | None, library: Lib
     A process pool for ``executor`` must not fork its workers after this process has run torch (they can
     hang): use a ``spawn`` or ``forkserver`` context, or a pool whose workers started before.
     """
-    import hashlib
-
     prims = [getattr(s, "prims", s) for s in shapes]
     stores = [dict() for _ in prims] if stores is None else stores
-    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
-    digest = hashlib.sha1(b"".join(v.numpy().tobytes() for v in state.values())).hexdigest()
-    payload = (digest, asdict(model.cfg), vocab, state)
+    payload = network_payload(model, vocab)
     search = {"batch": cfg.wake_batch, "batches": cfg.wake_batches, "seconds": cfg.wake_seconds}
     tasks = []
     for k, p in enumerate(prims):

@@ -25,7 +25,7 @@ from .lang import LANG_3D, Library, Num, expand, substitute, to_text
 from .objective import naive_program
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, refactor
 
-__all__ = ["Inferred", "infer", "load_library", "shipped_libraries"]
+__all__ = ["Inferred", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
 
 _DIR = ("data", "coder_libraries")
 
@@ -62,7 +62,7 @@ def _prims(shape) -> tuple:
 
 
 def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITERATIONS,
-          max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT) -> Inferred:
+          max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None, seed: int = 0) -> Inferred:
     """The program of one shape under ``library``.
 
     Args:
@@ -71,6 +71,10 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
         library: e.g. :func:`load_library`.
         passes: refactor calls at most, each on the previous one's program (each call is limited by
             ``iterations``, ``max_nodes``, ``time_limit``); stops at the first that does not lower the cost.
+        network: a recognition network for ``library`` (:func:`load_network`, a ``(model, vocab)`` pair, or
+            a payload of :func:`shapeprog.coder.discover.network_payload`): the refactored program is then a
+            candidate of the network wake's search for the shape (the paper's post hoc inference), and the
+            cheaper program is kept. seed: seeds that search.
 
     Raises:
         ParseError: a malformed line. ValueError: primitives of the wrong width, or more than the
@@ -97,8 +101,41 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
         if got is None or got[0] >= best[1][0] - 1e-9:
             break
         best = (r.expr, got)
+    if network is not None:
+        from .discover import network_best, network_payload
+
+        payload = network if len(network) == 4 else network_payload(*network)
+        limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit}
+        expr, cost, err, _ = network_best(best[0], library, prims, payload, limits, seed=seed)
+        if cost is not None and cost < best[1][0] - 1e-9:
+            best = (expr, (cost, err))
     e, (cost, err) = best
     return Inferred(to_text(e), to_text(expand(e, library)), cost, err, stop)
+
+
+def shipped_networks() -> tuple:
+    """The categories with a shipped recognition network (``<category>_recnet.pt``)."""
+    folder = resources.files("shapeprog").joinpath(*_DIR)
+    if not folder.is_dir():
+        return ()
+    return tuple(sorted(p.name[:-len("_recnet.pt")] for p in folder.iterdir() if p.name.endswith("_recnet.pt")))
+
+
+def load_network(category: str) -> tuple:
+    """``(model, vocab)``: the recognition network shipped with ``category``'s library (the one its final
+    wake used), on the CPU in eval mode; for :func:`infer`'s ``network``.
+
+    Raises:
+        ValueError: no network is shipped for ``category``.
+    """
+    from .recnet import load_checkpoint
+
+    if category not in shipped_networks():
+        raise ValueError(f"no shipped recognition network for {category!r}; shipped: "
+                         f"{', '.join(shipped_networks()) or 'none'}")
+    with resources.as_file(resources.files("shapeprog").joinpath(*_DIR, f"{category}_recnet.pt")) as path:
+        model, vocab, _ = load_checkpoint(path, load_library(category))
+    return model.eval(), vocab
 
 
 def shipped_libraries() -> tuple:

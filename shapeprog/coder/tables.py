@@ -94,6 +94,25 @@ def shipped(category: str) -> Run:
                      f"{category}_programs.txt", f"shapeprog/data/coder_libraries/{category}.txt")
 
 
+def network_of(run: Run) -> tuple:
+    """``(model, vocab)``: the recognition network of a run: the shipped one of its category for a shipped
+    run, else the last ``recnet_round<k>.pt`` in its folder.
+
+    Raises:
+        ValueError: the run has no network.
+    """
+    from .infer import load_network
+    from .recnet import load_checkpoint
+
+    if run.source.startswith("shapeprog/data/"):
+        return load_network(run.category)
+    files = sorted(Path(run.source).glob("recnet_round*.pt"), key=lambda p: int(p.stem[len("recnet_round"):]))
+    if not files:
+        raise ValueError(f"{run.source}: no recnet_round<k>.pt (the run used the refactor-only wake)")
+    model, vocab, _ = load_checkpoint(files[-1], run.library)
+    return model.eval(), vocab
+
+
 def from_run(folder, category: str) -> Run:
     """The library and programs of a ``discover-abstractions`` output folder.
 
@@ -168,21 +187,28 @@ class Phi:
 
 
 def _infer_one(task):
-    prims, lib_text, limits = task
+    prims, lib_text, limits, payload, seed = task
     lib = Library.from_text(lib_text, LANG_3D)
     t0 = time.process_time()
-    r = infer(prims, lib, **limits)
+    r = infer(prims, lib, **limits, network=payload, seed=seed)
     return r.cost, time.process_time() - t0, r.text
 
 
 def phi(split: str, records: Sequence, library: Library, *, executor=None, iterations: int = MAX_ITERATIONS,
-        max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT) -> Phi:
-    """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed."""
+        max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None) -> Phi:
+    """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed;
+    with ``network`` (a ``(model, vocab)`` pair) as :func:`~shapeprog.coder.infer.infer` with the network,
+    shape k's search seeded with k."""
     limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit}
     kept = [r for r in records if len(r.prims) <= library.lang.max_prims]
     if not kept:
         raise ValueError(f"{split}: no shape with at most {library.lang.max_prims} primitives")
-    tasks = [(r.prims, library.to_text(), limits) for r in kept]
+    payload = None
+    if network is not None:
+        from .discover import network_payload
+
+        payload = network_payload(*network)
+    tasks = [(r.prims, library.to_text(), limits, payload, k) for k, r in enumerate(kept)]
     t0 = time.time()
     out = list(executor.map(_infer_one, tasks)) if executor is not None else [_infer_one(t) for t in tasks]
     wall = time.time() - t0
@@ -193,20 +219,21 @@ def phi(split: str, records: Sequence, library: Library, *, executor=None, itera
 
 
 def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
-           progress: Callable[[str], None] | None = None, **limits) -> list:
+           progress: Callable[[str], None] | None = None, network=None, **limits) -> list:
     """The two post hoc inference rows: the first ``train`` discovery shapes and the first ``heldout``
-    held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit`` as :func:`phi`)."""
+    held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit``, and ``network`` as
+    :func:`phi`)."""
     rows = []
     for split, recs in (("train-PHI", data.load(run.category)[:train]),
                         ("validation-PHI", data.load(run.category, "heldout")[:heldout])):
         if progress is not None:
             progress(f"{run.category} {split}: {len(recs)} shapes")
-        rows.append(phi(split, recs, run.library, executor=executor, **limits))
+        rows.append(phi(split, recs, run.library, executor=executor, network=network, **limits))
     return rows
 
 
 def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
-                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT) -> str:
+                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network: bool = False) -> str:
     """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours."""
     cat = run.category
     out = [f"## Table 2 ({cat}, {t2.ours.shapes} discovery shapes; library {run.source})", "",
@@ -217,7 +244,8 @@ def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = 
     out += [f"| {name} (paper, 400 shapes) | {f} | {size} | {ns} | {npar} |" for name, f, size, ns, npar in PAPER_TABLE2[cat]]
     paper_limits = (iterations, max_nodes, time_limit) == (MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT)
     which = "the paper's" if paper_limits else "ours, not the paper's"
-    out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions; e-graph limits "
+    how = "the recognition network's search and refactoring" if network else "refactoring only"
+    out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions by {how}; e-graph limits "
             f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which})", "",
             "| split | shapes | F | abstractions used | CPU s / shape | wall s | paper F |",
             "| --- | --- | --- | --- | --- | --- | --- |"]

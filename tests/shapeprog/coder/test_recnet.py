@@ -275,3 +275,24 @@ def test_discovery_defaults_train_with_the_papers_settings():
     from shapeprog.coder.train import PAPER
 
     assert Config().train_config() == PAPER
+
+
+def test_post_hoc_inference_with_the_shipped_network_is_never_dearer_and_re_covers_the_shape():
+    from shapeprog.coder import data, tables
+    from shapeprog.coder.discover import evaluate
+    from shapeprog.coder.infer import infer, load_library, load_network, shipped_networks
+
+    assert "chair" in shipped_networks()
+    lib, net = load_library("chair"), load_network("chair")
+    rec = data.load("chair", "heldout")[1]
+    plain = infer(rec.prims, lib)
+    with_net = infer(rec.prims, lib, network=net, seed=0)
+    assert with_net.cost <= plain.cost + 1e-9
+    got = evaluate(parse(with_net.text, lib), lib, rec.prims)
+    assert got is not None and abs(got[0] - with_net.cost) < 1e-9
+    # Table 3's row with the network: never above the refactor-only row (the search stops on a 1 s budget
+    # per step, so the two runs need not find the same program)
+    row = tables.phi("validation-PHI", [rec], lib, network=net)
+    assert row.F <= tables.phi("x", [rec], lib).F + 1e-9 and row.shapes == 1
+    with pytest.raises(ValueError, match="no shipped recognition network for 'sofa'"):
+        load_network("sofa")
