@@ -670,9 +670,19 @@ def _cmd_abstract_infer(args) -> int:
         shape = data.parse_record(text[0], spec, 1).prims
     else:
         shape = spec
+    network = None
+    if args.network:
+        from .coder.infer import load_network
+
+        if args.library not in shipped_libraries():
+            raise SystemExit("error: --network needs a shipped library (its recognition network ships with it)")
+        try:
+            network = load_network(args.library)
+        except ValueError as e:
+            raise SystemExit(f"error: --network: {e}") from None
     try:
         r = infer(shape, lib, passes=args.passes, iterations=args.iterations, max_nodes=args.max_nodes,
-                  time_limit=args.time_limit)
+                  time_limit=args.time_limit, network=network)
     except ParseError:
         raise  # located in the shape's text; main reports it
     except ValueError as e:
@@ -1166,6 +1176,9 @@ def main(argv=None) -> int:
     a.add_argument("--library", required=True, help="a shipped category (chair) or a library.txt file")
     _add_egraph_limits(a)
     a.add_argument("--passes", type=int, default=3, help="refactor calls at most, each on the previous result")
+    a.add_argument("--network", action="store_true",
+                   help="also search with the shipped library's recognition network (the paper's post hoc "
+                        "inference; slower)")
     a.set_defaults(func=_cmd_abstract_infer)
     d = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",
                        description="Serve an editor page for a program: the shape in 3D, one control per free "

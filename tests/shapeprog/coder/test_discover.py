@@ -183,6 +183,8 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
     with pytest.raises(SystemExit, match="error: Config.iterations must be an int >= 0"):
         main(["discover-abstractions", "chair", "--out", str(tmp_path / "neg"), "--iterations", "-3", "--quiet"])
     assert not (tmp_path / "neg").exists()
+    with pytest.raises(SystemExit, match="--network needs a shipped library"):
+        main(["abstract-infer", "chair/401", "--library", str(lib), "--network"])
     bad = tmp_path / "bad.txt"
     bad.write_text("Legs(w: Float) = Cubiod(w,w,w)\n")
     assert main(["abstract-infer", "chair/401", "--library", str(bad)]) == 2
