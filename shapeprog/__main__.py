@@ -602,22 +602,15 @@ def _cmd_discover_abstractions(args) -> int:
     if args.start_from:
         from .coder import tables
 
-        import json
-        from importlib import resources
-
         src = Path(args.start_from)
         try:
             run = tables.from_run(src, category) if src.is_dir() else tables.shipped(args.start_from)
         except (OSError, ValueError) as e:
             raise SystemExit(f"error: --start-from: {e}") from None
-        log_file = (src / "log.json" if src.is_dir() else
-                    resources.files("shapeprog").joinpath("data", "coder_libraries", f"{args.start_from}_log.json"))
-        hist = json.loads(log_file.read_text())["log"] if log_file.is_file() else []
-        n = min(args.shapes, len(run.programs))
-        if n < args.shapes:
+        if len(run.programs) < args.shapes:
             raise SystemExit(f"error: {args.start_from} has {len(run.programs)} programs, fewer than --shapes "
                              f"{args.shapes}")
-        start = (run.library, list(run.programs[:n]), hist)
+        start = (run.library, list(run.programs[:args.shapes]), tables.log_of(run))
     t0 = time.time()
     try:
         res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress,

@@ -20,6 +20,7 @@ Example (``python -m shapeprog table2-coder --categories chair --train 20 --held
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
 from importlib import resources
@@ -92,6 +93,16 @@ def shipped(category: str) -> Run:
     return _read_run(category, folder.joinpath(f"{category}.txt").read_text(encoding="utf-8"), f"{category}.txt",
                      folder.joinpath(f"{category}_programs.txt").read_text(encoding="utf-8"),
                      f"{category}_programs.txt", f"shapeprog/data/coder_libraries/{category}.txt")
+
+
+def log_of(run: Run) -> list:
+    """The F log per phase of a run (``<category>_log.json`` of a shipped library, ``log.json`` of a run
+    folder); empty when the file is missing."""
+    if run.source.startswith("shapeprog/data/"):
+        f = resources.files("shapeprog").joinpath("data", "coder_libraries", f"{run.category}_log.json")
+    else:
+        f = Path(run.source) / "log.json"
+    return json.loads(f.read_text(encoding="utf-8"))["log"] if f.is_file() else []
 
 
 def network_of(run: Run) -> tuple:
