@@ -3,7 +3,8 @@
 :func:`infer` takes a cloud ``(N, 3)`` (NumPy or torch) in any position and scale, maps it into the canonical
 frame the training clouds are in (:func:`~shapeprog.pointcloud.normalize.normalize`), encodes
 :data:`ENCODER_POINTS` of its points with the PointNet++ encoder, decodes the code with the VAE decoder
-(non-rejecting validity decoding, :func:`shapeprog.vae.decode.decode_latent`), scales the program uniformly
+(non-rejecting validity decoding, :func:`shapeprog.vae.decode.decode_latent`; several codes at once with
+:func:`~shapeprog.vae.decode.decode_programs`), scales the program uniformly
 so that its executed cuboids span the cloud's bounding box (the decoder works in the corpus frame, whose
 shapes the normalisation scales by 0.85-1.1), and maps the result back into the input's scale and position.
 With ``fit=True`` the program's continuous numbers are then fitted to the cloud by chamfer through the
@@ -40,7 +41,7 @@ from ..fit import fit as fit_program
 from ..lang import Program, to_text
 from ..metrics import chamfer, fscore
 from ..sampling import sample_surface
-from ..vae.decode import decode_latent
+from ..vae.decode import decode_programs
 from ..vae.model import VAE
 from ..vae.pretrained import load_pretrained as load_vae
 from .data import TRAIN_POINTS
@@ -97,15 +98,15 @@ def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
     layout = getattr(vae, "layout", None)
     if layout is not None:
         from ..vae.macro_decode import decode_macro
+    if layout is None:
+        with torch.no_grad():
+            return decode_programs(vae.decoder, codes)
     out = []
     with torch.no_grad():
         for z in codes:
             try:
-                if layout is not None:
-                    d = decode_macro(vae, z)
-                    out.append(d if macros else d.program)
-                else:
-                    out.append(decode_latent(vae.decoder, z, reject=False).program)
+                d = decode_macro(vae, z)
+                out.append(d if macros else d.program)
             except ValueError:
                 out.append(None)
     return out
@@ -250,7 +251,13 @@ def align_program(program: Program, diagonal: float = CANONICAL_DIAGONAL) -> tup
     Raises:
         ValueError: the program executes to no cuboid.
     """
-    c = _corners_of(program).double()
+    return _align_executed(program, _corners_of(program), diagonal)
+
+
+def _align_executed(program: Program, corners: torch.Tensor,
+                    diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
+    """:func:`align_program` given the program's executed corners ``(L, 8, 3)``."""
+    c = corners.double()
     if len(c) == 0:
         raise ValueError("the program executes to no cuboid")
     flat = c.reshape(-1, 3)

@@ -14,8 +14,8 @@ from shapeprog.pointcloud.data import corpus_cloud
 from shapeprog.pointcloud.encoder import PointNet2SSG
 from shapeprog.pointcloud.infer import CloudModel, align_program, infer, shape_metrics, _corners_of
 from shapeprog.pointcloud.normalize import normalize
-from shapeprog.pointcloud.search import (MAX_SEARCH_DECODES, SEARCH_SCHEDULE, check_schedule, latent_search,
-                                         parse_schedule)
+from shapeprog.pointcloud.search import (MAX_SEARCH_DECODES, SEARCH_SCHEDULE, aligned_corners, check_schedule,
+                                         latent_search, parse_schedule)
 from shapeprog.vae.pretrained import load_pretrained as load_vae
 
 TINY = dict(npoints=[16, 8], radii=[0.3, 0.6], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
@@ -84,6 +84,40 @@ def test_the_kept_program_has_the_lowest_selection_chamfer_among_the_candidates(
         scores.append(shape_metrics(corners, target, points=1024, seed=1, physics=False)["cd"])
     # shape_metrics draws the surface samples with the search's seed: the same chamfer, exactly
     assert len(scores) >= 2 and r.cd == pytest.approx(min(scores), rel=1e-12)
+
+
+def test_batched_alignment_gives_the_numbers_of_aligning_one_program_at_a_time(model):
+    codes = 0.7 * torch.randn(12, 256, generator=torch.Generator().manual_seed(5))
+    programs = model.decode(codes) + [None]
+    got = aligned_corners(programs)
+    assert got[-1] is None and sum(c is not None for c in got) >= 6
+    for p, c in zip(programs, got):
+        if p is None:
+            assert c is None
+            continue
+        canon, off = align_program(p)
+        assert torch.equal(c, _corners_of(canon).double() + torch.from_numpy(off))
+
+
+
+def test_a_batch_that_fails_to_execute_is_run_one_program_at_a_time(model, monkeypatch):
+    import shapeprog.pointcloud.search as search
+
+    programs = [p for p in model.decode(0.7 * torch.randn(6, 256, generator=torch.Generator().manual_seed(6)))
+                if p is not None]
+    want = aligned_corners(programs)
+    real, calls = search.execute_batch, []
+
+    def fails_in_batches(batch):
+        calls.append(len(batch))
+        if len(batch) > 1:
+            raise ValueError("a program of the batch cannot be executed")
+        return real(batch)
+
+    monkeypatch.setattr(search, "execute_batch", fails_in_batches)
+    got = aligned_corners(programs)
+    assert len(programs) >= 2 and calls[0] == len(programs)
+    assert all(a is not None and torch.equal(a, b) for a, b in zip(got, want))
 
 
 @pytest.mark.parametrize("schedule, match", [

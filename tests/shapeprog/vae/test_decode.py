@@ -10,6 +10,7 @@ import shapeprog
 from shapeprog import corpus
 from shapeprog.errors import ParseError
 from shapeprog.vae import VAE, Decoded, Decoder, InvalidSample, decode, decode_latent, encode, interpolate, sample
+from shapeprog.vae.decode import decode_programs
 from shapeprog.vae.decode import _Budget, _decode_tree, _decode_with, _Net, _program, _propose
 from shapeprog.vae.replay import Replay
 from shapeprog.vae.validity import ATTACH_CMD as ATTACH
@@ -448,6 +449,23 @@ def test_untrained_models_decode_valid_programs(H):
         assert d.text == shapeprog.to_text(d.program) and d.tries == 1
     with pytest.raises(InvalidSample):  # an untrained decoder breaks a rule early
         decode_latent(vae.decoder, torch.randn(H, generator=g), reject=True)
+
+
+def test_decoding_several_latents_gives_the_programs_of_decoding_each():
+    from shapeprog.vae.pretrained import load_pretrained
+
+    vae = load_pretrained("chair")
+    zs = torch.randn(10, vae.decoder.hidden_dim, generator=torch.Generator().manual_seed(2))
+    got = decode_programs(vae.decoder, zs)
+    for z, p in zip(zs, got):
+        try:
+            want = decode_latent(vae.decoder, z, reject=False).text
+        except ValueError:
+            want = None
+        assert (None if p is None else shapeprog.to_text(p)) == want
+    assert sum(p is not None for p in got) >= 8
+    with pytest.raises(ValueError, match="shape"):
+        decode_programs(vae.decoder, torch.zeros(2, 7))
 
 
 def test_corpus_programs_replayed_through_the_rules_come_back():
