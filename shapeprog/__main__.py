@@ -991,7 +991,8 @@ def main(argv=None) -> int:
                    help="latent search: decode 96 more codes around the predicted one and keep the program closest "
                         "to the cloud (about 1 s; before --fit)")
     i.add_argument("--search-schedule", metavar="N:SIGMA,...",
-                   help="the search's steps, e.g. 16:0.75,16:0.5 (implies --search)")
+                   help="the search's steps, e.g. 16:0.75,16:0.5, or 'fast' (17 decodes, about 0.2 s) or 'default' "
+                        "(implies --search)")
     i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x"), help="the input's up axis")
     i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
     i.add_argument("--size", type=_int_at_least(8), default=256, help="picture cell size in pixels")

@@ -31,14 +31,22 @@ from ..lang import Program
 from ..metrics import chamfer
 from ..sampling import sample_surface
 
-__all__ = ["MAX_SEARCH_DECODES", "SEARCH_POINTS", "SEARCH_SCHEDULE", "SearchResult", "aligned_corners",
-           "check_schedule", "latent_search", "parse_schedule"]
+__all__ = ["FAST_SEARCH_SCHEDULE", "MAX_SEARCH_DECODES", "NAMED_SCHEDULES", "SEARCH_POINTS", "SEARCH_SCHEDULE",
+           "SearchResult", "aligned_corners", "check_schedule", "latent_search", "parse_schedule"]
 
 #: ``(samples, sigma)`` per step: ``samples`` codes drawn around the best code so far with standard deviation
 #: ``sigma`` (the VAE's prior has unit variance). Chosen on 30 chair test shapes of the cloud cache with the
 #: latent-regression chair model (F-score without fitting): 45.6 for the predicted code alone, 60.9 for four
 #: steps of 8, 64.4 for four steps of 16, 66.9 for these six steps of 16 (docs/pointcloud.md, "Latent search").
 SEARCH_SCHEDULE = ((16, 0.75), (16, 0.5), (16, 0.35), (16, 0.25), (16, 0.18), (16, 0.12))
+#: A short schedule (17 decodes) for a budget of about 0.2 s per cloud on one CPU core. Chosen on the validation
+#: carve-out of the chair cache (167 clouds, the shipped end-to-end model, F-score without fitting): 57.3 for
+#: the predicted code alone, 65.9 for these two steps of 8, 65.7 / 65.6 / 64.4 for the 21-decode schedules
+#: 12:0.5,8:0.25 / 10:0.6,10:0.3 / 8:0.75,8:0.4,4:0.2, and 66.4 for 25 decodes (16:0.5,8:0.25)
+#: (``bench/pointcloud_search_budget.py --split val``; docs/pointcloud.md, "Latent search").
+FAST_SEARCH_SCHEDULE = ((8, 0.5), (8, 0.25))
+#: Schedules by name for :func:`parse_schedule` (and so the command line's ``--search-schedule``).
+NAMED_SCHEDULES = {"default": SEARCH_SCHEDULE, "fast": FAST_SEARCH_SCHEDULE}
 #: Points of the input cloud, and surface samples of each candidate, in the selection chamfer.
 SEARCH_POINTS = 1024
 #: Most decodes one search may ask for (the sum of a schedule's samples).
@@ -94,11 +102,14 @@ def check_schedule(schedule: Sequence) -> tuple:
 
 
 def parse_schedule(text: str) -> tuple:
-    """``"16:0.75,16:0.5"`` -> ``((16, 0.75), (16, 0.5))`` (checked by :func:`check_schedule`).
+    """``"16:0.75,16:0.5"`` -> ``((16, 0.75), (16, 0.5))`` (checked by :func:`check_schedule`); a name of
+    :data:`NAMED_SCHEDULES` (``default``, ``fast``) gives that schedule.
 
     Raises:
         ValueError: a step that is not ``samples:sigma`` or fails :func:`check_schedule`.
     """
+    if str(text).strip() in NAMED_SCHEDULES:
+        return NAMED_SCHEDULES[str(text).strip()]
     steps = []
     for k, part in enumerate(str(text).split(",")):
         bits = part.strip().split(":")

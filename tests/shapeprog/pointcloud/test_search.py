@@ -132,6 +132,7 @@ def test_bad_schedules_are_refused(schedule, match):
 def test_schedules_parse_from_text():
     assert parse_schedule("16:0.75, 8:0.5") == ((16, 0.75), (8, 0.5))
     assert check_schedule(SEARCH_SCHEDULE) == SEARCH_SCHEDULE
+    assert parse_schedule("fast") == ((8, 0.5), (8, 0.25)) and parse_schedule(" default ") == SEARCH_SCHEDULE
     for bad in ("16", "a:0.5", "16:0.5:1", ""):
         with pytest.raises(ValueError, match="search step 0"):
             parse_schedule(bad)
