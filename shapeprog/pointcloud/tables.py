@@ -120,28 +120,34 @@ def _shape_job(job) -> dict:
     back = lambda corners: torch.from_numpy((np.asarray(corners) - b) / k)  # noqa: E731 - input -> canonical
     out = {}
     g = torch.Generator().manual_seed(int(seed))
+    empty = lambda: shape_metrics(torch.zeros(0, 8, 3), target)  # noqa: E731 - no shape: F 0, not rooted
+
+    def row(name, make):
+        """One row's metrics; a ValueError (no shape decoded, a fit that fails) empties this row only."""
+        try:
+            out[name] = shape_metrics(back(make()), target, seed=seed, stability=stability)
+        except ValueError:
+            out[name] = empty()
+
     try:
         plain = infer(x, model=model, physics=False, seed=seed)
+    except ValueError:  # no shape decoded: every row that starts from the decoded program fails for this shape
+        plain = None
+        out.update({r: empty() for r in ("model", "opt_program", "opt_cuboids")})
+    if plain is not None:
         out["model"] = shape_metrics(back(plain.corners()), target, seed=seed, stability=stability)
-        fitted = infer(x, model=model, fit=True, fit_steps=steps, physics=False, seed=seed)
-        out["opt_program"] = shape_metrics(back(fitted.corners()), target, seed=seed, stability=stability)
-        unit = torch.from_numpy(plain.transform.apply(x))
-        free = fit_cuboids(_corners_of(plain.canonical) + torch.from_numpy(plain.canonical_offset).float(), unit,
-                           steps=steps, generator=g)
-        placed = plain.transform.invert(free.double().numpy())
-        out["opt_cuboids"] = shape_metrics(back(placed), target, seed=seed, stability=stability)
-    except ValueError:  # no shape decoded: every model row fails for this shape
-        empty = shape_metrics(torch.zeros(0, 8, 3), target)
-        out.update({r: dict(empty) for r in ("model", "opt_program", "opt_cuboids")})
+        row("opt_program", lambda: infer(x, model=model, fit=True, fit_steps=steps, physics=False, seed=seed).corners())
+
+        def free_cuboids():
+            unit = torch.from_numpy(plain.transform.apply(x))
+            free = fit_cuboids(_corners_of(plain.canonical) + torch.from_numpy(plain.canonical_offset).float(), unit,
+                               steps=steps, generator=g)
+            return plain.transform.invert(free.double().numpy())
+        row("opt_cuboids", free_cuboids)
     if search:
-        try:
-            found = infer(x, model=model, physics=False, seed=seed, search=True)
-            out["search"] = shape_metrics(back(found.corners()), target, seed=seed, stability=stability)
-            fitted = infer(x, model=model, fit=True, fit_steps=steps, physics=False, seed=seed, search=True)
-            out["search_opt_program"] = shape_metrics(back(fitted.corners()), target, seed=seed, stability=stability)
-        except ValueError:
-            empty = shape_metrics(torch.zeros(0, 8, 3), target)
-            out.update({r: dict(empty) for r in ("search", "search_opt_program")})
+        row("search", lambda: infer(x, model=model, physics=False, seed=seed, search=True).corners())
+        row("search_opt_program", lambda: infer(x, model=model, fit=True, fit_steps=steps, physics=False, seed=seed,
+                                                search=True).corners())
     if retrieved is not None:
         corners, t = retrieved
         out["retrieval"] = shape_metrics(back(t.invert(corners)), target, seed=seed, stability=stability)

@@ -81,3 +81,20 @@ def test_the_latent_search_rows_are_measured_on_request(tmp_path):
     text = write_tables(res, tmp_path / "t.md").read_text()
     assert "Ours + latent search (not the papers' protocol; no fitting)" in text
     assert "With latent search the model" in text
+
+
+def test_a_fit_that_fails_empties_its_own_row_only(tmp_path, monkeypatch):
+    import shapeprog.pointcloud.tables as tables
+
+    w = _tiny_cache_and_weights(tmp_path, 3, 1)
+    real = tables.infer
+
+    def no_fit(*args, **kwargs):
+        if kwargs.get("fit"):
+            raise ValueError("the fit failed")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tables, "infer", no_fit)
+    res = evaluate(tmp_path / "c", "chair", weights=w, limit=1, steps=2, stability=False, retrieval=False)
+    assert res.rows["opt_program"]["fscore"] == 0.0 and res.rows["opt_program"]["rooted"] == 0.0
+    assert res.rows["model"]["fscore"] > 0.0 and res.rows["opt_cuboids"]["fscore"] > 0.0
