@@ -95,12 +95,11 @@ def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
     fails: programs (corpus frame); for a :class:`~shapeprog.vae.macro_model.MacroVAE` the expansions of its
     macro programs, or with ``macros`` the :class:`~shapeprog.vae.macro_decode.MacroDecoded` themselves
     (macro program, text and expansion). Shared by :class:`CloudModel` and the training modules' validation."""
-    layout = getattr(vae, "layout", None)
-    if layout is not None:
-        from ..vae.macro_decode import decode_macro
-    if layout is None:
+    if getattr(vae, "layout", None) is None:
         with torch.no_grad():
             return decode_programs(vae.decoder, codes)
+    from ..vae.macro_decode import decode_macro
+
     out = []
     with torch.no_grad():
         for z in codes:
