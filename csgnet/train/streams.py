@@ -95,16 +95,21 @@ class MixedLengthBatches(ShardedBatches):
     whenever a length's table is used up (short-program sets cycle more often, as in the reference), or
     are sampled on the fly with :func:`csgnet.synth.sample_programs` when ``tables`` is None.
 
+    ``prepare(tokens, lengths)``, when given, runs on each batch where it is made (in a DataLoader worker)
+    and its results are appended to the batch (e.g. :func:`csgnet.train.supervised.packed_inputs`).
+
     Yields:
-        ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded.
+        ``(tokens (B, T + 1) int64, lengths (B,) int64)``, ``$``-padded, then ``prepare``'s results if any.
     """
 
     def __init__(self, dim: int, lengths: list[int], batch: int, steps: int, max_len: int,
-                 tables: dict[int, torch.Tensor] | None = None, seed: int = 0, rank: int = 0, world: int = 1):
+                 tables: dict[int, torch.Tensor] | None = None, seed: int = 0, rank: int = 0, world: int = 1,
+                 prepare=None):
         super().__init__(steps, seed, rank, world)
         self.dim, self.lengths, self.max_len = dim, list(lengths), int(max_len)
         self.per_length = max(1, int(batch) // len(self.lengths))
         self.tables = tables
+        self.prepare = prepare
 
     def _batches(self, steps: int, rng: np.random.Generator):
         stop = vocabulary(self.dim).stop
@@ -119,7 +124,8 @@ class MixedLengthBatches(ShardedBatches):
                 else:
                     toks = self.tables[n][torch.as_tensor(cycles[n].take(self.per_length))]
                 parts.append(toks)
-            yield torch.cat(parts), lengths.clone()
+            tokens, lens = torch.cat(parts), lengths.clone()
+            yield (tokens, lens) if self.prepare is None else (tokens, lens, *self.prepare(tokens, lens))
 
 
 class ShuffledBatches(ShardedBatches):

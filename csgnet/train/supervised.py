@@ -2,8 +2,10 @@
 
 * :class:`CSGDataModule` streams synthetic programs, from files written by
   :func:`csgnet.data.generate_dataset` or sampled on the fly, as batches that mix the program lengths in
-  equal counts (the reference's "equal batch"). Batches hold token indices only; targets and stack
-  traces are rendered on the training device by the batched renderer.
+  equal counts (the reference's "equal batch"). Batches hold token indices; targets and stack traces are
+  rendered on the training device by the batched renderer, or, with ``render_in_workers``, by the
+  DataLoader workers on the CPU (bit-packed, unpacked on the device): on a GPU the stack machine's
+  token-by-token steps then leave the training step's critical path.
 * :class:`CSGNetModule` is teacher-forced supervised training: Adam, the spec's loss normalisation,
   reduce-on-plateau ×0.2 after more than 8 epochs without improvement of the validation chamfer (2D) or
   IoU (3D), validation by greedy decoding with IoU and chamfer per program length, and image grids of
@@ -14,6 +16,7 @@ configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI (``docs/c
 """
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import lightning as L
@@ -27,13 +30,14 @@ from .augment import jitter
 from ..decode import greedy
 from ..inference import load_model
 from ..models import CSGNet, ModelConfig, preset
-from ..renderer import render_tokens, stack_trace
+from ..renderer import encode_tokens, execute, render_tokens, stack_trace, unpack
 from ..score import score_renders
 from ..vocab import vocabulary
 from .logs import EpochValues, log_means, log_pairs
 from .streams import MixedLengthBatches, distributed, set_stream_epoch, stream_loader
 
-__all__ = ["CSGDataModule", "CSGNetModule", "DEFAULT_LENGTHS", "teacher_inputs", "teacher_forced_loss"]
+__all__ = ["CSGDataModule", "CSGNetModule", "DEFAULT_LENGTHS", "teacher_inputs", "teacher_forced_loss",
+           "packed_inputs"]
 
 DEFAULT_LENGTHS = {2: [3, 5, 7, 9, 11, 13], 3: [3, 5, 7]}
 
@@ -58,6 +62,31 @@ def teacher_inputs(model: CSGNet, tokens: torch.Tensor, lengths: torch.Tensor):
     tokens_in = torch.cat([start, tokens[:, :-1]], dim=1)
     stack = stack_trace(tokens[:, :-1], cfg.dim, k=cfg.stack_k, lengths=lengths) if cfg.stack else None
     return tokens, tokens_in, stack
+
+
+def packed_inputs(tokens: torch.Tensor, lengths: torch.Tensor, dim: int, stack_k: int | None):
+    """The renders a training step needs, bit-packed, computed where the batch is made (a DataLoader worker).
+
+    Args:
+        tokens: ``(B, T') int64`` ``$``-padded programs, as :class:`MixedLengthBatches` yields them.
+        lengths: ``(B,) int64`` program tokens.
+        dim: 2 or 3.
+        stack_k: CSGNetStack's stack depth (``None`` for CSGNet: no trace).
+
+    Returns:
+        ``(target, stack)``: int64 words of the programs' renders ``(B, *C)`` and, for CSGNetStack, of
+        their stack trace ``(T, B, K, *C)`` (``T = max(lengths) + 1``), else None. :func:`csgnet.renderer.unpack`
+        gives exactly what :func:`csgnet.renderer.render_tokens` and :func:`teacher_inputs` compute (tested).
+        Both are fresh tensors (the renderer recycles its CPU buffers), so a batch may be queued safely.
+    """
+    T = int(lengths.max()) + 1
+    tokens = tokens[:, :T]
+    kinds, params = encode_tokens(tokens, dim, lengths)
+    target = execute(kinds, params, dim, token_ids=tokens.long()).canvas.clone()
+    stack = None
+    if stack_k:
+        stack = stack_trace(tokens[:, :-1], dim, k=stack_k, lengths=lengths, packed=True).clone()
+    return target, stack
 
 
 def teacher_forced_loss(model: CSGNet, target: torch.Tensor, tokens_out: torch.Tensor, tokens_in: torch.Tensor,
@@ -98,11 +127,14 @@ class CSGDataModule(L.LightningDataModule):
         val_per_length: validation programs per length.
         num_workers: DataLoader workers (on-the-fly sampling scales with them).
         seed: stream seed.
+        render_in_workers: render each training batch's targets (and CSGNetStack's stack traces) in the
+            DataLoader workers (:func:`packed_inputs`) instead of in the training step; for GPU runs,
+            with ``num_workers`` > 0. The losses are the same (tested).
     """
 
     def __init__(self, dim: int = 2, data_dir: str | None = "data/synthetic", lengths: list[int] | None = None,
                  batch_size: int = 100, steps_per_epoch: int | None = None, val_per_length: int = 200,
-                 num_workers: int = 0, seed: int = 0):
+                 num_workers: int = 0, seed: int = 0, render_in_workers: bool = False):
         super().__init__()
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim!r}")
@@ -111,6 +143,7 @@ class CSGDataModule(L.LightningDataModule):
         self.max_len = max(self.lengths)
         self.batch_size, self.steps_per_epoch = int(batch_size), steps_per_epoch
         self.val_per_length, self.num_workers, self.seed = int(val_per_length), int(num_workers), int(seed)
+        self.render_in_workers = bool(render_in_workers)
         self.train_tables: dict[int, torch.Tensor] | None = None
         self.val_tokens: torch.Tensor | None = None
 
@@ -156,8 +189,19 @@ class CSGDataModule(L.LightningDataModule):
     def train_dataloader(self):
         rank, world = distributed(self.trainer)
         ds = MixedLengthBatches(self.dim, self.lengths, self.batch_size, self._steps(), self.max_len,
-                                self.train_tables, self.seed, rank, world)
+                                self.train_tables, self.seed, rank, world, prepare=self._prepare())
         return stream_loader(ds, self.trainer, self.num_workers)
+
+    def _prepare(self):
+        """The per-batch rendering of ``render_in_workers`` (None when off), with the trained model's stack depth."""
+        if not self.render_in_workers:
+            return None
+        module = getattr(self.trainer, "lightning_module", None) if self.trainer is not None else None
+        config = getattr(getattr(module, "model", None), "config", None)
+        if config is None or config.dim != self.dim:
+            raise ValueError("render_in_workers needs a CSGNetModule of the same dim as the data "
+                             f"(data dim {self.dim}, model {config if config is None else config.dim})")
+        return partial(packed_inputs, dim=self.dim, stack_k=config.stack_k if config.stack else None)
 
     def val_dataloader(self):
         lengths = (self.val_tokens != vocabulary(self.dim).stop).sum(1)
@@ -209,21 +253,30 @@ class CSGNetModule(L.LightningModule):
         self._val = EpochValues()
 
     # ------------------------------------------------------------------------------------------
-    def _inputs(self, tokens: torch.Tensor, lengths: torch.Tensor, augment: bool):
-        tokens, tokens_in, stack = teacher_inputs(self.model, tokens, lengths)
-        target = render_tokens(tokens, self.config.dim, lengths)
+    def _inputs(self, tokens: torch.Tensor, lengths: torch.Tensor, augment: bool, packed=None):
+        """Encoder input, targets, teacher inputs and stack trace of a batch; ``packed`` is the batch's
+        :func:`packed_inputs` when the DataLoader workers rendered it."""
+        if packed is None:
+            tokens, tokens_in, stack = teacher_inputs(self.model, tokens, lengths)
+            target = render_tokens(tokens, self.config.dim, lengths)
+        else:
+            T = int(lengths.max()) + 1
+            tokens = tokens[:, :T]
+            tokens_in = torch.cat([torch.full_like(tokens[:, :1], self.model.start), tokens[:, :-1]], dim=1)
+            target = unpack(packed[0], self.config.dim)
+            stack = None if packed[1] is None else unpack(packed[1], self.config.dim)
         if augment:
             target = jitter(target, self._rng)
         return target, tokens, tokens_in, stack
 
-    def _loss(self, tokens, lengths, augment):
-        target, tokens_out, tokens_in, stack = self._inputs(tokens, lengths, augment)
+    def _loss(self, tokens, lengths, augment, packed=None):
+        target, tokens_out, tokens_in, stack = self._inputs(tokens, lengths, augment, packed)
         loss, acc = teacher_forced_loss(self.model, target, tokens_out, tokens_in, stack, lengths, self.loss_norm)
         return loss, acc, target
 
     def training_step(self, batch, batch_idx):
-        tokens, lengths = batch
-        loss, acc, _ = self._loss(tokens, lengths, self.augment)
+        tokens, lengths, *packed = batch
+        loss, acc, _ = self._loss(tokens, lengths, self.augment, packed or None)
         self.log("train/loss", loss, prog_bar=True, batch_size=tokens.shape[0])
         self.log("train/exact", acc, batch_size=tokens.shape[0])
         return loss

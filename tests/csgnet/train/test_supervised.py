@@ -1,4 +1,5 @@
 """Supervised training: data stream, loss, Lightning loop, checkpoints, configs."""
+from functools import partial
 from pathlib import Path
 
 import lightning as L
@@ -10,7 +11,7 @@ from csgnet.train.checkpoint import AtomicCheckpointIO
 from csgnet.train.streams import MixedLengthBatches
 from csgnet.inference import export_weights
 from csgnet.models import preset
-from csgnet.train.supervised import CSGDataModule, CSGNetModule
+from csgnet.train.supervised import CSGDataModule, CSGNetModule, packed_inputs
 from csgnet.vocab import vocabulary
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -49,6 +50,48 @@ def test_stack_model_trains_on_the_stack_trace():
     full = stack_trace(tok[:, : int(lengths.max())], 2, k=m.config.stack_k, lengths=lengths)
     assert torch.equal(stack, full)
     assert (tok_in[:, 0] == m.model.start).all() and torch.equal(tok_in[:, 1:], out[:, :-1])
+
+
+@pytest.mark.parametrize("dim,stack", [(2, True), (2, False), (3, True)])
+def test_inputs_rendered_in_workers_equal_the_training_steps_own(dim, stack):
+    lens = [3, 5] if dim == 2 else [3]
+    m = CSGNetModule(dim=dim, stack=stack, model=TINY if dim == 2 else {"hidden": 8, "embed": 8}, augment=False)
+    k = m.config.stack_k if stack else None
+    ds = MixedLengthBatches(dim, lens, 4, 1, max(lens), None, seed=3,
+                            prepare=partial(packed_inputs, dim=dim, stack_k=k))
+    tok, lengths, target_w, stack_w = next(iter(ds))
+    assert target_w.dtype == torch.int64 and (stack_w is None) == (not stack)
+    own = m._inputs(tok, lengths, augment=False)
+    pre = m._inputs(tok, lengths, augment=False, packed=(target_w, stack_w))
+    for a, b in zip(own, pre):
+        assert (a is None and b is None) or torch.equal(a, b)
+
+
+def test_fit_with_rendering_in_a_worker_gives_the_same_losses(tmp_path):
+    losses = {}
+    for workers in (0, 1):
+        class Record(L.Callback):
+            def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
+                seen.append(float(outputs["loss"]))
+
+        seen = []
+        torch.manual_seed(0)
+        dm = CSGDataModule(dim=2, data_dir=None, lengths=[3, 5], batch_size=4, steps_per_epoch=3, val_per_length=2,
+                           num_workers=workers, render_in_workers=bool(workers))
+        m = CSGNetModule(dim=2, stack=True, model=TINY)
+        L.Trainer(max_steps=3, accelerator="cpu", devices=1, logger=False, enable_progress_bar=False,
+                  enable_model_summary=False, enable_checkpointing=False, default_root_dir=tmp_path,
+                  limit_val_batches=1, num_sanity_val_steps=0, callbacks=[Record()]).fit(m, dm)
+        losses[workers] = seen
+    assert len(losses[0]) == 3 and losses[0] == pytest.approx(losses[1], rel=1e-6)
+
+
+def test_rendering_in_workers_needs_the_csgnet_module_of_the_data():
+    dm = CSGDataModule(dim=3, data_dir=None, lengths=[3], batch_size=2, steps_per_epoch=1, render_in_workers=True)
+    dm.trainer = L.Trainer(accelerator="cpu", logger=False)
+    dm.trainer.strategy.connect(CSGNetModule(dim=2, stack=True, model=TINY))
+    with pytest.raises(ValueError, match="render_in_workers needs a CSGNetModule of the same dim"):
+        dm._prepare()
 
 
 class _StepAtStart(L.Callback):
