@@ -42,13 +42,15 @@ __all__ = ["CSGDataModule", "CSGNetModule", "DEFAULT_LENGTHS", "teacher_inputs",
 DEFAULT_LENGTHS = {2: [3, 5, 7, 9, 11, 13], 3: [3, 5, 7]}
 
 
-def teacher_inputs(model: CSGNet, tokens: torch.Tensor, lengths: torch.Tensor):
+def teacher_inputs(model: CSGNet, tokens: torch.Tensor, lengths: torch.Tensor, stack: torch.Tensor | None = None):
     """The teacher-forcing inputs of a batch of ``$``-padded programs.
 
     Args:
         model: the CSGNet / CSGNetStack trained (its start token and stack depth).
         tokens: ``(B, T') int64`` token indices, ``$``-padded, ``T' > max(lengths)``.
         lengths: ``(B,) int64`` program tokens before the ``$``.
+        stack: the batch's stack trace when it is already rendered (unpacked :func:`packed_inputs`); else
+            CSGNetStack's is rendered here.
 
     Returns:
         ``(tokens_out (B, T) int64, tokens_in (B, T) int64, stack)`` with ``T = max(lengths) + 1`` (the
@@ -60,7 +62,8 @@ def teacher_inputs(model: CSGNet, tokens: torch.Tensor, lengths: torch.Tensor):
     tokens = tokens[:, :T]
     start = torch.full_like(tokens[:, :1], model.start)
     tokens_in = torch.cat([start, tokens[:, :-1]], dim=1)
-    stack = stack_trace(tokens[:, :-1], cfg.dim, k=cfg.stack_k, lengths=lengths) if cfg.stack else None
+    if cfg.stack and stack is None:
+        stack = stack_trace(tokens[:, :-1], cfg.dim, k=cfg.stack_k, lengths=lengths)
     return tokens, tokens_in, stack
 
 
@@ -196,11 +199,11 @@ class CSGDataModule(L.LightningDataModule):
         """The per-batch rendering of ``render_in_workers`` (None when off), with the trained model's stack depth."""
         if not self.render_in_workers:
             return None
-        module = getattr(self.trainer, "lightning_module", None) if self.trainer is not None else None
+        module = getattr(self.trainer, "lightning_module", None)
         config = getattr(getattr(module, "model", None), "config", None)
-        if config is None or config.dim != self.dim:
+        if getattr(config, "dim", None) != self.dim:
             raise ValueError("render_in_workers needs a CSGNetModule of the same dim as the data "
-                             f"(data dim {self.dim}, model {config if config is None else config.dim})")
+                             f"(data dim {self.dim}, model dim {getattr(config, 'dim', None)})")
         return partial(packed_inputs, dim=self.dim, stack_k=config.stack_k if config.stack else None)
 
     def val_dataloader(self):
@@ -256,15 +259,12 @@ class CSGNetModule(L.LightningModule):
     def _inputs(self, tokens: torch.Tensor, lengths: torch.Tensor, augment: bool, packed=None):
         """Encoder input, targets, teacher inputs and stack trace of a batch; ``packed`` is the batch's
         :func:`packed_inputs` when the DataLoader workers rendered it."""
-        if packed is None:
-            tokens, tokens_in, stack = teacher_inputs(self.model, tokens, lengths)
+        target = trace = None
+        if packed is not None:
+            target, trace = (None if w is None else unpack(w, self.config.dim) for w in packed)
+        tokens, tokens_in, stack = teacher_inputs(self.model, tokens, lengths, trace)
+        if target is None:
             target = render_tokens(tokens, self.config.dim, lengths)
-        else:
-            T = int(lengths.max()) + 1
-            tokens = tokens[:, :T]
-            tokens_in = torch.cat([torch.full_like(tokens[:, :1], self.model.start), tokens[:, :-1]], dim=1)
-            target = unpack(packed[0], self.config.dim)
-            stack = None if packed[1] is None else unpack(packed[1], self.config.dim)
         if augment:
             target = jitter(target, self._rng)
         return target, tokens, tokens_in, stack

@@ -68,13 +68,14 @@ def test_inputs_rendered_in_workers_equal_the_training_steps_own(dim, stack):
 
 
 def test_fit_with_rendering_in_a_worker_gives_the_same_losses(tmp_path):
-    losses = {}
+    losses, sizes = {}, {}
     for workers in (0, 1):
         class Record(L.Callback):
             def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
                 seen.append(float(outputs["loss"]))
+                parts.add(len(batch))
 
-        seen = []
+        seen, parts = [], set()
         torch.manual_seed(0)
         dm = CSGDataModule(dim=2, data_dir=None, lengths=[3, 5], batch_size=4, steps_per_epoch=3, val_per_length=2,
                            num_workers=workers, render_in_workers=bool(workers))
@@ -82,7 +83,9 @@ def test_fit_with_rendering_in_a_worker_gives_the_same_losses(tmp_path):
         L.Trainer(max_steps=3, accelerator="cpu", devices=1, logger=False, enable_progress_bar=False,
                   enable_model_summary=False, enable_checkpointing=False, default_root_dir=tmp_path,
                   limit_val_batches=1, num_sanity_val_steps=0, callbacks=[Record()]).fit(m, dm)
-        losses[workers] = seen
+        losses[workers], sizes[workers] = seen, parts
+    # the worker run's batches carry the packed renders (tokens, lengths, target, stack); the other's do not
+    assert sizes == {0: {2}, 1: {4}}
     assert len(losses[0]) == 3 and losses[0] == pytest.approx(losses[1], rel=1e-6)
 
 
