@@ -77,11 +77,14 @@ def execute(kinds: torch.Tensor, params: torch.Tensor, dim: int, trace_k: int | 
     return Execution(machine.result(), machine.valid, trace)
 
 
-def render_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None = None) -> torch.Tensor:
+def render_tokens(tokens: torch.Tensor, dim: int, lengths: torch.Tensor | None = None,
+                  packed: bool = False) -> torch.Tensor:
     """Render token-index programs ``(B, T)`` (padded with ``$``) to bool ``(B, 64, 64[, 64])``
-    on the tokens' device."""
+    on the tokens' device; with ``packed``, to int64 words (:func:`unpack` gives the bools)."""
     tokens = torch.as_tensor(tokens)
     kinds, params = encode_tokens(tokens, dim, lengths)
+    if packed:
+        return _execute_plan(kinds, params, dim, tokens.long()).canvas
     return _execute_plan(kinds, params, dim, tokens.long(), as_bool=True)
 
 

@@ -30,7 +30,7 @@ from .augment import jitter
 from ..decode import greedy
 from ..inference import load_model
 from ..models import CSGNet, ModelConfig, preset
-from ..renderer import encode_tokens, execute, render_tokens, stack_trace, unpack
+from ..renderer import render_tokens, stack_trace, unpack
 from ..score import score_renders
 from ..vocab import vocabulary
 from .logs import EpochValues, log_means, log_pairs
@@ -84,8 +84,7 @@ def packed_inputs(tokens: torch.Tensor, lengths: torch.Tensor, dim: int, stack_k
     """
     T = int(lengths.max()) + 1
     tokens = tokens[:, :T]
-    kinds, params = encode_tokens(tokens, dim, lengths)
-    target = execute(kinds, params, dim, token_ids=tokens.long()).canvas.clone()
+    target = render_tokens(tokens, dim, lengths, packed=True).clone()
     stack = None
     if stack_k:
         stack = stack_trace(tokens[:, :-1], dim, k=stack_k, lengths=lengths, packed=True).clone()

@@ -161,6 +161,17 @@ def test_token_padding_and_lengths():
     assert (out2[1] == out2[0]).all()
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_packed_token_renders_unpack_to_the_bool_renders(dim):
+    rng = random.Random(11 + dim)
+    progs = [random_program(rng, dim, rng.randint(1, 3), vocab_only=True) for _ in range(6)]
+    ids = ProgramDataset(progs, dim).tokens
+    lengths = torch.tensor([len(p.tokens) for p in progs])
+    words = render_tokens(ids, dim, lengths, packed=True)
+    assert words.dtype == torch.int64
+    assert torch.equal(unpack(words, dim), render_tokens(ids, dim, lengths))
+
+
 # ------------------------------------------------------------------- stack trace
 
 @pytest.mark.parametrize("dim", [2, 3])
