@@ -11,7 +11,10 @@ optimiser step is timed on its own
 (``MixedLengthBatches``, programs sampled on the fly). "data" is the time to draw that batch. The table shows
 milliseconds per phase, the model's share (forward + backward + optimiser) of the step, samples/s, and
 samples/s without the data phase (what a training run reading a dataset folder with DataLoader workers steps at;
-on a GPU, the GPU side of the step).
+on a GPU, the GPU side of the step). The last column, outside the step, is what one DataLoader worker spends
+per batch with ``render_in_workers`` (:func:`~csgnet.train.supervised.packed_inputs`: the target and stack
+trace rendered and bit-packed on the CPU, on ``--threads`` threads); with it the render and stack phases leave
+the step.
 """
 from __future__ import annotations
 
@@ -27,7 +30,7 @@ import torch
 from csgnet.renderer import render_tokens, stack_trace
 from csgnet.train.augment import jitter
 from csgnet.train.streams import MixedLengthBatches
-from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule, teacher_forced_loss
+from csgnet.train.supervised import DEFAULT_LENGTHS, CSGNetModule, packed_inputs, teacher_forced_loss
 
 # name -> (dim, stack, size, model overrides, batch): the shipped small configs and the paper sizes
 MODELS = {
@@ -59,10 +62,15 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
 
     cfg = m.config
     times = {p: [] for p in PHASES}
+    worker = []
     for i in range(steps + 1):
         t = {}
         t0 = time.perf_counter()
         tok, lens = next(stream)
+        w0 = time.perf_counter()
+        packed_inputs(tok, lens, dim, cfg.stack_k if stack else None)
+        worker.append(time.perf_counter() - w0)
+        t0 += worker[-1]  # outside the step: the data phase is the draw alone
         tok, lens = tok.to(device), lens.to(device)
         sync()
         t["data"] = time.perf_counter()
@@ -95,6 +103,7 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
                 times[p].append(t[p] - prev)
                 prev = t[p]
     out = {p: float(np.median(v)) for p, v in times.items()}
+    out["worker"] = float(np.median(worker[1:]))
     out["batch"] = batch
     return out
 
@@ -113,14 +122,15 @@ def main(argv=None) -> int:
           f"{torch.__version__}, threads {torch.get_num_threads()}, device {args.device}, "
           f"load average {os.getloadavg()[0]:.2f}")
     print("| model | batch | " + " | ".join(f"{p} ms" for p in PHASES)
-          + " | model share | samples/s | samples/s without data |")
-    print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|---:|")
+          + " | model share | samples/s | samples/s without data | worker render ms (render_in_workers) |")
+    print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|---:|---:|")
     for name in args.models:
         r = profile(name, args.steps, args.device)
         total = sum(r[p] for p in PHASES)
         model = r["forward"] + r["backward"] + r["optimiser"]
         print(f"| {name} | {r['batch']} | " + " | ".join(f"{1000 * r[p]:.1f}" for p in PHASES)
-              + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} | {r['batch'] / (total - r['data']):.1f} |",
+              + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} | {r['batch'] / (total - r['data']):.1f}"
+              f" | {1000 * r['worker']:.1f} |",
               flush=True)
     print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
     return 0
