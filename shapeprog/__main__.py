@@ -746,10 +746,11 @@ def _cmd_discover_macros(args) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
     from .macros.api import collection
-    from .macros.discover import discover, load_config
+    from .macros.discover import Discovery, discover, load_config, prior_rounds
 
     cfg = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
                       abs_shape_num=args.subsample, selection=args.selection, search=args.search)
+    lib0, text0 = _macro_library(args.start_from, "--start-from: ", text=True) if args.start_from else (None, "")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
@@ -760,8 +761,9 @@ def _cmd_discover_macros(args) -> int:
         nodes, ids = collection(args.category, args.split, args.limit, args.seed, executor=pool,
                                 max_orders=cfg["abs_order_num"])
         log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
+        start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior_rounds(text0), args.start_from)
         state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
-                         stop_after=args.stop_after)
+                         stop_after=args.stop_after, start=start)
     finally:
         if pool is not None:
             pool.shutdown()
@@ -779,17 +781,21 @@ def _cmd_discover_macros(args) -> int:
     return 0
 
 
-def _macro_library(name: str, option: str = ""):
+def _macro_library(name: str, option: str = "", text: bool = False):
     """The ShapeMOD library ``name``: a library file when one exists at that path, else a shipped category;
-    SystemExit with the reason otherwise."""
+    SystemExit with the reason otherwise. ``text``: (library, its file's text)."""
     from .macros import Library, load_library
+    from .macros.api import library_text
 
     if Path(name).is_file():
-        return Library.from_text(decode(Path(name).read_bytes(), name), name)
-    try:
-        return load_library(name)
-    except ValueError as e:
-        raise SystemExit(f"error: {option}{e}" + (" (or give a library file)" if option else "")) from None
+        src = decode(Path(name).read_bytes(), name)
+        lib = Library.from_text(src, name)
+    else:
+        try:
+            lib, src = load_library(name), (library_text(name) if text else "")
+        except ValueError as e:
+            raise SystemExit(f"error: {option}{e}" + (" (or give a library file)" if option else "")) from None
+    return (lib, src) if text else lib
 
 
 def _cmd_refactor(args) -> int:
@@ -1208,6 +1214,10 @@ def main(argv=None) -> int:
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the searches (1: none)")
     d.add_argument("--stop-after", type=float, help="seconds after which no new round starts")
+    d.add_argument("--start-from", metavar="LIBRARY",
+                   help="continue from a library (a shipped category's or a file) when --out holds no state: "
+                        "its macros are L, the rounds its header records count toward --rounds, and the "
+                        "orderings are filtered with it first (a library file does not record them)")
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=_cmd_discover_macros, argv=None)
     rf = sub.add_parser("refactor", help="rewrite a program with a ShapeMOD library",

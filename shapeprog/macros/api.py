@@ -27,8 +27,8 @@ from .lang import BASE, BOOL, CUBE, FLOAT, Call, MacroProgram, Name, to_text
 from .library import Library
 from .objective import Result, best_program, templates, to_program
 
-__all__ = ["BlockRefactor", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "load_library", "refactor",
-           "program_stats"]
+__all__ = ["BlockRefactor", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library",
+           "refactor", "program_stats"]
 
 #: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
 LIBRARY_CATEGORIES = ("chair", "table", "storage")
@@ -40,11 +40,18 @@ def load_library(category: str) -> Library:
     Raises:
         ValueError: no library is shipped for ``category``.
     """
+    return Library.from_text(library_text(category), f"shapeprog/macros/libs/{category}.txt")
+
+
+def library_text(category: str) -> str:
+    """The text of the shipped library file of ``category``, header included.
+
+    Raises:
+        ValueError: no library is shipped for ``category``.
+    """
     if category not in LIBRARY_CATEGORIES:
         raise ValueError(f"no shipped ShapeMOD library for {category!r} (shipped: {', '.join(LIBRARY_CATEGORIES)})")
-    name = f"{category}.txt"
-    text = resources.files("shapeprog.macros").joinpath("libs", name).read_text(encoding="utf-8")
-    return Library.from_text(text, f"shapeprog/macros/libs/{name}")
+    return resources.files("shapeprog.macros").joinpath("libs", f"{category}.txt").read_text(encoding="utf-8")
 
 
 def program_stats(program: MacroProgram, library: Library) -> dict:

@@ -53,7 +53,8 @@ from .library import Library
 from .objective import WEIGHTS, beam_search, exact_search, fit_options, templates
 from .proposal import Candidate, gain, generalise, heur_score, propose_step
 
-__all__ = ["DEFAULTS", "Discovery", "Nodes", "discover", "evaluate", "load_config", "nodes_from_subprograms"]
+__all__ = ["DEFAULTS", "Discovery", "Nodes", "discover", "evaluate", "load_config", "nodes_from_subprograms",
+           "prior_rounds"]
 
 #: The spec's defaults (``configs/shapemod/default.yaml`` holds the same values).
 DEFAULTS: dict = {
@@ -239,10 +240,30 @@ class Discovery:
             out.append(m)
         return Library(out)
 
-    def to_json(self, nodes_digest: str, cfg: Mapping, seed: int) -> str:
+    def digest(self) -> str:
+        """A digest of the macros, active set and history (what a continued run starts from)."""
+        key = json.dumps([Library(self.macros).to_text(), self.active, self.history], sort_keys=True)
+        return hashlib.sha256(key.encode()).hexdigest()[:16]
+
+    def to_json(self, nodes_digest: str, cfg: Mapping, seed: int, start: str | None = None) -> str:
         return json.dumps({"format": "shapemod-discovery/1", "nodes": nodes_digest, "seed": seed, "config": dict(cfg),
+                           "start": start,
                            "library": Library(self.macros).to_text(), "active": self.active, "current": self.current,
                            "history": self.history, "counter": self.counter}, indent=1)
+
+    @classmethod
+    def from_library(cls, library: Library, nodes: "Nodes", prior: Sequence[float] = (),
+                     source: str = "library") -> "Discovery":
+        """A state that continues discovery from ``library`` (a shipped or earlier library): its macros, all
+        active; every ordering of every node (:func:`discover` runs filterBadOrders with the library before
+        its first round, as the end of a round does, since a library file does not record the orderings);
+        one history entry per ``prior`` round (its f per sub-program, from the library's header), so the
+        rounds that follow are numbered, and seeded, after them. New macros are numbered after the
+        largest ``nfunc_<k>`` of the library."""
+        nums = [int(m.name[6:]) for m in library.macros if m.name.startswith("nfunc_") and m.name[6:].isdigit()]
+        history = [{"round": k + 1, "f_after": float(f), "from": source} for k, f in enumerate(prior)]
+        return cls(list(library.macros), [m.name for m in library.macros],
+                   [list(range(len(ls))) for ls in nodes.lines], history, max(nums, default=-1) + 1)
 
     @classmethod
     def from_json(cls, text: str, file: str = "state.json") -> tuple["Discovery", dict]:
@@ -512,9 +533,21 @@ def _filter_orders(nodes: Nodes, state: Discovery, lib: Library, cfg, executor) 
     return dropped
 
 
+def prior_rounds(text: str) -> list[float]:
+    """The f per sub-program of each round recorded in a library file's header (the ``# rounds:`` line that
+    ``discover-macros`` writes); [] when there is none."""
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        if line.startswith("# rounds:") and "(subsample):" in line:
+            tail = line.split("(subsample):", 1)[1]
+            return [float(x) for x in tail.split(",") if x.strip()]
+    return []
+
+
 def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: Executor | None = None,
              out: str | Path | None = None, log: Callable[[str], None] | None = print,
-             stop_after: float | None = None) -> Discovery:
+             stop_after: float | None = None, start: Discovery | None = None) -> Discovery:
     """Run discovery (see the module docstring).
 
     Args:
@@ -526,9 +559,12 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
             collection, seed and settings, ``num_rounds`` aside, is resumed).
         log: progress lines.
         stop_after: seconds after which no new round is started.
+        start: the state to continue from when there is no ``state.json`` to resume
+            (:meth:`Discovery.from_library`); its orderings are filtered with its library first.
     """
     cfg = dict(DEFAULTS if cfg is None else cfg)
     digest = nodes.digest()
+    start_digest = None if start is None else start.digest()
     state = Discovery([], [], [list(range(len(ls))) for ls in nodes.lines])
     path = None if out is None else Path(out) / "state.json"
     if path is not None and path.exists():
@@ -538,8 +574,18 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
         if raw["nodes"] != digest or raw["seed"] != seed or not same:
             raise ParseError("the state was written for another collection, seed or configuration", str(path), 1, 1,
                              "")
+        if raw.get("start") != start_digest:
+            raise ParseError("the state was written for a run with another starting library (--start-from)",
+                             str(path), 1, 1, "")
         if log:
             log(f"resuming after round {len(state.history)} from {path}")
+    elif start is not None:
+        state = Discovery(list(start.macros), list(start.active), [list(c) for c in start.current],
+                          [dict(h) for h in start.history], start.counter)
+        dropped = _filter_orders(nodes, state, state.full_library(), cfg, executor)
+        if log:
+            log(f"starting after round {len(state.history)} from a library of {len(state.active)} macros, "
+                f"{dropped} orderings dropped")
     t_all = time.time()
     for rnd in range(len(state.history), cfg["num_rounds"]):
         if stop_after is not None and time.time() - t_all > stop_after:
@@ -570,5 +616,5 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
                 f"{dropped} orderings dropped, {time.time() - t0:.0f} s")
         if path is not None:
             from shapeio import atomic_write
-            atomic_write(path, state.to_json(digest, cfg, seed), mkdir=True)
+            atomic_write(path, state.to_json(digest, cfg, seed, start_digest), mkdir=True)
     return state

@@ -1,4 +1,6 @@
 """The discover-macros, refactor and table1 commands on tiny inputs."""
+import pytest
+
 from shapeprog.__main__ import main
 from shapeprog.macros import Library
 
@@ -40,3 +42,25 @@ def test_table1_library_option_form(tmp_path):
 
     with pytest.raises(SystemExit, match=r"--library 'lib.txt': expected CATEGORY=FILE"):
         main(["table1", "--categories", "chair", "--limit", "2", "--library", "lib.txt", "--quiet"])
+
+
+def test_discover_macros_continues_from_a_library(tmp_path, capsys):
+    first, second = tmp_path / "one", tmp_path / "two"
+    common = ["discover-macros", "--category", "chair", "--limit", "15", "--proposal-steps", "5", "--subsample", "30",
+              "--quiet"]
+    assert main(common + ["--rounds", "1", "--out", str(first)]) == 0
+    text = (first / "library.txt").read_text()
+    f1 = text.split("(subsample): ")[1].split("\n")[0]
+    assert main(common + ["--rounds", "2", "--out", str(second), "--start-from", str(first / "library.txt")]) == 0
+    text2 = (second / "library.txt").read_text()
+    # the first round is the library's, recorded in its header; the second is this run's
+    assert "# rounds: 2," in text2 and f"(subsample): {f1}, " in text2
+    assert "--start-from" in text2.split("\n")[1]
+    names = [m.name for m in Library.from_text(text).macros]
+    assert [m.name for m in Library.from_text(text2).macros][:len(names)] == names
+    # the state folder belongs to that start: another start is refused
+    assert main(common + ["--rounds", "2", "--out", str(second), "--start-from", "chair"]) == 2
+    assert "another starting library" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="--start-from: no shipped ShapeMOD library for 'sofa'"):
+        main(common + ["--rounds", "2", "--out", str(tmp_path / "x"), "--start-from", "sofa"])
+    assert not (tmp_path / "x").exists()

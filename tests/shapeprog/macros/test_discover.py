@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from shapeprog.errors import ParseError
-from shapeprog.macros.discover import DEFAULTS, Nodes, discover, load_config
+from shapeprog.macros.discover import DEFAULTS, Discovery, Nodes, discover, load_config, prior_rounds
 from shapeprog.macros.grammar import BBOX, AttachLine, CuboidLine, ReflectLine, SqueezeLine, signature
 from shapeprog.macros.lang import Linear, Literal, Name
 from shapeprog.macros.library import Library
@@ -149,3 +149,25 @@ def test_damaged_state_is_refused(tmp_path, text, match):
     with pytest.raises(ParseError, match=match) as e:
         discover(planted(5), small_cfg(), out=tmp_path, log=None)
     assert "state.json" in str(e.value)
+
+
+def test_continuing_from_a_library_equals_resuming():
+    """With one ordering per node and no macro removed, a library file holds the whole state: continuing from
+    it gives the run's next round exactly."""
+    nodes = planted(60)
+    cfg = small_cfg(num_rounds=2, abs_shape_num=60)
+    full = discover(nodes, cfg, seed=1, log=None)
+    one = discover(nodes, small_cfg(num_rounds=1, abs_shape_num=60), seed=1, log=None)
+    assert [m.name for m in one.macros] == one.active  # nothing removed: the library is the state
+    text = "# rounds: 1, selection greedy, search beam, f per sub-program (subsample): " \
+           f"{one.history[0]['f_after']:.2f}\n" + one.library().to_text()
+    assert prior_rounds(text) == [round(one.history[0]["f_after"], 2)]
+    start = Discovery.from_library(Library.from_text(text), nodes, prior_rounds(text), "one")
+    assert start.counter == 1 + max(int(m.name[6:]) for m in one.macros)
+    msgs = []
+    cont = discover(nodes, cfg, seed=1, log=msgs.append, start=start)
+    assert msgs[0].startswith("starting after round 1 from a library of")
+    assert len(cont.history) == 2 and cont.history[0]["from"] == "one"
+    assert cont.history[1]["f_after"] == full.history[1]["f_after"]
+    assert Library(cont.macros).to_text() == Library(full.macros).to_text()
+    assert prior_rounds("def f(x: float):\n    c = Cuboid(x, x, x, True)\n") == []
