@@ -63,6 +63,28 @@ def test_load_library_unknown_category():
         load_library("sofa")
 
 
+def test_shipped_library_files_agree_with_their_headers():
+    """Every library file under shapeprog/macros/libs parses, and its header's macro count, |L| and rounds
+    (one f per round) are those of its definitions."""
+    import re
+    from pathlib import Path
+
+    from shapeprog.macros.discover import prior_rounds
+
+    import shapeprog.macros
+
+    files = sorted((Path(shapeprog.macros.__file__).parent / "libs").glob("*.txt"))
+    assert {f.stem for f in files} >= {"chair", "table", "storage"}
+    for f in files:
+        text = f.read_text(encoding="utf-8")
+        lib = Library.from_text(text, str(f))
+        head = re.match(r"# ShapeMOD library \((\w+)\), (\d+) macros, \|L\| = (\d+)\n", text)
+        assert head, f
+        assert (int(head[2]), int(head[3])) == (len(lib.macros), len(lib)), f
+        rounds = int(re.search(r"^# rounds: (\d+),", text, re.M)[1])
+        assert len(prior_rounds(text)) == rounds, f
+
+
 def test_baseline_macros_constants_and_share():
     progs = []
     for k in range(10):
