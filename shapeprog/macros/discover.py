@@ -35,6 +35,7 @@ writes them inlined into their callers.
 """
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -580,8 +581,7 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
         if log:
             log(f"resuming after round {len(state.history)} from {path}")
     elif start is not None:
-        state = Discovery(list(start.macros), list(start.active), [list(c) for c in start.current],
-                          [dict(h) for h in start.history], start.counter)
+        state = copy.deepcopy(start)  # the caller's start stays as it was
         dropped = _filter_orders(nodes, state, state.full_library(), cfg, executor)
         if log:
             log(f"starting after round {len(state.history)} from a library of {len(state.active)} macros, "
