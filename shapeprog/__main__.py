@@ -746,7 +746,7 @@ def _cmd_discover_macros(args) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
     from .macros.api import collection
-    from .macros.discover import Discovery, discover, load_config, prior_rounds
+    from .macros.discover import Discovery, discover, load_config, prior_rounds, rounds_line
 
     cfg = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
                       abs_shape_num=args.subsample, selection=args.selection, search=args.search)
@@ -771,9 +771,7 @@ def _cmd_discover_macros(args) -> int:
     header = (f"# ShapeMOD library ({args.category}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
               f"# command: {command}\n"
               f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}), sub-programs: {len(nodes.keys)}\n"
-              f"# rounds: {len(state.history)}, selection {cfg['selection']}, search {cfg['search']}, "
-              f"f per sub-program (subsample): "
-              + ", ".join(f"{h['f_after']:.2f}" for h in state.history) + "\n"
+              f"{rounds_line(state, cfg)}\n"
               f"# time: {time.time() - t0:.0f} s on {platform.machine()}, {os.cpu_count()} CPUs, "
               f"{args.workers} worker(s)\n")
     atomic_write(out / "library.txt", header + lib.to_text())

@@ -534,6 +534,13 @@ def _filter_orders(nodes: Nodes, state: Discovery, lib: Library, cfg, executor) 
     return dropped
 
 
+def rounds_line(state: "Discovery", cfg: Mapping) -> str:
+    """The ``# rounds:`` header line of a library file written from ``state`` (read back by
+    :func:`prior_rounds`): the rounds run, the settings that shape them, and f per sub-program after each."""
+    return (f"# rounds: {len(state.history)}, selection {cfg['selection']}, search {cfg['search']}, "
+            "f per sub-program (subsample): " + ", ".join(f"{h['f_after']:.2f}" for h in state.history))
+
+
 def prior_rounds(text: str) -> list[float]:
     """The f per sub-program of each round recorded in a library file's header (the ``# rounds:`` line that
     ``discover-macros`` writes); [] when there is none."""

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from shapeprog.errors import ParseError
-from shapeprog.macros.discover import DEFAULTS, Discovery, Nodes, discover, load_config, prior_rounds
+from shapeprog.macros.discover import DEFAULTS, Discovery, Nodes, discover, load_config, prior_rounds, rounds_line
 from shapeprog.macros.grammar import BBOX, AttachLine, CuboidLine, ReflectLine, SqueezeLine, signature
 from shapeprog.macros.lang import Linear, Literal, Name
 from shapeprog.macros.library import Library
@@ -159,8 +159,7 @@ def test_continuing_from_a_library_equals_resuming():
     full = discover(nodes, cfg, seed=1, log=None)
     one = discover(nodes, small_cfg(num_rounds=1, abs_shape_num=60), seed=1, log=None)
     assert [m.name for m in one.macros] == one.active  # nothing removed: the library is the state
-    text = "# rounds: 1, selection greedy, search beam, f per sub-program (subsample): " \
-           f"{one.history[0]['f_after']:.2f}\n" + one.library().to_text()
+    text = rounds_line(one, cfg) + "\n" + one.library().to_text()  # the header line discover-macros writes
     assert prior_rounds(text) == [round(one.history[0]["f_after"], 2)]
     start = Discovery.from_library(Library.from_text(text), nodes, prior_rounds(text), "one")
     assert start.counter == 1 + max(int(m.name[6:]) for m in one.macros)
