@@ -3,6 +3,7 @@ forward, backward, optimiser.
 
     python bench/profile_train_step.py --threads 1
     python bench/profile_train_step.py --threads 2 --models csgnet2d_small csgnetstack2d_small
+    python bench/profile_train_step.py --device cuda --models csgnetstack3d_small --batch 128 --precision bf16
 
 Each phase of a supervised step (the pieces of :meth:`csgnet.train.supervised.CSGNetModule._loss`: the
 target render, jitter, stack trace, then :func:`~csgnet.train.supervised.teacher_forced_loss`) plus the
@@ -14,7 +15,10 @@ samples/s without the data phase (what a training run reading a dataset folder w
 on a GPU, the GPU side of the step). The last column, outside the step, is what one DataLoader worker spends
 per batch with ``render_in_workers`` (:func:`~csgnet.train.supervised.packed_inputs`: the target and stack
 trace rendered and bit-packed on the CPU, on ``--threads`` threads); with it the render and stack phases leave
-the step.
+the step; the column after it is the size of what that worker hands the training process per batch (the
+packed target and stack trace), which a DataLoader moves through shared memory. ``--precision bf16`` runs the
+forward and backward passes under bfloat16 autocast (as ``--trainer.precision bf16-mixed``); ``--batch``
+replaces each model's batch size.
 """
 from __future__ import annotations
 
@@ -47,9 +51,13 @@ MODELS = {
 PHASES = ("data", "render", "jitter", "stack", "forward", "backward", "optimiser")
 
 
-def profile(name: str, steps: int, device: str) -> dict[str, float]:
-    """Median seconds per phase of one training step of model ``name``."""
-    dim, stack, size, over, batch = MODELS[name]
+def profile(name: str, steps: int, device: str, batch: int | None = None, precision: str = "32") -> dict[str, float]:
+    """Median seconds per phase of one training step of model ``name`` (``batch``: instead of the model's;
+    ``precision``: ``"32"`` or ``"bf16"`` autocast of the forward and backward passes)."""
+    dim, stack, size, over, default_batch = MODELS[name]
+    batch = batch or default_batch
+    autocast = torch.autocast(device_type=torch.device(device).type, dtype=torch.bfloat16,
+                              enabled=precision == "bf16")
     m = CSGNetModule(dim=dim, stack=stack, size=size, model=over).to(device)
     opt = torch.optim.Adam(m.parameters(), lr=1e-3)
     lengths = DEFAULT_LENGTHS[dim]
@@ -62,14 +70,15 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
 
     cfg = m.config
     times = {p: [] for p in PHASES}
-    worker = []
+    worker, packed_mb = [], 0.0
     for i in range(steps + 1):
         t = {}
         t0 = time.perf_counter()
         tok, lens = next(stream)
         w0 = time.perf_counter()
-        packed_inputs(tok, lens, dim, cfg.stack_k if stack else None)
+        packed = packed_inputs(tok, lens, dim, cfg.stack_k if stack else None)
         worker.append(time.perf_counter() - w0)
+        packed_mb = max(packed_mb, sum(x.numel() * x.element_size() for x in packed if x is not None) / 2**20)
         t0 += worker[-1]  # outside the step: the data phase is the draw alone
         tok, lens = tok.to(device), lens.to(device)
         sync()
@@ -87,7 +96,8 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
         sync()
         t["stack"] = time.perf_counter()
         tokens_in = torch.cat([torch.full_like(tok[:, :1], m.model.start), tok[:, :-1]], dim=1)
-        loss, _ = teacher_forced_loss(m.model, target, tok, tokens_in, st, lens, m.loss_norm)
+        with autocast:
+            loss, _ = teacher_forced_loss(m.model, target, tok, tokens_in, st, lens, m.loss_norm)
         sync()
         t["forward"] = time.perf_counter()
         opt.zero_grad()
@@ -105,6 +115,7 @@ def profile(name: str, steps: int, device: str) -> dict[str, float]:
     out = {p: float(np.median(v)) for p, v in times.items()}
     out["worker"] = float(np.median(worker[1:]))
     out["batch"] = batch
+    out["packed_mb"] = packed_mb
     return out
 
 
@@ -115,22 +126,26 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--models", nargs="*", default=[n for n in MODELS if "paper" not in n or n == "csgnet2d_paper"],
                     choices=sorted(MODELS))
+    ap.add_argument("--batch", type=int, default=None, help="batch size for every model (default: each model's)")
+    ap.add_argument("--precision", choices=("32", "bf16"), default="32",
+                    help="bf16: forward and backward under bfloat16 autocast")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
           f"{torch.__version__}, threads {torch.get_num_threads()}, device {args.device}, "
-          f"load average {os.getloadavg()[0]:.2f}")
+          f"precision {args.precision}, load average {os.getloadavg()[0]:.2f}")
     print("| model | batch | " + " | ".join(f"{p} ms" for p in PHASES)
-          + " | model share | samples/s | samples/s without data | worker render ms (render_in_workers) |")
-    print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|---:|---:|")
+          + " | model share | samples/s | samples/s without data | worker render ms (render_in_workers) "
+          "| worker hands over MiB |")
+    print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|---:|---:|---:|")
     for name in args.models:
-        r = profile(name, args.steps, args.device)
+        r = profile(name, args.steps, args.device, args.batch, args.precision)
         total = sum(r[p] for p in PHASES)
         model = r["forward"] + r["backward"] + r["optimiser"]
         print(f"| {name} | {r['batch']} | " + " | ".join(f"{1000 * r[p]:.1f}" for p in PHASES)
               + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} | {r['batch'] / (total - r['data']):.1f}"
-              f" | {1000 * r['worker']:.1f} |",
+              f" | {1000 * r['worker']:.1f} | {r["packed_mb"]:.2f} |",
               flush=True)
     print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
     return 0
