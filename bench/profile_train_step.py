@@ -145,7 +145,7 @@ def main(argv=None) -> int:
         model = r["forward"] + r["backward"] + r["optimiser"]
         print(f"| {name} | {r['batch']} | " + " | ".join(f"{1000 * r[p]:.1f}" for p in PHASES)
               + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} | {r['batch'] / (total - r['data']):.1f}"
-              f" | {1000 * r['worker']:.1f} | {r["packed_mb"]:.2f} |",
+              f" | {1000 * r['worker']:.1f} | {r['packed_mb']:.2f} |",
               flush=True)
     print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
     return 0

@@ -534,7 +534,7 @@ def _filter_orders(nodes: Nodes, state: Discovery, lib: Library, cfg, executor) 
     return dropped
 
 
-def rounds_line(state: "Discovery", cfg: Mapping) -> str:
+def rounds_line(state: Discovery, cfg: Mapping) -> str:
     """The ``# rounds:`` header line of a library file written from ``state`` (read back by
     :func:`prior_rounds`): the rounds run, the settings that shape them, and f per sub-program after each."""
     return (f"# rounds: {len(state.history)}, selection {cfg['selection']}, search {cfg['search']}, "
