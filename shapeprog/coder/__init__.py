@@ -29,7 +29,7 @@ from . import data, limits  # cheap: data reads nothing until asked
 from .execute import Execution, ExecutionError, execute, run  # the function shadows the module name
 from .lang import (LANG_2D, LANG_3D, Abstraction, Library, ParseError, Param, ProgramError, Type, check, expand,
                    parse, parse_abstraction, to_text)
-from . import objective  # the module; F itself is objective.objective
+from . import objective  # the module, callable: objective(programs, library) is F (objective.objective)
 from .objective import WEIGHTS, match, naive_cost, naive_program, naive_summary, omega, preference, program_cost
 from ..errors import RefactorError
 from .refactor import Refactored, refactor

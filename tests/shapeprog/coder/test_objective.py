@@ -92,6 +92,10 @@ def test_preference_rejections_and_objective():
     assert objective(progs, lib, errors=[0.0, 0.04]) == pytest.approx((sum(costs) + 0.4) / 2 + 0.125)
     with pytest.raises(ValueError, match="2 programs but 1 errors"):
         objective(progs, lib, errors=[0.0])
+    # the public entry point: the module itself is F, its names stay reachable
+    from shapeprog import coder
+    assert coder.objective(progs, lib, errors=[0.0, 0.04]) == objective(progs, lib, errors=[0.0, 0.04])
+    assert coder.objective.objective is objective and coder.objective.match is match
 
 
 def _box(w, h, d, x=0.0, y=0.0, z=0.0, a=0.0, b=0.0, c=0.0):
