@@ -733,12 +733,14 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
         result = discover(recs, cfg, LANG_3D, None, out, log, progress, stop_at)
     s = result.summary()
     last = result.log[-1] if result.log else {"round": 0, "phase": "none", "seconds": 0}
+    first = cfg.rounds if start is not None and start_round is None else (0 if start is None else start_round)
+    # a run that starts at the final wake proposes nothing: its header does not claim proposal settings
+    proposing = (f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, " if first < cfg.rounds else "")
     header = (f"# ShapeCoder library discovered on the first {len(recs)} {category} shapes: rounds={cfg.rounds}, "
-              f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, seed={cfg.seed}, wake={cfg.wake}"
+              f"{proposing}seed={cfg.seed}, wake={cfg.wake}"
               + (f" (dreams={cfg.n_dreams}, training {cfg.train_seconds or 0:g} s, lr={cfg.train_lr:g}, "
                  f"dropout={cfg.dropout:g})" if cfg.wake == "network" else "")
-              + ("" if start is None else f", started at round {cfg.rounds if start_round is None else start_round}"
-                 " from an earlier library and its programs")
+              + ("" if start is None else f", started at round {first} from an earlier library and its programs")
               + f", e-graph limits "
               f"{cfg.iterations} iterations / {cfg.max_nodes} e-nodes / {cfg.time_limit:g} s; last finished phase: "
               f"round {last['round']} {last['phase']} after {last['seconds']:.0f} s; F={s.F:.2f}, |L|={s.library_size}\n")
