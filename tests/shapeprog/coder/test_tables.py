@@ -24,15 +24,17 @@ def _run_folder(tmp_path, n=3, lib_text=LEGS + "\n"):
     return recs
 
 
-def test_shipped_table2_matches_the_library_header_and_the_naive_cost():
-    run = tables.shipped("chair")
+@pytest.mark.parametrize("category,paper", [("chair", 146.0), ("table", 125.0), ("storage", 154.0)])
+def test_shipped_table2_matches_the_library_header_and_the_naive_cost(category, paper):
+    run = tables.shipped(category)
     t2 = tables.table2(run)
     assert t2.ours.shapes == len(run.programs) == 400
-    assert t2.naive.F == pytest.approx(naive_summary(r.prims for r in data.load("chair")).F)
-    assert abs(t2.naive.F - 146.0) / 146.0 < 0.01  # the paper's Input Prims row
+    assert t2.naive.F == pytest.approx(naive_summary(r.prims for r in data.load(category)).F)
+    assert abs(t2.naive.F - paper) / paper < 0.01  # the paper's Input Prims row
     assert t2.ours.library_size == 6 + len(run.library)
     # the library file's first line records the discovery's own F for the same programs
-    header = resources.files("shapeprog").joinpath("data", "coder_libraries", "chair.txt").read_text().splitlines()[0]
+    header = (resources.files("shapeprog").joinpath("data", "coder_libraries", f"{category}.txt")
+              .read_text().splitlines()[0])
     assert f"F={t2.ours.F:.2f}" in header
     assert 1 <= t2.used <= len(run.library)
 
