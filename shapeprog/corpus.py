@@ -111,7 +111,8 @@ def load(category: str, split: str = "train", strict: bool = False) -> list[tupl
 
 
 def example_text(name: str = "ex-0.txt") -> str:
-    """A vendored example file: ``'ex-0.txt'`` (flat program) or ``'comp_pc.obj'`` (point cloud)."""
+    """A vendored example file: ``'ex-0.txt'`` (flat program), ``'comp_pc.obj'`` or ``'simp_pc.obj'`` (point
+    clouds of a real PartNet table and chair)."""
     arc = _archive("examples.tar.xz")
     if name not in arc:
         raise KeyError(f"no example {name!r}; available: {', '.join(sorted(arc))}")
@@ -119,5 +120,6 @@ def example_text(name: str = "ex-0.txt") -> str:
 
 
 def example_points(name: str = "comp_pc.obj"):
-    """The example point cloud as a (N, 3) float32 numpy array (10,000 points of a table)."""
+    """An example point cloud (``'comp_pc.obj'`` or ``'simp_pc.obj'``) as a (N, 3) float32 numpy array (10,000
+    points of a real PartNet table, or chair for ``simp_pc``)."""
     return obj_vertices(example_text(name).splitlines(), name)
