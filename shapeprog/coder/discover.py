@@ -718,8 +718,9 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     if (out / "library.txt").exists() and not (out / "state.json").exists():
         raise FileExistsError(f"{out / 'library.txt'} exists and is not from a resumable run; choose another --out")
     recs = data.load(category)[:shapes]
+    first = 0 if start is None else (cfg.rounds if start_round is None else start_round)  # the first round run here
     if start is not None:
-        start_from(out, recs, start[0], start[1], cfg, LANG_3D, start_round, start[2])
+        start_from(out, recs, start[0], start[1], cfg, LANG_3D, first, start[2])
     stop_at = None if minutes is None else time.time() + 60 * minutes
     if workers > 1:
         import multiprocessing
@@ -733,7 +734,6 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
         result = discover(recs, cfg, LANG_3D, None, out, log, progress, stop_at)
     s = result.summary()
     last = result.log[-1] if result.log else {"round": 0, "phase": "none", "seconds": 0}
-    first = cfg.rounds if start is not None and start_round is None else (0 if start is None else start_round)
     # a run that starts at the final wake proposes nothing: its header does not claim proposal settings
     proposing = (f"proposals={cfg.n_proposals}, N_A={cfg.n_abstractions}, " if first < cfg.rounds else "")
     header = (f"# ShapeCoder library discovered on the first {len(recs)} {category} shapes: rounds={cfg.rounds}, "

@@ -88,7 +88,7 @@ def test_licence_notice_ships_with_the_data():
 def test_example_points():
     pts = corpus.example_points()
     assert pts.shape == (10000, 3) and abs(float(pts.max())) < 2
-    # the second real cloud: a table of its own, not a copy of the first
+    # the second real cloud (a chair): a shape of its own, not a copy of the first
     simp = corpus.example_points("simp_pc.obj")
     assert simp.shape == (10000, 3) and np.isfinite(simp).all()
     assert not np.allclose(np.sort(simp, axis=0), np.sort(pts, axis=0), atol=1e-3)
