@@ -48,7 +48,12 @@ __all__ = [
     "COSTS",
     "RefactorError",
     "check_limits",
+    "NAIVE_OPS",
+    "naive_program",
+    "naive_relations",
+    "relations_command",
     "Refactored",
+    "SCHEMES",
     "SEMANTIC_TOL",
     "abstraction_rule",
     "egglog_program",
@@ -60,6 +65,10 @@ __all__ = [
 SEMANTIC_TOL = 0.01
 #: Tolerance of the abstraction rewrites (``ab_rw_max_error``), per domain.
 ABSTRACTION_TOL = {"3d": 0.055, "2d": 0.04}
+#: How parameter relations reach the e-graph: ``"conditional"`` (guards on a value table, the paper's
+#: method) or ``"naive"`` (the ablation of the paper's Table 1: every pairwise relation of the program's
+#: floats put into the e-graph as e-nodes before the run, and unguarded rules; see :func:`naive_program`).
+SCHEMES = ("conditional", "naive")
 #: Integer e-node costs: the paper's costs times 10.
 COSTS = {"fn": 10, "float_fn": 1, "float_var": 20, "float_const": 5, "cat": 5}
 
@@ -341,6 +350,110 @@ def egglog_program(lib: Library, semantic=None) -> str:
     return _declarations(lib) + "\n" + "\n".join(rules) + "\n"
 
 
+def _naive_semantic_rules(lang: Lang) -> list:
+    """The semantic rewrites without value guards: a relation between floats is a shared e-class (the
+    relations are put in by :func:`naive_relations`), so each conditional rule becomes a plain pattern;
+    the symmetry introduction drops its sign guard (both orders give the same SymRef up to rule 1)."""
+    k = lang.dim
+    co = ["x", "y", "z"][:k]
+    p1 = " ".join(f"{c}1" for c in co)
+    prim = "Cuboid" if k == 3 else "Rectangle"
+    dims = " ".join(["a", "b", "c"][:k])
+    zero = "(K 0.0)"
+    out = []
+    conditional = semantic_rules(lang)
+    for i, ax in enumerate(lang.axes):
+        flipped = " ".join(f"(Inv {co[j]}1)" if j == i else f"{co[j]}1" for j in range(k))
+        out.append(f"(rewrite (Union (Move ({prim} {dims}) {p1}) (Move ({prim} {dims}) {flipped})) "
+                   f"(SymRef (Move ({prim} {dims}) {p1}) ({ax})) :ruleset rw)")
+    out.append(f"(rewrite (Union (Move S1 {p1}) (Move S2 {p1})) (Move (Union S1 S2) {p1}) :ruleset rw)")
+    out.append(f"(rewrite (Move S {' '.join([zero] * k)}) S :ruleset rw)")
+    out += [f"(rewrite (Add a {zero}) a :ruleset rw)", f"(rewrite (Add {zero} a) a :ruleset rw)"]
+    if k == 3:
+        out.append(f"(rewrite (Rotate S A {zero}) S :ruleset rw)")
+        out.append("(rewrite (Union (Rotate S1 A a) (Rotate S2 A a)) (Rotate (Union S1 S2) A a) :ruleset rw)")
+    # the unguarded rules of the conditional list are kept as they are
+    return out + [r for r in conditional if "(val " not in r]
+
+
+def _naive_abstraction_rule(ab: Abstraction, lib: Library) -> str:
+    """An abstraction's rewrite as a plain pattern: its float expressions are matched as e-nodes (which
+    :func:`naive_relations` must have put in the e-graph)."""
+    def pat(e: Expr) -> str:
+        if isinstance(e, Call):
+            head = _AB + e.fn if e.fn in lib else e.fn
+            return "(" + " ".join([head] + [pat(a) for a in e.args]) + ")"
+        if isinstance(e, Num):
+            v = round(e.value, 12) + 0.0
+            return f"(K {_f64(v)})" if v in FLOAT_CONSTANTS else f"(Num {_f64(v)})"
+        if isinstance(e, AxisConst):
+            return f"({e.name})"
+        if isinstance(e, IntConst):
+            return f"(N {e.value})"
+        return f"p_{e.name}"
+
+    args = " ".join(f"p_{p.name}" for p in ab.params)
+    return f"(rewrite {pat(ab.body)} ({_AB}{ab.name} {args}) :ruleset rw)"
+
+
+def naive_program(lib: Library) -> str:
+    """The egglog declarations and rules of the naive scheme (the paper's Table 1 ablation): the
+    declarations and structural bookkeeping of :func:`egglog_program`, the semantic rules of
+    :func:`_naive_semantic_rules` and one plain rewrite per abstraction. Use with ``refactor(...,
+    scheme="naive")``, which adds the program's :func:`naive_relations`."""
+    book = [r for r in _bookkeeping(lib) if "(val " not in r and "(set " not in r]
+    rules = book + _naive_semantic_rules(lib.lang) + [_naive_abstraction_rule(ab, lib) for ab in lib.abstractions]
+    return _declarations(lib) + "\n" + "\n".join(rules) + "\n"
+
+
+#: The float operators whose pairwise e-nodes the naive scheme puts in (``Inv`` of each leaf as well).
+NAIVE_OPS = ("Add", "Sub", "Mul", "Div")
+
+
+def naive_relations(values, prec: int = 2) -> list:
+    """egglog actions that put a program's parameter relations into the e-graph (the naive scheme): for
+    the program's distinct floats ``values``, the e-nodes ``Inv a`` and ``op a b`` for every ordered pair
+    and every operator of :data:`NAIVE_OPS`, each unioned with the leaf (one of the program's floats or the
+    constants 0, 1, 2) equal to the node's value at ``prec`` decimals. About ``4 n²`` new e-nodes for ``n``
+    distinct floats.
+
+    The relations are exact at ``prec`` decimals, not within a tolerance as the guards of the conditional
+    scheme: a union is transitive and a tolerance is not, so with ±0.01 chains of near-equal values merged
+    every float of a 32-parameter scene into one e-class (and the extracted program into a point).
+    :func:`relations_command` makes them one egglog command."""
+    leaves = sorted({round(float(v), 12) + 0.0 for v in values} | set(FLOAT_CONSTANTS))
+    operands = sorted({round(float(v), 12) + 0.0 for v in values})
+    term = {v: (f"(K {_f64(v)})" if v in FLOAT_CONSTANTS else f"(Num {_f64(v)})") for v in leaves}
+    half = 0.5 * 10.0 ** -prec
+    out = []
+
+    def relate(value, node):
+        c = min(leaves, key=lambda x: abs(x - value))
+        if abs(c - value) < half - _EPS or abs(round(value, prec) - c) <= _EPS:
+            out.append(f"(union {node} {term[c]})")
+
+    for a in operands:
+        out.append(f"(Inv {term[a]})")
+        relate(-a, f"(Inv {term[a]})")
+        for b in operands:
+            for op in NAIVE_OPS:
+                if op == "Div" and abs(b) <= 1e-6:
+                    continue
+                v = {"Add": a + b, "Sub": a - b, "Mul": a * b, "Div": a / b if b else 0.0}[op]
+                node = f"({op} {term[a]} {term[b]})"
+                out.append(node)
+                relate(v, node)
+    return out
+
+
+def relations_command(actions: list) -> str:
+    """egglog commands running ``actions`` (e.g. :func:`naive_relations`) at once: rules with no query and
+    10 actions each, in a ruleset of their own, run once (thousands of top-level commands, or one rule with
+    thousands of actions, take tens of seconds)."""
+    rules = [f"(rule () ({' '.join(actions[i:i + 10])}) :ruleset naive_rel)" for i in range(0, len(actions), 10)]
+    return "(ruleset naive_rel)\n" + "\n".join(rules) + "\n(run naive_rel 1)"
+
+
 # ----------------------------------------------------------------------------- program <-> term
 
 
@@ -418,7 +531,7 @@ def _node_count(eg, bindings) -> int:
 
 def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | None = None, *,
              iterations: int = MAX_ITERATIONS, max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT,
-             rules: str | None = None) -> Refactored:
+             rules: str | None = None, scheme: str = "conditional") -> Refactored:
     """Refactor one program with the semantic rewrites and the library's abstractions.
 
     Args:
@@ -427,7 +540,9 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
         env: values of the program's Float variables (e.g. a naive program's ``S_i_j_``); Axis and Int
             variables are not allowed.
         iterations, max_nodes, time_limit: the e-graph limits (checked before each iteration).
-        rules: the text of :func:`egglog_program` for ``library``, when the caller has it already.
+        rules: the text of :func:`egglog_program` for ``library`` (of :func:`naive_program` with the naive
+            scheme), when the caller has it already.
+        scheme: one of :data:`SCHEMES`; ``"naive"`` is the paper's Table 1 ablation, for benchmarks.
 
     Returns:
         :class:`Refactored`; the input program itself when extraction finds nothing cheaper.
@@ -443,6 +558,8 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
     t0 = time.perf_counter()
     lib = _library(library)
     check_limits(iterations, max_nodes, time_limit)
+    if scheme not in SCHEMES:
+        raise RefactorError(f"scheme must be one of {SCHEMES}, got {scheme!r}")
     try:
         check(expr, lib, Type.SHAPE)
     except ProgramError as e:
@@ -456,8 +573,13 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
     input_cost = program_cost(expr, lib)
     eg = bindings.EGraph()
     try:
-        eg.run_program(*eg.parse_program(rules if rules is not None else egglog_program(lib)))
+        if rules is None:
+            rules = egglog_program(lib) if scheme == "conditional" else naive_program(lib)
+        eg.run_program(*eg.parse_program(rules))
         eg.run_program(*eg.parse_program(f"(let $root {_term(expr, lib)})"))
+        if scheme == "naive":
+            leaves = [n.value for n in walk(expr) if isinstance(n, Num)]
+            eg.run_program(*eg.parse_program(relations_command(naive_relations(leaves))))
         stop, done = "iterations", 0
         nodes = _node_count(eg, bindings)
         for _ in range(iterations):

@@ -195,3 +195,45 @@ def test_each_semantic_rule_fires_and_keeps_the_primitives(k):
     assert len(variants) > len(base_vars) or best != expr, f"rule {k} did not fire"
     for v in variants + [best]:
         assert _same_geometry(v, expr), (k, to_text(v))
+
+
+def test_naive_scheme_finds_what_the_conditional_scheme_finds_on_a_small_scene():
+    """The Table 1 ablation: with the relations put in as e-nodes and plain rules, a mirrored instance of a
+    planted abstraction gives the same program as the guarded rules; a relation off by more than the
+    tolerance is not put in; an unknown scheme is refused."""
+    from shapeprog.coder.refactor import naive_relations
+
+    lib = Library.from_text("A0(F0: Float, F1: Float) = Move(Rectangle(F0,F1),Add(F0,F1),Sub(F1,F0))", LANG_2D)
+    p = parse("Union(Move(Rectangle(0.2,0.1),0.3,-0.1),Move(Rectangle(0.2,0.1),-0.3,-0.1))", lib)
+    out = {s: refactor(p, lib, scheme=s, iterations=50, max_nodes=20_000, time_limit=60) for s in ("conditional", "naive")}
+    assert to_text(out["naive"].expr) == to_text(out["conditional"].expr) == "SymRef(A0(0.2,0.1),AX)"
+    assert out["conditional"].stop == "saturated"  # the naive e-graph grows far larger: its run may stop first
+    assert out["naive"].nodes > out["conditional"].nodes
+    assert _same_geometry(expand(out["naive"].expr, lib), p, LANG_2D)
+    rel = naive_relations([0.2, 0.1, 0.3, -0.1])
+    assert "(union (Add (Num 0.2) (Num 0.1)) (Num 0.3))" in rel
+    assert "(union (Sub (Num 0.1) (Num 0.2)) (Num -0.1))" in rel
+    assert "(union (Inv (Num 0.1)) (Num -0.1))" in rel
+    assert not any(r.startswith("(union (Add (Num 0.2) (Num 0.3))") for r in rel)
+    # four operators over 4 x 4 ordered pairs, one Inv per float (no Div by a zero)
+    assert sum(not r.startswith("(union ") for r in rel) == 4 * 16 + 4
+    # relations are exact at 2 decimals: with near-equal values (0.1, 0.11, 0.12; 0.18 is 0.07 / 0.4 rounded)
+    # no two leaves end in one e-class (a tolerance of 0.01 merged every float of a 32-parameter scene)
+    from egglog import bindings
+
+    from shapeprog.coder.refactor import naive_program, relations_command
+    vals = [0.1, 0.18, 0.12, 0.07, 0.4, 0.05, 0.13, 0.11]
+    eg = bindings.EGraph()
+    eg.run_program(*eg.parse_program(naive_program(lib)))
+    eg.run_program(*eg.parse_program(relations_command(naive_relations(vals + [-v for v in vals]))))
+    pairs = [("(Num 0.1)", "(Num 0.11)"), ("(Num 0.11)", "(Num 0.12)"), ("(Num 0.12)", "(Num 0.13)")]
+    pairs += [("(K 0.0)", f"(Num {v})") for v in vals]
+    for a, b in pairs:
+        with pytest.raises(Exception):
+            eg.run_program(*eg.parse_program(f"(check (= {a} {b}))"))
+    eg.run_program(*eg.parse_program("(check (= (Add (Num 0.05) (Num 0.07)) (Num 0.12)))"))
+    off = refactor(parse("Union(Move(Rectangle(0.2,0.1),0.33,-0.1),Move(Rectangle(0.2,0.1),-0.33,-0.1))", lib), lib,
+                   scheme="naive", iterations=50, max_nodes=100_000, time_limit=60)
+    assert "A0" not in to_text(off.expr)
+    with pytest.raises(RefactorError, match="scheme"):
+        refactor(p, lib, scheme="greedy")
