@@ -15,12 +15,13 @@ same way), once per scheme:
   (:func:`shapeprog.coder.refactor.naive_program`).
 
 Prints per size and scheme: programs, median seconds per whole call (building the e-graph, the run and the
-extraction), how many saturated / stopped on the node limit / timed out, median e-nodes at the end and the
-mean extracted cost.
+extraction; a timed-out call counts as ``--timeout``) and median CPU seconds (when no call timed out), median
+e-nodes at the end and the mean cost before and after (of the calls that finished), and how many saturated /
+stopped on the node limit / timed out.
 
 Usage::
 
-    python bench/bench_shapecoder_saturation.py [--per-size 5] [--timeout 60] [--max-nodes 2000000]
+    python bench/bench_shapecoder_saturation.py [--per-size 5] [--timeout 60] [--max-nodes 1000000]
 """
 from __future__ import annotations
 
@@ -57,13 +58,16 @@ def scene(n_rects: int, seed: int) -> str:
 
 def _one(text, scheme, max_nodes, timeout, queue):
     from egglog import bindings  # noqa: F401  (imported here, before the clock starts: a forked egglog hangs)
+    import time
     lib = Library.from_text(ABSTRACTION, LANG_2D)
+    c0 = time.process_time()
     r = refactor(parse(text, lib), lib, scheme=scheme, iterations=50, max_nodes=max_nodes, time_limit=timeout)
-    queue.put((r.seconds, r.stop, r.nodes, r.cost, r.input_cost))
+    queue.put((r.seconds, r.stop, r.nodes, r.cost, r.input_cost, time.process_time() - c0))
 
 
 def run_one(text: str, scheme: str, max_nodes: int, timeout: float):
-    """(seconds, stop, nodes, cost, input cost) of one call, or ``(timeout, "timeout", None, None, None)``."""
+    """(seconds, stop, nodes, cost, input cost, CPU seconds) of one call, or ``(timeout, "timeout", None, None,
+    None, None)``."""
     queue = mp.get_context("fork").Queue()
     proc = mp.get_context("fork").Process(target=_one, args=(text, scheme, max_nodes, timeout, queue))
     proc.start()
@@ -71,7 +75,7 @@ def run_one(text: str, scheme: str, max_nodes: int, timeout: float):
     if proc.is_alive():
         proc.kill()
         proc.join()
-        return timeout, "timeout", None, None, None
+        return timeout, "timeout", None, None, None, None
     return queue.get(timeout=5)
 
 
@@ -80,14 +84,14 @@ def main(argv=None):
     ap.add_argument("--rects", default="2,4,8")
     ap.add_argument("--per-size", type=int, default=5)
     ap.add_argument("--timeout", type=float, default=60.0)
-    ap.add_argument("--max-nodes", type=int, default=2_000_000)
+    ap.add_argument("--max-nodes", type=int, default=1_000_000)
     ap.add_argument("--schemes", default="conditional,naive")
     ap.add_argument("--seed", type=int, default=42)
     args = ap.parse_args(argv)
     print(f"# command: python {' '.join(sys.argv)}")
     print(f"# machine: {platform.platform()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
           f"load {os.getloadavg()[0]:.1f}")
-    print(f"{'params':>6} {'scheme':>11} {'n':>3} {'median s':>9} {'e-nodes':>9} {'cost':>13}  stops")
+    print(f"{'params':>6} {'scheme':>11} {'n':>3} {'median s':>9} {'CPU s':>7} {'e-nodes':>9} {'cost':>13}  stops")
     for n in (int(s) for s in args.rects.split(",")):
         texts = [scene(n, args.seed + i) for i in range(args.per_size)]
         for scheme in args.schemes.split(","):
@@ -95,9 +99,10 @@ def main(argv=None):
             stops = collections.Counter(r[1] for r in rows)
             done = [r for r in rows if r[2] is not None]
             nodes = f"{int(statistics.median(r[2] for r in done)):>9}" if done else f"{'-':>9}"
+            cpu = f"{statistics.median(r[5] for r in done):>7.3f}" if len(done) == len(rows) else f"{'-':>7}"
             cost = (f"{statistics.mean(r[4] for r in done):.1f} -> {statistics.mean(r[3] for r in done):.1f}"
                     if done else "-")
-            print(f"{4 * n:>6} {scheme:>11} {len(rows):>3} {statistics.median(r[0] for r in rows):>9.3f} {nodes} "
+            print(f"{4 * n:>6} {scheme:>11} {len(rows):>3} {statistics.median(r[0] for r in rows):>9.3f} {cpu} {nodes} "
                   f"{cost:>13}  {dict(stops)}", flush=True)
 
 
