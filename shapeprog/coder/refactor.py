@@ -49,7 +49,7 @@ __all__ = [
     "RefactorError",
     "check_limits",
     "NAIVE_OPS",
-    "naive_program",
+    "naive_egglog_program",
     "naive_relations",
     "relations_command",
     "Refactored",
@@ -67,7 +67,7 @@ SEMANTIC_TOL = 0.01
 ABSTRACTION_TOL = {"3d": 0.055, "2d": 0.04}
 #: How parameter relations reach the e-graph: ``"conditional"`` (guards on a value table, the paper's
 #: method) or ``"naive"`` (the ablation of the paper's Table 1: every pairwise relation of the program's
-#: floats put into the e-graph as e-nodes before the run, and unguarded rules; see :func:`naive_program`).
+#: floats put into the e-graph as e-nodes before the run, and unguarded rules; see :func:`naive_egglog_program`).
 SCHEMES = ("conditional", "naive")
 #: Integer e-node costs: the paper's costs times 10.
 COSTS = {"fn": 10, "float_fn": 1, "float_var": 20, "float_const": 5, "cat": 5}
@@ -396,7 +396,7 @@ def _naive_abstraction_rule(ab: Abstraction, lib: Library) -> str:
     return f"(rewrite {pat(ab.body)} ({_AB}{ab.name} {args}) :ruleset rw)"
 
 
-def naive_program(lib: Library) -> str:
+def naive_egglog_program(lib: Library) -> str:
     """The egglog declarations and rules of the naive scheme (the paper's Table 1 ablation): the
     declarations and structural bookkeeping of :func:`egglog_program`, the semantic rules of
     :func:`_naive_semantic_rules` and one plain rewrite per abstraction. Use with ``refactor(...,
@@ -412,32 +412,41 @@ NAIVE_OPS = ("Add", "Sub", "Mul", "Div")
 
 def naive_relations(values, prec: int = 2) -> list:
     """egglog actions that put a program's parameter relations into the e-graph (the naive scheme): for
-    the program's distinct floats ``values``, the e-nodes ``Inv a`` and ``op a b`` for every ordered pair
-    and every operator of :data:`NAIVE_OPS`, each unioned with the leaf (one of the program's floats or the
-    constants 0, 1, 2) equal to the node's value at ``prec`` decimals. About ``4 n²`` new e-nodes for ``n``
-    distinct floats.
+    the program's distinct floats ``values``, the e-nodes ``Inv a`` and ``op a b`` for every operator of
+    :data:`NAIVE_OPS` and every ordered pair of leaves (the program's floats and the constants 0, 1, 2) with
+    at least one of the program's floats (less the identities and zeros: ``a + 0``, ``a - 0``, ``a · 1``,
+    ``a / 1``, ``a · 0``, ``0 / a``), each unioned with the leaf equal to the node's value rounded to
+    ``prec`` decimals, if there is one. About ``4 (n + 3)²`` new e-nodes for ``n`` distinct floats. The
+    relations are one operator deep: an abstraction whose body nests float operators (``Add(Mul(a, 2), b)``)
+    never fires in this scheme.
 
     The relations are exact at ``prec`` decimals, not within a tolerance as the guards of the conditional
     scheme: a union is transitive and a tolerance is not, so with ±0.01 chains of near-equal values merged
     every float of a 32-parameter scene into one e-class (and the extracted program into a point).
     :func:`relations_command` makes them one egglog command."""
-    leaves = sorted({round(float(v), 12) + 0.0 for v in values} | set(FLOAT_CONSTANTS))
-    operands = sorted({round(float(v), 12) + 0.0 for v in values})
+    own = {round(float(v), 12) + 0.0 for v in values}
+    leaves = sorted(own | set(FLOAT_CONSTANTS))
     term = {v: (f"(K {_f64(v)})" if v in FLOAT_CONSTANTS else f"(Num {_f64(v)})") for v in leaves}
-    half = 0.5 * 10.0 ** -prec
+    by_value = {round(v, prec) + 0.0: v for v in leaves}
     out = []
 
     def relate(value, node):
-        c = min(leaves, key=lambda x: abs(x - value))
-        if abs(c - value) < half - _EPS or abs(round(value, prec) - c) <= _EPS:
+        c = by_value.get(round(value, prec) + 0.0)
+        if c is not None:
             out.append(f"(union {node} {term[c]})")
 
-    for a in operands:
+    trivial = {(x, "Add", 0.0) for x in leaves} | {(0.0, "Add", x) for x in leaves} | {(x, "Sub", 0.0) for x in leaves}
+    trivial |= {(x, "Mul", 1.0) for x in leaves} | {(1.0, "Mul", x) for x in leaves} | {(x, "Div", 1.0) for x in leaves}
+    trivial |= {(x, "Mul", 0.0) for x in leaves} | {(0.0, "Mul", x) for x in leaves} | {(0.0, "Div", x) for x in leaves}
+    for a in sorted(own):
         out.append(f"(Inv {term[a]})")
         relate(-a, f"(Inv {term[a]})")
-        for b in operands:
+    for a in leaves:
+        for b in leaves:
+            if a not in own and b not in own:
+                continue
             for op in NAIVE_OPS:
-                if op == "Div" and abs(b) <= 1e-6:
+                if (a, op, b) in trivial or (op == "Div" and b == 0.0):
                     continue
                 v = {"Add": a + b, "Sub": a - b, "Mul": a * b, "Div": a / b if b else 0.0}[op]
                 node = f"({op} {term[a]} {term[b]})"
@@ -540,7 +549,7 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
         env: values of the program's Float variables (e.g. a naive program's ``S_i_j_``); Axis and Int
             variables are not allowed.
         iterations, max_nodes, time_limit: the e-graph limits (checked before each iteration).
-        rules: the text of :func:`egglog_program` for ``library`` (of :func:`naive_program` with the naive
+        rules: the text of :func:`egglog_program` for ``library`` (of :func:`naive_egglog_program` with the naive
             scheme), when the caller has it already.
         scheme: one of :data:`SCHEMES`; ``"naive"`` is the paper's Table 1 ablation, for benchmarks.
 
@@ -574,7 +583,7 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
     eg = bindings.EGraph()
     try:
         if rules is None:
-            rules = egglog_program(lib) if scheme == "conditional" else naive_program(lib)
+            rules = egglog_program(lib) if scheme == "conditional" else naive_egglog_program(lib)
         eg.run_program(*eg.parse_program(rules))
         eg.run_program(*eg.parse_program(f"(let $root {_term(expr, lib)})"))
         if scheme == "naive":

@@ -199,8 +199,8 @@ def test_each_semantic_rule_fires_and_keeps_the_primitives(k):
 
 def test_naive_scheme_finds_what_the_conditional_scheme_finds_on_a_small_scene():
     """The Table 1 ablation: with the relations put in as e-nodes and plain rules, a mirrored instance of a
-    planted abstraction gives the same program as the guarded rules; a relation off by more than the
-    tolerance is not put in; an unknown scheme is refused."""
+    planted abstraction gives the same program as the guarded rules; relations are exact at 2 decimals (no
+    two leaves merge; a near miss is no relation); an unknown scheme is refused."""
     from shapeprog.coder.refactor import naive_relations
 
     lib = Library.from_text("A0(F0: Float, F1: Float) = Move(Rectangle(F0,F1),Add(F0,F1),Sub(F1,F0))", LANG_2D)
@@ -215,25 +215,37 @@ def test_naive_scheme_finds_what_the_conditional_scheme_finds_on_a_small_scene()
     assert "(union (Sub (Num 0.1) (Num 0.2)) (Num -0.1))" in rel
     assert "(union (Inv (Num 0.1)) (Num -0.1))" in rel
     assert not any(r.startswith("(union (Add (Num 0.2) (Num 0.3))") for r in rel)
-    # four operators over 4 x 4 ordered pairs, one Inv per float (no Div by a zero)
-    assert sum(not r.startswith("(union ") for r in rel) == 4 * 16 + 4
+    # four operators over the ordered pairs of the 7 leaves (4 floats, 0, 1, 2) that hold a float, less 9
+    # identities and zeros per float and the Div by 0, and one Inv per float; a value halfway between two
+    # leaves goes to the one it rounds to
+    assert sum(not r.startswith("(union ") for r in rel) == 4 * (7 * 7 - 3 * 3) - 9 * 4 - 4 + 4
+    assert not any(r.startswith(("(Add (Num 0.2) (K 0.0))", "(Mul (K 1.0) (Num 0.2))")) for r in rel)
+    assert "(union (Mul (Num 0.2) (K 2.0)) (Num 0.4))" in naive_relations([0.2, 0.4])
+    assert "(union (Mul (Num 0.45) (Num 0.3)) (Num 0.14))" in naive_relations([0.45, 0.3, 0.13, 0.14])
     # relations are exact at 2 decimals: with near-equal values (0.1, 0.11, 0.12; 0.18 is 0.07 / 0.4 rounded)
     # no two leaves end in one e-class (a tolerance of 0.01 merged every float of a 32-parameter scene)
     from egglog import bindings
 
-    from shapeprog.coder.refactor import naive_program, relations_command
+    from shapeprog.coder.refactor import naive_egglog_program, relations_command
     vals = [0.1, 0.18, 0.12, 0.07, 0.4, 0.05, 0.13, 0.11]
     eg = bindings.EGraph()
-    eg.run_program(*eg.parse_program(naive_program(lib)))
+    eg.run_program(*eg.parse_program(naive_egglog_program(lib)))
     eg.run_program(*eg.parse_program(relations_command(naive_relations(vals + [-v for v in vals]))))
     pairs = [("(Num 0.1)", "(Num 0.11)"), ("(Num 0.11)", "(Num 0.12)"), ("(Num 0.12)", "(Num 0.13)")]
     pairs += [("(K 0.0)", f"(Num {v})") for v in vals]
     for a, b in pairs:
-        with pytest.raises(Exception):
+        with pytest.raises(Exception, match="Check failed"):
             eg.run_program(*eg.parse_program(f"(check (= {a} {b}))"))
     eg.run_program(*eg.parse_program("(check (= (Add (Num 0.05) (Num 0.07)) (Num 0.12)))"))
-    off = refactor(parse("Union(Move(Rectangle(0.2,0.1),0.33,-0.1),Move(Rectangle(0.2,0.1),-0.33,-0.1))", lib), lib,
-                   scheme="naive", iterations=50, max_nodes=100_000, time_limit=60)
-    assert "A0" not in to_text(off.expr)
+    # an offset 0.03 from a + b: within the 2D abstraction tolerance (0.04) of the guarded rule, not a
+    # relation at 2 decimals
+    off = parse("Union(Move(Rectangle(0.2,0.1),0.33,-0.1),Move(Rectangle(0.2,0.1),-0.33,-0.1))", lib)
+    got = {s: to_text(refactor(off, lib, scheme=s, iterations=50, max_nodes=20_000, time_limit=60).expr)
+           for s in ("conditional", "naive")}
+    assert "A0" in got["conditional"] and "A0" not in got["naive"]
+    # the 3D naive rules of a shipped library are valid egglog
+    from shapeprog.coder import load_library
+    eg3 = bindings.EGraph()
+    eg3.run_program(*eg3.parse_program(naive_egglog_program(load_library("chair"))))
     with pytest.raises(RefactorError, match="scheme"):
         refactor(p, lib, scheme="greedy")
