@@ -379,21 +379,9 @@ def _naive_semantic_rules(lang: Lang) -> list:
 def _naive_abstraction_rule(ab: Abstraction, lib: Library) -> str:
     """An abstraction's rewrite as a plain pattern: its float expressions are matched as e-nodes (which
     :func:`naive_relations` must have put in the e-graph)."""
-    def pat(e: Expr) -> str:
-        if isinstance(e, Call):
-            head = _AB + e.fn if e.fn in lib else e.fn
-            return "(" + " ".join([head] + [pat(a) for a in e.args]) + ")"
-        if isinstance(e, Num):
-            v = round(e.value, 12) + 0.0
-            return f"(K {_f64(v)})" if v in FLOAT_CONSTANTS else f"(Num {_f64(v)})"
-        if isinstance(e, AxisConst):
-            return f"({e.name})"
-        if isinstance(e, IntConst):
-            return f"(N {e.value})"
-        return f"p_{e.name}"
-
     args = " ".join(f"p_{p.name}" for p in ab.params)
-    return f"(rewrite {pat(ab.body)} ({_AB}{ab.name} {args}) :ruleset rw)"
+    body = _term(ab.body, lib, var=lambda v: f"p_{v.name}")
+    return f"(rewrite {body} ({_AB}{ab.name} {args}) :ruleset rw)"
 
 
 def naive_egglog_program(lib: Library) -> str:
@@ -466,9 +454,10 @@ def relations_command(actions: list) -> str:
 # ----------------------------------------------------------------------------- program <-> term
 
 
-def _term(e: Expr, lib: Library) -> str:
+def _term(e: Expr, lib: Library, var=None) -> str:
+    """The egglog term of ``e``; a variable is an error, or the pattern variable ``var(v)`` names."""
     if isinstance(e, Call):
-        return "(" + (_AB + e.fn if e.fn in lib else e.fn) + "".join(" " + _term(a, lib) for a in e.args) + ")"
+        return "(" + (_AB + e.fn if e.fn in lib else e.fn) + "".join(" " + _term(a, lib, var) for a in e.args) + ")"
     if isinstance(e, Num):
         v = round(e.value, 12) + 0.0
         return f"(K {_f64(v)})" if v in FLOAT_CONSTANTS else f"(Num {_f64(v)})"
@@ -476,6 +465,8 @@ def _term(e: Expr, lib: Library) -> str:
         return f"({e.name})"
     if isinstance(e, IntConst):
         return f"(N {e.value})"
+    if isinstance(e, Var) and var is not None:
+        return var(e)
     raise RefactorError(f"unbound variable {e.name!r}" if isinstance(e, Var) else f"bad node {e!r}")
 
 
