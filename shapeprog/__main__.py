@@ -193,6 +193,27 @@ def _fmt_metrics(m: dict) -> str:
     return f"CD x1000 {cd}, F-score {m['fscore']:.1f}, rooted {yes[m['rooted']]}, stable {yes[m['stable']]}"
 
 
+def _retrieval_index(category: str, clouds):
+    """The retrieval index of ``category``'s training shapes: from a make-clouds folder, or sampled from the
+    corpus (with a progress line on stderr)."""
+    import time
+
+    from .pointcloud.retrieval import RetrievalIndex
+
+    t0 = time.perf_counter()
+    if clouds:
+        try:
+            index = RetrievalIndex.from_cache(clouds, category)
+        except (OSError, ValueError, KeyError) as e:
+            raise SystemExit(f"error: {clouds}: {e}") from None
+    else:
+        print(f"building the {category} retrieval index from the corpus train split ...", file=sys.stderr, flush=True)
+        index = RetrievalIndex.from_corpus(category)
+    print(f"retrieval index: {len(index)} {category} training shapes ({time.perf_counter() - t0:.0f} s)",
+          file=sys.stderr, flush=True)
+    return index
+
+
 def _cmd_infer(args) -> int:
     import json
 
@@ -201,7 +222,7 @@ def _cmd_infer(args) -> int:
     from shapeio.points import read_cloud
     from .errors import PointCloudError
     from .picture import render_grid
-    from .pointcloud.infer import cloud_corners, infer, load_model
+    from .pointcloud.infer import RETRIEVAL_CANDIDATES, cloud_corners, infer, load_model
     from .pointcloud.search import parse_schedule
 
     src = Path(args.file)
@@ -217,11 +238,17 @@ def _cmd_infer(args) -> int:
         if path.exists():
             raise SystemExit(f"error: {path}: exists; infer never overwrites a file (choose another --out)")
     points = read_cloud(src)
+    index = None
+    if args.retrieval is not None:
+        index = _retrieval_index(args.category if model is None else model.category, args.clouds)
+    elif args.clouds:
+        raise SystemExit("error: --clouds is only used with --retrieval")
     try:
         schedule = parse_schedule(args.search_schedule) if args.search_schedule else None
         r = infer(points, args.category, fit=args.fit, model=model, up=args.up, fit_steps=args.steps,
                   stability=not args.no_stability, seed=args.seed, search=args.search or schedule is not None,
-                  search_schedule=schedule)
+                  search_schedule=schedule, retrieval=index,
+                  retrieval_candidates=args.retrieval or RETRIEVAL_CANDIDATES)
     except PointCloudError as e:
         raise SystemExit(f"error: {src}: {e}") from None
     except ValueError as e:
@@ -238,7 +265,8 @@ def _cmd_infer(args) -> int:
     record = {"input": str(src), "category": args.category if model is None else model.category,
               "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
-              "before_fit": r.before, "search": r.search, "seconds": r.seconds, "macro_text": r.macro_text,
+              "before_fit": r.before, "search": r.search, "retrieval": r.retrieval, "seconds": r.seconds,
+              "macro_text": r.macro_text,
               "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
                       "canonical units (bounding-box diagonal 2)"}
     atomic_write(files["json"], json.dumps(record, indent=1) + "\n")
@@ -246,6 +274,12 @@ def _cmd_infer(args) -> int:
         s = r.search
         start = "none" if s["start_cd"] is None else f"{1000 * s['start_cd']:.1f}"
         print(f"latent search: {s['decodes']} decodes, chamfer to the cloud x1000 {start} -> {1000 * s['cd']:.1f}")
+    if r.retrieval is not None:
+        v = r.retrieval
+        dec = "no shape" if v["decoded_cd"] is None else f"{1000 * v['decoded_cd']:.1f}"
+        kept = f"the training program {v['chosen']}" if v["chosen"] else "the decoded program"
+        print(f"retrieval: {v['candidates']} training programs against the decoded one (chamfer to the cloud x1000 "
+              f"{dec}); kept {kept} ({1000 * v['cd']:.1f})")
     if r.before is not None:
         print(f"before fitting: {_fmt_metrics(r.before)}")
     print(("after fitting:  " if r.before is not None else "") + _fmt_metrics(r.metrics))
@@ -273,7 +307,7 @@ def _cmd_pointcloud_tables(args) -> int:
     try:
         result = evaluate(args.clouds, args.category, weights=args.weights, limit=args.limit, steps=args.steps,
                           stability=not args.no_stability, retrieval=not args.no_retrieval, executor=executor,
-                          seed=args.seed, progress=progress, search=args.search)
+                          seed=args.seed, progress=progress, search=args.search, augmented=args.augmented)
     finally:
         if executor is not None:
             executor.shutdown()
@@ -997,6 +1031,13 @@ def main(argv=None) -> int:
     i.add_argument("--search-schedule", metavar="N:SIGMA,...",
                    help="the search's steps, e.g. 16:0.75,16:0.5, or 'fast' (17 decodes, about 4.5x a plain decode's time) or 'default' "
                         "(implies --search)")
+    i.add_argument("--retrieval", nargs="?", type=_int_at_least(1), const=0, metavar="K",
+                   help="retrieval-augmented decoding (ours, not the papers'): the decoded program competes with the K "
+                        "training programs nearest to the cloud (without K: shapeprog.pointcloud.infer."
+                        "RETRIEVAL_CANDIDATES); the one closest to the cloud is kept")
+    i.add_argument("--clouds", metavar="DIR",
+                   help="with --retrieval: a make-clouds folder whose training clouds make the index (else it is "
+                        "sampled from the corpus, about a minute for chairs)")
     i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x"), help="the input's up axis")
     i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
     i.add_argument("--size", type=_int_at_least(8), default=256, help="picture cell size in pixels")
@@ -1016,6 +1057,8 @@ def main(argv=None) -> int:
     pt.add_argument("--no-stability", action="store_true", help="skip the stability test")
     pt.add_argument("--no-retrieval", action="store_true", help="leave out the retrieval row")
     pt.add_argument("--search", action="store_true", help="also measure the latent-search rows (ours, not the papers')")
+    pt.add_argument("--augmented", action="store_true",
+                    help="also measure the retrieval-augmented decoding rows (ours, not the papers')")
     pt.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the per-shape work")
     pt.add_argument("--seed", type=int, default=0, help="seed of the inputs' noise, subsets, scales and positions")
     pt.add_argument("--quiet", action="store_true", help="no progress lines")

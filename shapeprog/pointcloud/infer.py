@@ -26,6 +26,7 @@ Example:
 from __future__ import annotations
 
 import functools
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,7 +49,7 @@ from .data import TRAIN_POINTS
 from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 
-__all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MIN_POINTS", "PRETRAINED", "CloudModel", "Inference",
+__all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MIN_POINTS", "PRETRAINED", "RETRIEVAL_CANDIDATES", "CloudModel", "Inference",
            "align_program", "cloud_corners", "decode_codes", "infer", "load_encoder", "load_model", "load_pretrained", "shape_metrics"]
 
 #: Fewest points :func:`infer` takes.
@@ -59,6 +60,9 @@ ENCODER_POINTS = TRAIN_POINTS
 FIT_STEPS = 150
 #: The F-score's distance threshold, canonical units (AABB diagonal 2): the papers' 0.03.
 FSCORE_THRESHOLD = 0.03
+#: Training programs that compete with the decoded one under ``infer(..., retrieval=index)`` (chosen on the
+#: validation carve-out of the chair cache: docs/pointcloud.md, "Retrieval-augmented decoding").
+RETRIEVAL_CANDIDATES = 4
 #: Surface samples of the result for the metrics.
 METRIC_POINTS = 10_000
 #: The weights files shipped under ``shapeprog/weights`` (docs/benchmarks.md names the command of each).
@@ -317,7 +321,11 @@ class Inference:
             else None.
         macro_text: for a model that writes macro programs (ShapeMOD), the decoded macro program's text, in
             the decoder's frame, before the alignment and any fitting (:attr:`program` is its expansion, aligned
-            and fitted); None for a base-language model.
+            and fitted); None for a base-language model, and None when a retrieved program was kept.
+        retrieval: with ``retrieval=``: ``candidates`` (training programs scored), ``decoded_cd`` (the
+            decoded program's selection chamfer, None when it decoded to no shape), ``cd`` (the kept
+            program's) and ``chosen`` (the kept training program's corpus name, ``"chair/173"``, or None when
+            the decoded program was kept); else None.
     """
 
     program: Program
@@ -332,6 +340,7 @@ class Inference:
     seconds: dict = field(default_factory=dict)
     search: Optional[dict] = None
     macro_text: Optional[str] = None
+    retrieval: Optional[dict] = None
 
     def place(self, points):
         """Points of the executed :attr:`program` ``(..., 3)`` -> the input's frame."""
@@ -362,7 +371,8 @@ def _as_cloud(points) -> np.ndarray:
 
 def infer(points, category: str = "chair", fit: bool = False, model: Optional[CloudModel] = None, up: str = "y",
           fit_steps: int = FIT_STEPS, fit_lr: float = 5e-3, physics: bool = True, stability: bool = True,
-          seed: int = 0, search: bool = False, search_schedule=None) -> Inference:
+          seed: int = 0, search: bool = False, search_schedule=None, retrieval=None,
+          retrieval_candidates: int = RETRIEVAL_CANDIDATES) -> Inference:
     """A ShapeAssembly program for a point cloud.
 
     Args:
@@ -380,6 +390,12 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
             papers' protocol is ``search=False``.
         search_schedule: the search's ``(samples, sigma)`` steps (default
             :data:`~shapeprog.pointcloud.search.SEARCH_SCHEDULE`).
+        retrieval: a :class:`~shapeprog.pointcloud.retrieval.RetrievalIndex` of the category's training
+            shapes: the ``retrieval_candidates`` training programs nearest to the cloud by the index's coarse
+            stage compete with the decoded (or searched) program, and the one of lowest selection chamfer to
+            the input is kept (:func:`~shapeprog.pointcloud.search.selection_chamfers`; the decoded program wins
+            ties). Ours, not the papers'; default None (no retrieval).
+        retrieval_candidates: training programs scored with ``retrieval`` (at least 1).
 
     Returns:
         An :class:`Inference`.
@@ -419,11 +435,20 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     elif not search:
         program = model.decode(code[None])[0]
     macro_text = None if macro is None else macro.text
+    retrieved = None
+    if retrieval is not None:
+        t3 = time.perf_counter()
+        program, chosen, retrieved = _retrieve(retrieval, retrieval_candidates, program, cloud, unit, seed)
+        if chosen:
+            macro_text = None
+        seconds_retrieval = time.perf_counter() - t3
     if program is None or len(_corners_of(program)) == 0:
         hint = "" if search else "; the latent search (search=True, CLI --search) looks for one near the predicted code"
         raise ValueError(f"the {model.category} model decoded no shape for this cloud{hint}")
     canon, off = align_program(program)
     seconds = {"search" if search else "decode": time.perf_counter() - t0}
+    if retrieval is not None:
+        seconds["retrieval"] = seconds_retrieval
     target = torch.from_numpy(unit)
     before = None
     if fit:
@@ -444,4 +469,26 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / scale
     offset = np.asarray(t.center) + (off / t.scale) @ rotation
     return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics, before,
-                     seconds, searched, macro_text)
+                     seconds, searched, macro_text, retrieved)
+
+
+def _retrieve(index, k, program: Optional[Program], cloud: torch.Tensor, unit: np.ndarray, seed: int):
+    """``(program kept, True when it is a training program, the record)``: ``program`` against the ``k``
+    shortlisted training programs of ``index`` (coarse stage on ``cloud``, the encoder's subset), by
+    selection chamfer against :data:`~shapeprog.pointcloud.search.SEARCH_POINTS` points of ``unit``."""
+    from .search import SEARCH_POINTS, selection_chamfers
+
+    if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+        raise ValueError(f"retrieval_candidates must be an integer >= 1, got {k!r}")
+    matches = index.shortlist(cloud.double(), k)
+    target = torch.from_numpy(unit)
+    g = torch.Generator().manual_seed(int(seed))
+    if len(target) > SEARCH_POINTS:
+        target = target[torch.randperm(len(target), generator=g)[:SEARCH_POINTS]]
+    candidates = [program] + [m.program() for m in matches]
+    cds = selection_chamfers(candidates, target, SEARCH_POINTS, seed)
+    best = min(range(len(cds)), key=lambda i: (cds[i], i))  # the decoded program (0) wins ties
+    record = {"candidates": len(matches), "decoded_cd": None if math.isinf(cds[0]) else cds[0],
+              "cd": None if math.isinf(cds[best]) else cds[best],
+              "chosen": None if best == 0 else matches[best - 1].name}
+    return candidates[best], best > 0, record

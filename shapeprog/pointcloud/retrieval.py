@@ -34,8 +34,8 @@ from .. import corpus
 from ..genmetrics import coarse_fields
 from ..lang import Program, parse
 from ..metrics import chamfer
-from .data import load_cache, read_split
-from .normalize import CANONICAL_DIAGONAL, Transform, scale_program
+from .data import corpus_splits, load_cache, read_split, sample_clouds
+from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 
 __all__ = ["INDEX_CANDIDATES", "INDEX_GRID", "INDEX_POINTS", "Match", "RetrievalIndex"]
 
@@ -58,7 +58,9 @@ class Match:
     Attributes:
         category: the category.
         id: the shape id (corpus program ``category/id``).
-        distance: chamfer distance to the query, in canonical units (AABB diagonal 2).
+        distance: chamfer distance to the query, in canonical units (AABB diagonal 2), from
+            :meth:`RetrievalIndex.search`; from :meth:`RetrievalIndex.shortlist` it is the coarse stage's
+            estimate instead (an ordering, not a chamfer distance).
         center, scale: the reference cloud's :class:`~shapeprog.pointcloud.normalize.Transform`
             (program frame -> canonical frame); None when the index was built from bare clouds.
     """
@@ -182,6 +184,37 @@ class RetrievalIndex:
         return cls(category, cache.ids[rows], torch.from_numpy(x), centers=cache.center[rows],
                    scales=cache.scale[rows], **kwargs)
 
+    @classmethod
+    def from_corpus(cls, category: str, points: int = INDEX_POINTS, seed: int = 0, executor=None,
+                    progress=None, ids: Optional[Sequence[int]] = None, **kwargs) -> "RetrievalIndex":
+        """The index of the corpus train split of ``category`` without a cache: each program executed and
+        ``points`` points sampled from its cuboids (:func:`~shapeprog.pointcloud.data.sample_clouds`, the
+        cache's per-shape seeds), normalised. The same shapes as :meth:`from_cache` with the default splits
+        (the training carve-out and its validation part); the clouds are other samples of the same
+        surfaces. About a minute for chairs on one core (``docs/pointcloud.md``); ``executor`` runs the
+        per-shape jobs, ``progress(done, total)`` is called after each. Shapes that fail to execute are
+        left out (none in the shipped corpus). ``ids`` restricts the index to some of those shapes (a ValueError
+        names an id outside the corpus train split). ``kwargs`` go to the constructor."""
+        split = corpus_splits(category)
+        train = sorted(split["train"] + split["val"])
+        if ids is None:
+            ids = train
+        else:
+            known = set(train)
+            bad = [int(i) for i in ids if int(i) not in known]
+            if bad:
+                raise ValueError(f"{category}/{bad[0]} is not in the corpus train split; the index holds training "
+                                 "shapes only")
+            ids = sorted(int(i) for i in ids)
+        cs = sample_clouds(category, ids, n_points=points, seed=seed, executor=executor, progress=progress)
+        centers = np.empty((len(cs.ids), 3))
+        scales = np.empty(len(cs.ids))
+        unit = np.empty(cs.points.shape, dtype=np.float32)
+        for k, x in enumerate(cs.points):
+            u, t = normalize(x.astype(np.float64))
+            unit[k], centers[k], scales[k] = u, t.center, t.scale
+        return cls(category, cs.ids, torch.from_numpy(unit), centers=centers, scales=scales, **kwargs)
+
     def __len__(self) -> int:
         return len(self.ids)
 
@@ -190,9 +223,9 @@ class RetrievalIndex:
             return Match(self.category, int(self.ids[row]), dist)
         return Match(self.category, int(self.ids[row]), dist, tuple(self.centers[row]), float(self.scales[row]))
 
-    def _candidates(self, queries: list[torch.Tensor], k: int) -> torch.Tensor:
-        """``(Q, k)`` rows with the smallest coarse estimates."""
-        out = []
+    def _candidates(self, queries: list[torch.Tensor], k: int, values: bool = False):
+        """``(Q, k)`` rows with the smallest coarse estimates, best first (and the estimates with ``values``)."""
+        out, vals = [], []
         for s in range(0, len(queries), _QUERY_CHUNK):
             chunk = queries[s:s + _QUERY_CHUNK]
             fields = [coarse_fields(self._unit(q)[None], self.grid) for q in chunk]
@@ -203,8 +236,20 @@ class RetrievalIndex:
                 hr = self.splat[r:r + _REF_CHUNK].float()
                 dr = self.field[r:r + _REF_CHUNK].float()
                 est[:, r:r + _REF_CHUNK] = hq @ dr.T + dq @ hr.T
-            out.append(est.topk(k, dim=1, largest=False).indices)
-        return torch.cat(out)
+            top = est.topk(k, dim=1, largest=False)
+            out.append(top.indices)
+            vals.append(top.values)
+        return (torch.cat(out), torch.cat(vals)) if values else torch.cat(out)
+
+    def shortlist(self, cloud, k: int = INDEX_CANDIDATES) -> list[Match]:
+        """The ``k`` references of smallest coarse estimate for one ``(N, 3)`` cloud in the canonical frame,
+        best first, without the exact stage (about 10 ms for chairs): the candidates that
+        :func:`~shapeprog.pointcloud.infer.infer` scores itself with ``retrieval=``. Each
+        :class:`Match`'s ``distance`` is the coarse estimate."""
+        q = _as_clouds([cloud], "cloud")
+        k = max(1, min(int(k), len(self.ids)))
+        rows, est = self._candidates(q, k, values=True)
+        return [self._match(int(r), float(e)) for r, e in zip(rows[0].tolist(), est[0].tolist())]
 
     def search(self, queries, executor=None, candidates: Union[int, None, str] = "default",
                chunk: int = 8) -> list[Match]:
