@@ -612,6 +612,24 @@ def _int_at_least(low: int):
     return convert
 
 
+def _positive_float(text: str) -> float:
+    """An argparse type: a positive finite float."""
+    import math
+
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _search_budget(args, seconds: str, batches: str) -> dict:
+    """``infer``'s network-search budget from two options whose default (None) means the wake's."""
+    from .coder.search import WAKE_BATCHES, WAKE_SECONDS
+
+    s, b = getattr(args, seconds), getattr(args, batches)
+    return {"search_seconds": WAKE_SECONDS if s is None else s, "search_batches": WAKE_BATCHES if b is None else b}
+
+
 def _cmd_discover_abstractions(args) -> int:
     from .coder.discover import Config, discover_category
 
@@ -698,6 +716,8 @@ def _cmd_abstract_infer(args) -> int:
     else:
         shape = spec
     network = None
+    if (args.search_seconds, args.search_batches) != (None, None) and not args.network:
+        raise SystemExit("error: --search-seconds / --search-batches need --network")
     if args.network:
         from .coder.infer import load_network
 
@@ -709,7 +729,8 @@ def _cmd_abstract_infer(args) -> int:
             raise SystemExit(f"error: --network: {e}") from None
     try:
         r = infer(shape, lib, passes=args.passes, iterations=args.iterations, max_nodes=args.max_nodes,
-                  time_limit=args.time_limit, network=network)
+                  time_limit=args.time_limit, network=network,
+                  **_search_budget(args, "search_seconds", "search_batches"))
     except ParseError:
         raise  # located in the shape's text; main reports it
     except ValueError as e:
@@ -947,6 +968,9 @@ def _cmd_table2_coder(args) -> int:
         raise SystemExit(f"error: --library {unknown[0]}=...: {unknown[0]} is not among --categories")
     _check_outputs(others=[args.out])
     limits = {"iterations": args.iterations, "max_nodes": args.max_nodes, "time_limit": args.time_limit}
+    budget = _search_budget(args, "phi_search_seconds", "phi_search_batches")
+    if (args.phi_search_seconds, args.phi_search_batches) != (None, None) and not args.phi_network:
+        raise SystemExit("error: --phi-search-seconds / --phi-search-batches need --phi-network")
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
     parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]
     progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
@@ -965,8 +989,8 @@ def _cmd_table2_coder(args) -> int:
             except ValueError as e:
                 raise SystemExit(f"error: --phi-network: {e}") from None
             t3 = tables.table3(run, train=args.train, heldout=args.heldout, executor=pool, progress=progress,
-                               network=network, **limits)
-            parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None))
+                               network=network, **limits, **budget)
+            parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None, **budget))
             print(parts[-1] + "\n", flush=True)
     finally:
         if pool is not None:
@@ -1220,6 +1244,11 @@ def main(argv=None) -> int:
     a.add_argument("--network", action="store_true",
                    help="also search with the shipped library's recognition network (the paper's post hoc "
                         "inference; slower)")
+    a.add_argument("--search-seconds", type=_positive_float, metavar="S",
+                   help="with --network: seconds of the network search per step (default 1, the paper's wake; more "
+                        "is ours)")
+    a.add_argument("--search-batches", type=_int_at_least(1), metavar="N",
+                   help="with --network: batches of 64 samples per search step at most (default 16)")
     a.set_defaults(func=_cmd_abstract_infer)
     d = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",
                        description="Serve an editor page for a program: the shape in 3D, one control per free "
@@ -1316,6 +1345,11 @@ def main(argv=None) -> int:
                     help="post hoc inference with the library's recognition network as well (the paper's; the "
                          "shipped <category>_recnet.pt, or a run folder's last recnet_round<k>.pt); default: "
                          "refactoring only")
+    t2.add_argument("--phi-search-seconds", type=_positive_float, metavar="S",
+                    help="with --phi-network: seconds of the network search per step (default 1, the paper's wake; "
+                         "more is ours)")
+    t2.add_argument("--phi-search-batches", type=_int_at_least(1), metavar="N",
+                    help="with --phi-network: batches of 64 samples per search step at most (default 16)")
     t2.add_argument("--out", help="also write the tables (markdown) here, atomically")
     t2.add_argument("--quiet", action="store_true")
     t2.set_defaults(func=_cmd_table2_coder, argv=None)

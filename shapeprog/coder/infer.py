@@ -16,6 +16,7 @@ Example:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from importlib import resources
 from . import data
@@ -24,8 +25,9 @@ from .execute import order
 from .lang import LANG_3D, Library, Num, expand, substitute, to_text
 from .objective import naive_program
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, refactor
+from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
-__all__ = ["Inferred", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
+__all__ = ["Inferred", "check_search_budget", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
 
 _DIR = ("data", "coder_libraries")
 
@@ -62,7 +64,8 @@ def _prims(shape) -> tuple:
 
 
 def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITERATIONS,
-          max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None, seed: int = 0) -> Inferred:
+          max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None, seed: int = 0,
+          search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES) -> Inferred:
     """The program of one shape under ``library``.
 
     Args:
@@ -75,6 +78,10 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
             a payload of :func:`shapeprog.coder.discover.network_payload`): the refactored program is then a
             candidate of the network wake's search for the shape (the paper's post hoc inference), and the
             cheaper program is kept. seed: seeds that search.
+        search_seconds, search_batches: the network search's budget per step: no new batch of
+            :data:`~shapeprog.coder.search.WAKE_BATCH` samples starts after ``search_seconds`` or
+            ``search_batches`` batches (the paper's wake: 1 s, and 16 batches, ours). A larger budget is ours,
+            not the paper's post hoc inference.
 
     Raises:
         ParseError: a malformed line. ValueError: primitives of the wrong width, or more than the
@@ -88,6 +95,7 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
         raise ValueError(f"the shape has {len(prims)} primitives; at most {lang.max_prims} are allowed")
     if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
         raise ValueError(f"passes must be an int >= 1, got {passes!r}")
+    check_search_budget(search_seconds, search_batches)
     naive, env = naive_program(prims)
     naive = substitute(naive, {k: Num(v) for k, v in env.items()})
     best = (naive, evaluate(naive, library, prims))
@@ -106,11 +114,20 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
 
         payload = network if len(network) == 4 else network_payload(*network)
         limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit}
-        expr, cost, err, _ = network_best(best[0], library, prims, payload, limits, seed=seed)
+        search = {"batch": WAKE_BATCH, "batches": int(search_batches), "seconds": float(search_seconds)}
+        expr, cost, err, _ = network_best(best[0], library, prims, payload, limits, search=search, seed=seed)
         if cost is not None and cost < best[1][0] - 1e-9:
             best = (expr, (cost, err))
     e, (cost, err) = best
     return Inferred(to_text(e), to_text(expand(e, library)), cost, err, stop)
+
+
+def check_search_budget(seconds, batches) -> None:
+    """Refuse a network-search budget that is not ``seconds > 0`` (finite) and ``batches >= 1`` (an int)."""
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) or seconds <= 0:
+        raise ValueError(f"search_seconds must be a positive finite number, got {seconds!r}")
+    if isinstance(batches, bool) or not isinstance(batches, int) or batches < 1:
+        raise ValueError(f"search_batches must be an int >= 1, got {batches!r}")
 
 
 def shipped_networks() -> tuple:

@@ -30,10 +30,11 @@ from typing import Callable, Sequence
 from ..limits import decode
 from . import data
 from .discover import Summary, evaluate, summarize
-from .infer import infer, shipped_libraries
+from .infer import check_search_budget, infer, shipped_libraries
 from .lang import LANG_3D, Call, Library, parse, walk
 from .objective import naive_summary, omega
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
+from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
 __all__ = ["PAPER_TABLE2", "PAPER_TABLE3", "Phi", "Run", "Table2", "format_tables", "from_run", "phi", "shipped",
            "table2", "table3"]
@@ -198,19 +199,23 @@ class Phi:
 
 
 def _infer_one(task):
-    prims, lib_text, limits, payload, seed = task
+    prims, lib_text, limits, payload, seed, budget = task
     lib = Library.from_text(lib_text, LANG_3D)
     t0 = time.process_time()
-    r = infer(prims, lib, **limits, network=payload, seed=seed)
+    r = infer(prims, lib, **limits, network=payload, seed=seed, **budget)
     return r.cost, time.process_time() - t0, r.text
 
 
 def phi(split: str, records: Sequence, library: Library, *, executor=None, iterations: int = MAX_ITERATIONS,
-        max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None) -> Phi:
+        max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None,
+        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES) -> Phi:
     """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed;
     with ``network`` (a ``(model, vocab)`` pair) as :func:`~shapeprog.coder.infer.infer` with the network,
-    shape k's search seeded with k."""
+    shape k's search seeded with k and budgeted by ``search_seconds`` / ``search_batches`` (as
+    :func:`~shapeprog.coder.infer.infer`)."""
+    check_search_budget(search_seconds, search_batches)
     limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit}
+    budget = {"search_seconds": float(search_seconds), "search_batches": int(search_batches)}
     kept = [r for r in records if len(r.prims) <= library.lang.max_prims]
     if not kept:
         raise ValueError(f"{split}: no shape with at most {library.lang.max_prims} primitives")
@@ -219,7 +224,7 @@ def phi(split: str, records: Sequence, library: Library, *, executor=None, itera
         from .discover import network_payload
 
         payload = network_payload(*network)
-    tasks = [(r.prims, library.to_text(), limits, payload, k) for k, r in enumerate(kept)]
+    tasks = [(r.prims, library.to_text(), limits, payload, k, budget) for k, r in enumerate(kept)]
     t0 = time.time()
     out = list(executor.map(_infer_one, tasks)) if executor is not None else [_infer_one(t) for t in tasks]
     wall = time.time() - t0
@@ -232,8 +237,8 @@ def phi(split: str, records: Sequence, library: Library, *, executor=None, itera
 def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
            progress: Callable[[str], None] | None = None, network=None, **limits) -> list:
     """The two post hoc inference rows: the first ``train`` discovery shapes and the first ``heldout``
-    held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit``, and ``network`` as
-    :func:`phi`)."""
+    held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit``, and ``network``,
+    ``search_seconds``, ``search_batches`` as :func:`phi`)."""
     rows = []
     for split, recs in (("train-PHI", data.load(run.category)[:train]),
                         ("validation-PHI", data.load(run.category, "heldout")[:heldout])):
@@ -244,7 +249,8 @@ def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
 
 
 def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
-                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network: bool = False) -> str:
+                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network: bool = False,
+                  search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES) -> str:
     """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours."""
     cat = run.category
     out = [f"## Table 2 ({cat}, {t2.ours.shapes} discovery shapes; library {run.source})", "",
@@ -256,6 +262,10 @@ def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = 
     paper_limits = (iterations, max_nodes, time_limit) == (MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT)
     which = "the paper's" if paper_limits else "ours, not the paper's"
     how = "the recognition network's search and refactoring" if network else "refactoring only"
+    if network:
+        paper_budget = (search_seconds, search_batches) == (WAKE_SECONDS, WAKE_BATCHES)
+        how += (f", the search's budget {search_seconds:g} s / {search_batches} batches of {WAKE_BATCH} per step: "
+                + ("the wake's" if paper_budget else "ours, larger than the paper's 1 s"))
     out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions by {how}; e-graph limits "
             f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which})", "",
             "| split | shapes | F | abstractions used | CPU s / shape | wall s | paper F |",

@@ -296,3 +296,50 @@ def test_post_hoc_inference_with_the_shipped_network_is_never_dearer_and_re_cove
     assert row.F <= tables.phi("x", [rec], lib).F + 1e-9 and row.shapes == 1
     with pytest.raises(ValueError, match="no shipped recognition network for 'sofa'"):
         load_network("sofa")
+
+
+def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_are_refused(monkeypatch, capsys):
+    import importlib
+
+    from shapeprog.__main__ import main
+    from shapeprog.coder import data, tables
+    from shapeprog.coder.infer import infer, load_library, load_network
+    from shapeprog.coder.search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+
+    discover = importlib.import_module("shapeprog.coder.discover")
+    seen = []
+    real = discover.network_best
+
+    def spy(current, library, prims, payload, limits, search=None, seed=0):
+        seen.append(dict(search))
+        return real(current, library, prims, payload, limits, search={**search, "batches": 1}, seed=seed)
+
+    monkeypatch.setattr(discover, "network_best", spy)
+    lib, net = load_library("chair"), load_network("chair")
+    rec = data.load("chair", "heldout")[1]
+    infer(rec.prims, lib, network=net)
+    infer(rec.prims, lib, network=net, search_seconds=3.5, search_batches=40)
+    assert seen == [{"batch": WAKE_BATCH, "batches": WAKE_BATCHES, "seconds": WAKE_SECONDS},
+                    {"batch": WAKE_BATCH, "batches": 40, "seconds": 3.5}]
+    for bad in ({"search_seconds": 0}, {"search_seconds": float("nan")}, {"search_batches": 0},
+                {"search_batches": 2.0}, {"search_seconds": True}):
+        with pytest.raises(ValueError, match="search_"):
+            infer(rec.prims, lib, network=net, **bad)
+    # Table 3 labels a larger budget as ours
+    row = tables.phi("validation-PHI", [rec], lib, network=net, search_seconds=2.0, search_batches=20)
+    assert seen[-1] == {"batch": WAKE_BATCH, "batches": 20, "seconds": 2.0} and row.shapes == 1
+    run = tables.shipped("chair")
+    text = tables.format_tables(run, tables.table2(run), [row], network=True, search_seconds=2.0, search_batches=20)
+    assert "the search's budget 2 s / 20 batches of 64 per step: ours, larger than the paper's 1 s" in text
+    assert "the wake's" in tables.format_tables(run, tables.table2(run), [row], network=True)
+    # the commands pass it on, and refuse it without the network
+    assert main(["abstract-infer", "chair/402", "--library", "chair", "--network", "--search-seconds", "2.5",
+                 "--search-batches", "8"]) == 0
+    assert seen[-1] == {"batch": WAKE_BATCH, "batches": 8, "seconds": 2.5}
+    with pytest.raises(SystemExit, match="need --network"):
+        main(["abstract-infer", "chair/402", "--library", "chair", "--search-seconds", "2"])
+    with pytest.raises(SystemExit, match="need --phi-network"):
+        main(["table2-coder", "--categories", "chair", "--phi-search-batches", "4", "--train", "1", "--heldout", "1"])
+    with pytest.raises(SystemExit):
+        main(["abstract-infer", "chair/402", "--library", "chair", "--network", "--search-seconds", "-1"])
+    capsys.readouterr()

@@ -10,6 +10,7 @@ import torch
 from shapeprog import corpus
 from shapeprog.__main__ import main
 from shapeprog.lang import parse, to_text
+from shapeprog.metrics import chamfer
 from shapeprog.pointcloud.data import corpus_cloud, corpus_splits, make_clouds, sample_clouds
 from shapeprog.pointcloud.encoder import PointNet2SSG
 from shapeprog.pointcloud.infer import CloudModel, infer
@@ -54,6 +55,9 @@ def test_the_shortlist_is_ordered_by_the_coarse_estimate_and_starts_with_the_sha
         assert est == sorted(est) and len({m.id for m in short}) == 5
     assert len(index.shortlist(index.clouds[0], 100)) == len(index)  # at most every reference
     assert len(index.shortlist(index.clouds[0], 0)) == 1
+    assert torch.equal(index.reference_cloud(TRAIN[5]), index.clouds[index.ids.tolist().index(TRAIN[5])])
+    with pytest.raises(KeyError, match=f"chair/{SPLITS['test'][0]} is not in the index"):
+        index.reference_cloud(SPLITS["test"][0])
     # the shortlist's first rows are the candidates that search() measures exactly
     assert index.search(index.clouds[2:3])[0].id in {m.id for m in index.shortlist(index.clouds[2], 4)}
 
@@ -67,13 +71,14 @@ def test_the_kept_program_is_the_candidate_closest_to_the_input(model, index):
     assert plain.retrieval is None and v["candidates"] == 3 and "retrieval" in r.seconds
     # the untrained model's decode loses to the training shape itself, which is on the shortlist
     assert v["chosen"] == f"chair/{shape}" and v["cd"] < v["decoded_cd"] and r.macro_text is None
-    # the same selection, recomputed: the decoded program and the three shortlisted programs
+    # the same selection, recomputed: the decoded program and the three shortlisted training shapes' clouds
     unit, _ = normalize(cloud)
     g = torch.Generator().manual_seed(0)
     target = torch.from_numpy(unit)[torch.randperm(len(unit), generator=g)[:SEARCH_POINTS]]
     pick = np.sort(np.random.default_rng(0).choice(len(unit), 2048, replace=False))  # the encoder's subset
     matches = index.shortlist(torch.from_numpy(unit[pick].astype(np.float32)).double(), 3)
-    cds = selection_chamfers([plain.canonical] + [m.program() for m in matches], target, SEARCH_POINTS, 0)
+    cds = selection_chamfers([plain.canonical], target, SEARCH_POINTS, 0)  # the decoded program: surface samples
+    cds += [float(chamfer(index.reference_cloud(m.id).double(), target, eps=0.0)) for m in matches]  # references
     assert cds[0] == pytest.approx(v["decoded_cd"]) and min(cds) == pytest.approx(v["cd"])
     assert matches[int(np.argmin(cds)) - 1].name == v["chosen"]
     # the kept program lies on the input: its cuboids span the cloud's box, in any frame
@@ -91,7 +96,8 @@ def test_the_kept_program_is_the_candidate_closest_to_the_input(model, index):
 def test_a_decoded_program_that_is_closer_is_kept(model, index, monkeypatch):
     shape = TRAIN[4]
     cloud = corpus_cloud("chair", shape, n_points=3000).astype(np.float64)
-    # a model that decodes the shape's own program: no training program is strictly closer to the input
+    # a model that decodes the shape's own program (scored with 1,024 surface samples) is kept against the
+    # index's clouds of 400 points, that of the same shape included
     own = parse(corpus.read("chair", shape))
     monkeypatch.setattr(model, "decode", lambda codes: [own for _ in range(len(codes))])
     r = infer(cloud, model=model, physics=False, retrieval=index, retrieval_candidates=4)
