@@ -1053,8 +1053,8 @@ def main(argv=None) -> int:
                    help="latent search: decode 96 more codes around the predicted one and keep the program closest "
                         "to the cloud (about 1 s; before --fit)")
     i.add_argument("--search-schedule", metavar="N:SIGMA,...",
-                   help="the search's steps, e.g. 16:0.75,16:0.5, or 'fast' (17 decodes, about 4.5x a plain decode's time) or 'default' "
-                        "(implies --search)")
+                   help="the search's steps, e.g. 16:0.75,16:0.5, or 'quick' (5 decodes; with --retrieval), 'fast' (17 decodes, "
+                        "about 4.5x a plain decode's time) or 'default' (implies --search)")
     i.add_argument("--retrieval", nargs="?", type=_int_at_least(1), const=0, metavar="K",
                    help="retrieval-augmented decoding (ours, not the papers'): the decoded program competes with the K "
                         "training programs nearest to the cloud (without K: shapeprog.pointcloud.infer."

@@ -18,7 +18,8 @@ Data (clouds of corpus shapes, the canonical frame, users' files, a nearest-neig
 Cloud -> program (training in :mod:`~shapeprog.pointcloud.train`, the only module here importing Lightning):
 
 * :func:`infer` (:mod:`shapeprog.pointcloud.infer`): a program for a cloud in any frame and scale, optionally
-  polished by fitting; :class:`CloudModel` and :func:`load_model` for trained weights files.
+  polished by fitting, optionally searched (:mod:`~shapeprog.pointcloud.search`) or against the training
+  programs nearest to it (``retrieval=``); :class:`CloudModel` and :func:`load_model` for trained weights files.
 """
 from __future__ import annotations
 

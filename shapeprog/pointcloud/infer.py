@@ -8,7 +8,9 @@ frame the training clouds are in (:func:`~shapeprog.pointcloud.normalize.normali
 so that its executed cuboids span the cloud's bounding box (the decoder works in the corpus frame, whose
 shapes the normalisation scales by 0.85-1.1), and maps the result back into the input's scale and position.
 With ``fit=True`` the program's continuous numbers are then fitted to the cloud by chamfer through the
-differentiable executor (:func:`shapeprog.fit.fit`), keeping the structure.
+differentiable executor (:func:`shapeprog.fit.fit`), keeping the structure. With ``retrieval=`` (a
+:class:`~shapeprog.pointcloud.retrieval.RetrievalIndex`; ours, not the papers') the decoded program competes
+with the training programs nearest to the cloud, and the one closest to the input is kept.
 
 :class:`CloudModel` is a trained encoder with its decoder; :func:`load_model` reads a weights file written by
 :func:`shapeprog.pointcloud.train.export_weights` (``torch.load(weights_only=True)``), :func:`load_pretrained`

@@ -16,7 +16,7 @@ from shapeprog.pointcloud.encoder import PointNet2SSG
 from shapeprog.pointcloud.infer import CloudModel, infer
 from shapeprog.pointcloud.normalize import normalize
 from shapeprog.pointcloud.retrieval import RetrievalIndex
-from shapeprog.pointcloud.search import SEARCH_POINTS, selection_chamfers
+from shapeprog.pointcloud.search import QUICK_SEARCH_SCHEDULE, SEARCH_POINTS, parse_schedule, selection_chamfers
 from shapeprog.pointcloud.tables import evaluate, write_tables
 from shapeprog.vae.pretrained import load_pretrained as load_vae
 
@@ -88,6 +88,11 @@ def test_the_kept_program_is_the_candidate_closest_to_the_input(model, index):
     moved = infer(cloud * k + b, model=model, physics=False, retrieval=index, retrieval_candidates=3)
     assert to_text(moved.canonical) == to_text(r.canonical)
     assert np.allclose(moved.corners(), r.corners() * k + b, atol=1e-3 * k)
+    # with a search, the searched program is the one that competes
+    searched = infer(cloud, model=model, physics=False, retrieval=index, retrieval_candidates=3, search=True,
+                     search_schedule=parse_schedule("quick"))
+    assert parse_schedule("quick") == QUICK_SEARCH_SCHEDULE == ((4, 0.5),)
+    assert searched.search["decodes"] == 5 and searched.retrieval["decoded_cd"] == pytest.approx(searched.search["cd"])
     for bad in (0, -1, 1.5, True):
         with pytest.raises(ValueError, match="retrieval_candidates"):
             infer(cloud, model=model, physics=False, retrieval=index, retrieval_candidates=bad)
