@@ -143,5 +143,5 @@ def test_the_retrieval_augmented_rows_are_measured_on_request(tmp_path, model):
         m = res.rows[row]
         assert m["n"] == 1 and 0.0 <= m["fscore"] <= 100.0 and m["cd"] is not None and m["stable"] is None
     text = write_tables(res, tmp_path / "t.md").read_text()
-    assert "Ours + retrieval-augmented decoding (not the papers' protocol; no fitting)" in text
+    assert "Ours + quick search + retrieval-augmented decoding (not the papers' protocol; no fitting)" in text
     assert "retrieval alone on F-score without fitting" in text
