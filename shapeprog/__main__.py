@@ -1061,7 +1061,7 @@ def main(argv=None) -> int:
                         "RETRIEVAL_CANDIDATES); the one closest to the cloud is kept")
     i.add_argument("--clouds", metavar="DIR",
                    help="with --retrieval: a make-clouds folder whose training clouds make the index (else it is "
-                        "sampled from the corpus, about a minute for chairs)")
+                        "sampled from the corpus, about 20 s for chairs)")
     i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x"), help="the input's up axis")
     i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
     i.add_argument("--size", type=_int_at_least(8), default=256, help="picture cell size in pixels")

@@ -193,7 +193,7 @@ class RetrievalIndex:
         ``points`` points sampled from its cuboids (:func:`~shapeprog.pointcloud.data.sample_clouds`, the
         cache's per-shape seeds), normalised. The same shapes as :meth:`from_cache` with the default splits
         (the training carve-out and its validation part); the clouds are other samples of the same
-        surfaces. About a minute for chairs on one core (``docs/pointcloud.md``); ``executor`` runs the
+        surfaces. About 22 s for chairs on one core (``docs/pointcloud.md``); ``executor`` runs the
         per-shape jobs, ``progress(done, total)`` is called after each. Shapes that fail to execute are
         left out (none in the shipped corpus). ``ids`` restricts the index to some of those shapes (a ValueError
         names an id outside the corpus train split). ``kwargs`` go to the constructor."""
