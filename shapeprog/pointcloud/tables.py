@@ -275,6 +275,16 @@ def _f(v, digits=1) -> str:
     return "n/a" if v is None else f"{v:.{digits}f}"
 
 
+def _against_retrieval(r: dict, row: str, claim: str) -> list:
+    """A sentence on whether ``row`` beats the retrieval row on F-score (``claim`` has a ``{}`` for the verb);
+    nothing without a retrieval row."""
+    if "retrieval" not in r:
+        return []
+    verdict = "beats" if r[row]["fscore"] > r["retrieval"]["fscore"] else "does not beat"
+    return [claim.format(verdict) + f" on F-score without fitting ({_f(r[row]['fscore'])} against "
+            f"{_f(r['retrieval']['fscore'])}).", ""]
+
+
 def write_tables(result: TableResult, out, command: str = "") -> Path:
     """Write both layouts as Markdown to ``out`` (atomically); ``command`` is recorded under them."""
     r, cat = result.rows, result.category
@@ -335,21 +345,16 @@ def write_tables(result: TableResult, out, command: str = "") -> Path:
                   "drawn around the predicted one, the program of lowest chamfer to the *input* cloud kept (no ground "
                   "truth, no training shape). It is ours, not the papers' protocol: compare the papers with the rows "
                   "above it.", ""]
-        if "retrieval" in r:
-            verdict = "beats" if r["search"]["fscore"] > r["retrieval"]["fscore"] else "does not beat"
-            lines += [f"With latent search the model {verdict} retrieval on F-score without fitting "
-                      f"({_f(r['search']['fscore'])} against {_f(r['retrieval']['fscore'])}).", ""]
+        lines += _against_retrieval(r, "search", "With latent search the model {} retrieval")
     if "augmented" in r:
         from .infer import RETRIEVAL_CANDIDATES
+        quick = 1 + sum(n for n, _ in QUICK_SEARCH_SCHEDULE)
         lines += [f"Retrieval-augmented decoding (`infer(..., search=True, search_schedule=QUICK_SEARCH_SCHEDULE, "
-                  f"retrieval=index)`; CLI `--retrieval --search-schedule quick`): the program of a 5-decode latent "
+                  f"retrieval=index)`; CLI `--retrieval --search-schedule quick`): the program of a {quick}-decode latent "
                   f"search and the {RETRIEVAL_CANDIDATES} training programs that the retrieval index's coarse stage "
                   "puts nearest to the input compete, and the one of lowest chamfer to the *input* cloud is kept (no "
                   "ground truth; the index holds the corpus train split only). It is ours, not the papers' protocol.", ""]
-        if "retrieval" in r:
-            verdict = "beats" if r["augmented"]["fscore"] > r["retrieval"]["fscore"] else "does not beat"
-            lines += [f"Retrieval-augmented decoding {verdict} retrieval alone on F-score without fitting "
-                      f"({_f(r['augmented']['fscore'])} against {_f(r['retrieval']['fscore'])}).", ""]
+        lines += _against_retrieval(r, "augmented", "Retrieval-augmented decoding {} retrieval alone")
     failed = {k: v for k, v in result.failed.items() if v}
     lines += [f"Shapes without a decoded shape (scored F 0, not rooted): {failed or 'none'}. "
               f"Settings: {result.settings}. Wall time {result.seconds:.0f} s.", ""]
