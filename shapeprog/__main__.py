@@ -1058,7 +1058,8 @@ def main(argv=None) -> int:
     i.add_argument("--retrieval", nargs="?", type=_int_at_least(1), const=0, metavar="K",
                    help="retrieval-augmented decoding (ours, not the papers'): the decoded program competes with the K "
                         "training programs nearest to the cloud (without K: shapeprog.pointcloud.infer."
-                        "RETRIEVAL_CANDIDATES); the one closest to the cloud is kept")
+                        "RETRIEVAL_CANDIDATES); the one closest to the cloud is kept. Give the file before "
+                        "--retrieval: a file right after it is read as K")
     i.add_argument("--clouds", metavar="DIR",
                    help="with --retrieval: a make-clouds folder whose training clouds make the index (else it is "
                         "sampled from the corpus, about 20 s for chairs)")

@@ -64,9 +64,9 @@ FIT_STEPS = 150
 FSCORE_THRESHOLD = 0.03
 #: Training programs that compete with the decoded one under ``infer(..., retrieval=index)``. Chosen on the
 #: validation carve-out of the chair cache (167 chairs against an index of the other 3,172 training chairs, the
-#: shipped end-to-end model, no fitting): F-score 57.3 for the decoded program alone, 66.3 / 67.7 / 68.3 / 68.9
-#: with 2 / 4 / 8 / 16 candidates at 0.082 / 0.091 / 0.108 / 0.132 CPU s per cloud (median, one core);
-#: 8 keeps the whole call near half the 0.2 s budget (docs/pointcloud.md, "Retrieval-augmented decoding").
+#: shipped end-to-end model, no fitting): F-score 57.3 for the decoded program alone, 68.2 / 68.9 / 69.1 with
+#: 8 / 16 / 32 candidates at 0.081 / 0.092 / 0.112 CPU s per cloud (median, one core); 16 takes nearly all of
+#: the gain for little time, 32 and 64 add 0.2 (docs/pointcloud.md, "Retrieval-augmented decoding").
 RETRIEVAL_CANDIDATES = 16
 #: Surface samples of the result for the metrics.
 METRIC_POINTS = 10_000
@@ -320,7 +320,7 @@ class Inference:
             ``stable`` of the result against the (normalised) input cloud.
         before: the same metrics before fitting (``fit=True``), else None.
         seconds: wall time of ``decode`` (encode + decode + align; ``search`` in its place with ``search=True``),
-            ``fit`` and ``metrics``.
+            ``retrieval`` (with ``retrieval=``; not counted in ``decode`` / ``search``), ``fit`` and ``metrics``.
         search: with ``search=True``: ``start_cd`` and ``cd`` (the selection chamfer of the predicted code's
             program and of the one kept), ``decodes`` and ``improved`` (steps that found a better program);
             else None.
@@ -417,6 +417,8 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     except ValueError as e:
         raise PointCloudError(str(e), "points") from None
     model = load_pretrained(category) if model is None else model
+    if retrieval is not None:
+        _check_retrieval(retrieval, retrieval_candidates, model)
     rng = np.random.default_rng(int(seed))
     pick = rng.choice(len(unit), size=ENCODER_POINTS, replace=len(unit) < ENCODER_POINTS)
     cloud = torch.from_numpy(unit[np.sort(pick)].astype(np.float32))
@@ -453,6 +455,7 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     canon, off = align_program(program)
     seconds = {"search" if search else "decode": time.perf_counter() - t0}
     if retrieval is not None:
+        seconds["search" if search else "decode"] -= seconds_retrieval
         seconds["retrieval"] = seconds_retrieval
     target = torch.from_numpy(unit)
     before = None
@@ -477,6 +480,22 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
                      seconds, searched, macro_text, retrieved)
 
 
+def _check_retrieval(index, k, model) -> None:
+    """Refuse a bad candidate count, an index of another category than ``model``'s, or one whose clouds have
+    fewer points than the selection chamfer uses (a training shape would then be scored with fewer points
+    than the decoded program, which biases the choice against it)."""
+    from .search import SEARCH_POINTS
+
+    if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+        raise ValueError(f"retrieval_candidates must be an integer >= 1, got {k!r}")
+    if index.category != model.category:
+        raise ValueError(f"the retrieval index holds {index.category} shapes but the model is the "
+                         f"{model.category} model")
+    if index.clouds.shape[1] < SEARCH_POINTS:
+        raise ValueError(f"the retrieval index's clouds have {index.clouds.shape[1]} points; retrieval-augmented "
+                         f"decoding scores with {SEARCH_POINTS} (build the index with at least that many)")
+
+
 def _retrieve(index, k, program: Optional[Program], cloud: torch.Tensor, unit: np.ndarray, seed: int):
     """``(program kept, True when it is a training program, the record)``: ``program`` against the ``k``
     shortlisted training programs of ``index`` (coarse stage on ``cloud``, the encoder's subset), by
@@ -486,8 +505,6 @@ def _retrieve(index, k, program: Optional[Program], cloud: torch.Tensor, unit: n
     cuboid surfaces in the same frame, so no program is executed until one is kept)."""
     from .search import SEARCH_POINTS, selection_chamfers
 
-    if isinstance(k, bool) or not isinstance(k, int) or k < 1:
-        raise ValueError(f"retrieval_candidates must be an integer >= 1, got {k!r}")
     matches = index.shortlist(cloud.double(), k)
     target = torch.from_numpy(unit)
     g = torch.Generator().manual_seed(int(seed))

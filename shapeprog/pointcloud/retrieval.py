@@ -261,13 +261,16 @@ class RetrievalIndex:
 
     def shortlist(self, cloud, k: int = INDEX_CANDIDATES) -> list[Match]:
         """The ``k`` references of smallest coarse estimate for one ``(N, 3)`` cloud in the canonical frame,
-        best first, without the exact stage (about 10 ms for chairs): the candidates that
+        best first, without the exact stage (about 12 ms for chairs; ``k`` above the index's size gives
+        every reference): the candidates that
         :func:`~shapeprog.pointcloud.infer.infer` scores itself with ``retrieval=``. Each
         :class:`Match`'s ``distance`` is the coarse estimate. The first call keeps float32 copies of the
         references' fields (twice their float16 memory: about 110 MiB more for chairs) so that later calls do
         not convert them again (about 14 ms per call for chairs)."""
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+            raise ValueError(f"`k` must be an integer >= 1, got {k!r}")
         q = _as_clouds([cloud], "cloud")
-        k = max(1, min(int(k), len(self.ids)))
+        k = min(k, len(self.ids))
         rows, est = self._candidates(q, k, values=True, dense=True)
         return [self._match(int(r), float(e)) for r, e in zip(rows[0].tolist(), est[0].tolist())]
 

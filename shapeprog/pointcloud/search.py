@@ -111,7 +111,7 @@ def check_schedule(schedule: Sequence) -> tuple:
 
 def parse_schedule(text: str) -> tuple:
     """``"16:0.75,16:0.5"`` -> ``((16, 0.75), (16, 0.5))`` (checked by :func:`check_schedule`); a name of
-    :data:`NAMED_SCHEDULES` (``default``, ``fast``) gives that schedule.
+    :data:`NAMED_SCHEDULES` (``default``, ``fast``, ``quick``) gives that schedule.
 
     Raises:
         ValueError: a step that is not ``samples:sigma`` or fails :func:`check_schedule`.

@@ -33,11 +33,11 @@ def model():
 
 @pytest.fixture(scope="module")
 def index():
-    return RetrievalIndex.from_corpus("chair", points=400, ids=TRAIN, grid=12, candidates=4)
+    return RetrievalIndex.from_corpus("chair", points=SEARCH_POINTS, ids=TRAIN, grid=12, candidates=4)
 
 
 def test_the_corpus_index_holds_the_normalised_clouds_of_the_training_shapes(index):
-    refs = sample_clouds("chair", TRAIN, n_points=400)
+    refs = sample_clouds("chair", TRAIN, n_points=SEARCH_POINTS)
     assert index.ids.tolist() == sorted(TRAIN) == refs.ids.tolist()
     for k, x in enumerate(refs.points):
         unit, t = normalize(x.astype(np.float64))
@@ -54,7 +54,9 @@ def test_the_shortlist_is_ordered_by_the_coarse_estimate_and_starts_with_the_sha
         est = [m.distance for m in short]
         assert est == sorted(est) and len({m.id for m in short}) == 5
     assert len(index.shortlist(index.clouds[0], 100)) == len(index)  # at most every reference
-    assert len(index.shortlist(index.clouds[0], 0)) == 1
+    for bad in (0, -2, 2.5, True):
+        with pytest.raises(ValueError, match="`k` must be an integer >= 1"):
+            index.shortlist(index.clouds[0], bad)
     assert torch.equal(index.reference_cloud(TRAIN[5]), index.clouds[index.ids.tolist().index(TRAIN[5])])
     with pytest.raises(KeyError, match=f"chair/{SPLITS['test'][0]} is not in the index"):
         index.reference_cloud(SPLITS["test"][0])
@@ -98,19 +100,30 @@ def test_the_kept_program_is_the_candidate_closest_to_the_input(model, index):
             infer(cloud, model=model, physics=False, retrieval=index, retrieval_candidates=bad)
 
 
-def test_a_decoded_program_that_is_closer_is_kept(model, index, monkeypatch):
+def test_a_decoded_program_that_is_closer_is_kept(model, monkeypatch):
     shape = TRAIN[4]
     cloud = corpus_cloud("chair", shape, n_points=3000).astype(np.float64)
-    # a model that decodes the shape's own program (scored with 1,024 surface samples) is kept against the
-    # index's clouds of 400 points, that of the same shape included
+    # a model that decodes the shape's own program, against an index of the other training chairs
+    others = RetrievalIndex.from_corpus("chair", points=SEARCH_POINTS, ids=[i for i in TRAIN if i != shape], grid=12)
     own = parse(corpus.read("chair", shape))
     monkeypatch.setattr(model, "decode", lambda codes: [own for _ in range(len(codes))])
-    r = infer(cloud, model=model, physics=False, retrieval=index, retrieval_candidates=4)
+    r = infer(cloud, model=model, physics=False, retrieval=others, retrieval_candidates=9)
     assert r.retrieval["chosen"] is None and r.retrieval["cd"] == r.retrieval["decoded_cd"]
+    assert to_text(r.canonical) == to_text(infer(cloud, model=model, physics=False).canonical)
+
+
+def test_an_index_that_does_not_fit_the_model_is_refused(model, index):
+    cloud = corpus_cloud("chair", TRAIN[0], n_points=2000)
+    sparse = RetrievalIndex.from_corpus("chair", points=300, ids=TRAIN[:3], grid=8)
+    with pytest.raises(ValueError, match=f"clouds have 300 points; retrieval-augmented decoding scores with {SEARCH_POINTS}"):
+        infer(cloud, model=model, physics=False, retrieval=sparse)
+    tables = RetrievalIndex("table", [1, 2], index.clouds[:2], grid=8)
+    with pytest.raises(ValueError, match="holds table shapes but the model is the chair model"):
+        infer(cloud, model=model, physics=False, retrieval=tables)
 
 
 def test_cli_retrieval_from_a_cache_prints_and_records_it(tmp_path, model, capsys):
-    make_clouds("chair", tmp_path / "c", n_points=400, workers=1, ids=TRAIN[:5] + SPLITS["test"][:1])
+    make_clouds("chair", tmp_path / "c", n_points=SEARCH_POINTS, workers=1, ids=TRAIN[:5] + SPLITS["test"][:1])
     path = tmp_path / "tiny.pt"
     torch.save({"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
                 "config": model.encoder.config, "hidden_dim": 256, "encoder": model.encoder.state_dict(),
@@ -132,7 +145,7 @@ def test_cli_retrieval_from_a_cache_prints_and_records_it(tmp_path, model, capsy
 
 
 def test_the_retrieval_augmented_rows_are_measured_on_request(tmp_path, model):
-    make_clouds("chair", tmp_path / "c", n_points=512, workers=1, ids=TRAIN[:4] + SPLITS["test"][:1])
+    make_clouds("chair", tmp_path / "c", n_points=SEARCH_POINTS, workers=1, ids=TRAIN[:4] + SPLITS["test"][:1])
     w = tmp_path / "w.pt"
     torch.save({"format": "shapeprog-pointcloud", "version": 1, "recipe": "latent", "category": "chair",
                 "config": model.encoder.config, "hidden_dim": 256, "encoder": model.encoder.state_dict(),
