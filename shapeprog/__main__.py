@@ -196,8 +196,6 @@ def _fmt_metrics(m: dict) -> str:
 def _retrieval_index(category: str, clouds):
     """The retrieval index of ``category``'s training shapes: from a make-clouds folder, or sampled from the
     corpus (with a progress line on stderr)."""
-    import time
-
     from .pointcloud.retrieval import RetrievalIndex
 
     t0 = time.perf_counter()
@@ -622,12 +620,26 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _search_budget(args, seconds: str, batches: str) -> dict:
-    """``infer``'s network-search budget from two options whose default (None) means the wake's."""
+def _add_search_budget(parser, prefix: str, needs: str) -> None:
+    """``--{prefix}search-seconds --{prefix}search-batches``: the recognition network's search budget per step
+    of post hoc inference (default the wake's, the paper's 1 s; used with ``needs``)."""
+    from .coder.search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+
+    parser.add_argument(f"--{prefix}search-seconds", type=_positive_float, default=WAKE_SECONDS, metavar="S",
+                        help=f"with {needs}: seconds of the network search per step (default {WAKE_SECONDS:g}, the "
+                             "paper's wake; another budget is ours)")
+    parser.add_argument(f"--{prefix}search-batches", type=_int_at_least(1), default=WAKE_BATCHES, metavar="N",
+                        help=f"with {needs}: batches of {WAKE_BATCH} samples per search step at most "
+                             f"(default {WAKE_BATCHES})")
+
+
+def _search_budget(seconds: float, batches: int, network: bool, prefix: str, needs: str) -> dict:
+    """``infer``'s budget keywords; a budget other than the wake's without the network is refused."""
     from .coder.search import WAKE_BATCHES, WAKE_SECONDS
 
-    s, b = getattr(args, seconds), getattr(args, batches)
-    return {"search_seconds": WAKE_SECONDS if s is None else s, "search_batches": WAKE_BATCHES if b is None else b}
+    if (seconds, batches) != (WAKE_SECONDS, WAKE_BATCHES) and not network:
+        raise SystemExit(f"error: --{prefix}search-seconds / --{prefix}search-batches need {needs}")
+    return {"search_seconds": seconds, "search_batches": batches}
 
 
 def _cmd_discover_abstractions(args) -> int:
@@ -716,8 +728,7 @@ def _cmd_abstract_infer(args) -> int:
     else:
         shape = spec
     network = None
-    if (args.search_seconds, args.search_batches) != (None, None) and not args.network:
-        raise SystemExit("error: --search-seconds / --search-batches need --network")
+    budget = _search_budget(args.search_seconds, args.search_batches, args.network, "", "--network")
     if args.network:
         from .coder.infer import load_network
 
@@ -729,8 +740,7 @@ def _cmd_abstract_infer(args) -> int:
             raise SystemExit(f"error: --network: {e}") from None
     try:
         r = infer(shape, lib, passes=args.passes, iterations=args.iterations, max_nodes=args.max_nodes,
-                  time_limit=args.time_limit, network=network,
-                  **_search_budget(args, "search_seconds", "search_batches"))
+                  time_limit=args.time_limit, network=network, **budget)
     except ParseError:
         raise  # located in the shape's text; main reports it
     except ValueError as e:
@@ -968,9 +978,7 @@ def _cmd_table2_coder(args) -> int:
         raise SystemExit(f"error: --library {unknown[0]}=...: {unknown[0]} is not among --categories")
     _check_outputs(others=[args.out])
     limits = {"iterations": args.iterations, "max_nodes": args.max_nodes, "time_limit": args.time_limit}
-    budget = _search_budget(args, "phi_search_seconds", "phi_search_batches")
-    if (args.phi_search_seconds, args.phi_search_batches) != (None, None) and not args.phi_network:
-        raise SystemExit("error: --phi-search-seconds / --phi-search-batches need --phi-network")
+    budget = _search_budget(args.phi_search_seconds, args.phi_search_batches, args.phi_network, "phi-", "--phi-network")
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
     parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]
     progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
@@ -1245,11 +1253,7 @@ def main(argv=None) -> int:
     a.add_argument("--network", action="store_true",
                    help="also search with the shipped library's recognition network (the paper's post hoc "
                         "inference; slower)")
-    a.add_argument("--search-seconds", type=_positive_float, metavar="S",
-                   help="with --network: seconds of the network search per step (default 1, the paper's wake; more "
-                        "is ours)")
-    a.add_argument("--search-batches", type=_int_at_least(1), metavar="N",
-                   help="with --network: batches of 64 samples per search step at most (default 16)")
+    _add_search_budget(a, "", "--network")
     a.set_defaults(func=_cmd_abstract_infer)
     d = sub.add_parser("edit", help="edit a program in the browser (needs the 'editor' extra: viser)",
                        description="Serve an editor page for a program: the shape in 3D, one control per free "
@@ -1346,11 +1350,7 @@ def main(argv=None) -> int:
                     help="post hoc inference with the library's recognition network as well (the paper's; the "
                          "shipped <category>_recnet.pt, or a run folder's last recnet_round<k>.pt); default: "
                          "refactoring only")
-    t2.add_argument("--phi-search-seconds", type=_positive_float, metavar="S",
-                    help="with --phi-network: seconds of the network search per step (default 1, the paper's wake; "
-                         "more is ours)")
-    t2.add_argument("--phi-search-batches", type=_int_at_least(1), metavar="N",
-                    help="with --phi-network: batches of 64 samples per search step at most (default 16)")
+    _add_search_budget(t2, "phi-", "--phi-network")
     t2.add_argument("--out", help="also write the tables (markdown) here, atomically")
     t2.add_argument("--quiet", action="store_true")
     t2.set_defaults(func=_cmd_table2_coder, argv=None)

@@ -47,7 +47,7 @@ from .normalize import Transform, normalize
 
 __all__ = ["CACHE_DTYPES", "CACHE_VERSION", "CLOUD_POINTS", "MAX_CLOUD_POINTS", "SPLITS", "TRAIN_POINTS",
            "VAL_FRACTION", "CloudCache", "CloudDataset", "CloudSet", "MakeCloudsReport", "cache_paths", "carve_validation",
-           "cloud_seed", "collate_clouds", "corpus_cloud", "corpus_splits", "load_cache", "make_clouds",
+           "cloud_seed", "cloud_transforms", "collate_clouds", "corpus_cloud", "corpus_splits", "load_cache", "make_clouds",
            "program_cloud", "read_split", "sample_clouds"]
 
 PathLike = Union[str, os.PathLike]
@@ -169,6 +169,18 @@ def _pool(workers: Optional[int]) -> Optional[ProcessPoolExecutor]:
         return None
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_init_worker)
+
+
+def cloud_transforms(points, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
+    """``(center (S, 3), scale (S,))`` float64: each cloud's canonical-frame :class:`Transform`
+    (:func:`~shapeprog.pointcloud.normalize.normalize`, y up) of ``points`` ``(S, N, 3)``, each cloud converted to
+    ``dtype`` first; the normalised clouds are ``(points - center[:, None]) * scale[:, None, None]``."""
+    center = np.zeros((len(points), 3))
+    scale = np.zeros(len(points))
+    for k, pts in enumerate(points):
+        t = normalize(pts.astype(dtype))[1]
+        center[k], scale[k] = t.center, t.scale
+    return center, scale
 
 
 def sample_clouds(category: str, ids: Sequence[int], n_points: int = CLOUD_POINTS, seed: int = 0,
@@ -349,11 +361,7 @@ def make_clouds(category: str, out: PathLike, n_points: int = CLOUD_POINTS, seed
         if pool is not None:
             pool.shutdown()
     stored = clouds.points.astype(dtype)
-    center = np.zeros((len(stored), 3))
-    scale = np.zeros(len(stored))
-    for k, pts in enumerate(stored):
-        t = normalize(pts.astype(np.float32))[1]
-        center[k], scale[k] = t.center, t.scale
+    center, scale = cloud_transforms(stored, np.float32)
     failed_ids = np.asarray([i for i, _ in clouds.failures], dtype=np.int64)
     arrays = dict(version=np.int64(CACHE_VERSION), category=np.str_(category), ids=clouds.ids, points=stored,
                   center=center, scale=scale, n_points=np.int64(n), seed=np.int64(seed), failed_ids=failed_ids,

@@ -445,7 +445,8 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     retrieved = None
     if retrieval is not None:
         t3 = time.perf_counter()
-        program, chosen, retrieved = _retrieve(retrieval, retrieval_candidates, program, cloud, unit, seed)
+        known = None if searched is None else (math.inf if searched["cd"] is None else searched["cd"])
+        program, chosen, retrieved = _retrieve(retrieval, retrieval_candidates, program, cloud, unit, seed, known)
         if chosen:
             macro_text = None
         seconds_retrieval = time.perf_counter() - t3
@@ -496,21 +497,20 @@ def _check_retrieval(index, k, model) -> None:
                          f"decoding scores with {SEARCH_POINTS} (build the index with at least that many)")
 
 
-def _retrieve(index, k, program: Optional[Program], cloud: torch.Tensor, unit: np.ndarray, seed: int):
+def _retrieve(index, k, program: Optional[Program], cloud: torch.Tensor, unit: np.ndarray, seed: int,
+              program_cd: Optional[float] = None):
     """``(program kept, True when it is a training program, the record)``: ``program`` against the ``k``
     shortlisted training programs of ``index`` (coarse stage on ``cloud``, the encoder's subset), by
     selection chamfer against :data:`~shapeprog.pointcloud.search.SEARCH_POINTS` points of ``unit``: the
-    decoded program's as the latent search scores (aligned, that many surface samples), a training
-    program's from the first that many points of its reference cloud in the index (samples of the same
-    cuboid surfaces in the same frame, so no program is executed until one is kept)."""
-    from .search import SEARCH_POINTS, selection_chamfers
+    decoded program's as the latent search scores (aligned, that many surface samples; ``program_cd`` when
+    the search has scored it already), a training program's from the first that many points of its reference
+    cloud in the index (samples of the same cuboid surfaces in the same frame, so no program is executed until
+    one is kept)."""
+    from .search import SEARCH_POINTS, selection_chamfers, selection_target
 
     matches = index.shortlist(cloud.double(), k)
-    target = torch.from_numpy(unit)
-    g = torch.Generator().manual_seed(int(seed))
-    if len(target) > SEARCH_POINTS:
-        target = target[torch.randperm(len(target), generator=g)[:SEARCH_POINTS]]
-    cds = selection_chamfers([program], target, SEARCH_POINTS, seed)
+    target = selection_target(unit, SEARCH_POINTS, torch.Generator().manual_seed(int(seed)))
+    cds = [program_cd] if program_cd is not None else selection_chamfers([program], target, SEARCH_POINTS, seed)
     for m in matches:
         ref = index.reference_cloud(m.id)[:SEARCH_POINTS].double()
         cds.append(float(chamfer(ref, target, eps=0.0)))

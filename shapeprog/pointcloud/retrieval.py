@@ -34,8 +34,8 @@ from .. import corpus
 from ..genmetrics import coarse_fields
 from ..lang import Program, parse
 from ..metrics import chamfer
-from .data import corpus_splits, load_cache, read_split, sample_clouds
-from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
+from .data import cloud_transforms, corpus_splits, load_cache, read_split, sample_clouds
+from .normalize import CANONICAL_DIAGONAL, Transform, scale_program
 
 __all__ = ["INDEX_CANDIDATES", "INDEX_GRID", "INDEX_POINTS", "Match", "RetrievalIndex"]
 
@@ -209,12 +209,8 @@ class RetrievalIndex:
                                  "shapes only")
             ids = sorted(int(i) for i in ids)
         cs = sample_clouds(category, ids, n_points=points, seed=seed, executor=executor, progress=progress)
-        centers = np.empty((len(cs.ids), 3))
-        scales = np.empty(len(cs.ids))
-        unit = np.empty(cs.points.shape, dtype=np.float32)
-        for k, x in enumerate(cs.points):
-            u, t = normalize(x.astype(np.float64))
-            unit[k], centers[k], scales[k] = u, t.center, t.scale
+        centers, scales = cloud_transforms(cs.points)
+        unit = (cs.points.astype(np.float64) - centers[:, None, :]) * scales[:, None, None]
         return cls(category, cs.ids, torch.from_numpy(unit), centers=centers, scales=scales, **kwargs)
 
     def __len__(self) -> int:

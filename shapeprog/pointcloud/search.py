@@ -33,7 +33,8 @@ from ..sampling import sample_surface
 
 __all__ = ["FAST_SEARCH_SCHEDULE", "MAX_SEARCH_DECODES", "NAMED_SCHEDULES", "QUICK_SEARCH_SCHEDULE", "SEARCH_POINTS",
            "SEARCH_SCHEDULE",
-           "SearchResult", "aligned_corners", "check_schedule", "latent_search", "parse_schedule", "selection_chamfers"]
+           "SearchResult", "aligned_corners", "check_schedule", "latent_search", "parse_schedule", "selection_chamfers",
+           "selection_target"]
 
 #: ``(samples, sigma)`` per step: ``samples`` codes drawn around the best code so far with standard deviation
 #: ``sigma`` (the VAE's prior has unit variance). Chosen on 30 chair test shapes of the cloud cache with the
@@ -146,8 +147,7 @@ def latent_search(model, code: torch.Tensor, cloud: torch.Tensor, schedule: Sequ
     code = torch.as_tensor(code).detach().float().reshape(-1)
     target = torch.as_tensor(cloud, dtype=torch.float64)
     g = torch.Generator().manual_seed(int(seed))
-    if len(target) > points:
-        target = target[torch.randperm(len(target), generator=g)[:points]]
+    target = selection_target(target, points, g)
 
     def scores(programs) -> list[float]:
         return selection_chamfers(programs, target, points, seed)
@@ -166,6 +166,16 @@ def latent_search(model, code: torch.Tensor, cloud: torch.Tensor, schedule: Sequ
         decodes += samples
         improved += int(found)
     return SearchResult(best_prog, best_code, best_cd, start_cd, decodes, improved)
+
+
+def selection_target(cloud, points: int, generator: torch.Generator) -> torch.Tensor:
+    """``cloud`` ``(N, 3)`` as float64, or ``points`` of its points drawn with ``generator`` when it has more:
+    the target of :func:`selection_chamfers` (the latent search draws its codes from the same generator
+    afterwards)."""
+    target = torch.as_tensor(cloud, dtype=torch.float64)
+    if len(target) > points:
+        target = target[torch.randperm(len(target), generator=generator)[:points]]
+    return target
 
 
 def selection_chamfers(programs: Sequence[Optional[Program]], target: torch.Tensor, points: int = SEARCH_POINTS,
