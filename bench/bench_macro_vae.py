@@ -5,13 +5,15 @@ training step against the base model's.
   line-vector tree (``macro_program_to_tree``) -> program (``tree_to_macro_program``) -> expansion ->
   execution; the leaf cuboids (sorted) are compared with the original's. Prints how many were compared,
   how many differ in their number of leaves, and the largest corner difference.
-* Step time: one training step (forward, loss, backward, fused Adam), one shape per step, ``--hidden``,
-  on the same ``--shapes`` chairs as macro programs (``MacroVAE``, per tree) and as base programs (``VAE``,
-  per tree, ``program_loss``); one warm-up pass first.
+* Step time: one training step (forward, loss, backward, fused Adam), ``--hidden``, on the same ``--shapes``
+  chairs as macro programs (``MacroVAE``) and as base programs (``VAE``): one shape per step tree by tree
+  (``macro_program_loss`` / ``program_loss`` of the model's forward), and ``--batch`` shapes per step through
+  the level-by-level batched passes (``macro_batch_loss`` / ``batch_loss`` of ``batch_forward``, what
+  ``train.py`` runs); one warm-up pass first. The ratios compare rows of the same run.
 
 Usage::
 
-    OMP_NUM_THREADS=1 python bench/bench_macro_vae.py [--roundtrip 0] [--shapes 64] [--hidden 256]
+    OMP_NUM_THREADS=1 python bench/bench_macro_vae.py [--roundtrip 0] [--shapes 64] [--hidden 256] [--batch 8]
 """
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ def main() -> None:
     ap.add_argument("--roundtrip", type=int, default=0, help="chairs in the round trip (0: all shipped)")
     ap.add_argument("--shapes", type=int, default=64, help="chairs in the step timing")
     ap.add_argument("--hidden", type=int, default=256)
+    ap.add_argument("--batch", type=int, default=8, help="shapes per step of the batched passes")
     args = ap.parse_args()
     torch.set_num_threads(1)
 
@@ -36,6 +39,7 @@ def main() -> None:
     from shapeprog.macros import load_library
     from shapeprog.macros.execute import execute_hierarchy
     from shapeprog.macros.refactored import load_refactored
+    from shapeprog.vae.batch import MacroTreeBatch, TreeBatch, batch_forward, batch_loss, macro_batch_loss
     from shapeprog.vae.layout import LineLayout, macro_program_to_tree, tree_to_macro_program
     from shapeprog.vae.losses import macro_program_loss, program_loss
     from shapeprog.vae.macro_model import MacroVAE
@@ -72,22 +76,30 @@ def main() -> None:
     chosen = [i for i in progs if i in train][: args.shapes]
     macro = [macro_program_to_tree(progs[i], layout) for i in chosen]
     base = [program_to_tree(shapeprog.parse(corpus.read("chair", i), f"chair/{i}.txt")) for i in chosen]
-    for name, model, trees, loss in (("macro", MacroVAE(layout, args.hidden), macro,
-                                      lambda m, t: macro_program_loss(m(t), t, layout)[0]),
-                                     ("base", VAE(args.hidden), base, lambda m, t: program_loss(m(t), t)[0])):
-        torch.manual_seed(0)
-        opt = torch.optim.Adam(model.parameters(), lr=1e-4, eps=1e-6, fused=True)
-        for timed in (False, True):
-            t0 = time.perf_counter()
-            for t in trees:
-                opt.zero_grad()
-                loss(model, t).backward()
-                opt.step()
-            if timed:
-                s = time.perf_counter() - t0
-                print(f"{name}: {len(trees)} chairs, {s / len(trees) * 1000:.1f} ms per training step, "
-                      f"{len(trees) / s:.1f} shapes/s (hidden {args.hidden}, one shape per step, per tree)")
-
+    per_tree = {"macro": lambda m, ts: sum(macro_program_loss(m(t), t, layout)[0] for t in ts),
+                "base": lambda m, ts: sum(program_loss(m(t), t)[0] for t in ts)}
+    batched = {"macro": lambda m, ts: macro_batch_loss(m, MacroTreeBatch(ts))[0].sum(),
+               "base": lambda m, ts: batch_loss(batch_forward(m, TreeBatch(ts)), TreeBatch(ts))[0].sum()}
+    times = {}
+    for name, trees in (("macro", macro), ("base", base)):
+        for mode, size, loss in (("per tree", 1, per_tree[name]), ("batched", args.batch, batched[name])):
+            torch.manual_seed(0)
+            model = MacroVAE(layout, args.hidden) if name == "macro" else VAE(args.hidden)
+            opt = torch.optim.Adam(model.parameters(), lr=1e-4, eps=1e-6, fused=True)
+            for timed in (False, True):
+                t0 = time.perf_counter()
+                for i in range(0, len(trees), size):
+                    opt.zero_grad()
+                    loss(model, trees[i:i + size]).backward()
+                    opt.step()
+                if timed:
+                    s = time.perf_counter() - t0
+                    times[name, mode] = s / len(trees)
+                    print(f"{name}, {mode} ({size} per step): {len(trees)} chairs, {s / len(trees) * 1000:.1f} ms per "
+                          f"shape, {len(trees) / s:.1f} shapes/s (hidden {args.hidden})")
+    for name in ("macro", "base"):
+        print(f"{name}: batched / per tree speed-up {times[name, 'per tree'] / times[name, 'batched']:.2f}x")
+    print(f"batched: macro / base time per shape {times['macro', 'batched'] / times['base', 'batched']:.2f}")
 
 if __name__ == "__main__":
     main()

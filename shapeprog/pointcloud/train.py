@@ -464,7 +464,7 @@ class EndToEndModule(_CloudModule):
 
     def _macro_losses(self, z: torch.Tensor, trees: MacroTreeBatch) -> tuple[torch.Tensor, dict]:
         """:func:`~shapeprog.vae.batch.macro_batch_loss` (no KL) of the trees decoded teacher-forced from their
-        clouds' codes, averaged over the batch (the macro decoder runs tree by tree)."""
+        clouds' codes, averaged over the batch (the level-by-level batched pass)."""
         total, terms = macro_batch_loss(self.vae, trees, weights=self.weights, kl=False, codes=z)
         return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
 

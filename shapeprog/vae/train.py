@@ -483,7 +483,7 @@ class VAEModule(L.LightningModule):
         return batch_forward(self.vae, batch, sample=sample)
 
     def _loss(self, batch, sample: bool):
-        """``(total (B,), terms)`` of a batch: the batched pass, or tree by tree for macro programs."""
+        """``(total (B,), terms)`` of a batch: the level-by-level batched pass of base or macro programs."""
         if isinstance(batch, MacroTreeBatch):
             return macro_batch_loss(self.vae, batch, sample=sample, weights=self.weights)
         return batch_loss(batch_forward(self.vae, batch, sample=sample), batch, self.weights)

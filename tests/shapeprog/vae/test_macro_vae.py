@@ -172,3 +172,97 @@ def test_float_ranges_follow_the_base_slots_a_parameter_fills_alone():
     assert float_ranges(lib, "hang") == ((MIN_DIM, math.inf),) * 3
     assert float_ranges(lib, "odd") == ((-math.inf, math.inf),)  # only in an expression: not clamped
     assert float_ranges(lib, "attach") == ((0.0, 1.0),) * 6 and float_ranges(lib, "reflect") == ()
+
+
+# ------------------------------------------------------------------------------------------ batched pass
+
+TWO_LEVELS = ("# Program_0\nbbox = Cuboid(1.0, 1.0, 1.0, True)\nProgram_1, cube1 = legs(0.1, 0.2, True, X)\n"
+              "Program_2 = hang(0.4, 0.1, 0.4, bbox, top, cube1)\n\n"
+              "# Program_1\nbbox = Cuboid(0.1, 1.0, 0.1, True)\nc, d = legs(0.02, 0.3, False, Z)\n\n"
+              "# Program_2\nbbox = Cuboid(0.4, 0.1, 0.4, True)\nc = Cuboid(0.2, 0.1, 0.2, True)\n"
+              "squeeze(bbox, bbox, top, 0.5, 0.5)\n\n")
+
+
+def _per_tree_losses(vae, trees, eps=None, codes=None, kl=True):
+    from shapeprog.vae.model import VAEOutput
+    out = []
+    for b, t in enumerate(trees):
+        if codes is not None:
+            z = mu = codes[b]
+            logvar = torch.zeros_like(z)
+        else:
+            _, mu, logvar = vae.encode(t, sample=False)
+            z = mu if eps is None else mu + eps[b] * torch.exp(0.5 * logvar)
+        res = VAEOutput(vae.decoder.teacher_forced(t, z), vae.decoder.bbox(z), mu, logvar, z)
+        out.append((res, macro_program_loss(res, t, vae.layout, kl=kl)))
+    return out
+
+
+@pytest.mark.parametrize("which", ["hand-built", "shipped chair"])
+def test_the_batched_pass_equals_the_tree_by_tree_pass(which, chairs):
+    from shapeprog.vae.batch import MacroTreeBatch, macro_batch_forward, macro_batch_loss
+    if which == "hand-built":
+        lib = Library.from_text(LIB_TEXT)
+        lay = LineLayout(lib)
+        h = parse_hierarchy(TWO_LEVELS, library=lib)
+        flat = parse_hierarchy("# Program_0\nbbox = Cuboid(1.0, 1.0, 1.0, True)\nc, d = legs(0.1, 0.2, True, X)\n\n",
+                               library=lib)
+        hs = [h, flat, h]
+    else:
+        lib, progs = chairs
+        lay = LineLayout(lib)
+        deep = [p for p in progs.values() if len(p.programs) >= 3][:4]
+        hs = deep + list(progs.values())[:6]
+        assert len(deep) == 4
+    trees = [macro_program_to_tree(x, lay, dtype=torch.float64) for x in hs]
+    torch.manual_seed(0)
+    vae = MacroVAE(lay, hidden_dim=24).double()
+    eps = torch.randn(len(trees), 24, dtype=torch.float64)
+    codes = torch.randn(len(trees), 24, dtype=torch.float64)
+    batch = MacroTreeBatch(trees)
+    for kw in ({"sample": False}, {"eps": eps}, {"codes": codes, "kl": False}):
+        ref = _per_tree_losses(vae, trees, eps=kw.get("eps"), codes=kw.get("codes"), kl=kw.get("kl", True))
+        total, terms = macro_batch_loss(vae, batch, **kw)
+        torch.testing.assert_close(total, torch.stack([r[1][0] for r in ref]), rtol=1e-10, atol=1e-10)
+        assert sorted(terms) == sorted(ref[0][1][1])
+        for name in terms:
+            torch.testing.assert_close(terms[name], torch.stack([r[1][1][name] for r in ref]), rtol=1e-10, atol=1e-9)
+    # the split output is the per-tree output, node by node
+    out = macro_batch_forward(vae, batch, sample=False)
+    for got, (want, _) in zip(batch.plan(lay).split(out), _per_tree_losses(vae, trees)):
+        assert len(got.nodes) == len(want.nodes)
+        for g, w in zip(got.nodes, want.nodes):
+            torch.testing.assert_close(g.lines, w.lines, rtol=1e-10, atol=1e-10)
+            torch.testing.assert_close(g.leaf, w.leaf, rtol=1e-10, atol=1e-10)
+    # gradients of the summed losses, z sampled with the same eps
+    vae.zero_grad()
+    sum(r[1][0] for r in _per_tree_losses(vae, trees, eps=eps)).backward()
+    want = {k: p.grad.clone() for k, p in vae.named_parameters()}
+    vae.zero_grad()
+    macro_batch_loss(vae, batch, eps=eps)[0].sum().backward()
+    for k, p in vae.named_parameters():
+        torch.testing.assert_close(p.grad, want[k], rtol=1e-8, atol=1e-8 * (1 + want[k].abs().max().item()),
+                                   msg=lambda m: f"{k}: {m}")
+
+
+def test_the_batched_pass_refuses_bad_noise_codes_and_trees():
+    from shapeprog.vae.batch import MacroTreeBatch, macro_batch_loss
+    lib = Library.from_text(LIB_TEXT)
+    lay = LineLayout(lib)
+    tree = macro_program_to_tree(parse_hierarchy(TWO_LEVELS, library=lib), lay)
+    vae = MacroVAE(lay, hidden_dim=16)
+    batch = MacroTreeBatch([tree, tree])
+    with pytest.raises(ValueError, match=r"eps must be \(B, H\) = \(2, 16\)"):
+        macro_batch_loss(vae, batch, eps=torch.zeros(3, 16))
+    with pytest.raises(ValueError, match="codes must be"):
+        macro_batch_loss(vae, batch, codes=torch.zeros(3, 16), kl=False)
+    with pytest.raises(ValueError, match="no posterior"):
+        macro_batch_loss(vae, batch, codes=torch.zeros(2, 16))
+    with pytest.raises(ValueError, match="at least one tree"):
+        MacroTreeBatch([])
+    other = LineLayout(Library())  # a narrower line vector than the trees'
+    with pytest.raises(ValueError, match=r"lines must be \(L, \d+\)"):
+        MacroTreeBatch([tree]).plan(other)
+    mixed = MacroTreeBatch([tree, tree.to(dtype=torch.float64)])
+    with pytest.raises(ValueError, match="the batch is torch.float32"):
+        mixed.plan(lay)
