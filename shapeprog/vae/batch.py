@@ -68,6 +68,60 @@ _LEVEL_TENSORS = ("enc_index", "enc_last", "child_rows", "in_rows", "row_node", 
                   "leaf_index", "next_index")
 
 
+def _commands_by_node(trees: list, width: int, cmd: slice) -> dict[int, list[int]]:
+    """Every node of the trees checked to hold (L >= 1, ``width``) lines of the first tree's dtype and device,
+    and its commands read in one argmax over the whole batch: ``{id(node): [command per line]}``."""
+    dtype, device = trees[0].lines.dtype, trees[0].lines.device
+    flat, frontier = [], list(trees)
+    while frontier:
+        flat += frontier
+        frontier = [c for n in frontier for c in n.children if c is not None]
+    for i, n in enumerate(flat):
+        x = n.lines
+        if not isinstance(x, torch.Tensor) or x.dim() != 2 or x.shape[1] != width or x.shape[0] == 0:
+            got = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
+            raise ValueError(f"node {i} of the batch: lines must be (L, {width}) with L >= 1, got {got}")
+        if x.dtype != dtype or x.device != device:
+            raise ValueError(f"node {i} of the batch is {x.dtype} on {x.device}; the batch is {dtype} on {device}")
+    cmds_all = torch.cat([n.lines for n in flat])[:, cmd].argmax(dim=1).tolist()
+    out, pos = {}, 0
+    for n in flat:
+        out[id(n)] = cmds_all[pos:pos + n.lines.shape[0]]
+        pos += n.lines.shape[0]
+    return out
+
+
+class _LevelRows:
+    """The sequence bookkeeping shared by the level plans of :class:`TreeBatch` and :class:`MacroPlan`: per node
+    of a depth (n nodes, T steps at most), its ``[start, l1 .. lL, stop]`` block of ``seqs`` rows for the encoder
+    and its L + 1 decoder rows."""
+
+    def __init__(self, n: int, T: int):
+        self.T = T
+        self.enc_index = torch.full((n, T + 1), -1, dtype=torch.int64)
+        self.gather = torch.full((n, T), -1, dtype=torch.int64)
+        self.enc_last, self.in_rows, self.row_node, self.steps, self.bbox_index = [], [], [], [], []
+
+    def add(self, k: int, L: int, o: int, q0: int) -> None:
+        """Node ``k`` of L lines whose sequence starts at ``seqs`` row ``o`` and whose first target row is the
+        level's row ``q0``."""
+        self.enc_index[k, : L + 2] = torch.arange(o, o + L + 2)
+        self.gather[k, : L + 1] = torch.arange(q0, q0 + L + 1)
+        self.enc_last.append(L + 1)
+        self.bbox_index.append(o + 1)
+        self.in_rows += range(o, o + L + 1)
+        self.row_node += [k] * (L + 1)
+        self.steps += range(k * self.T, k * self.T + L + 1)
+
+    def tensors(self, r: int) -> dict[str, torch.Tensor]:
+        """The level's index tensors, padding steps pointing at row ``r`` (one past its rows)."""
+        self.gather[self.gather < 0] = r
+        t = lambda v: torch.tensor(v, dtype=torch.int64)  # noqa: E731
+        return {"enc_index": self.enc_index, "enc_last": t(self.enc_last), "in_rows": t(self.in_rows),
+                "row_node": t(self.row_node), "gather": self.gather, "steps": t(self.steps),
+                "bbox_index": t(self.bbox_index)}
+
+
 class TreeBatch:
     """B program trees flattened for :func:`batch_forward` and :func:`batch_loss`.
 
@@ -109,25 +163,7 @@ class TreeBatch:
         ref = trees[0].lines
         dtype, device = ref.dtype, ref.device
 
-        # every node's commands, read in one argmax over the whole batch
-        flat: list[VectorNode] = []
-        frontier = list(trees)
-        while frontier:
-            flat += frontier
-            frontier = [c for n in frontier for c in n.children if c is not None]
-        for i, n in enumerate(flat):
-            x = n.lines
-            if not isinstance(x, torch.Tensor) or x.dim() != 2 or x.shape[1] != LINE_DIM or x.shape[0] == 0:
-                got = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
-                raise ValueError(f"node {i} of the batch: lines must be (L, {LINE_DIM}) with L >= 1, got {got}")
-            if x.dtype != dtype or x.device != device:
-                raise ValueError(f"node {i} of the batch is {x.dtype} on {x.device}; the batch is {dtype} on {device}")
-        cmds_all = torch.cat([n.lines for n in flat])[:, CMD].argmax(dim=1).tolist()
-        cmds_of: dict[int, list[int]] = {}
-        pos = 0
-        for n in flat:
-            cmds_of[id(n)] = cmds_all[pos:pos + n.lines.shape[0]]
-            pos += n.lines.shape[0]
+        cmds_of = _commands_by_node(trees, LINE_DIM, CMD)
 
         start = command_vector("start", dtype, device)[None]
         stop = command_vector("stop", dtype, device)[None]
@@ -149,10 +185,8 @@ class TreeBatch:
             n = len(current)
             T = max(len(cmds_of[id(node)]) for _, node in current) + 1
             R0 = len(target_rows)
-            enc_index = torch.full((n, T + 1), -1, dtype=torch.int64)
-            gather = torch.full((n, T), -1, dtype=torch.int64)
-            enc_last, in_rows, row_node, steps, bbox_index, next_index, leaf_index = [], [], [], [], [], [], []
-            child_nodes, child_pos = [], []
+            seq = _LevelRows(n, T)
+            next_index, leaf_index, child_nodes, child_pos = [], [], [], []
             nxt: list[tuple[int, VectorNode]] = []
             for k, (b, node) in enumerate(current):
                 cmds = cmds_of[id(node)]
@@ -162,13 +196,7 @@ class TreeBatch:
                 offset += L + 2
                 r0 = len(target_rows)  # the node's first row in targets
                 q0 = r0 - R0  # ... and in the level
-                enc_index[k, : L + 2] = torch.arange(o, o + L + 2)
-                gather[k, : L + 1] = torch.arange(q0, q0 + L + 1)
-                enc_last.append(L + 1)
-                bbox_index.append(o + 1)
-                in_rows += range(o, o + L + 1)
-                row_node += [k] * (L + 1)
-                steps += range(k * T, k * T + L + 1)
+                seq.add(k, L, o, q0)
                 target_rows += range(o + 1, o + L + 2)
                 row_shape += [b] * (L + 1)
                 rows = [i for i, c in enumerate(cmds) if c == _CUBOID]
@@ -190,12 +218,10 @@ class TreeBatch:
                         nxt.append((b, child))
                 self._node_slices.append((b, r0, L + 1, l0, len(rows)))
             r = len(target_rows) - R0
-            gather[gather < 0] = r
             as_tensor = lambda v: torch.tensor(v, dtype=torch.int64)  # noqa: E731
             self.levels.append(_Level(
-                depth, slice(R0, R0 + r), enc_index, as_tensor(enc_last), as_tensor([child_nodes, child_pos]),
-                as_tensor(in_rows), as_tensor(row_node), gather, as_tensor(steps), as_tensor(bbox_index),
-                as_tensor(leaf_index), as_tensor(next_index)))
+                depth, slice(R0, R0 + r), child_rows=as_tensor([child_nodes, child_pos]),
+                leaf_index=as_tensor(leaf_index), next_index=as_tensor(next_index), **seq.tensors(r)))
             current = nxt
             depth += 1
         self.num_nodes = len(self._node_slices)
@@ -328,6 +354,19 @@ def decode_batch(decoder: Decoder, batch: TreeBatch, z: torch.Tensor) -> tuple[t
     return torch.cat(lines), torch.cat(leaves)
 
 
+def _latents(mu: torch.Tensor, logvar: torch.Tensor, sample: bool, generator: torch.Generator | None,
+             eps: torch.Tensor | None) -> torch.Tensor:
+    """The latents (B, H) of a batched pass: ``mu``, or ``mu + eps * exp(logvar / 2)`` when ``sample`` (``eps``
+    drawn by ``generator`` unless given)."""
+    if not sample:
+        return mu
+    if eps is None:
+        eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
+    elif eps.shape != mu.shape:
+        raise ValueError(f"eps must be (B, H) = {tuple(mu.shape)}, got {tuple(eps.shape)}")
+    return mu + eps * torch.exp(0.5 * logvar)
+
+
 def batch_forward(vae: VAE, batch: TreeBatch, sample: bool = True, generator: torch.Generator | None = None,
                   eps: torch.Tensor | None = None) -> BatchOutput:
     """Encode and decode a batch teacher-forced: :meth:`VAE.forward <shapeprog.vae.model.VAE.forward>` for B
@@ -344,14 +383,7 @@ def batch_forward(vae: VAE, batch: TreeBatch, sample: bool = True, generator: to
         A :class:`BatchOutput`.
     """
     mu, logvar = vae.encoder.sampler(encode_batch(vae.encoder, batch))
-    if not sample:
-        z = mu
-    else:
-        if eps is None:
-            eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
-        elif eps.shape != mu.shape:
-            raise ValueError(f"eps must be (B, H) = {tuple(mu.shape)}, got {tuple(eps.shape)}")
-        z = mu + eps * torch.exp(0.5 * logvar)
+    z = _latents(mu, logvar, sample, generator, eps)
     lines, leaf = decode_batch(vae.decoder, batch, z)
     return BatchOutput(lines, leaf, vae.decoder.bbox(z), mu, logvar, z)
 
@@ -477,25 +509,8 @@ class MacroPlan:
         self.layout, self.size = layout, len(trees)
         ref = trees[0].lines
         dtype, device = ref.dtype, ref.device
-        flat, frontier = [], list(trees)
-        while frontier:
-            flat += frontier
-            frontier = [c for n in frontier for c in n.children if c is not None]
-        for i, n in enumerate(flat):
-            x = n.lines
-            if x.dim() != 2 or x.shape[1] != layout.width or x.shape[0] == 0:
-                raise ValueError(f"node {i} ({n.name}) of the batch: lines must be (L, {layout.width}) with L >= 1, "
-                                 f"got {tuple(x.shape)}")
-            if x.dtype != dtype or x.device != device:
-                raise ValueError(f"node {i} ({n.name}) of the batch is {x.dtype} on {x.device}; the batch is {dtype} "
-                                 f"on {device}")
-        cs = layout.slices["cmd"]
-        cmds_all = torch.cat([n.lines for n in flat])[:, cs].argmax(dim=1).tolist()
+        cmds_of = _commands_by_node(trees, layout.width, layout.slices["cmd"])
         n_created = layout.n_created.tolist()
-        cmds_of, pos = {}, 0
-        for n in flat:
-            cmds_of[id(n)] = cmds_all[pos:pos + n.lines.shape[0]]
-            pos += n.lines.shape[0]
         start = layout.command_vector("start", dtype, device)[None]
         stop = layout.command_vector("stop", dtype, device)[None]
         seq_parts, target_rows, commands, row_shape, first_row = [], [], [], [], []
@@ -509,9 +524,7 @@ class MacroPlan:
             n = len(current)
             T = max(len(cmds_of[id(node)]) for _, node in current) + 1
             R0 = len(target_rows)
-            enc_index = torch.full((n, T + 1), -1, dtype=torch.int64)
-            gather = torch.full((n, T), -1, dtype=torch.int64)
-            enc_last, in_rows, row_node, steps, bbox_index = [], [], [], [], []
+            seq = _LevelRows(n, T)
             kid_node, kid_row, kid_pos = [], [], []
             creator_row, creator_pos, creator_node, next_index = [], [], [], []
             nxt = []
@@ -523,13 +536,7 @@ class MacroPlan:
                 offset += L + 2
                 r0 = len(target_rows)
                 q0 = r0 - R0
-                enc_index[k, : L + 2] = torch.arange(o, o + L + 2)
-                gather[k, : L + 1] = torch.arange(q0, q0 + L + 1)
-                enc_last.append(L + 1)
-                bbox_index.append(o + 1)
-                in_rows += range(o, o + L + 1)
-                row_node += [k] * (L + 1)
-                steps += range(k * T, k * T + L + 1)
+                seq.add(k, L, o, q0)
                 target_rows += range(o + 1, o + L + 2)
                 commands += cmds + [layout.STOP]
                 row_shape += [b] * (L + 1)
@@ -552,12 +559,10 @@ class MacroPlan:
                         nxt.append((b, child))
                 self._node_slices.append((b, r0, L + 1, l0, len(creators)))
             r = len(target_rows) - R0
-            gather[gather < 0] = r
             self.levels.append(_MacroLevel(
-                depth, slice(R0, R0 + r), enc_index, as_tensor(enc_last), as_tensor([kid_node, kid_row]),
-                as_tensor(kid_pos), as_tensor(in_rows), as_tensor(row_node), gather, as_tensor(steps),
-                as_tensor(bbox_index), as_tensor(creator_row), as_tensor(creator_pos), as_tensor(creator_node),
-                as_tensor(next_index)))
+                depth, slice(R0, R0 + r), kid_at=as_tensor([kid_node, kid_row]), kid_pos=as_tensor(kid_pos),
+                creator_row=as_tensor(creator_row), creator_pos=as_tensor(creator_pos),
+                creator_node=as_tensor(creator_node), next_index=as_tensor(next_index), **seq.tensors(r)))
             current = nxt
             depth += 1
         for lv in self.levels:
@@ -667,14 +672,7 @@ def macro_batch_forward(vae, batch: MacroTreeBatch, sample: bool = True, generat
             out, _ = enc.gru(x, enc.h_start.expand(1, n, H).contiguous())
             kids = out[torch.arange(n, device=out.device), lv.enc_last]
         mu, logvar = enc.sampler(kids)
-        if not sample:
-            z = mu
-        else:
-            if eps is None:
-                eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
-            elif eps.shape != mu.shape:
-                raise ValueError(f"eps must be (B, H) = {tuple(mu.shape)}, got {tuple(eps.shape)}")
-            z = mu + eps * torch.exp(0.5 * logvar)
+        z = _latents(mu, logvar, sample, generator, eps)
     else:
         if codes.dim() != 2 or codes.shape[0] != batch.size:
             raise ValueError(f"codes must be (B, H) with B = {batch.size}, got {tuple(codes.shape)}")
