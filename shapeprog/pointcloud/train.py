@@ -57,7 +57,7 @@ from ..vae.train import (_corners, _read_macro_programs, check_data_category, lo
 from ..vae.vectors import VectorNode
 from .data import TRAIN_POINTS, CloudDataset, collate_clouds, read_split
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
-from .infer import cloud_corners, decode_codes, load_encoder
+from .infer import cloud_corners, decode_codes, load_encoder, load_model as load_cloud_model
 
 __all__ = ["CHECKPOINT_FORMAT", "RECIPES", "WEIGHTS_FORMAT", "CloudDataModule", "EndToEndModule",
            "LatentRegressionModule", "export_weights"]
@@ -423,6 +423,9 @@ class EndToEndModule(_CloudModule):
         macros: decode macro programs: the decoder is the shipped macro-program VAE's of the category
             (:data:`shapeprog.vae.pretrained.PRETRAINED_MACROS`) unless ``vae_weights`` names one; the data
             module's ``library`` must be its library.
+        init: an end-to-end weights file (:func:`export_weights`) to continue from: its encoder and decoder
+            replace this run's (after ``init_decoder`` / ``init_encoder``); its category, recipe, sizes and
+            macro library must equal this run's. The optimiser starts afresh (``--ckpt_path`` resumes a run).
     """
 
     recipe = "e2e"
@@ -432,7 +435,8 @@ class EndToEndModule(_CloudModule):
                  widths: Sequence[Sequence[int]] = WIDTHS, lr: float = 1e-4, weight_decay: float = 0.0,
                  init_decoder: bool = True, init_encoder: Optional[str] = None, loss_weights: Optional[dict] = None,
                  recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 2048,
-                 image_shapes: int = 8, image_size: int = 128, seed: int = 0, macros: bool = False):
+                 image_shapes: int = 8, image_size: int = 128, seed: int = 0, macros: bool = False,
+                 init: Optional[str] = None):
         super().__init__(category, vae_weights, npoints, radii, nsamples, widths, lr, weight_decay,
                          recon_every_n_epochs, recon_shapes, recon_points, image_shapes, image_size, seed, macros)
         base = LOSS_WEIGHTS if self.layout is None else MACRO_LOSS_WEIGHTS
@@ -446,7 +450,27 @@ class EndToEndModule(_CloudModule):
         self.vae.encoder.requires_grad_(False)
         if init_encoder is not None:
             self._init_encoder(init_encoder)
+        if init is not None:
+            self._init_model(init)
         self.weights = {**base, **(loss_weights or {})}
+
+    def _init_model(self, path) -> None:
+        start = load_cloud_model(path, category=self.hparams.category)
+        if start.recipe != "e2e":
+            raise ValueError(f"{path}: a {start.recipe!r} model; --model.init_args.init takes an end-to-end one")
+        if start.encoder.config != self.encoder.config:
+            raise ValueError(f"{path}: its encoder has sizes {start.encoder.config}, this run's are {self.encoder.config}")
+        mine = None if self.layout is None else self.layout.library.to_text()
+        theirs = None if start.layout is None else start.layout.library.to_text()
+        if mine != theirs:
+            what = lambda t: "the base language" if t is None else "a macro library"  # noqa: E731
+            raise ValueError(f"{path}: its decoder writes {what(theirs)}{' (another one)' if mine and theirs else ''}, "
+                             f"this run's {what(mine)}")
+        if start.vae.decoder.hidden_dim != self.vae.decoder.hidden_dim:
+            raise ValueError(f"{path}: its decoder has hidden_dim {start.vae.decoder.hidden_dim}, this run's "
+                             f"{self.vae.decoder.hidden_dim}")
+        self.encoder.load_state_dict(start.encoder.state_dict())
+        self.vae.decoder.load_state_dict(start.vae.decoder.state_dict())
 
     def _init_encoder(self, path) -> None:
         start = load_encoder(path, category=self.hparams.category)

@@ -281,3 +281,19 @@ def test_macro_model_trains_exports_and_infers_macro_programs(clouds, tmp_path):
     assert infer(cloud, "chair", physics=False).macro_text is None  # the shipped base model writes no macros
     with pytest.raises(ValueError, match="not macro programs"):
         load_model(ROOT / "shapeprog" / "weights" / "pointcloud_e2e_chair.pt").decode_macros(codes)
+    # a run continues from the exported weights (init): encoder and decoder equal, the library checked
+    again = _module(EndToEndModule, macros=True, init=str(path))
+    for part in ("encoder", "vae.decoder"):
+        ref = dict(m.named_parameters())
+        for name, value in again.named_parameters():
+            if name.startswith(part + "."):
+                assert torch.equal(value, ref[name]), name
+    assert not torch.equal(_module(EndToEndModule, macros=True).encoder.state_dict()["fc.weight"],
+                           again.encoder.state_dict()["fc.weight"])
+    with pytest.raises(ValueError, match="w.pt: its decoder writes a macro library, this run's the base language"):
+        _module(EndToEndModule, init=str(path))
+    with pytest.raises(ValueError, match="w.pt: its encoder has sizes"):
+        _module(EndToEndModule, macros=True, init=str(path), nsamples=[4, 4])
+    latent = ROOT / "shapeprog" / "weights" / "pointcloud_latent_chair.pt"
+    with pytest.raises(ValueError, match="a 'latent' model"):
+        _module(EndToEndModule, init=str(latent))
