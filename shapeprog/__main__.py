@@ -657,7 +657,8 @@ def _cmd_discover_abstractions(args) -> int:
                      seed=args.seed, wake=args.wake, n_dreams=args.dreams, train_seconds=60.0 * args.train_minutes,
                      train_epochs=args.train_epochs, train_lr=args.train_lr, dropout=args.dropout,
                      wake_seconds=args.wake_seconds, device=args.device, iterations=args.iterations,
-                     max_nodes=args.max_nodes, time_limit=args.time_limit)
+                     max_nodes=args.max_nodes, time_limit=args.time_limit,
+                     semantic_rewrites=not args.no_semantic_rewrites)
     except ValueError as e:  # a setting out of range, named
         raise SystemExit(f"error: {e}") from None
     start = None
@@ -938,11 +939,11 @@ def _cmd_refactor_corpus(args) -> int:
     return 0
 
 
-def _category_pairs(values, form: str) -> dict:
+def _category_pairs(values, form: str, flag: str = "--library") -> dict:
     """``--library CATEGORY=PATH`` values as a dict; a value without '=' stops with the expected form."""
     bad = [x for x in values or () if "=" not in x]
     if bad:
-        raise SystemExit(f"error: --library {bad[0]!r}: expected {form}")
+        raise SystemExit(f"error: {flag} {bad[0]!r}: expected {form}")
     return dict(x.split("=", 1) for x in values or ())
 
 
@@ -973,9 +974,11 @@ def _cmd_table2_coder(args) -> int:
     from .coder import tables
 
     runs = _category_pairs(args.library, "CATEGORY=FOLDER")
-    unknown = sorted(set(runs) - set(args.categories))
-    if unknown:
-        raise SystemExit(f"error: --library {unknown[0]}=...: {unknown[0]} is not among --categories")
+    baselines = _category_pairs(args.baseline, "CATEGORY=FOLDER", "--baseline")
+    for flag, given in (("--library", runs), ("--baseline", baselines)):
+        unknown = sorted(set(given) - set(args.categories))
+        if unknown:
+            raise SystemExit(f"error: {flag} {unknown[0]}=...: {unknown[0]} is not among --categories")
     _check_outputs(others=[args.out])
     limits = {"iterations": args.iterations, "max_nodes": args.max_nodes, "time_limit": args.time_limit}
     budget = _search_budget(args.phi_search_seconds, args.phi_search_batches, args.phi_network, "phi-", "--phi-network")
@@ -990,6 +993,7 @@ def _cmd_table2_coder(args) -> int:
             try:
                 run = tables.from_run(runs[cat], cat) if cat in runs else tables.shipped(cat)
                 t2 = tables.table2(run)
+                baseline = tables.baseline(tables.from_run(baselines[cat], cat), run) if cat in baselines else None
             except ValueError as e:
                 raise SystemExit(f"error: {e}") from None
             try:
@@ -998,7 +1002,8 @@ def _cmd_table2_coder(args) -> int:
                 raise SystemExit(f"error: --phi-network: {e}") from None
             t3 = tables.table3(run, train=args.train, heldout=args.heldout, executor=pool, progress=progress,
                                network=network, **limits, **budget)
-            parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None, **budget))
+            parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None, baseline=baseline,
+                                              **budget))
             print(parts[-1] + "\n", flush=True)
     finally:
         if pool is not None:
@@ -1239,6 +1244,10 @@ def main(argv=None) -> int:
     d.add_argument("--start-round", type=_int_at_least(0),
                    help="with --start-from: the round whose wake comes first (default --rounds: only the final "
                         "wake)")
+    d.add_argument("--no-semantic-rewrites", action="store_true",
+                   help="refactor with the abstraction rules only (the paper's 'no semantic rewrites' ablation; "
+                        "with the default wake, the structure-only library-learning baseline of table2-coder "
+                        "--baseline)")
     _add_egraph_limits(d)
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     d.set_defaults(func=_cmd_discover_abstractions)
@@ -1341,6 +1350,9 @@ def main(argv=None) -> int:
     t2.add_argument("--categories", nargs="+", default=["chair"], choices=("chair", "table", "storage"))
     t2.add_argument("--library", action="append",
                     help="CATEGORY=FOLDER: a discover-abstractions output folder instead of the shipped library")
+    t2.add_argument("--baseline", action="append",
+                    help="CATEGORY=FOLDER: a discover-abstractions folder of the same shapes run with "
+                         "--no-semantic-rewrites, written as Table 2's structure-only baseline row (ours)")
     t2.add_argument("--train", type=_int_at_least(1), default=100, help="train-PHI: the first N discovery shapes")
     t2.add_argument("--heldout", type=_int_at_least(1), default=100, help="validation-PHI: the first N held-out shapes")
     t2.add_argument("--workers", type=_int_at_least(1), default=2,

@@ -740,6 +740,7 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
               f"{proposing}seed={cfg.seed}, wake={cfg.wake}"
               + (f" (dreams={cfg.n_dreams}, training {cfg.train_seconds or 0:g} s, lr={cfg.train_lr:g}, "
                  f"dropout={cfg.dropout:g})" if cfg.wake == "network" else "")
+              + ("" if cfg.semantic_rewrites else ", semantic rewrites off (abstraction rules only)")
               + ("" if start is None else f", started at round {first} from an earlier library and its programs")
               + f", e-graph limits "
               f"{cfg.iterations} iterations / {cfg.max_nodes} e-nodes / {cfg.time_limit:g} s; last finished phase: "

@@ -215,3 +215,19 @@ def test_config_is_checked_and_the_no_rewrite_ablation_keeps_programs_valid():
     assert all(evaluate(p, res.library, s) is not None for p, s in zip(res.programs, shapes))
     # without the rewrites the wake cannot introduce the reflections the naive programs lack
     assert not any(n.fn == "SymRef" for p in res.programs for n in walk(p) if isinstance(n, Call))
+
+
+def test_cli_no_semantic_rewrites_is_the_structure_only_run(tmp_path):
+    from shapeprog.__main__ import main
+
+    out = tmp_path / "base"
+    assert main(["discover-abstractions", "chair", "--shapes", "3", "--rounds", "0", "--workers", "1",
+                 "--no-semantic-rewrites", "--out", str(out), "--quiet"]) == 0
+    header = (out / "library.txt").read_text().splitlines()[0]
+    assert "semantic rewrites off (abstraction rules only)" in header
+    assert json.loads((out / "state.json").read_text())["config"]["semantic_rewrites"] is False
+    programs = [parse(line.split(":", 1)[1]) for line in (out / "programs.txt").read_text().splitlines()]
+    assert len(programs) == 3 and not any(n.fn == "SymRef" for p in programs for n in walk(p) if isinstance(n, Call))
+    assert main(["discover-abstractions", "chair", "--shapes", "3", "--rounds", "0", "--workers", "1",
+                 "--out", str(tmp_path / "full"), "--quiet"]) == 0
+    assert "semantic rewrites off" not in (tmp_path / "full" / "library.txt").read_text()

@@ -24,6 +24,18 @@ def _run_folder(tmp_path, n=3, lib_text=LEGS + "\n"):
     return recs
 
 
+def _naive_folder(tmp_path, n=3):
+    """A folder with no abstraction whose programs are the first n chairs' naive programs."""
+    from shapeprog.coder.lang import Num, substitute
+
+    lines = []
+    for r in data.load("chair")[:n]:
+        prog, env = naive_program(r.prims)
+        lines.append(f"{r.key}:{to_text(substitute(prog, {k: Num(v) for k, v in env.items()}))}\n")
+    (tmp_path / "library.txt").write_text("")
+    (tmp_path / "programs.txt").write_text("".join(lines))
+
+
 @pytest.mark.parametrize("category,paper", [("chair", 146.0), ("table", 125.0), ("storage", 154.0)])
 def test_shipped_table2_matches_the_library_header_and_the_naive_cost(category, paper):
     run = tables.shipped(category)
@@ -104,3 +116,32 @@ def test_cli_table2_coder(tmp_path, capsys):
         main(["table2-coder", "--out", str(tmp_path / "missing" / "t.md")])
     assert main(["table2-coder", "--library", f"chair={tmp_path / 'none'}", "--quiet"]) == 1
     assert "library.txt: not found" in capsys.readouterr().err
+
+
+def test_cli_table2_coder_structure_only_baseline_row(tmp_path):
+    from shapeprog.__main__ import main
+
+    run, base = tmp_path / "run", tmp_path / "base"
+    run.mkdir()
+    base.mkdir()
+    _run_folder(run, n=2)
+    _naive_folder(base, n=2)  # no abstraction: the naive programs
+    out = tmp_path / "t.md"
+    assert main(["table2-coder", "--categories", "chair", "--library", f"chair={run}", "--baseline", f"chair={base}",
+                 "--train", "1", "--heldout", "1", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    row = next(x for x in lines if x.startswith("| Structure only (ours"))
+    naive = next(x for x in lines if x.startswith("| Input Prims (ours)"))
+    b = tables.table2(tables.from_run(base, "chair")).ours
+    assert row.split("|")[2:-1] == [f" {b.F:.1f} ", " 6 ", f" {b.num_struct:.1f} ", f" {b.num_param:.1f} "]
+    assert b.F < float(naive.split("|")[2])  # a 0.0 move coordinate of the naive text costs as a constant
+    assert lines.index(naive) < lines.index(row) < lines.index(next(x for x in lines if x.startswith("| ShapeCoder (ours)")))
+    assert "| ShapeMOD+Input (paper, 400 shapes) | 109.0 | 21 | 16 | 46 |" in lines
+    # a baseline of other shapes is refused, naming it
+    _naive_folder(base, n=3)
+    with pytest.raises(SystemExit, match="the baseline's 3 shapes are not the 2 shapes"):
+        main(["table2-coder", "--library", f"chair={run}", "--baseline", f"chair={base}", "--quiet"])
+    with pytest.raises(SystemExit, match="--baseline table=...: table is not among --categories"):
+        main(["table2-coder", "--baseline", f"table={base}"])
+    with pytest.raises(SystemExit, match="--baseline .*expected CATEGORY=FOLDER"):
+        main(["table2-coder", "--baseline", str(base)])
