@@ -974,8 +974,10 @@ def _cmd_table2_coder(args) -> int:
     from .coder import tables
 
     runs = _category_pairs(args.library, "CATEGORY=FOLDER")
-    baselines = _category_pairs(args.baseline, "CATEGORY=FOLDER", "--baseline")
-    for flag, given in (("--library", runs), ("--baseline", baselines)):
+    baselines = {kind: _category_pairs(getattr(args, f"baseline_{kind}"), "CATEGORY=FOLDER", f"--baseline-{kind}")
+                 for kind in ("input", "wake")}
+    for flag, given in (("--library", runs), ("--baseline-input", baselines["input"]),
+                        ("--baseline-wake", baselines["wake"])):
         unknown = sorted(set(given) - set(args.categories))
         if unknown:
             raise SystemExit(f"error: {flag} {unknown[0]}=...: {unknown[0]} is not among --categories")
@@ -993,7 +995,8 @@ def _cmd_table2_coder(args) -> int:
             try:
                 run = tables.from_run(runs[cat], cat) if cat in runs else tables.shipped(cat)
                 t2 = tables.table2(run)
-                baseline = tables.baseline(tables.from_run(baselines[cat], cat), run) if cat in baselines else None
+                rows = [(kind, tables.baseline(tables.from_run(given[cat], cat), run))
+                        for kind, given in baselines.items() if cat in given]
             except ValueError as e:
                 raise SystemExit(f"error: {e}") from None
             try:
@@ -1002,7 +1005,7 @@ def _cmd_table2_coder(args) -> int:
                 raise SystemExit(f"error: --phi-network: {e}") from None
             t3 = tables.table3(run, train=args.train, heldout=args.heldout, executor=pool, progress=progress,
                                network=network, **limits, **budget)
-            parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None, baseline=baseline,
+            parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None, baselines=rows,
                                               **budget))
             print(parts[-1] + "\n", flush=True)
     finally:
@@ -1350,9 +1353,12 @@ def main(argv=None) -> int:
     t2.add_argument("--categories", nargs="+", default=["chair"], choices=("chair", "table", "storage"))
     t2.add_argument("--library", action="append",
                     help="CATEGORY=FOLDER: a discover-abstractions output folder instead of the shipped library")
-    t2.add_argument("--baseline", action="append",
-                    help="CATEGORY=FOLDER: a discover-abstractions folder of the same shapes run with "
-                         "--no-semantic-rewrites, written as Table 2's structure-only baseline row (ours)")
+    t2.add_argument("--baseline-input", action="append", metavar="CATEGORY=FOLDER",
+                    help="a discover-abstractions folder of the same shapes run with --no-semantic-rewrites from "
+                         "the naive programs: Table 2's structure-only row beside the paper's ShapeMOD+Input (ours)")
+    t2.add_argument("--baseline-wake", action="append", metavar="CATEGORY=FOLDER",
+                    help="the same, started (--start-from, --start-round 0) from the programs of one wake with the "
+                         "semantic rewrites: the row beside the paper's ShapeMOD+Wake (ours)")
     t2.add_argument("--train", type=_int_at_least(1), default=100, help="train-PHI: the first N discovery shapes")
     t2.add_argument("--heldout", type=_int_at_least(1), default=100, help="validation-PHI: the first N held-out shapes")
     t2.add_argument("--workers", type=_int_at_least(1), default=2,

@@ -1,12 +1,12 @@
 """ShapeCoder's Tables 2 and 3 for a discovered library, beside the paper's rows.
 
 Table 2 (discovery): the "Input Prims" row (the naive programs of the library's discovery shapes) and the
-library's row (F, |L|, Num Struct, Num Param of its discovered programs), with an optional structure-only
-baseline row (:func:`baseline`: a discovery run with the abstraction rules only, ``discover-abstractions
---no-semantic-rewrites``, so every abstraction is a structure already present in the naive programs; ours,
-the nearest this implementation has to the paper's ShapeMOD+Input row, which ran ShapeMOD on the naive
-programs and is printed beside it). Table 3: F of the discovered
-programs ("train"), and of post hoc inference (:func:`shapeprog.coder.infer.infer`, the library fixed) on
+library's row (F, |L|, Num Struct, Num Param of its discovered programs), with optional structure-only
+baseline rows (:func:`baseline`, :data:`BASELINE_ROWS`: discovery runs with the abstraction rules only,
+``discover-abstractions --no-semantic-rewrites``, from the naive programs or from the programs of one wake
+with the semantic rewrites; ours, the nearest this implementation has to the paper's ShapeMOD+Input and
+ShapeMOD+Wake rows, which ran ShapeMOD on those programs and are printed beside them). Table 3: F of the
+discovered programs ("train"), and of post hoc inference (:func:`shapeprog.coder.infer.infer`, the library fixed) on
 the first discovery shapes ("train-PHI") and the first held-out shapes ("validation-PHI"), with the number of
 abstractions the programs use.
 
@@ -40,7 +40,7 @@ from .objective import naive_summary, omega
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
-__all__ = ["PAPER_TABLE2", "PAPER_TABLE3", "Phi", "Run", "Table2", "baseline", "format_tables", "from_run", "phi",
+__all__ = ["BASELINE_ROWS", "PAPER_TABLE2", "PAPER_TABLE3", "Phi", "Run", "Table2", "baseline", "format_tables", "from_run", "phi",
            "shipped", "table2", "table3"]
 
 #: The paper's Table 2 rows per category: (row, F, |L|, Num Struct, Num Param), 400 discovery shapes.
@@ -50,6 +50,10 @@ PAPER_TABLE2 = {"chair": [("Input Prims", 146.0, 6, 29, 61), ("ShapeMOD+Input", 
                           ("ShapeMOD+Wake", 69.1, 17, 10, 30), ("ShapeCoder", 40.9, 37, 8, 18)],
                 "storage": [("Input Prims", 154.0, 6, 30, 62), ("ShapeMOD+Input", 119.0, 16, 20, 48),
                             ("ShapeMOD+Wake", 103.0, 10, 19, 45), ("ShapeCoder", 71.3, 31, 11, 33)]}
+#: Table 2's structure-only rows (ours, not ShapeMOD): discovery with the abstraction rules only, from the naive
+#: programs or from one wake's programs (``discover-abstractions --no-semantic-rewrites``).
+BASELINE_ROWS = {"input": "Structure only, from the naive programs (ours; not ShapeMOD)",
+                 "wake": "Structure only, from one wake's programs (ours; not ShapeMOD)"}
 #: The paper's post hoc inference F (chairs only are reported): train shapes and validation shapes.
 PAPER_TABLE3 = {"chair": {"train": 63.6, "train-PHI": 67.5, "validation-PHI": 70.6}}
 
@@ -271,17 +275,18 @@ def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
 def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
                   max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network: bool = False,
                   search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
-                  baseline: Table2 | None = None) -> str:
-    """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours; ``baseline`` (:func:`baseline`)
-    adds the structure-only row to Table 2."""
+                  baselines: Sequence[tuple] = ()) -> str:
+    """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours; ``baselines``, ``[(kind,
+    Table2)]`` with kind ``"input"`` or ``"wake"`` (:func:`baseline`), add the structure-only rows to Table 2."""
     cat = run.category
     out = [f"## Table 2 ({cat}, {t2.ours.shapes} discovery shapes; library {run.source})", "",
            "| row | F | \\|L\\| | Num Struct | Num Param |", "| --- | --- | --- | --- | --- |",
            f"| Input Prims (ours) | {t2.naive.F:.1f} | 6 | {t2.naive.num_struct:.1f} | {t2.naive.num_param:.1f} |"]
-    if baseline is not None:
-        b = baseline.ours
-        out.append(f"| Structure only (ours: no semantic rewrites, refactor wake; not ShapeMOD) | {b.F:.1f} | "
-                   f"{b.library_size} | {b.num_struct:.1f} | {b.num_param:.1f} |")
+    for kind, t in baselines:
+        if kind not in BASELINE_ROWS:
+            raise ValueError(f"a baseline is 'input' or 'wake', got {kind!r}")
+        b = t.ours
+        out.append(f"| {BASELINE_ROWS[kind]} | {b.F:.1f} | {b.library_size} | {b.num_struct:.1f} | {b.num_param:.1f} |")
     out.append(f"| ShapeCoder (ours) | {t2.ours.F:.1f} | {t2.ours.library_size} | {t2.ours.num_struct:.1f} | "
                f"{t2.ours.num_param:.1f} |")
     out += [f"| {name} (paper, 400 shapes) | {f} | {size} | {ns} | {npar} |" for name, f, size, ns, npar in PAPER_TABLE2[cat]]

@@ -127,10 +127,11 @@ def test_cli_table2_coder_structure_only_baseline_row(tmp_path):
     _run_folder(run, n=2)
     _naive_folder(base, n=2)  # no abstraction: the naive programs
     out = tmp_path / "t.md"
-    assert main(["table2-coder", "--categories", "chair", "--library", f"chair={run}", "--baseline", f"chair={base}",
-                 "--train", "1", "--heldout", "1", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    assert main(["table2-coder", "--categories", "chair", "--library", f"chair={run}", "--baseline-input", f"chair={base}",
+                 "--baseline-wake", f"chair={base}", "--train", "1", "--heldout", "1", "--workers", "1", "--quiet", "--out", str(out)]) == 0
     lines = out.read_text().splitlines()
-    row = next(x for x in lines if x.startswith("| Structure only (ours"))
+    row = next(x for x in lines if x.startswith("| Structure only, from the naive programs (ours"))
+    assert lines[lines.index(row) + 1].startswith("| Structure only, from one wake's programs (ours")
     naive = next(x for x in lines if x.startswith("| Input Prims (ours)"))
     b = tables.table2(tables.from_run(base, "chair")).ours
     assert row.split("|")[2:-1] == [f" {b.F:.1f} ", " 6 ", f" {b.num_struct:.1f} ", f" {b.num_param:.1f} "]
@@ -140,8 +141,8 @@ def test_cli_table2_coder_structure_only_baseline_row(tmp_path):
     # a baseline of other shapes is refused, naming it
     _naive_folder(base, n=3)
     with pytest.raises(SystemExit, match="the baseline's 3 shapes are not the 2 shapes"):
-        main(["table2-coder", "--library", f"chair={run}", "--baseline", f"chair={base}", "--quiet"])
-    with pytest.raises(SystemExit, match="--baseline table=...: table is not among --categories"):
-        main(["table2-coder", "--baseline", f"table={base}"])
-    with pytest.raises(SystemExit, match="--baseline .*expected CATEGORY=FOLDER"):
-        main(["table2-coder", "--baseline", str(base)])
+        main(["table2-coder", "--library", f"chair={run}", "--baseline-wake", f"chair={base}", "--quiet"])
+    with pytest.raises(SystemExit, match="--baseline-input table=...: table is not among --categories"):
+        main(["table2-coder", "--baseline-input", f"table={base}"])
+    with pytest.raises(SystemExit, match="--baseline-wake .*expected CATEGORY=FOLDER"):
+        main(["table2-coder", "--baseline-wake", str(base)])
