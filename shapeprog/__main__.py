@@ -658,7 +658,8 @@ def _cmd_discover_abstractions(args) -> int:
                      train_epochs=args.train_epochs, train_lr=args.train_lr, dropout=args.dropout,
                      wake_seconds=args.wake_seconds, device=args.device, iterations=args.iterations,
                      max_nodes=args.max_nodes, time_limit=args.time_limit,
-                     semantic_rewrites=not args.no_semantic_rewrites)
+                     semantic_rewrites=not args.no_semantic_rewrites, network_from=args.network_from_round,
+                     wake_repeats=args.wake_repeats)
     except ValueError as e:  # a setting out of range, named
         raise SystemExit(f"error: {e}") from None
     start = None
@@ -1240,6 +1241,12 @@ def main(argv=None) -> int:
     d.add_argument("--wake-seconds", type=float, default=1.0,
                    help="network wake: seconds of sampling per search step (1)")
     d.add_argument("--device", default="auto", help="network wake: where to train (auto: CUDA when available)")
+    d.add_argument("--network-from-round", type=_int_at_least(0), default=0,
+                   help="network wake: the first round that uses the network; earlier rounds use the refactor-only "
+                        "wake (0: every round, the paper)")
+    d.add_argument("--wake-repeats", type=_int_at_least(1), default=1,
+                   help="network wake: wakes per round with the round's network, each from the last one's programs "
+                        "with other sampling seeds (1: the paper)")
     d.add_argument("--start-from", metavar="LIBRARY",
                    help="begin with an earlier run's library and programs: a shipped category (chair) or a "
                         "discover-abstractions output folder; e.g. with --wake network, the final wake again with "

@@ -80,6 +80,11 @@ class Config:
         wake_batch, wake_batches, wake_seconds: samples per batch (64), batches per search step at most,
             and seconds per search step (1 s; None: the search depends only on the seed).
         device: where the network trains (``"auto"``: CUDA when available).
+        network_from: with ``wake="network"``, the first round whose wake uses the network; the rounds
+            before it use the refactor-only wake (cheap early rounds, then the network; ours, not the paper's).
+        wake_repeats: network wakes per round with the round's network, each from the programs of the one
+            before and with other sampling seeds (a shape keeps its program unless a candidate is cheaper,
+            so F never rises); 1 is the paper's one wake per round.
     """
 
     rounds: int = 4
@@ -107,13 +112,16 @@ class Config:
     wake_batches: int = WAKE_BATCHES
     wake_seconds: float | None = WAKE_SECONDS
     device: str = "auto"
+    network_from: int = 0
+    wake_repeats: int = 1
 
     def __post_init__(self):
-        for name in ("rounds", "n_proposals", "n_abstractions", "iterations", "max_nodes", "train_epochs"):
+        for name in ("rounds", "n_proposals", "n_abstractions", "iterations", "max_nodes", "train_epochs",
+                     "network_from"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"Config.{name} must be an int >= 0, got {v!r}")
-        for name in ("n_dreams", "train_batch", "train_patience", "wake_batch", "wake_batches"):
+        for name in ("n_dreams", "train_batch", "train_patience", "wake_batch", "wake_batches", "wake_repeats"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"Config.{name} must be an int >= 1, got {v!r}")
@@ -621,12 +629,13 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
     if st is None:
         library, programs, costs, errors = Library(lang), None, None, None
         rnd, phase, hist, weights, index = 0, "wake", [], [1.0] * len(shapes), 0
-        stores = None
+        stores, repeat = None, 0
     else:
         library, programs = st["library_obj"], st["programs"]
         costs, errors, rnd, phase = st["costs"], st["errors"], st["round"], st["phase"]
         hist, weights, index = st["log"], st["weights"], st["index"]
         stores = st.get("stores")
+        repeat = st.get("repeat", 0)  # network wakes of this round already done
         log(f"resume at round {rnd}, phase {phase}")
         before = st.get("config") or {}
         changed = {k: (before[k], v) for k, v in asdict(cfg).items() if k in before and before[k] != v}
@@ -645,8 +654,8 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
                      "seconds": round(time.time() - t0, 1)})
         log(f"round {rnd} {ph}: F={s.F:.3f} |L|={s.library_size} struct={s.num_struct:.2f} param={s.num_param:.2f}")
 
-    def save(next_round, next_phase):
-        _save(out, {"round": next_round, "phase": next_phase, "library": library.to_text(),
+    def save(next_round, next_phase, next_repeat=0):
+        _save(out, {"round": next_round, "phase": next_phase, "repeat": next_repeat, "library": library.to_text(),
                     "programs": [to_text(p) for p in programs], "costs": costs, "errors": errors, "log": hist,
                     "weights": weights, "index": index, "config": asdict(cfg), "lang": lang.name,
                     **({"stores": stores} if stores is not None else {})})
@@ -658,20 +667,34 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
             log("stopping: time is up (resumable)")
             break
         if phase == "wake":
-            if cfg.wake == "network":
+            if cfg.wake == "network" and rnd >= cfg.network_from:
                 ckpt = None if out is None else out / f"recnet_round{rnd}.pt"
                 model, vocab, _ = train_network(shapes, library, cfg, cfg.seed + rnd, executor, dream_cache, log,
                                                 ckpt)
-                programs, costs, errors, stores, sources = wake_network(
-                    shapes, programs, library, model, vocab, stores, cfg, executor, progress, cfg.seed + rnd)
-                counts = {k: sources.count(k) for k in sorted(set(sources))}
-                log(f"round {rnd} wake: best candidate per shape: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+                while True:
+                    # repeat 0 samples with the round's seed (the paper's single wake); later ones with others
+                    seed = cfg.seed + rnd if repeat == 0 else (cfg.seed + rnd) * 1_000 + repeat
+                    programs, costs, errors, stores, sources = wake_network(
+                        shapes, programs, library, model, vocab, stores, cfg, executor, progress, seed)
+                    counts = {k: sources.count(k) for k in sorted(set(sources))}
+                    log(f"round {rnd} wake{f' {repeat + 1}/{cfg.wake_repeats}' if cfg.wake_repeats > 1 else ''}: "
+                        "best candidate per shape: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+                    _check_costs(costs)
+                    repeat += 1
+                    if repeat >= cfg.wake_repeats:
+                        break
+                    record("wake")
+                    save(rnd, "wake", repeat)
+                    if stop_at is not None and time.time() > stop_at:
+                        break
+                if repeat < cfg.wake_repeats:
+                    log("stopping: time is up (resumable)")
+                    break
             else:
                 programs, costs, errors = wake(shapes, programs, library, cfg, executor, progress)
-            if any(c is None for c in costs):
-                bad = [k for k, c in enumerate(costs) if c is None]
-                raise RefactorError(f"no program re-covers shape(s) {bad[:5]}")
+                _check_costs(costs)
             record("wake")
+            repeat = 0
             phase = "integrate" if rnd < cfg.rounds else "done"
             save(rnd, phase)
         elif phase == "integrate":
@@ -686,6 +709,12 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
             rnd, phase = rnd + 1, "wake"
             save(rnd, phase)
     return DiscoveryResult(library, programs, costs, errors, hist)
+
+
+def _check_costs(costs: Sequence) -> None:
+    if any(c is None for c in costs):
+        bad = [k for k, c in enumerate(costs) if c is None]
+        raise RefactorError(f"no program re-covers shape(s) {bad[:5]}")
 
 
 def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str], header: str = "") -> None:
@@ -739,7 +768,10 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     header = (f"# ShapeCoder library discovered on the first {len(recs)} {category} shapes: rounds={cfg.rounds}, "
               f"{proposing}seed={cfg.seed}, wake={cfg.wake}"
               + (f" (dreams={cfg.n_dreams}, training {cfg.train_seconds or 0:g} s, lr={cfg.train_lr:g}, "
-                 f"dropout={cfg.dropout:g})" if cfg.wake == "network" else "")
+                 f"dropout={cfg.dropout:g}"
+                 + (f", from round {cfg.network_from}, refactor-only before" if cfg.network_from else "")
+                 + (f", {cfg.wake_repeats} wakes per round" if cfg.wake_repeats > 1 else "")
+                 + ")" if cfg.wake == "network" else "")
               + ("" if cfg.semantic_rewrites else ", semantic rewrites off (abstraction rules only)")
               + ("" if start is None else f", started at round {first} from an earlier library and its programs")
               + f", e-graph limits "

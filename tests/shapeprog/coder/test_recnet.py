@@ -343,3 +343,36 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     with pytest.raises(SystemExit):
         main(["abstract-infer", "chair/402", "--library", "chair", "--network", "--search-seconds", "-1"])
     capsys.readouterr()
+
+
+def test_network_from_a_later_round_and_repeated_wakes_resume_where_they_stopped(tmp_path):
+    pytest.importorskip("egglog")
+    import json
+
+    from shapeprog.coder.discover import Config, discover
+
+    shapes = [execute(parse(f"Union({LEGS},{SLATS})")), execute(parse(LEGS))]
+    cfg = Config(rounds=1, n_proposals=50, n_abstractions=2, wake="network", network_from=1, wake_repeats=2,
+                 n_dreams=8, train_epochs=1, wake_batch=8, wake_batches=1, wake_seconds=None, device="cpu")
+    lines = []
+    r = discover(shapes, cfg, out=tmp_path, log=lines.append)
+    # round 0 used the refactor-only wake (no network), round 1 trained one network and woke twice with it
+    assert not (tmp_path / "recnet_round0.pt").exists() and (tmp_path / "recnet_round1.pt").is_file()
+    assert [(e["round"], e["phase"]) for e in r.log] == [(0, "wake"), (0, "integrate"), (1, "wake"), (1, "wake")]
+    assert r.log[3]["F"] <= r.log[2]["F"] + 1e-9
+    assert sum(ln.startswith("dreams:") for ln in lines) >= 1
+    assert any(" wake 1/2:" in ln for ln in lines) and any(" wake 2/2:" in ln for ln in lines)
+    st = json.loads((tmp_path / "state.json").read_text())
+    assert st["phase"] == "done" and st["repeat"] == 0 and st["config"]["wake_repeats"] == 2
+    # a state saved after the first of the two wakes resumes with the second only, with the saved network
+    st.update(phase="wake", round=1, repeat=1, log=st["log"][:3])
+    (tmp_path / "state.json").write_text(json.dumps(st))
+    lines.clear()
+    r2 = discover(shapes, cfg, out=tmp_path, log=lines.append)
+    assert any(ln.startswith("network: loaded") for ln in lines)
+    assert any(" wake 2/2:" in ln for ln in lines) and not any(" wake 1/2:" in ln for ln in lines)
+    assert [(e["round"], e["phase"]) for e in r2.log] == [(0, "wake"), (0, "integrate"), (1, "wake"), (1, "wake")]
+    assert all(e == 0.0 for e in r2.errors)
+    for bad in ({"wake_repeats": 0}, {"network_from": -1}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            Config(**bad)
