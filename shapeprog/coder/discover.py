@@ -626,6 +626,7 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
     st = _load(out, lang)
     t0 = time.time()
     dream_cache: dict = {}
+    net = None  # (round, model, vocab) of the network wake
     if st is None:
         library, programs, costs, errors = Library(lang), None, None, None
         rnd, phase, hist, weights, index = 0, "wake", [], [1.0] * len(shapes), 0
@@ -668,32 +669,27 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
             break
         if phase == "wake":
             if cfg.wake == "network" and rnd >= cfg.network_from:
-                ckpt = None if out is None else out / f"recnet_round{rnd}.pt"
-                model, vocab, _ = train_network(shapes, library, cfg, cfg.seed + rnd, executor, dream_cache, log,
-                                                ckpt)
-                while True:
-                    # repeat 0 samples with the round's seed (the paper's single wake); later ones with others
-                    seed = cfg.seed + rnd if repeat == 0 else (cfg.seed + rnd) * 1_000 + repeat
-                    programs, costs, errors, stores, sources = wake_network(
-                        shapes, programs, library, model, vocab, stores, cfg, executor, progress, seed)
-                    counts = {k: sources.count(k) for k in sorted(set(sources))}
-                    log(f"round {rnd} wake{f' {repeat + 1}/{cfg.wake_repeats}' if cfg.wake_repeats > 1 else ''}: "
-                        "best candidate per shape: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-                    _check_costs(costs)
-                    repeat += 1
-                    if repeat >= cfg.wake_repeats:
-                        break
-                    record("wake")
-                    save(rnd, "wake", repeat)
-                    if stop_at is not None and time.time() > stop_at:
-                        break
-                if repeat < cfg.wake_repeats:
-                    log("stopping: time is up (resumable)")
-                    break
+                if net is None or net[0] != rnd:  # one network per round, kept across its repeated wakes
+                    ckpt = None if out is None else out / f"recnet_round{rnd}.pt"
+                    net = (rnd, *train_network(shapes, library, cfg, cfg.seed + rnd, executor, dream_cache, log,
+                                               ckpt)[:2])
+                # repeat 0 samples with the round's seed (the paper's single wake); later ones with others
+                seed = cfg.seed + rnd if repeat == 0 else (cfg.seed + rnd) * 1_000 + repeat
+                programs, costs, errors, stores, sources = wake_network(
+                    shapes, programs, library, net[1], net[2], stores, cfg, executor, progress, seed)
+                counts = {k: sources.count(k) for k in sorted(set(sources))}
+                log(f"round {rnd} wake{f' {repeat + 1}/{cfg.wake_repeats}' if cfg.wake_repeats > 1 else ''}: "
+                    "best candidate per shape: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+                repeat += 1
             else:
                 programs, costs, errors = wake(shapes, programs, library, cfg, executor, progress)
-                _check_costs(costs)
+            if any(c is None for c in costs):
+                bad = [k for k, c in enumerate(costs) if c is None]
+                raise RefactorError(f"no program re-covers shape(s) {bad[:5]}")
             record("wake")
+            if 0 < repeat < cfg.wake_repeats:  # another wake of this round next (the loop checks the time)
+                save(rnd, "wake", repeat)
+                continue
             repeat = 0
             phase = "integrate" if rnd < cfg.rounds else "done"
             save(rnd, phase)
@@ -709,12 +705,6 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
             rnd, phase = rnd + 1, "wake"
             save(rnd, phase)
     return DiscoveryResult(library, programs, costs, errors, hist)
-
-
-def _check_costs(costs: Sequence) -> None:
-    if any(c is None for c in costs):
-        bad = [k for k, c in enumerate(costs) if c is None]
-        raise RefactorError(f"no program re-covers shape(s) {bad[:5]}")
 
 
 def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str], header: str = "") -> None:
