@@ -13,15 +13,32 @@ with their ``init_args``), so a new family adds a module and a YAML file and lea
 The modules, data and losses live in the library (:mod:`csgnet.train`); ``configs/README.md`` lists the
 configs.
 """
+from pathlib import Path
+
 import lightning as L
 from lightning.pytorch.cli import LightningCLI
+
+
+class CLI(LightningCLI):
+    """The LightningCLI that never lets a new run overwrite an earlier run's checkpoints."""
+
+    def before_fit(self) -> None:
+        """A ``fit`` without ``--ckpt_path`` into a checkpoint folder that already holds checkpoints stops
+        before training: resume that run (``--ckpt_path last``) or move its folder away."""
+        if self.config[self.subcommand].get("ckpt_path") is not None:
+            return
+        for cb in self.trainer.checkpoint_callbacks:
+            folder = Path(cb.dirpath) if getattr(cb, "dirpath", None) else None
+            if folder is not None and folder.is_dir() and any(folder.glob("*.ckpt")):
+                raise SystemExit(f"error: {folder} holds the checkpoints of an earlier run; resume it with "
+                                 "--ckpt_path last, or move that folder away to start a new run")
 
 
 def main(args=None, run: bool = True) -> LightningCLI:
     """Run the CLI on ``args`` (default: ``sys.argv``); ``run=False`` only parses and builds the config's
     model, data module and trainer (``args`` then takes no subcommand)."""
-    return LightningCLI(L.LightningModule, L.LightningDataModule, subclass_mode_model=True,
-                        subclass_mode_data=True, save_config_kwargs={"overwrite": True}, args=args, run=run)
+    return CLI(L.LightningModule, L.LightningDataModule, subclass_mode_model=True,
+               subclass_mode_data=True, save_config_kwargs={"overwrite": True}, args=args, run=run)
 
 
 if __name__ == "__main__":

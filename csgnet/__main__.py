@@ -275,9 +275,13 @@ def cmd_export_weights(args) -> int:
         print(f"error: {args.checkpoint}: no such checkpoint file", file=sys.stderr)
         return 2
     try:
+        refuse_overwrite([args.out], [args.checkpoint])
         path = export_weights(args.checkpoint, args.out, half=not args.float32)
     except ValueError as e:  # read_checkpoint names the file and what is wrong with it
         print(f"error: {e}; `export-weights` reads the .ckpt files that training writes", file=sys.stderr)
+        return 2
+    except FileExistsError as e:
+        print(f"error: {e}", file=sys.stderr)
         return 2
     except OSError as e:
         print(f"error: {_located(args.out, e)}", file=sys.stderr)
@@ -432,7 +436,11 @@ def cmd_edit(args) -> int:
     text, name = args.program, "csg"
     path = Path(args.program)
     if path.is_file():  # a file holding a program (e.g. a parse result): its first non-blank line
-        lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines() if ln.strip()]
+        try:
+            lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines() if ln.strip()]
+        except UnicodeDecodeError as e:
+            print(f"error: {path}: not UTF-8 text (byte offset {e.start})", file=sys.stderr)
+            return 1
         if not lines:
             print(f"error: {path}: no program in the file", file=sys.stderr)
             return 1
@@ -577,6 +585,9 @@ def main(argv=None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
+    except (ValueError, OSError) as e:  # bad input files (ParseError, InputError, ...): the message names them
+        print(f"error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -140,6 +140,8 @@ def read_checkpoint(path) -> tuple[ModelConfig, dict, dict]:
             hp = payload["hyper_parameters"]
             config = preset(hp.get("size", "small"), hp.get("dim", 2), hp.get("stack", False), **(hp.get("model") or {}))
             state = {k[len("model."):]: v for k, v in payload["state_dict"].items() if k.startswith("model.")}
+            if not state:
+                raise ValueError("a Lightning checkpoint without csgnet model weights (no 'model.' keys)")
             meta = {"epoch": int(payload.get("epoch", -1)), "global_step": int(payload.get("global_step", -1))}
             return config, state, meta
     except (KeyError, TypeError, ValueError) as e:
@@ -151,7 +153,11 @@ def load_model(path, device=None) -> CSGNet:
     """A model from a weights file or a Lightning checkpoint (:func:`read_checkpoint`), in eval mode."""
     config, state, _ = read_checkpoint(path)
     model = CSGNet(config)
-    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+    try:
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+    except RuntimeError as e:  # missing, unexpected or mis-sized tensors
+        first = str(e).strip().splitlines()[0]
+        raise ValueError(f"{path}: its weights do not fit the model its config describes ({first})") from None
     return model.to(device or "cpu").eval()
 
 

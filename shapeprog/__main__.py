@@ -153,6 +153,11 @@ def _cmd_fit(args) -> int:
         except ValueError as e:  # the message names the file (and line)
             print(f"error: {e}", file=sys.stderr)
             return 1
+        from shapeio.points import MIN_POINTS
+
+        if len(pts) < MIN_POINTS:
+            print(f"error: {args.points}: {len(pts)} points; fitting needs at least {MIN_POINTS}", file=sys.stderr)
+            return 1
     g = torch.Generator().manual_seed(args.seed)
     thr = float(adaptive_threshold(pts))  # the target's F-score threshold, the same before and after
 
@@ -226,7 +231,10 @@ def _cmd_infer(args) -> int:
     src = Path(args.file)
     out = Path(args.out)
     stem = src.stem
-    model = load_model(args.weights, args.category) if args.weights else None
+    try:
+        model = load_model(args.weights, args.category) if args.weights else None
+    except (FileNotFoundError, ValueError) as e:  # the message names the weights file
+        raise SystemExit(f"error: {e}") from None
     kinds = [("program", ".txt"), ("mesh", ".obj"), ("png", ".png"), ("json", ".json")]
     if model is not None and model.layout is not None:
         kinds.append(("macros", "_macros.txt"))  # the decoded macro program (ShapeMOD)
@@ -545,6 +553,7 @@ def _vae_samples(args) -> tuple[list, str, str]:
 
 def _cmd_evaluate_generation(args) -> int:
     _check_outputs(others=[args.out])
+    _refuse_overwrite([args.out], [args.classifier])
     if args.programs and args.n:
         raise SystemExit("error: give either --programs DIR or -n N (samples of the VAE), not both")
     model = None
@@ -671,12 +680,13 @@ def _cmd_discover_abstractions(args) -> int:
         src = Path(args.start_from)
         try:
             run = tables.from_run(src, category) if src.is_dir() else tables.shipped(args.start_from)
+            log = tables.log_of(run)
         except (OSError, ValueError) as e:
             raise SystemExit(f"error: --start-from: {e}") from None
         if len(run.programs) < args.shapes:
             raise SystemExit(f"error: {args.start_from} has {len(run.programs)} programs, fewer than --shapes "
                              f"{args.shapes}")
-        start = (run.library, list(run.programs[:args.shapes]), tables.log_of(run))
+        start = (run.library, list(run.programs[:args.shapes]), log)
     t0 = time.time()
     try:
         res = discover_category(category, args.out, cfg, args.shapes, args.workers, args.minutes, progress=progress,
@@ -725,8 +735,13 @@ def _cmd_abstract_infer(args) -> int:
         line = data.parse_record(lines[int(num) - 1], f"PN_{cat}.txt", int(num))
         shape = line.prims
     elif Path(spec).is_file():
-        text = decode(Path(spec).read_bytes(), spec).strip().splitlines()
-        shape = data.parse_record(text[0], spec, 1).prims
+        found = [(n, ln.rstrip("\r")) for n, ln in enumerate(decode(Path(spec).read_bytes(), spec).split("\n"), 1)
+                 if ln.strip()]
+        if len(found) != 1:
+            raise SystemExit(f"error: {spec}: " + ("no shape line" if not found else
+                             f"{len(found)} shape lines (the second at line {found[1][0]}); abstract-infer "
+                             "reads one shape (table2-coder evaluates many)"))
+        shape = data.parse_record(found[0][1], spec, found[0][0]).prims
     else:
         shape = spec
     network = None
@@ -819,6 +834,10 @@ def _cmd_discover_macros(args) -> int:
                       abs_shape_num=args.subsample, selection=args.selection, search=args.search)
     lib0, text0 = _macro_library(args.start_from, "--start-from: ", text=True) if args.start_from else (None, "")
     out = Path(args.out)
+    _refuse_overwrite([out / "library.txt"], [args.start_from, args.config])
+    if (out / "library.txt").exists() and not (out / "state.json").exists():  # user files are never overwritten
+        raise SystemExit(f"error: {out} holds a library.txt but no state.json of a discovery run to resume; "
+                         "choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
@@ -866,6 +885,7 @@ def _macro_library(name: str, option: str = "", text: bool = False):
 def _cmd_refactor(args) -> int:
     from .macros import from_lines, refactor, to_text
 
+    _refuse_overwrite([args.output], [args.program, args.library])
     prog = _Program(args.program)
     lib = _macro_library(args.library)
     cat, _, ident = args.program.partition("/")
@@ -953,10 +973,12 @@ def _cmd_table1(args) -> int:
 
     from .macros.table1 import table1
 
+    library_files = _category_pairs(args.library, "CATEGORY=FILE")
+    _refuse_overwrite([args.out], library_files.values())
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     try:
         text = table1(args.categories, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
-                      library_files=_category_pairs(args.library, "CATEGORY=FILE"),
+                      library_files=library_files,
                       log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
     finally:
         if pool is not None:
@@ -1074,8 +1096,8 @@ def main(argv=None) -> int:
                         "about 4.5x a plain decode's time) or 'default' (implies --search)")
     i.add_argument("--retrieval", nargs="?", type=_int_at_least(1), const=0, metavar="K",
                    help="retrieval-augmented decoding (ours, not the papers'): the decoded program competes with the K "
-                        "training programs nearest to the cloud (without K: shapeprog.pointcloud.infer."
-                        "RETRIEVAL_CANDIDATES); the one closest to the cloud is kept. Give the file before "
+                        "training programs nearest to the cloud (without K: the constant "
+                        "RETRIEVAL_CANDIDATES of shapeprog/pointcloud/infer.py); the one closest to the cloud is kept. Give the file before "
                         "--retrieval: a file right after it is read as K")
     i.add_argument("--clouds", metavar="DIR",
                    help="with --retrieval: a make-clouds folder whose training clouds make the index (else it is "
@@ -1257,7 +1279,7 @@ def main(argv=None) -> int:
     d.add_argument("--no-semantic-rewrites", action="store_true",
                    help="refactor with the abstraction rules only (the paper's 'no semantic rewrites' ablation; "
                         "with the default wake, the structure-only library-learning baseline of table2-coder "
-                        "--baseline)")
+                        "--baseline-input / --baseline-wake)")
     _add_egraph_limits(d)
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     d.set_defaults(func=_cmd_discover_abstractions)

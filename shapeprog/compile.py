@@ -235,11 +235,11 @@ def _child_of(code: BlockCode, s: int, index: dict) -> tuple[int | None, int | N
     if s < len(code.child_names):
         name = code.child_names[s]
         return (index[name] if name is not None else None), None
-    src = code.slot_source[s]
-    if src is None:
-        return None, None
-    child, _ = _child_of(code, src, index)
-    if child is None:
-        return None, None
-    return child, code.slot_reflect_axis[s]
+    axis, k = code.slot_reflect_axis[s], s
+    while k >= len(code.child_names):  # follow the copy chain to its source (a loop: chains can be long)
+        k = code.slot_source[k]
+        if k is None:
+            return None, None
+    name = code.child_names[k]
+    return (None, None) if name is None else (index[name], axis)
 

@@ -23,7 +23,7 @@ import dataclasses
 import re
 import warnings
 from dataclasses import dataclass
-from typing import Iterator, Union
+from typing import Iterator, Sequence, Union
 
 from . import limits
 from .errors import ParseError, ParseWarning
@@ -356,31 +356,42 @@ def _parse_statement(ln: _Line) -> tuple[Statement, list[tuple[str, str, int]]]:
     return cls(*vals), names
 
 
-def _check_block(stmts: list[tuple[Statement, _Line, list]], header: _Line | None, file: str) -> list:
-    """Semantic checks of one block: bbox first, names known, bbox never moved.
+def _cuboid_names(s: Statement) -> tuple[str, ...]:
+    """The cuboids a move statement names, in text order."""
+    return (s.a, s.b) if isinstance(s, Attach) else (s.a, s.b, s.c) if isinstance(s, Squeeze) else (s.a,)
+
+
+def block_rows(stmts: Sequence[Statement], fail, names: bool = True) -> list[tuple[list, int]]:
+    """The executor's cuboid slots and attach operations of one block, with its semantic checks.
+
+    Checks: bbox first, cuboid names well formed and known, bbox never moved, nothing attached or
+    squeezed against itself. Slots, macro copy names and operations follow the executor's compile step
+    (:mod:`shapeprog.compile`).
+
+    Args:
+        stmts: the block's statements (not empty).
+        fail: ``fail(i, reason, k)`` raises the error of statement ``i`` at its ``k``-th cuboid name
+            (the declared name for a Cuboid line).
+        names: check the form of declared names (bbox, cube<k>, Program_<k>); False for programs whose
+            cuboids carry other names (expanded macro programs), which execute the same way.
 
     Returns:
-        One row per statement for :func:`shapeprog.limits.check_tree`: its location, per cuboid slot
-        it creates (bbox excluded) the sub-program block placed there (None: a leaf), and the number
-        of attach operations it executes to. Slots, macro names and operations follow the executor's
-        compile step (:mod:`shapeprog.compile`).
+        Per statement: for each cuboid slot it creates (bbox excluded) the sub-program block placed
+        there (None: a leaf), and the number of attach operations it executes to.
     """
-    if not stmts:
-        where = header or _Line("", file, 1)
-        raise where.error("empty block")
-    s0, ln0, _ = stmts[0]
+    s0 = stmts[0]
     if not (isinstance(s0, Cuboid) and s0.name == "bbox"):
-        raise ln0.error("a block must start with 'bbox = Cuboid(...)'", ln0.toks[0])
+        fail(0, "a block must start with 'bbox = Cuboid(...)'", None)
     known = {"bbox": 0}  # name -> slot (macro names are cube<number of slots - 1>)
     source: list[int | None] = [None]  # per slot: the slot it is a macro copy of
     maker = [0]  # per slot: the statement that created it
     moves = [0]  # per slot: attach operations that move it (a macro copy repeats its source's)
     ops = [0] * len(stmts)  # per statement: attach operations
     lines: list[str | None] = []  # per Cuboid line: its sub-program name or None
-    for si, (s, ln, names) in enumerate(stmts):
+    for si, s in enumerate(stmts):
         if isinstance(s, Cuboid):
-            if not re.fullmatch(r"bbox|cube\d+|Program_\d+", s.name):
-                raise ln.error(f"bad cuboid name {s.name!r} (expected bbox, cube<k> or Program_<k>)", names[0])
+            if names and not re.fullmatch(r"bbox|cube\d+|Program_\d+", s.name):
+                fail(si, f"bad cuboid name {s.name!r} (expected bbox, cube<k> or Program_<k>)", 0)
             lines.append(s.name if s.name.startswith("Program_") else None)
             if s.name not in known:
                 known[s.name] = len(source)
@@ -388,16 +399,16 @@ def _check_block(stmts: list[tuple[Statement, _Line, list]], header: _Line | Non
                 maker.append(si)
                 moves.append(0)
             continue
-        for tok in names:
-            if tok[1] not in known:
-                raise ln.error(f"unknown cuboid {tok[1]!r}", tok)
-        if names[0][1] == "bbox":
-            verb = type(s).__name__.lower()
-            raise ln.error(f"bbox cannot be moved ({verb} of bbox)", names[0])
+        named = _cuboid_names(s)
+        for k, name in enumerate(named):
+            if name not in known:
+                fail(si, f"unknown cuboid {name!r}", k)
+        if named[0] == "bbox":
+            fail(si, f"bbox cannot be moved ({type(s).__name__.lower()} of bbox)", 0)
         if isinstance(s, Squeeze) and s.a in (s.b, s.c):
-            raise ln.error(f"{s.a!r} cannot be squeezed against itself", names[0])
+            fail(si, f"{s.a!r} cannot be squeezed against itself", 0)
         if isinstance(s, Attach) and s.a == s.b:
-            raise ln.error(f"{s.a!r} cannot be attached to itself", names[1])
+            fail(si, f"{s.a!r} cannot be attached to itself", 1)
         if isinstance(s, (Attach, Squeeze)):
             ops[si] = 1 if isinstance(s, Attach) else 2
             moves[known[s.a]] += ops[si]
@@ -415,15 +426,36 @@ def _check_block(stmts: list[tuple[Statement, _Line, list]], header: _Line | Non
             moves[known[name]] += copied
             ops[si] += copied
 
-    def child(k: int) -> str | None:  # as shapeprog.compile._child_of
-        if k < len(lines):
-            return lines[k]
-        return None if source[k] is None else child(source[k])
+    def child(k: int) -> str | None:  # as shapeprog.compile._child_of (a loop: copy chains can be long)
+        while k >= len(lines):
+            if source[k] is None:
+                return None
+            k = source[k]
+        return lines[k]
 
-    rows = [((ln.lineno, ln.toks[0][2], ln.toks[0][1]), [], n) for (_, ln, _), n in zip(stmts, ops)]
+    rows: list[tuple[list, int]] = [([], n) for n in ops]
     for k in range(1, len(source)):
-        rows[maker[k]][1].append(child(k))
+        rows[maker[k]][0].append(child(k))
     return rows
+
+
+def _check_block(stmts: list[tuple[Statement, _Line, list]], header: _Line | None, file: str) -> list:
+    """Semantic checks of one block (:func:`block_rows`), errors at the offending token.
+
+    Returns:
+        One row per statement for :func:`shapeprog.limits.check_tree`: its location, and the
+        statement's :func:`block_rows` row (slots, attach operations).
+    """
+    if not stmts:
+        where = header or _Line("", file, 1)
+        raise where.error("empty block")
+
+    def fail(si: int, reason: str, k: int | None):
+        _, ln, names = stmts[si]
+        raise ln.error(reason, ln.toks[0] if k is None else names[k])
+
+    rows = block_rows([s for s, _, _ in stmts], fail)
+    return [((ln.lineno, ln.toks[0][2], ln.toks[0][1]), slots, n) for (_, ln, _), (slots, n) in zip(stmts, rows)]
 
 
 def parse(text: str, file: str = "<string>") -> Program:

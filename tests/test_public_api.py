@@ -126,7 +126,10 @@ def test_the_readme_python_entry_points():
     assert tuple(shape.corners.shape) == (6, 8, 3)
     fitted = shapeprog.fit(sa, shape.corners.reshape(-1, 3).detach(), steps=1, samples=64, target_samples=None,
                            generator=torch.Generator().manual_seed(0))
-    assert fitted is not None
+    assert len(fitted.losses) == len(fitted.chamfer) == 1 and np.isfinite(fitted.losses).all()
+    assert shapeprog.parse(fitted.text) == fitted.program  # the text is the program
+    kinds = lambda p: [[type(s).__name__ for s in b.statements] for b in p.blocks]  # noqa: E731
+    assert kinds(fitted.program) == kinds(sa)  # fitting keeps the structure
 
 
 def test_the_readme_names_its_commands():

@@ -567,11 +567,36 @@ def _save(out: Path | None, state: dict) -> None:
 def _load(out: Path | None, lang: Lang):
     if out is None or not (out / "state.json").is_file():
         return None
-    st = json.loads((out / "state.json").read_text())
-    lib = Library.from_text(st["library"], lang, file=str(out / "state.json"))
-    st["programs"] = [parse(t, lib, file=str(out / "state.json"), line=i + 1) for i, t in enumerate(st["programs"])]
-    st["library_obj"] = lib
+    from ..errors import ParseError
+    from ..limits import decode
+
+    file = str(out / "state.json")
+    try:
+        st = json.loads(decode((out / "state.json").read_bytes(), file))
+    except json.JSONDecodeError as e:
+        raise ParseError(f"not JSON: {e.msg}", file, e.lineno, e.colno, "") from None
+    where = "its library"
+    try:
+        missing = [k for k in _STATE_KEYS if k not in st]
+        if missing:
+            raise KeyError(missing[0])
+        lib = Library.from_text(st["library"], lang, file=file)
+        programs = []
+        for i, t in enumerate(st["programs"]):
+            where = f"its program {i} (shape {i})"
+            programs.append(parse(t, lib, file=file, line=i + 1))
+    except ParseError as e:  # located in the embedded text, not in the file
+        raise ParseError(f"a damaged discovery state: {where}: {e.reason}", file, 1, 1, e.token) from None
+    except (KeyError, TypeError, AttributeError) as e:
+        raise ParseError(f"a damaged discovery state ({type(e).__name__}: {e})", file, 1, 1, "") from None
+    except ValueError as e:  # ProgramError: the message names the sub-expression
+        raise ParseError(f"a damaged discovery state: {where}: {e}", file, 1, 1, "") from None
+    st["programs"], st["library_obj"] = programs, lib
     return st
+
+
+#: The keys every discovery state holds (``stores``, ``repeat`` and ``config`` are optional).
+_STATE_KEYS = ("library", "programs", "costs", "errors", "round", "phase", "log", "weights", "index")
 
 
 def start_from(out: str | Path, shapes: Sequence, library: Library, programs: Sequence[Expr], cfg: Config = Config(),

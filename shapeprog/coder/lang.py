@@ -393,15 +393,27 @@ class Library:
     lang: Lang = LANG_3D
     abstractions: tuple = ()
     _table: dict = field(init=False, repr=False, compare=False, hash=False)
+    _depth: dict = field(init=False, repr=False, compare=False, hash=False)  # per abstraction: expanded depth bound
 
     def __post_init__(self):
         if not isinstance(self.abstractions, tuple):
             object.__setattr__(self, "abstractions", tuple(self.abstractions))
         table: dict = {}
         object.__setattr__(self, "_table", table)
+        object.__setattr__(self, "_depth", {})
         for ab in self.abstractions:
             self._validate(ab)
             table[ab.name] = ab
+            self._depth[ab.name] = self.expanded_depth(ab.body)
+
+    def expanded_depth(self, expr: Expr) -> int:
+        """A bound on the depth of ``expr`` with every abstraction call expanded (the root at depth 1):
+        a call adds its abstraction's expanded body depth to its deepest argument's."""
+        if not isinstance(expr, Call):
+            return 1
+        args = max((self.expanded_depth(a) for a in expr.args), default=0)
+        body = self._depth.get(expr.fn)
+        return 1 + args if body is None else body + max(args - 1, 0)
 
     def _validate(self, ab: Abstraction) -> None:
         if not isinstance(ab, Abstraction):
@@ -412,6 +424,8 @@ class Library:
             raise ProgramError(f"{ab.name!r} is a base function of the {self.lang.name} language")
         if ab.name in self._table:
             raise ProgramError(f"the library already has an abstraction {ab.name!r}")
+        if len(self._table) >= limits.MAX_ABSTRACTIONS:
+            raise ProgramError(f"more than {limits.MAX_ABSTRACTIONS} abstractions (MAX_ABSTRACTIONS)")
         declared: dict = {}
         for p in ab.params:
             if not isinstance(p, Param) or not isinstance(p.type, Type) or p.type is Type.SHAPE:
@@ -426,6 +440,8 @@ class Library:
         unused = [n for n in declared if n not in variables(ab.body)]
         if unused:
             raise ProgramError(f"{ab.name}: parameter(s) {', '.join(unused)} not used in the body")
+        if self.expanded_depth(ab.body) > limits.MAX_DEPTH:
+            raise ProgramError(f"{ab.name}: its body expands to a depth over {limits.MAX_DEPTH} (MAX_DEPTH)")
 
     def signature(self, name: str) -> Signature | None:
         """The signature of base function or abstraction ``name``, or None."""
@@ -474,9 +490,14 @@ class Library:
     def from_text(cls, text: str, lang: Lang = LANG_3D, file: str = "<string>") -> "Library":
         """The library written by :meth:`to_text` (blank lines and ``#`` comments skipped)."""
         lib = cls(lang)
-        for n, line in enumerate(text.splitlines(), 1):
+        for n, line in enumerate(text.split("\n"), 1):
             if line.strip() and not line.lstrip().startswith("#"):
-                lib = lib.add(parse_abstraction(line, lib, file=file, line=n))
+                ab = parse_abstraction(line, lib, file=file, line=n)
+                try:
+                    lib = lib.add(ab)
+                except ProgramError as e:  # a library-level limit: at the abstraction's line
+                    col = len(line) - len(line.lstrip()) + 1
+                    raise ParseError(str(e), file, n, col, ab.name) from None
         return lib
 
 

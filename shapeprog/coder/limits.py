@@ -12,12 +12,15 @@ Example:
 """
 from __future__ import annotations
 
-__all__ = ["MAX_ABS_NUMBER", "MAX_COUNT", "MAX_DEPTH", "MAX_NODES", "MAX_PARTS", "MAX_TEXT_LENGTH"]
+__all__ = ["MAX_ABSTRACTIONS", "MAX_ABS_NUMBER", "MAX_COUNT", "MAX_DEPTH", "MAX_NODES", "MAX_PARTS", "MAX_TEXT_LENGTH"]
 
 #: Characters of one program text, or of one line of a data file (data maximum: 1,398).
 MAX_TEXT_LENGTH = 100_000
-#: Nesting depth of an expression, the root at depth 1 (data maximum: 21).
+#: Nesting depth of an expression, the root at depth 1, also of an abstraction's body with the abstractions it
+#: calls expanded (data maximum: 21).
 MAX_DEPTH = 256
+#: Abstractions of a library (shipped maximum: 30).
+MAX_ABSTRACTIONS = 256
 #: Nodes of an expression tree, also after expanding abstractions (data maximum: 245).
 MAX_NODES = 100_000
 #: Magnitude of a number literal (data maximum: 2.06).

@@ -31,6 +31,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Callable, Sequence
 
+from ..errors import ParseError
 from ..limits import decode
 from . import data
 from .discover import Summary, evaluate, summarize
@@ -87,7 +88,7 @@ def _read_run(category: str, lib_text: str, lib_name: str, prog_text: str, prog_
         if not sep:
             raise ValueError(f"{prog_name}:{i + 1}: expected '<key>:<program>', got {line[:40]!r}")
         keys.append(key)
-        progs.append(parse(text, lib, file=prog_name, line=i + 1))
+        progs.append(parse(text, lib, file=prog_name, line=i + 1, column=len(key) + 2))
     if not progs:
         raise ValueError(f"{prog_name}: no programs")
     return Run(category, lib, tuple(keys), tuple(progs), source)
@@ -109,12 +110,27 @@ def shipped(category: str) -> Run:
 
 def log_of(run: Run) -> list:
     """The F log per phase of a run (``<category>_log.json`` of a shipped library, ``log.json`` of a run
-    folder); empty when the file is missing."""
+    folder); empty when the file is missing.
+
+    Raises:
+        ParseError: the file is not JSON (at its line and column) or holds no ``log`` list.
+    """
     if run.source.startswith("shapeprog/data/"):
         f = resources.files("shapeprog").joinpath("data", "coder_libraries", f"{run.category}_log.json")
     else:
         f = Path(run.source) / "log.json"
-    return json.loads(f.read_text(encoding="utf-8"))["log"] if f.is_file() else []
+    if not f.is_file():
+        return []
+    name = str(f)
+    try:
+        log = json.loads(decode(f.read_bytes(), name))["log"]
+    except json.JSONDecodeError as e:
+        raise ParseError(f"not JSON: {e.msg}", name, e.lineno, e.colno, "") from None
+    except (KeyError, TypeError):
+        raise ParseError("not a discovery log (no 'log' list)", name, 1, 1, "") from None
+    if not isinstance(log, list) or not all(isinstance(h, dict) for h in log):
+        raise ParseError("not a discovery log ('log' is not a list of phases)", name, 1, 1, "")
+    return log
 
 
 def network_of(run: Run) -> tuple:

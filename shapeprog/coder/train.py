@@ -27,11 +27,13 @@ from __future__ import annotations
 
 import copy
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import torch
 
+from .lang import ProgramError
 from .recnet import MAX_TOKENS, RecognitionNet, Vocab, encode_scene, encode_target
 
 __all__ = ["BUCKET_GROUP", "CPU", "PAPER", "Batch", "TrainConfig", "TrainLog", "batch_loss", "batches", "device_of",
@@ -129,20 +131,26 @@ class Batch:
         return Batch(*(getattr(self, f).to(device) for f in self.__dataclass_fields__))
 
 
-def tensorize(pairs: Sequence, vocab: Vocab, inputs: int, library=None) -> Batch:
+def tensorize(pairs: Sequence, vocab: Vocab, inputs: int, library=None, skipped: Counter | None = None) -> Batch:
     """The :class:`Batch` of ``pairs`` (:class:`~shapeprog.coder.dream.DreamPair`, or ``(scene, target)``
     tuples); ``inputs`` is the network's conditioning length (fields × max primitives). Pairs whose
-    target does not fit the vocabulary or :data:`~shapeprog.coder.recnet.MAX_TOKENS` are skipped.
+    scene is longer than ``inputs``, or whose target does not fit the vocabulary or
+    :data:`~shapeprog.coder.recnet.MAX_TOKENS`, are skipped and counted in ``skipped`` (per reason).
     ``library``: the targets' library (see :func:`~shapeprog.coder.recnet.encode_target`)."""
+    skipped = Counter() if skipped is None else skipped
     rows = []
     for p in pairs:
         scene, target = (p.scene, p.target) if hasattr(p, "scene") else p
         sc = encode_scene(scene)
         if len(sc.ranks) > inputs:
+            skipped[f"scene longer than the network's {inputs} inputs"] += 1
             continue
         try:
             toks, rks = encode_target(target, sc, vocab, library)
-        except Exception:  # noqa: BLE001 - a token outside the vocabulary: skip the pair
+        except ProgramError as e:  # a token outside the vocabulary, a target over MAX_TOKENS
+            reason = str(e)
+            skipped["target over MAX_TOKENS" if "MAX_TOKENS" in reason else
+                    reason if "not in the vocabulary" in reason else "target not encodable"] += 1
             continue
         rows.append((sc, toks, rks))
     n, t = len(rows), MAX_TOKENS
@@ -191,6 +199,7 @@ class TrainLog:
     stop: str = "epochs"
     seconds: float = 0.0
     pairs: int = 0
+    skipped: dict = field(default_factory=dict)  # pairs left out of training, per reason (tensorize)
 
 
 def device_of(name: str = "auto") -> torch.device:
@@ -216,9 +225,12 @@ def train(model: RecognitionNet, pairs, vocab: Vocab, cfg: TrainConfig = PAPER,
     t0 = time.perf_counter()
     generator = generator or torch.Generator().manual_seed(0)
     dev = torch.device(device)
-    data = pairs if isinstance(pairs, Batch) else tensorize(pairs, vocab, model.cfg.inputs, library)
+    skipped: Counter = Counter()
+    data = pairs if isinstance(pairs, Batch) else tensorize(pairs, vocab, model.cfg.inputs, library, skipped)
     n = len(data)
-    out = TrainLog(pairs=n)
+    out = TrainLog(pairs=n, skipped=dict(skipped))
+    if skipped and log is not None:
+        log(f"{sum(skipped.values())} pairs left out: " + "; ".join(f"{k}: {v}" for k, v in sorted(skipped.items())))
     if n == 0:
         raise ValueError("no training pairs")
     perm = torch.randperm(n, generator=generator)

@@ -67,6 +67,16 @@ DEFAULTS: dict = {
     "milp_pool": 60, "milp_time_limit": 120, "milp_warm": True, "chunk": 50,
 }
 _CHOICES = {"selection": ("greedy", "milp"), "search": ("beam", "exact")}
+#: The range of every numeric setting (inclusive): a value outside is refused when the config is loaded.
+LIMITS: dict = {
+    "num_rounds": (0, 100), "cand_cluster_num": (1, 10**6), "cand_cluster_size": (1, 10**4), "cand_abs_num": (1, 10**4),
+    "cand_max_changes": (0, 100), "cand_max_error": (0.0, 10.0), "cand_max_avg_error": (0.0, 10.0),
+    "cand_max_lines": (1, 100), "abs_shape_num": (1, 10**6), "abs_order_num": (1, 10**6), "abs_beam_size": (1, 1000),
+    "abs_max_error": (0.0, 10.0), "abs_add_threshold": (0.0, 10.0), "order_thresh": (0.0, 10.0),
+    "func_change_thresh": (0.0, 10.0), "err_shape_perc": (0.0, 1.0), "err_const_perc": (0.0, 1.0), "prec": (0, 10),
+    "scale_prec": (1, 10**4), "cluster_eps": (0.0, 10.0), "gen_limit": (1, 10**6), "milp_pool": (1, 10**4),
+    "milp_time_limit": (1, 10**6), "chunk": (1, 10**6),
+}
 
 
 def load_config(path: str | Path | None = None, **overrides) -> dict:
@@ -76,28 +86,37 @@ def load_config(path: str | Path | None = None, **overrides) -> dict:
         ParseError: an unknown key or a value of the wrong type, naming the file and the key.
     """
     cfg = dict(DEFAULTS)
-    items: list[tuple[str, object, str]] = []
+    items: list[tuple[str, object, str, int, int]] = []  # key, value, file, line, column
     if path is not None:
         import yaml
-        text = Path(path).read_text(encoding="utf-8")
+
+        from ..limits import decode
+        text = decode(Path(path).read_bytes(), str(path))
         try:
             data = yaml.safe_load(text) or {}
+            node = yaml.compose(text)
         except yaml.YAMLError as e:
-            raise ParseError(f"not YAML: {e}", str(path), 1, 1, "") from None
+            mark = getattr(e, "problem_mark", None)
+            line, col = (mark.line + 1, mark.column + 1) if mark is not None else (1, 1)
+            raise ParseError(f"not YAML: {getattr(e, 'problem', None) or e}", str(path), line, col, "") from None
         if not isinstance(data, dict):
             raise ParseError("a config is a mapping of settings", str(path), 1, 1, "")
-        items += [(k, v, str(path)) for k, v in data.items()]
-    items += [(k, v, "<overrides>") for k, v in overrides.items() if v is not None]
-    for k, v, where in items:
+        marks = {k.value: (k.start_mark.line + 1, k.start_mark.column + 1) for k, _ in node.value}
+        items += [(k, v, str(path), *marks.get(str(k), (1, 1))) for k, v in data.items()]
+    items += [(k, v, "<overrides>", 1, 1) for k, v in overrides.items() if v is not None]
+    for k, v, where, line, col in items:
         if k not in DEFAULTS:
-            raise ParseError(f"unknown setting {k!r}", where, 1, 1, str(k))
+            raise ParseError(f"unknown setting {k!r}", where, line, col, str(k))
         want = type(DEFAULTS[k])
         if want is float and isinstance(v, int) and not isinstance(v, bool):
             v = float(v)
         if not isinstance(v, want) or isinstance(v, bool) != (want is bool):
-            raise ParseError(f"setting {k!r} must be {want.__name__}, got {v!r}", where, 1, 1, str(k))
+            raise ParseError(f"setting {k!r} must be {want.__name__}, got {v!r}", where, line, col, str(k))
         if k in _CHOICES and v not in _CHOICES[k]:
-            raise ParseError(f"setting {k!r} must be one of {_CHOICES[k]}, got {v!r}", where, 1, 1, str(k))
+            raise ParseError(f"setting {k!r} must be one of {_CHOICES[k]}, got {v!r}", where, line, col, str(k))
+        if k in LIMITS and not LIMITS[k][0] <= v <= LIMITS[k][1]:
+            raise ParseError(f"setting {k!r} must be in {LIMITS[k][0]}..{LIMITS[k][1]}, got {v!r}", where, line, col,
+                             str(k))
         cfg[k] = v
     return cfg
 

@@ -23,13 +23,14 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import torch
 
 from ..execute import ExecutedShape, ExecutionPlan
-from ..lang import Block, Program
+from ..lang import Program
 from .grammar import TranslateLine, to_shapeassembly
+from .hierarchy import rename_block
 from .lang import MacroProgram, parameters
 from .library import Expansion, Library
 
@@ -183,35 +184,11 @@ def hierarchy_parameters(h, dtype: torch.dtype = torch.float32, device=None) -> 
     return torch.cat([program_parameters(p, dtype, device) for p in h.programs])
 
 
-def _renamed(block: Program, names, block_name: str):
-    from ..lang import Attach, Block, Cuboid, Squeeze
-
-    old = [s.name for s in block.statements if isinstance(s, Cuboid)][1:]
-    m = dict(zip(old, names))
-    m["bbox"] = "bbox"
-    out = []
-    for s in block.statements:
-        if isinstance(s, Cuboid):
-            out.append(replace(s, name=m[s.name]))
-        elif isinstance(s, Attach):
-            out.append(replace(s, a=m[s.a], b=m[s.b]))
-        elif isinstance(s, Squeeze):
-            out.append(replace(s, a=m[s.a], b=m[s.b], c=m[s.c]))
-        else:
-            out.append(replace(s, a=m[s.a]))
-    # declarations first, as in the corpus format: in a flat text, a cuboid the program names ``cube1``
-    # declared after ``reflect(cube0, X)`` loses its leaf to the copy (the executor's implicit copy slots);
-    # declared before, it keeps it. Moves keep their order.
-    order = [k for k, s in enumerate(out) if isinstance(s, Cuboid)] + [k for k, s in enumerate(out)
-                                                                       if not isinstance(s, Cuboid)]
-    return Block(block_name, tuple(out[k] for k in order)), order
-
-
 def compile_hierarchy(h, library: Library | None = None) -> CompiledHierarchy:
     """Compile every block of a hierarchical macro program (:func:`compile_program`) and join the flat
     programs into one hierarchical ShapeAssembly program (corpus format)."""
     blocks = [compile_program(p, library) for p in h.programs]
-    renamed = [_renamed(c.program.blocks[0], c.expansion.names, n) for c, n in zip(blocks, h.names)]
+    renamed = [rename_block(c.program.blocks[0], c.expansion.names, n) for c, n in zip(blocks, h.names)]
     sa = Program(tuple(b for b, _ in renamed), flat=False)
     rows = []
     for c, (_, order) in zip(blocks, renamed):

@@ -33,6 +33,7 @@ Example:
 """
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass
 
@@ -115,6 +116,58 @@ def check(h: MacroHierarchy, file: str = "<string>", header_lines=None) -> None:
                     bound[r] = bi
 
 
+def rename_block(block, names, block_name: str):
+    """A block's flat expansion with its cuboids named as the macro program binds them (``names``, per
+    non-bbox Cuboid line), declarations first; and the expansion line of each statement of the result."""
+    from ..lang import Attach, Block, Cuboid, Squeeze
+
+    old = [s.name for s in block.statements if isinstance(s, Cuboid)][1:]
+    m = dict(zip(old, names))
+    m["bbox"] = "bbox"
+    out = []
+    for s in block.statements:
+        if isinstance(s, Cuboid):
+            out.append(dataclasses.replace(s, name=m[s.name]))
+        elif isinstance(s, Attach):
+            out.append(dataclasses.replace(s, a=m[s.a], b=m[s.b]))
+        elif isinstance(s, Squeeze):
+            out.append(dataclasses.replace(s, a=m[s.a], b=m[s.b], c=m[s.c]))
+        else:
+            out.append(dataclasses.replace(s, a=m[s.a]))
+    # declarations first, as in the corpus format: in a flat text, a cuboid the program names ``cube1``
+    # declared after ``reflect(cube0, X)`` loses its leaf to the copy (the executor's implicit copy slots);
+    # declared before, it keeps it. Moves keep their order.
+    order = [k for k, s in enumerate(out) if isinstance(s, Cuboid)] + [k for k, s in enumerate(out)
+                                                                       if not isinstance(s, Cuboid)]
+    return Block(block_name, tuple(out[k] for k in order)), order
+
+
+
+def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header_lines=None) -> None:
+    """The ShapeAssembly limits of the program the hierarchy expands to (:func:`shapeprog.limits.check_tree`:
+    sub-program depth, executed cuboids and attach operations), each error at its block's header line."""
+    from .. import limits
+    from ..lang import Cuboid, block_rows
+    from .grammar import to_shapeassembly
+    from .library import Library
+
+    lib = Library() if library is None else library
+    header_lines = block_line_offsets(h) if header_lines is None else header_lines
+    blocks, parent = {}, {}
+    for bi, (program, name) in enumerate(zip(h.programs, h.names)):
+        loc = (header_lines[bi], 1, f"# {h.keys[bi]}")
+
+        def fail(i, reason, k, loc=loc):
+            raise ParseError(reason, file, *loc)
+
+        exp = lib.expand(program)
+        block, _ = rename_block(to_shapeassembly(exp.lines, check=False).blocks[0], exp.names, name)
+        blocks[name] = (loc, [(loc, slots, n) for slots, n in block_rows(block.statements, fail, names=False)])
+        parent.update((s.name, name) for s in block.statements
+                      if isinstance(s, Cuboid) and re.fullmatch(r"Program_\d+", s.name))
+    limits.check_tree(blocks, parent, file)
+
+
 def _parse_block(body: str, file: str, lib):
     """One block: on its own (it carries its definitions, which may repeat the library's), else with the
     library's functions."""
@@ -162,4 +215,5 @@ def parse(text: str, file: str = "<string>", library=None) -> MacroHierarchy:
             raise ParseError(e.reason, e.file, e.line + s + 1, e.column, e.token) from None
     h = MacroHierarchy(tuple(keys), tuple(programs))
     check(h, file, [s + 1 for s in starts])
+    check_limits(h, lib, file, [s + 1 for s in starts])
     return h

@@ -407,9 +407,9 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
 
     Raises:
         PointCloudError: not ``(N, 3)``, fewer than :data:`MIN_POINTS` points, a NaN or infinite coordinate,
-            all points at one place.
-        ValueError: the model decodes no shape (no cuboid) for this cloud (nor does the search find one), or a
-            bad ``search_schedule``.
+            all points at one place; or the model decodes no shape (no cuboid) for this cloud (nor does the
+            search find one).
+        ValueError: a bad ``search_schedule``.
     """
     x = _as_cloud(points)
     try:
@@ -452,7 +452,7 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         seconds_retrieval = time.perf_counter() - t3
     if program is None or len(_corners_of(program)) == 0:
         hint = "" if search else "; the latent search (search=True, CLI --search) looks for one near the predicted code"
-        raise ValueError(f"the {model.category} model decoded no shape for this cloud{hint}")
+        raise PointCloudError(f"the {model.category} model decoded no shape for this cloud{hint}", "points")
     canon, off = align_program(program)
     seconds = {"search" if search else "decode": time.perf_counter() - t0}
     if retrieval is not None:

@@ -92,15 +92,18 @@ def mutate(data: bytes, rng: random.Random, seeds: Sequence[bytes] = ()) -> byte
     return bytes(buf)
 
 
-def fuzz(target: Target, seconds: float | None = None, inputs: int | None = None, seed: int = 0) -> Stats:
-    """Run ``target`` on its seeds, then on mutations, for ``seconds`` or ``inputs`` (whichever ends first)."""
+def fuzz(target: Target, seconds: float | None = None, inputs: int | None = None, seed: int = 0,
+         min_inputs: int = 0) -> Stats:
+    """Run ``target`` on its seeds, then on mutations, for ``seconds`` or ``inputs`` (whichever ends first),
+    but never fewer than ``min_inputs`` inputs (however long they take)."""
     rng = random.Random(seed)
     stats = Stats(target.name)
     start = time.perf_counter()
     queue = list(target.seeds)
     while True:
         elapsed = time.perf_counter() - start
-        if (seconds is not None and elapsed >= seconds) or (inputs is not None and stats.inputs >= inputs):
+        if stats.inputs >= min_inputs and ((seconds is not None and elapsed >= seconds)
+                                           or (inputs is not None and stats.inputs >= inputs)):
             break
         data = queue.pop() if queue else (target.mutator or mutate)(rng.choice(target.seeds), rng, target.seeds)
         t0 = time.perf_counter()

@@ -15,6 +15,7 @@ import numpy as np
 
 from shapeio.files import InputError
 from shapeio.points import read_cloud
+from shapeprog.errors import PointCloudError
 
 from fuzz.engine import Target
 
@@ -97,4 +98,4 @@ def run_infer(data: bytes) -> list[float]:
 
 
 TARGETS = [Target("shapeio/cloud-files", seeds(), run, (InputError,), BOUND_S),
-           Target("pointcloud/infer", infer_seeds(), run_infer, (ValueError,), BOUND_S)]
+           Target("pointcloud/infer", infer_seeds(), run_infer, (PointCloudError,), BOUND_S)]

@@ -69,7 +69,8 @@ def test_check_corners_names_the_argument_and_the_place():
         check_corners(torch.zeros(1, 8, 3, dtype=torch.int64))
     with pytest.raises(TypeError, match="torch.Tensor"):
         check_corners(ok.numpy())
-    assert check_corners(ok.numpy(), arrays=True) is not None
+    arr = ok.numpy()
+    assert check_corners(arr, arrays=True) is arr  # returned unchanged
 
 
 def test_numpy_corners_casts_to_float64_and_rejects_empty():

@@ -103,3 +103,12 @@ def test_decode_names_the_bad_byte():
     e = ei.value
     assert (e.file, e.line, e.column) == ("p.txt", 2, 10) and "not UTF-8" in e.reason
     assert limits.decode("é\n".encode(), "p.txt") == "é\n"
+
+
+def test_a_long_chain_of_copies_within_the_limits_parses_and_executes():
+    """Each reflect copies the previous copy: the copy chain is as long as the program (no recursion limit)."""
+    n = limits.MAX_LINES - 3
+    text = HEAD + "".join(f"reflect(cube{k}, X)\n" for k in range(n))
+    cubes = execute(parse(text, "p.txt"))
+    assert len(cubes) == n + 1
+    compile_program(parse(text, "p.txt"))

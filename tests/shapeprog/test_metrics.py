@@ -126,12 +126,24 @@ def test_chamfer_identical_symmetric_and_grad():
     assert torch.autograd.gradcheck(lambda x: chamfer(x, b.detach()), (a,), eps=1e-7, atol=1e-6)
 
 
-def test_chamfer_large_clouds_bounded_memory():
+def test_chamfer_large_clouds_bounded_memory(monkeypatch):
+    import shapeprog.metrics as M
+
     g = torch.Generator().manual_seed(2)
     a, b = torch.rand(10000, 3, generator=g), torch.rand(10000, 3, generator=g)
     c = chamfer(a, b)
     # random uniform clouds in the unit cube: mean NN distance ~ 0.554 * n^(-1/3) ~ 0.026
     assert 0.04 < c.item() < 0.065
+    # the brute-force search never holds the 10^4 x 10^4 distance matrix: blocks of at most CHUNK_ELEMENTS
+    blocks, cdist = [], torch.cdist
+
+    def spy(x, y, **kw):
+        blocks.append(x.shape[-2] * y.shape[-2])
+        return cdist(x, y, **kw)
+
+    monkeypatch.setattr(M.torch, "cdist", spy)
+    assert chamfer(a, b, method="brute").item() == pytest.approx(c.item(), rel=1e-5)
+    assert len(blocks) > 2 and max(blocks) <= M.CHUNK_ELEMENTS < 10000 * 10000
 
 
 def test_chamfer_errors():

@@ -1,6 +1,7 @@
 """``train.py``: one LightningCLI runs every family's config (fit, resume, validate, TensorBoard)."""
 from pathlib import Path
 
+import pytest
 import yaml
 
 TINY = {"hidden": 16, "channels": [2, 2, 2], "embed": 8, "dropout": 0.0, "enc_dropout": 0.0}
@@ -35,6 +36,10 @@ def test_fit_resume_and_validate_through_the_one_cli(tmp_path, train_main):
     assert "val/chamfer" in cli.trainer.callback_metrics
     assert list((tmp_path / "tb").glob("version_0/events.out.tfevents.*"))
     assert (tmp_path / "tb" / "version_0" / "config.yaml").is_file()  # the resolved config beside the logs
+    before = (tmp_path / "ckpt" / "last.ckpt").read_bytes()
+    with pytest.raises(SystemExit, match="holds the checkpoints of an earlier run"):  # a new run never overwrites
+        train_main(["fit", "--config", str(config)])
+    assert (tmp_path / "ckpt" / "last.ckpt").read_bytes() == before
     resumed = train_main(["fit", "--config", str(config), "--trainer.max_steps", "3", "--ckpt_path", "last"])
     assert resumed.trainer.global_step == 3
     val = train_main(["validate", "--config", str(config), "--trainer.logger", "false",

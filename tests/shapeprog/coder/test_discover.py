@@ -137,6 +137,33 @@ def test_a_run_starts_from_an_earlier_library_and_its_programs(tmp_path, capsys)
         main(["discover-abstractions", "chair", "--start-from", "sofa", "--out", str(tmp_path / "z"), "--quiet"])
 
 
+def test_a_damaged_state_is_refused_naming_the_file(tmp_path):
+    from shapeprog.errors import ParseError
+
+    shapes = _chairs(3)
+    cfg = Config(rounds=1, n_proposals=10, n_abstractions=2, seed=1)
+    progs = [refactor(naive_program(s)[0], env=naive_program(s)[1]).expr for s in shapes]
+    start_from(tmp_path, shapes, Library(), progs, cfg)
+    good = json.loads((tmp_path / "state.json").read_text())
+    path = str(tmp_path / "state.json")
+
+    def refused(text: str) -> ParseError:
+        (tmp_path / "state.json").write_text(text)
+        with pytest.raises(ParseError) as e:
+            discover(shapes, cfg, out=tmp_path, log=None)
+        assert e.value.file == path
+        return e.value
+
+    e = refused(json.dumps(good)[:-5])
+    assert e.reason.startswith("not JSON") and e.line == 1 and e.column > 1
+    e = refused(json.dumps({k: v for k, v in good.items() if k != "weights"}))
+    assert "a damaged discovery state (KeyError: 'weights')" in e.reason
+    e = refused(json.dumps(dict(good, programs=["Union(" + good["programs"][0]] + good["programs"][1:])))
+    assert "its program 0 (shape 0)" in e.reason
+    e = refused(json.dumps(dict(good, library="Nope(F0: Float) = Cuboid(F0,F0,Q)")))
+    assert "its library" in e.reason
+
+
 def test_propose_ranks_candidates_and_respects_frequency():
     shapes = _chairs(6)
     progs = [refactor(*naive_program(s)[:1], env=naive_program(s)[1]).expr for s in shapes]
@@ -199,6 +226,20 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
     bad.write_text("Legs(w: Float) = Cubiod(w,w,w)\n")
     assert main(["abstract-infer", "chair/401", "--library", str(bad)]) == 2
     assert "bad.txt:1:" in capsys.readouterr().err
+    # a shape given as a file: its one non-blank line, errors at that line; more than one shape is refused
+    shape = tmp_path / "shape.txt"
+    shape.write_text("\n\n" + data.read_lines("chair")[400] + "\n")
+    assert main(["abstract-infer", str(shape), "--library", str(lib)]) == 0
+    assert capsys.readouterr().out.startswith("program:")
+    shape.write_text("\n\nkey_0_1:Cuboid(0.1,0.2)\n")
+    assert main(["abstract-infer", str(shape), "--library", str(lib)]) == 2
+    assert "shape.txt:3:" in capsys.readouterr().err
+    shape.write_text(data.read_lines("chair")[400] + "\n\n" + data.read_lines("chair")[401] + "\n")
+    with pytest.raises(SystemExit, match="2 shape lines .the second at line 3."):
+        main(["abstract-infer", str(shape), "--library", str(lib)])
+    shape.write_text("\n \n")
+    with pytest.raises(SystemExit, match="shape.txt: no shape line"):
+        main(["abstract-infer", str(shape), "--library", str(lib)])
     (tmp_path / "run").mkdir()
     (tmp_path / "run" / "library.txt").write_text("# mine\n")
     assert main(["discover-abstractions", "chair", "--out", str(tmp_path / "run"), "--shapes", "2", "--quiet"]) == 1

@@ -218,3 +218,24 @@ def test_library_validates_constructed_abstractions():
         Library().add(Abstraction("A", (Param("a"),), Call("Cuboid", (Var("a"), Var("z"), Var("a")))))
     with pytest.raises(ProgramError, match="unknown function 'B'"):  # no forward references
         Library().add(Abstraction("A", (Param("a"),), Call("B", (Var("a"),))))
+
+
+def test_library_limits_hold_after_expansion_and_are_located():
+    from shapeprog.errors import ParseError
+
+    def nest(inner: str, n: int = 100) -> str:
+        return "Move(" * n + inner + ",0.0,0.0,0.0)" * n
+
+    lines = ["A0(F0: Float) = " + nest("Cuboid(F0,F0,F0)")]  # depth 102
+    lines.append("A1(F0: Float) = " + nest("A0(F0)"))  # 202 when expanded
+    lib = Library.from_text("\n".join(lines) + "\n")
+    assert [lib.expanded_depth(a.body) for a in lib] == [102, 202]
+    lines.append("A2(F0: Float) = " + nest("A1(F0)"))  # 302: over MAX_DEPTH although each line is shallow
+    with pytest.raises(ParseError) as e:
+        Library.from_text("\n".join(lines) + "\n", file="lib.txt")
+    assert (e.value.file, e.value.line, e.value.column, e.value.token) == ("lib.txt", 3, 1, "A2")
+    assert "MAX_DEPTH" in e.value.reason
+    many = "".join(f"B{k}(F0: Float) = Cuboid(F0,F0,F0)\n" for k in range(limits.MAX_ABSTRACTIONS + 1))
+    with pytest.raises(ParseError) as e:
+        Library.from_text(many, file="lib.txt")
+    assert e.value.line == limits.MAX_ABSTRACTIONS + 1 and "MAX_ABSTRACTIONS" in e.value.reason

@@ -26,7 +26,8 @@ def test_naive_cost_of_the_discovery_shapes_is_the_papers_input_prims_row():
 
 
 def test_naive_cost_by_hand_and_as_a_program():
-    assert naive_cost([(1, 1, 1, 0, 0, 0, 0, 0, 0)]) == naive_cost([(1, 1, 1, 0, 0, 0, 0, 0, 0)])
+    one = naive_cost([(1, 1, 1, 0, 0, 0, 0, 0, 0)])  # one Cuboid at the origin: 1 function, 3 dims
+    assert (one.fn, one.floats, one.cats) == (1, 3, 0) and one.cost() == 1 + 2 * 3
     c = naive_cost([(1, 1, 1, 0, 0, 0, 0, 0, 0), (0.5, 0.2, 0.3, 0.1, 0, 0, 0.2, 0, -0.1)])
     # Union, 2 Cuboids, 1 Move, 2 Rotates; 3 + 3 dims, 3 offsets, 2 angles; 2 axes
     assert (c.fn, c.floats, c.cats) == (6, 11, 2) and c.cost() == 6 + 22 + 1

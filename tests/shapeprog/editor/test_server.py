@@ -77,7 +77,8 @@ def test_a_refused_edit_shows_the_error_and_keeps_the_geometry(app):
     assert not app.run_text(CHAIR.replace("squeeze(", "squeez(", 1))
     assert "chair/173.txt:" in app.state["error"] and "unknown command 'squeez'" in app.state["error"]
     assert np.array_equal(app.state["corners"], before) and app.state["version"] == version
-    assert app.run_text(CHAIR) is True or app.state["error"] is None
+    assert app.run_text(CHAIR) is True and app.state["error"] is None  # a good text afterwards is taken
+    assert np.allclose(app.state["corners"], before)
 
 
 def test_a_refused_control_value_is_shown_and_the_control_put_back(app):
@@ -313,10 +314,13 @@ def test_the_edit_command_serves_until_interrupted(argv, tmp_path):
     finally:
         proc.send_signal(signal.SIGINT)
         try:
-            proc.wait(timeout=30)
+            code = proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+            code = None
+    err = proc.stderr.read()
+    assert code == 0 and "Traceback" not in err, err  # an interrupt ends the server cleanly
 
 
 def test_the_edit_command_refuses_bad_arguments(tmp_path, capsys):
@@ -358,12 +362,12 @@ def test_a_websocket_client_receives_the_new_geometry(app):
     zstandard = pytest.importorskip("zstandard")
     websockets = pytest.importorskip("websockets")
 
+    if not viser.__version__.startswith("1.1."):
+        pytest.skip(f"viser {viser.__version__}'s wire format may not be the one this test decodes (viser 1.1's)")
+
     def decode(m):
         n, c = int.from_bytes(m[:8], "little"), int.from_bytes(m[8:16], "little")
-        try:
-            data = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(m[16:16 + c], max_output_size=n))
-        except Exception as e:  # noqa: BLE001 - another viser version
-            pytest.skip(f"viser {viser.__version__}'s wire format is not the one this test decodes ({e})")
+        data = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(m[16:16 + c], max_output_size=n))
         return [x for batch in (data if isinstance(data, list) else [data]) for x in batch["messages"]]
 
     async def drain(ws, seconds):

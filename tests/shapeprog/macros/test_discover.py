@@ -117,6 +117,22 @@ def test_config_file_and_errors(tmp_path):
         load_config(None, num_rounds="5")
     with pytest.raises(ParseError, match="one of"):
         load_config(None, selection="best")
+    # errors at the setting's own line; numbers outside their range; bad YAML at its place; bytes not UTF-8
+    bad.write_text("num_rounds: 3\n\n  # spacing\nabs_beam_size: 0\n")
+    with pytest.raises(ParseError, match=r"'abs_beam_size' must be in 1\.\.1000, got 0") as e:
+        load_config(bad)
+    assert (e.value.line, e.value.column) == (4, 1)
+    bad.write_text("num_rounds: 3\nchunk: [1\n")
+    with pytest.raises(ParseError, match="not YAML") as e:
+        load_config(bad)
+    assert e.value.line >= 2
+    bad.write_bytes(b"num_rounds: 3\nprec: \xff\n")
+    with pytest.raises(ParseError, match="not UTF-8") as e:
+        load_config(bad)
+    assert e.value.line == 2
+    from shapeprog.macros.discover import LIMITS
+    assert set(LIMITS) == {k for k, v in DEFAULTS.items() if type(v) in (int, float)}
+    assert all(lo <= DEFAULTS[k] <= hi for k, (lo, hi) in LIMITS.items())
 
 
 def test_generalise_snaps_coefficients_and_edits():

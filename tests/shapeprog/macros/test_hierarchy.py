@@ -69,4 +69,29 @@ def test_a_definition_clashing_with_the_library_is_refused(r173):
     text = text.replace("Cuboid(bb_x, x0,", "Cuboid(bb_x, y0,", 1)
     with pytest.raises(ParseError, match="defines differently"):
         H.parse(text, "m.txt", LIB)
-    assert H.parse(text, "m.txt") is not None  # alone it is a valid program
+    alone = H.parse(text, "m.txt")  # alone it is a valid program, with its own definition
+    assert alone.keys == H.parse(r173.text, "m.txt").keys
+    assert any(d.name == name and d.params[0].name == "y0" for d in alone.programs[0].defs)
+
+
+def _nested_copies(levels: int) -> str:
+    """Program_k holds Program_{k+1} and 256 translated copies of it: 257**levels leaf cuboids."""
+    out = []
+    for k in range(levels + 1):
+        body = "bbox = Cuboid(1.0, 1.0, 1.0, True)\n"
+        if k < levels:
+            body += (f"Program_{k + 1} = Cuboid(0.5, 0.5, 0.5, True)\nattach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n"
+                     "translate(X, 256, 0.9)\n")
+        else:
+            body += "c = Cuboid(0.1, 0.5, 0.1, True)\nattach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n"
+        out.append(f"# Program_{k}\n{body}")
+    return "\n".join(out)
+
+
+def test_the_shapeassembly_limits_hold_for_the_program_a_hierarchy_expands_to():
+    one = H.parse(_nested_copies(1), "h.txt")
+    assert execute_hierarchy(one).corners.shape[0] == 257
+    with pytest.raises(ParseError) as e:  # 257**2 leaves: refused before anything executes
+        H.parse(_nested_copies(2), "h.txt")
+    assert (e.value.file, e.value.line, e.value.token) == ("h.txt", 1, "# Program_0")
+    assert "MAX_CUBOIDS" in e.value.reason
