@@ -34,7 +34,8 @@ def test_a_cloud_depends_only_on_category_id_and_seed():
     assert a.shape == (200, 3) and a.dtype == np.float32
     assert np.array_equal(a, corpus_cloud("chair", IDS[0], n_points=200))
     assert not np.array_equal(a, corpus_cloud("chair", IDS[0], n_points=200, seed=1))
-    assert cloud_seed("chair", 173, 0) == cloud_seed("chair", 173, 0) != cloud_seed("table", 173, 0)
+    # pinned: the same in every process and Python version (a salted hash would change between runs)
+    assert (cloud_seed("chair", 173, 0), cloud_seed("table", 173, 0)) == (2054223066050137686, 3659894705287828627)
     # order and executor do not matter
     ids = IDS[:4]
     fwd = sample_clouds("chair", ids, n_points=200)

@@ -63,6 +63,8 @@ def test_evaluate_and_write_both_layouts(tmp_path):
     assert "ShapeMOD Table 3 layout" in text and "ShapeAssembly Table 7 layout" in text
     assert "| ShapeMOD paper, No Macros | 44.2 | 54.8 | 93.7 | 83.6 |" in text
     assert "Nearest training shape (retrieval)" in text
+    m = res.rows["model"]  # the measured row is the one written, number for number
+    assert f"| {m['cd']:.1f} | {m['fscore']:.1f} | {m['rooted']:.1f} | n/a |" in text
     assert res.settings["macros"] is False and "ShapeMOD (macros)" not in text
     # a model of macro programs labels its rows and shows the paper's ShapeMOD row beside them
     res.settings["macros"] = True
