@@ -402,9 +402,8 @@ class Library:
         object.__setattr__(self, "_table", table)
         object.__setattr__(self, "_depth", {})
         for ab in self.abstractions:
-            self._validate(ab)
+            self._depth[ab.name] = self._validate(ab)
             table[ab.name] = ab
-            self._depth[ab.name] = self.expanded_depth(ab.body)
 
     def expanded_depth(self, expr: Expr) -> int:
         """A bound on the depth of ``expr`` with every abstraction call expanded (the root at depth 1):
@@ -415,7 +414,8 @@ class Library:
         body = self._depth.get(expr.fn)
         return 1 + args if body is None else body + max(args - 1, 0)
 
-    def _validate(self, ab: Abstraction) -> None:
+    def _validate(self, ab: Abstraction) -> int:
+        """Check ``ab`` against this library; returns its body's expanded depth bound."""
         if not isinstance(ab, Abstraction):
             raise ProgramError(f"not an Abstraction: {type(ab).__name__}")
         if not _NAME.match(ab.name) or ab.name in AXES or ab.name.startswith("INT#"):
@@ -440,8 +440,10 @@ class Library:
         unused = [n for n in declared if n not in variables(ab.body)]
         if unused:
             raise ProgramError(f"{ab.name}: parameter(s) {', '.join(unused)} not used in the body")
-        if self.expanded_depth(ab.body) > limits.MAX_DEPTH:
+        depth = self.expanded_depth(ab.body)
+        if depth > limits.MAX_DEPTH:
             raise ProgramError(f"{ab.name}: its body expands to a depth over {limits.MAX_DEPTH} (MAX_DEPTH)")
+        return depth
 
     def signature(self, name: str) -> Signature | None:
         """The signature of base function or abstraction ``name``, or None."""

@@ -142,7 +142,6 @@ def rename_block(block, names, block_name: str):
     return Block(block_name, tuple(out[k] for k in order)), order
 
 
-
 def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header_lines=None) -> None:
     """The ShapeAssembly limits of the program the hierarchy expands to (:func:`shapeprog.limits.check_tree`:
     sub-program depth, executed cuboids and attach operations), each error at its block's header line."""
