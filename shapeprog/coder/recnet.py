@@ -52,7 +52,7 @@ from torch.nn import functional as F
 from .lang import (FLOAT_CONSTANTS, FLOAT_FN, AxisConst, Call, Expr, IntConst, Library, Num, ProgramError, Type,
                    walk)
 
-__all__ = ["COUNT_TOKENS", "MAX_FLOAT_TERMS", "MAX_TOKENS", "NetConfig", "RecognitionNet", "Scene", "Vocab",
+__all__ = ["COUNT_TOKENS", "MAX_FLOAT_TERMS", "MAX_TOKENS", "NetConfig", "RecognitionNet", "Scene", "TargetError", "Vocab",
            "decode_tokens", "encode_scene", "encode_target", "load_checkpoint", "sample", "save_checkpoint"]
 
 #: Tokens of one expression at most, the start token included.
@@ -61,6 +61,20 @@ MAX_TOKENS = 32
 MAX_FLOAT_TERMS = 3
 #: The counts the network can write.
 COUNT_TOKENS = (1, 2, 3, 4, 5, 6)
+
+
+class TargetError(ProgramError):
+    """A target the network cannot be trained on; ``reason`` names the kind (counted by
+    :func:`~shapeprog.coder.train.tensorize`)."""
+
+    def __init__(self, message: str, reason: str):
+        super().__init__(message)
+        self.reason = reason
+
+    def __reduce__(self):  # picklable, so that it crosses a process pool with its reason
+        return type(self), (str(self), self.reason)
+
+
 START, VAR = "<start>", "<var>"
 
 
@@ -108,7 +122,7 @@ class Vocab:
         try:
             return self._index()[token]
         except KeyError:
-            raise ProgramError(f"token {token!r} is not in the vocabulary") from None
+            raise TargetError(f"token {token!r} is not in the vocabulary", "token not in the vocabulary") from None
 
     def _index(self) -> dict:
         d = self.__dict__.get("_idx")
@@ -155,7 +169,7 @@ def encode_target(expr: Expr, scene_prims, vocab: Vocab, library: Library | None
     ``SymTrans`` distance parameters).
 
     Raises:
-        ProgramError: a token outside the vocabulary, or more than :data:`MAX_TOKENS` - 1 tokens.
+        TargetError: a token outside the vocabulary, or more than :data:`MAX_TOKENS` - 1 tokens.
     """
     from .dream import LITERAL_TOL, distance_literals
 
@@ -181,9 +195,10 @@ def encode_target(expr: Expr, scene_prims, vocab: Vocab, library: Library | None
         elif isinstance(n, IntConst):
             toks.append(vocab.index(f"INT#{n.value}#")), ranks.append(-1)
         else:
-            raise ProgramError(f"a target has no variables; got {n!r}")
+            raise TargetError(f"a target has no variables; got {n!r}", "target not encodable")
     if len(toks) > MAX_TOKENS - 1:
-        raise ProgramError(f"the target has {len(toks)} tokens; at most {MAX_TOKENS - 1} (MAX_TOKENS)")
+        raise TargetError(f"the target has {len(toks)} tokens; at most {MAX_TOKENS - 1} (MAX_TOKENS)",
+                          "target over MAX_TOKENS")
     return toks, ranks
 
 

@@ -33,8 +33,7 @@ from typing import Callable, Sequence
 
 import torch
 
-from .lang import ProgramError
-from .recnet import MAX_TOKENS, RecognitionNet, Vocab, encode_scene, encode_target
+from .recnet import MAX_TOKENS, RecognitionNet, TargetError, Vocab, encode_scene, encode_target
 
 __all__ = ["BUCKET_GROUP", "CPU", "PAPER", "Batch", "TrainConfig", "TrainLog", "batch_loss", "batches", "device_of",
            "tensorize", "train"]
@@ -147,10 +146,8 @@ def tensorize(pairs: Sequence, vocab: Vocab, inputs: int, library=None, skipped:
             continue
         try:
             toks, rks = encode_target(target, sc, vocab, library)
-        except ProgramError as e:  # a token outside the vocabulary, a target over MAX_TOKENS
-            reason = str(e)
-            skipped["target over MAX_TOKENS" if "MAX_TOKENS" in reason else
-                    reason if "not in the vocabulary" in reason else "target not encodable"] += 1
+        except TargetError as e:  # a token outside the vocabulary, a target over MAX_TOKENS
+            skipped[e.reason] += 1
             continue
         rows.append((sc, toks, rks))
     n, t = len(rows), MAX_TOKENS

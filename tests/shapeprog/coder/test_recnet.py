@@ -376,3 +376,26 @@ def test_network_from_a_later_round_and_repeated_wakes_resume_where_they_stopped
     for bad in ({"wake_repeats": 0}, {"network_from": -1}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             Config(**bad)
+
+
+def test_targets_left_out_of_training_are_counted_by_kind():
+    import pickle
+    from collections import Counter
+
+    from shapeprog.coder.recnet import TargetError
+
+    vocab = Vocab.of(Library())
+    prims = [(1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
+    ok = parse("Cuboid(1.0,1.0,1.0)", Library())
+    long_ = "Cuboid(1.0,1.0,1.0)"
+    for _ in range(12):  # each Move adds 4 tokens: 49 in all, over MAX_TOKENS
+        long_ = f"Move({long_},0.0,0.0,0.0)"
+    other = Library().add(parse_abstraction("Foo(a: Float) = Cuboid(a,a,a)"))
+    unknown = parse("Foo(1.0)", other)
+    skipped = Counter()
+    b = tensorize([(prims, ok), (prims, parse(long_, Library())), (prims, parse(long_, Library())),
+                   (prims, unknown)], vocab, 64, None, skipped)
+    assert len(b.ranks) == 1
+    assert skipped == Counter({"target over MAX_TOKENS": 2, "token not in the vocabulary": 1})
+    e = pickle.loads(pickle.dumps(TargetError("m", "target over MAX_TOKENS")))
+    assert isinstance(e, ProgramError) and str(e) == "m" and e.reason == "target over MAX_TOKENS"
