@@ -417,6 +417,8 @@ class VAEModule(L.LightningModule):
         hidden_dim: H of :class:`~shapeprog.vae.model.VAE` (256 in the reference).
         lr: Adam's learning rate (1e-4); no decay.
         eps: Adam's eps (1e-6).
+        weight_decay: 0 (the reference): Adam without weight decay; above 0, AdamW's decoupled weight decay
+            of this factor (ours, a regulariser for small corpora such as the macro-refactored ones).
         loss_weights: weights by term name that replace those of
             :data:`~shapeprog.vae.losses.LOSS_WEIGHTS` (the others are kept).
         kl_weight: the KL term's weight (default: that of ``loss_weights``, else 0.1).
@@ -439,7 +441,7 @@ class VAEModule(L.LightningModule):
     """
 
     def __init__(self, category: str = "chair", hidden_dim: int = 256, lr: float = 1e-4, eps: float = 1e-6,
-                 loss_weights: dict[str, float] | None = None, kl_weight: float | None = None, batch_shapes: int = 1,
+                 weight_decay: float = 0.0, loss_weights: dict[str, float] | None = None, kl_weight: float | None = None, batch_shapes: int = 1,
                  recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 10_000,
                  image_shapes: int = 8, image_size: int = 128, seed: int = 42, init: str | None = None,
                  library: str | None = None):
@@ -447,6 +449,8 @@ class VAEModule(L.LightningModule):
         _check_category(category)
         if int(batch_shapes) < 1:
             raise ValueError(f"batch_shapes must be >= 1, got {batch_shapes!r}")
+        if not 0.0 <= float(weight_decay) < 1.0:
+            raise ValueError(f"weight_decay must be in [0, 1), got {weight_decay!r}")
         base_weights = LOSS_WEIGHTS if library is None else MACRO_LOSS_WEIGHTS
         unknown = sorted(set(loss_weights or {}) - set(base_weights))
         if unknown:
@@ -615,4 +619,8 @@ class VAEModule(L.LightningModule):
 
     def configure_optimizers(self):
         fused = self.device.type in ("cpu", "cuda")
+        wd = float(self.hparams.get("weight_decay", 0.0))  # checkpoints written before the option have none
+        if wd > 0:
+            return torch.optim.AdamW(self.parameters(), lr=self.hparams.lr, eps=self.hparams.eps, weight_decay=wd,
+                                     fused=fused)
         return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, eps=self.hparams.eps, fused=fused)

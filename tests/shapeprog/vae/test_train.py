@@ -231,6 +231,26 @@ def test_checkpoint_info_and_refusals():
         VAEModule("chair", loss_weights={"bbox": 1.0})
 
 
+def test_weight_decay_is_decoupled_and_zero_keeps_the_reference_adam():
+    torch.manual_seed(0)
+    ref = VAEModule("table", hidden_dim=8)
+    opt = ref.configure_optimizers()
+    assert type(opt) is torch.optim.Adam and opt.defaults["weight_decay"] == 0
+    wd = VAEModule("table", hidden_dim=8, weight_decay=0.01)
+    opt = wd.configure_optimizers()
+    assert type(opt) is torch.optim.AdamW and opt.defaults["weight_decay"] == 0.01
+    # with zero gradients, one AdamW step shrinks every weight by exactly lr * weight_decay
+    p = next(wd.parameters())
+    before = p.detach().clone()
+    for q in wd.parameters():
+        q.grad = torch.zeros_like(q)
+    opt.step()
+    assert torch.allclose(p.detach(), before * (1 - 1e-4 * 0.01), rtol=0, atol=1e-12)
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="weight_decay must be in"):
+            VAEModule("table", hidden_dim=8, weight_decay=bad)
+
+
 def test_init_starts_from_weights_and_refuses_another_vae(tmp_path):
     from shapeprog.vae.pretrained import save_weights
     torch.manual_seed(0)
