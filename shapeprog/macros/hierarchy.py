@@ -142,9 +142,11 @@ def rename_block(block, names, block_name: str):
     return Block(block_name, tuple(out[k] for k in order)), order
 
 
-def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header_lines=None) -> None:
+def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header_lines=None,
+                 expansions=None) -> None:
     """The ShapeAssembly limits of the program the hierarchy expands to (:func:`shapeprog.limits.check_tree`:
-    sub-program depth, executed cuboids and attach operations), each error at its block's header line."""
+    sub-program depth, executed cuboids and attach operations), each error at its block's header line.
+    ``expansions``: each block's :meth:`~shapeprog.macros.library.Library.expand` when the caller has them."""
     from .. import limits
     from ..lang import Cuboid, block_rows
     from .grammar import to_shapeassembly
@@ -159,7 +161,7 @@ def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header
         def fail(i, reason, k, loc=loc):
             raise ParseError(reason, file, *loc)
 
-        exp = lib.expand(program)
+        exp = lib.expand(program) if expansions is None else expansions[bi]
         block, _ = rename_block(to_shapeassembly(exp.lines, check=False).blocks[0], exp.names, name)
         blocks[name] = (loc, [(loc, slots, n) for slots, n in block_rows(block.statements, fail, names=False)])
         parent.update((s.name, name) for s in block.statements
@@ -167,23 +169,23 @@ def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header
     limits.check_tree(blocks, parent, file)
 
 
-def _parse_block(body: str, file: str, lib):
-    """One block: on its own (it carries its definitions, which may repeat the library's), else with the
-    library's functions."""
+def _parse_block(body: str, file: str, lib) -> tuple:
+    """``(program, expansion)`` of one block: on its own (it carries its definitions, which may repeat the
+    library's), else with the library's functions."""
     from .lang import MacroError
     from .library import Library
 
     try:
-        program = Library().parse(body, file)
+        program, exp = Library().parse_expanded(body, file)
     except ParseError:
-        return lib.parse(body, file)
+        return lib.parse_expanded(body, file)
     try:
-        lib.with_program(program)
+        lib.with_program(program)  # the same definitions as the library's: the same expansion
     except MacroError as e:
         d = next(k for k, d in enumerate(program.defs) if d.name == e.macro)
         line = 1 + sum(x.count("\n") + 1 for x in map(def_text, program.defs[:d]))
         raise ParseError(e.reason, file, line, 5, e.macro) from None
-    return program
+    return program, exp
 
 
 def parse(text: str, file: str = "<string>", library=None) -> MacroHierarchy:
@@ -203,16 +205,17 @@ def parse(text: str, file: str = "<string>", library=None) -> MacroHierarchy:
     for i, ln in enumerate(lines[:starts[0]]):
         if ln.strip() and not ln.lstrip().startswith("#"):
             raise ParseError("text before the first block header ('# Program_0')", file, i + 1, 1, ln.strip())
-    keys, programs = [], []
+    keys, programs, expansions = [], [], []
     for n, s in enumerate(starts):
         end = starts[n + 1] if n + 1 < len(starts) else len(lines)
         keys.append(HEADER.fullmatch(lines[s]).group("key"))
         body = "\n".join(lines[s + 1:end])
         try:
-            programs.append(_parse_block(body, file, lib))
+            program, exp = _parse_block(body, file, lib)
+            programs.append(program), expansions.append(exp)
         except ParseError as e:
             raise ParseError(e.reason, e.file, e.line + s + 1, e.column, e.token) from None
     h = MacroHierarchy(tuple(keys), tuple(programs))
     check(h, file, [s + 1 for s in starts])
-    check_limits(h, lib, file, [s + 1 for s in starts])
+    check_limits(h, lib, file, [s + 1 for s in starts], expansions)
     return h

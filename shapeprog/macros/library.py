@@ -255,16 +255,23 @@ class Library:
             ParseError: at the offending line and token (syntax, names, types, and expansion errors
                 such as an attach to its own subject or a fractional translate count).
         """
-        program, where, _ = _parse(text, file, self.infos())
         if not check:
-            return program
+            return _parse(text, file, self.infos())[0]
+        return self.parse_expanded(text, file)[0]
+
+    def parse_expanded(self, text: str, file: str = "<string>") -> tuple:
+        """``(program, expansion)``: :meth:`parse` with its check, and the :meth:`expand` it made.
+
+        Raises:
+            ParseError: as :meth:`parse`.
+        """
+        program, where, _ = _parse(text, file, self.infos())
         try:
-            self.expand(program)
+            return program, self.expand(program)
         except MacroError as e:
             line, toks, fn, _, _ = where[(None, e.index)]
             tok = toks[e.arg] if e.arg is not None and e.arg < len(toks) else fn
             raise ParseError(e.reason, file, line, tok[2], tok[1]) from None
-        return program
 
     # -- expansion
     def expand_macro(self, name: str) -> MacroDef:

@@ -31,6 +31,18 @@ def test_refactor_text_round_trips_with_and_without_the_library(r173):
     assert "Program_1" in h.programs[0].lines[1].rets
 
 
+def test_parsing_expands_each_block_once(r173, monkeypatch):
+    from shapeprog.macros.library import Library as Lib
+
+    calls = []
+    real = Lib.expand
+    monkeypatch.setattr(Lib, "expand", lambda self, program: calls.append(program) or real(self, program))
+    for lib in (LIB, None):
+        calls.clear()
+        h = H.parse(r173.text, "m.txt", lib)
+        assert len(calls) == len(h.programs) == 2  # the check of each block, reused by the limits check
+
+
 def test_hierarchy_executes_as_its_shapeassembly_program():
     h = H.parse(SMALL)
     c = compile_hierarchy(h)
