@@ -36,7 +36,7 @@ from torch import nn
 
 from ..macros.lang import AXIS, BOOL, CUBE, FACE, FLOAT, TYPES
 from .layout import GROUPS, LineLayout, MacroNode
-from .model import MLP, NodeOutput, Sampler, VAEOutput, one_hot_argmax, reparameterize
+from .model import MLP, NodeOutput, Sampler, VAEOutput, check_dropout, one_hot_argmax, reparameterize
 
 __all__ = ["MacroDecoder", "MacroEncoder", "MacroVAE"]
 
@@ -90,12 +90,14 @@ class MacroDecoder(nn.Module):
     Args:
         layout: the line layout.
         hidden_dim: H.
+        dropout: dropout on the GRU's input embeddings in training (as the base decoder's; 0: none).
     """
 
-    def __init__(self, layout: LineLayout, hidden_dim: int = 256):
+    def __init__(self, layout: LineLayout, hidden_dim: int = 256, dropout: float = 0.0):
         super().__init__()
         h, lay = hidden_dim, layout
         self.layout, self.hidden_dim = layout, h
+        self.input_dropout = nn.Dropout(check_dropout(dropout))
         n_cmd, n_cube = len(lay.commands), lay.counts[CUBE] * GROUPS[CUBE]
         self.bbdimNet = MLP(h, h, h, 3)  # noqa: N815 - the base decoder's name
         self.gru = nn.GRU(h, h, batch_first=True)
@@ -112,7 +114,7 @@ class MacroDecoder(nn.Module):
         """The GRU's input: ``inp_net`` of the line (*, width), the bbox dims (*, 3) and the depth one-hot."""
         hier = inp.new_zeros(*inp.shape[:-1], 3)
         hier[..., min(int(depth), 2)] = 1.0
-        return self.inp_net(torch.cat([inp, bbox_dims, hier], dim=-1))
+        return self.input_dropout(self.inp_net(torch.cat([inp, bbox_dims, hier], dim=-1)))
 
     def heads(self, out: torch.Tensor, bbox_dims: torch.Tensor, teacher: torch.Tensor | None = None) -> torch.Tensor:
         """The line vectors (*, width) predicted from GRU outputs (*, H); ``teacher`` (*, width) gives the
@@ -183,13 +185,14 @@ class MacroVAE(nn.Module):
     Args:
         layout: the library's :class:`~shapeprog.vae.layout.LineLayout`.
         hidden_dim: H.
+        dropout: the decoder's input dropout in training (:class:`MacroDecoder`).
     """
 
-    def __init__(self, layout: LineLayout, hidden_dim: int = 256):
+    def __init__(self, layout: LineLayout, hidden_dim: int = 256, dropout: float = 0.0):
         super().__init__()
         self.layout = layout
         self.encoder = MacroEncoder(layout, hidden_dim)
-        self.decoder = MacroDecoder(layout, hidden_dim)
+        self.decoder = MacroDecoder(layout, hidden_dim, dropout)
 
     @property
     def library(self):

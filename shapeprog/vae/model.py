@@ -30,6 +30,17 @@ __all__ = ["MLP", "Decoder", "DecoderStep", "Encoder", "NodeOutput", "Sampler", 
            "prediction_tree"]
 
 
+def check_dropout(p: float) -> float:
+    """``p`` as a float in [0, 1).
+
+    Raises:
+        ValueError: outside [0, 1).
+    """
+    if not 0.0 <= float(p) < 1.0:
+        raise ValueError(f"dropout must be in [0, 1), got {p!r}")
+    return float(p)
+
+
 class MLP(nn.Module):
     """Three Linear layers with leaky-ReLU(0.2) after the first two: ``(*, in) -> (*, out)``."""
 
@@ -127,12 +138,15 @@ class Decoder(nn.Module):
 
     Args:
         hidden_dim: H (256 in the reference: 1,406,403 parameters).
+        dropout: dropout on the GRU's input embeddings in training (0, the reference: none; ours, a
+            regulariser; it has no weights, so it does not change the state dict).
     """
 
-    def __init__(self, hidden_dim: int = 256):
+    def __init__(self, hidden_dim: int = 256, dropout: float = 0.0):
         super().__init__()
         h = hidden_dim
         self.hidden_dim = h
+        self.input_dropout = nn.Dropout(check_dropout(dropout))
         self.bbdimNet = MLP(h, h, h, 3)  # noqa: N815 - the reference's state_dict key
         self.gru = nn.GRU(h, h, batch_first=True)
         self.inp_net = MLP(LINE_DIM + 3 + 3, h, h, h)
@@ -183,7 +197,7 @@ class Decoder(nn.Module):
         """
         hier = inp.new_zeros(*inp.shape[:-1], 3)
         hier[..., min(int(depth), 2)] = 1.0
-        return self.inp_net(torch.cat([inp, bbox_dims, hier], dim=-1))
+        return self.input_dropout(self.inp_net(torch.cat([inp, bbox_dims, hier], dim=-1)))
 
     def heads(self, out: torch.Tensor, bbox_dims: torch.Tensor, teacher: torch.Tensor | None = None) -> torch.Tensor:
         """The line vector predicted from GRU outputs, one head per field (no recurrence: any leading shape).
@@ -289,12 +303,13 @@ class VAE(nn.Module):
 
     Args:
         hidden_dim: H, the code, latent and GRU size (256 in the reference).
+        dropout: the decoder's input dropout in training (:class:`Decoder`; 0 in the reference).
     """
 
-    def __init__(self, hidden_dim: int = 256):
+    def __init__(self, hidden_dim: int = 256, dropout: float = 0.0):
         super().__init__()
         self.encoder = Encoder(hidden_dim)
-        self.decoder = Decoder(hidden_dim)
+        self.decoder = Decoder(hidden_dim, dropout)
 
     def encode(self, tree: VectorNode, sample: bool = False,
                generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -419,6 +419,7 @@ class VAEModule(L.LightningModule):
         eps: Adam's eps (1e-6).
         weight_decay: 0 (the reference): Adam without weight decay; above 0, AdamW's decoupled weight decay
             of this factor (ours, a regulariser for small corpora such as the macro-refactored ones).
+        dropout: dropout on the decoder's GRU input embeddings in training (0, the reference: none; ours).
         loss_weights: weights by term name that replace those of
             :data:`~shapeprog.vae.losses.LOSS_WEIGHTS` (the others are kept).
         kl_weight: the KL term's weight (default: that of ``loss_weights``, else 0.1).
@@ -441,7 +442,8 @@ class VAEModule(L.LightningModule):
     """
 
     def __init__(self, category: str = "chair", hidden_dim: int = 256, lr: float = 1e-4, eps: float = 1e-6,
-                 weight_decay: float = 0.0, loss_weights: dict[str, float] | None = None, kl_weight: float | None = None, batch_shapes: int = 1,
+                 weight_decay: float = 0.0, dropout: float = 0.0, loss_weights: dict[str, float] | None = None,
+                 kl_weight: float | None = None, batch_shapes: int = 1,
                  recon_every_n_epochs: int = 5, recon_shapes: int = 32, recon_points: int = 10_000,
                  image_shapes: int = 8, image_size: int = 128, seed: int = 42, init: str | None = None,
                  library: str | None = None):
@@ -460,7 +462,7 @@ class VAEModule(L.LightningModule):
         if kl_weight is not None:
             self.weights["kl"] = float(kl_weight)
         self.layout = None if library is None else LineLayout(load_macro_library(library))
-        self.vae = VAE(hidden_dim) if library is None else MacroVAE(self.layout, hidden_dim)
+        self.vae = VAE(hidden_dim, dropout) if library is None else MacroVAE(self.layout, hidden_dim, dropout)
         if init is not None:
             self._load_init(init)
         self._recon_trees: list[VectorNode] = []

@@ -266,3 +266,37 @@ def test_the_batched_pass_refuses_bad_noise_codes_and_trees():
     mixed = MacroTreeBatch([tree, tree.to(dtype=torch.float64)])
     with pytest.raises(ValueError, match="the batch is torch.float32"):
         mixed.plan(lay)
+
+
+def test_decoder_input_dropout_acts_in_training_only_and_adds_no_weights():
+    from shapeprog.vae.batch import MacroTreeBatch, macro_batch_loss
+    from shapeprog.vae.model import VAE
+    from shapeprog.vae.train import VAEModule
+
+    lib = Library.from_text(LIB_TEXT)
+    lay = LineLayout(lib)
+    trees = [macro_program_to_tree(parse_hierarchy(TWO_LEVELS, library=lib), lay)]
+    torch.manual_seed(0)
+    plain = MacroVAE(lay, hidden_dim=16)
+    drop = MacroVAE(lay, hidden_dim=16, dropout=0.5)
+    assert drop.state_dict().keys() == plain.state_dict().keys()
+    assert VAE(16, dropout=0.5).state_dict().keys() == VAE(16).state_dict().keys()
+    drop.load_state_dict(plain.state_dict())
+    batch = MacroTreeBatch(trees)
+    want = macro_batch_loss(plain.eval(), batch, sample=False)[0]
+    torch.testing.assert_close(macro_batch_loss(drop.eval(), batch, sample=False)[0], want, rtol=0, atol=0)
+    drop.train()
+    torch.manual_seed(1)
+    a = macro_batch_loss(drop, batch, sample=False)[0]
+    b = macro_batch_loss(drop, batch, sample=False)[0]
+    assert not torch.equal(a, want) and not torch.equal(a, b)
+    # the embeddings are zeroed at about the rate asked, and scaled by 1 / (1 - p)
+    x = drop.decoder.embed(torch.zeros(4000, lay.width), torch.ones(4000, 3), 0)
+    ref = plain.decoder.embed(torch.zeros(4000, lay.width), torch.ones(4000, 3), 0)
+    zeroed = (x == 0) & (ref != 0)
+    assert 0.45 < zeroed.float().mean() < 0.55
+    torch.testing.assert_close(x[~zeroed], 2 * ref[~zeroed])
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="dropout must be in"):
+            MacroVAE(lay, hidden_dim=16, dropout=bad)
+    assert VAEModule("chair", hidden_dim=8, dropout=0.25).vae.decoder.input_dropout.p == 0.25
