@@ -666,7 +666,7 @@ def _cmd_discover_abstractions(args) -> int:
                      seed=args.seed, wake=args.wake, n_dreams=args.dreams, train_seconds=60.0 * args.train_minutes,
                      train_epochs=args.train_epochs, train_lr=args.train_lr, dropout=args.dropout,
                      wake_seconds=args.wake_seconds, device=args.device, iterations=args.iterations,
-                     max_nodes=args.max_nodes, time_limit=args.time_limit,
+                     max_nodes=args.max_nodes, time_limit=args.time_limit, egraph_values=args.egraph_values,
                      semantic_rewrites=not args.no_semantic_rewrites, network_from=args.network_from_round,
                      wake_repeats=args.wake_repeats)
     except ValueError as e:  # a setting out of range, named
@@ -701,8 +701,8 @@ def _cmd_discover_abstractions(args) -> int:
 
 def _add_egraph_limits(parser) -> None:
     """``--iterations --max-nodes --time-limit``: the e-graph limits of each ShapeCoder refactor call (default
-    the paper's; checked by :mod:`shapeprog.coder.refactor` before any work)."""
-    from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
+    the paper's; checked by :mod:`shapeprog.coder.refactor` before any work), and ``--egraph-values``."""
+    from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUE_SCHEDULES, VALUES
 
     parser.add_argument("--iterations", type=int, default=MAX_ITERATIONS,
                         help=f"e-graph iterations per refactor call (paper: {MAX_ITERATIONS})")
@@ -711,6 +711,10 @@ def _add_egraph_limits(parser) -> None:
                              f"programs at more time (docs/shapecoder.md)")
     parser.add_argument("--time-limit", type=float, default=TIME_LIMIT,
                         help=f"seconds per refactor call (paper: {TIME_LIMIT:g})")
+    parser.add_argument("--egraph-values", choices=VALUE_SCHEDULES, default=VALUES,
+                        help=f"the e-graph's value table: {VALUES} (default, as the reference: up to date before every "
+                             f"iteration) or lagged (one iteration behind, as runs made before 2026-11-29; to "
+                             f"reproduce them)"),
 
 
 def _cmd_abstract_infer(args) -> int:
@@ -757,7 +761,7 @@ def _cmd_abstract_infer(args) -> int:
             raise SystemExit(f"error: --network: {e}") from None
     try:
         r = infer(shape, lib, passes=args.passes, iterations=args.iterations, max_nodes=args.max_nodes,
-                  time_limit=args.time_limit, network=network, **budget)
+                  time_limit=args.time_limit, values=args.egraph_values, network=network, **budget)
     except ParseError:
         raise  # located in the shape's text; main reports it
     except ValueError as e:
@@ -1005,7 +1009,8 @@ def _cmd_table2_coder(args) -> int:
         if unknown:
             raise SystemExit(f"error: {flag} {unknown[0]}=...: {unknown[0]} is not among --categories")
     _check_outputs(others=[args.out])
-    limits = {"iterations": args.iterations, "max_nodes": args.max_nodes, "time_limit": args.time_limit}
+    limits = {"iterations": args.iterations, "max_nodes": args.max_nodes, "time_limit": args.time_limit,
+              "values": args.egraph_values}
     budget = _search_budget(args.phi_search_seconds, args.phi_search_batches, args.phi_network, "phi-", "--phi-network")
     command = "python -m shapeprog " + " ".join(sys.argv[1:] if args.argv is None else args.argv)
     parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]

@@ -46,7 +46,8 @@ from .lang import LANG_3D, Call, Expr, Lang, Library, Num, ProgramError, expand,
 from .objective import WEIGHTS, match, naive_program, omega, program_cost, token_counts
 from .dream import DREAM_TIMEOUT, N_DREAMS
 from .proposal import propose
-from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, check_limits, egglog_program, refactor
+from .refactor import (MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUE_SCHEDULES, VALUES, RefactorError, check_limits,
+                       egglog_program, refactor)
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
 __all__ = ["Config", "DiscoveryResult", "Summary", "WAKES", "discover", "discover_category", "evaluate", "integrate",
@@ -67,6 +68,8 @@ class Config:
         n_abstractions: candidates tried per round (N_A, 20).
         seed: random seed of the proposals (42).
         iterations, max_nodes, time_limit: e-graph limits of each refactor (5, 10,000, 5 s).
+        egraph_values: how the e-graph's value table follows its e-nodes (:data:`~shapeprog.coder.refactor.VALUES`;
+            ``"lagged"`` reproduces runs made before 2026-11-29; :func:`~shapeprog.coder.refactor.refactor`).
         refactor_all: integration refactors every program (the paper) rather than only those a candidate
             covers.
         semantic_rewrites: use the semantic rewrites (False: only the abstraction rules, the paper's
@@ -94,6 +97,7 @@ class Config:
     iterations: int = MAX_ITERATIONS
     max_nodes: int = MAX_ENODES
     time_limit: float = TIME_LIMIT
+    egraph_values: str = VALUES
     refactor_all: bool = False
     semantic_rewrites: bool = True
     wake: str = "refactor"
@@ -128,6 +132,9 @@ class Config:
         if self.wake not in WAKES:
             raise ValueError(f"Config.wake must be one of {', '.join(WAKES)}, got {self.wake!r}")
         check_limits(self.iterations, self.max_nodes, self.time_limit)  # before any work, not in a worker
+        if self.egraph_values not in VALUE_SCHEDULES:
+            raise ValueError(f"Config.egraph_values must be one of {', '.join(VALUE_SCHEDULES)}, "
+                             f"got {self.egraph_values!r}")
 
     def train_config(self):
         """The :class:`shapeprog.coder.train.TrainConfig` of these settings."""
@@ -215,7 +222,7 @@ def _best_of(task) -> tuple:
 
 def _limits(cfg: Config) -> dict:
     return {"iterations": cfg.iterations, "max_nodes": cfg.max_nodes, "time_limit": cfg.time_limit,
-            "semantic": cfg.semantic_rewrites}
+            "values": cfg.egraph_values, "semantic": cfg.semantic_rewrites}
 
 
 def _map(executor, fn, tasks, progress: Callable | None, desc: str):
@@ -664,6 +671,8 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
         repeat = st.get("repeat", 0)  # network wakes of this round already done
         log(f"resume at round {rnd}, phase {phase}")
         before = st.get("config") or {}
+        if before:  # states written before the setting existed ran with the lagged value table
+            before = {"egraph_values": "lagged", **before}
         changed = {k: (before[k], v) for k, v in asdict(cfg).items() if k in before and before[k] != v}
         if changed:  # allowed (e.g. more rounds, larger e-graphs for the later rounds), but said
             log("resumed with other settings than the saved state's: "
@@ -788,6 +797,7 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
                  + (f", {cfg.wake_repeats} wakes per round" if cfg.wake_repeats > 1 else "")
                  + ")" if cfg.wake == "network" else "")
               + ("" if cfg.semantic_rewrites else ", semantic rewrites off (abstraction rules only)")
+              + ("" if cfg.egraph_values == VALUES else f", e-graph values {cfg.egraph_values}")
               + ("" if start is None else f", started at round {first} from an earlier library and its programs")
               + f", e-graph limits "
               f"{cfg.iterations} iterations / {cfg.max_nodes} e-nodes / {cfg.time_limit:g} s; last finished phase: "

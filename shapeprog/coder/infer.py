@@ -65,7 +65,8 @@ def _prims(shape) -> tuple:
 
 def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITERATIONS,
           max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None, seed: int = 0,
-          search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES) -> Inferred:
+          search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
+          values: str | None = None) -> Inferred:
     """The program of one shape under ``library``.
 
     Args:
@@ -82,6 +83,7 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
             :data:`~shapeprog.coder.search.WAKE_BATCH` samples starts after ``search_seconds`` or
             ``search_batches`` batches (the paper's wake: 1 s, and 16 batches, ours). A larger budget is ours,
             not the paper's post hoc inference.
+        values: the e-graph's value schedule (:func:`~shapeprog.coder.refactor.refactor`; None: the default).
 
     Raises:
         ParseError: a malformed line. ValueError: primitives of the wrong width, or more than the
@@ -103,7 +105,8 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
         raise RefactorError("the naive program does not re-cover the shape")
     stop = "iterations"
     for _ in range(passes):
-        r = refactor(best[0], library, iterations=iterations, max_nodes=max_nodes, time_limit=time_limit)
+        r = refactor(best[0], library, iterations=iterations, max_nodes=max_nodes, time_limit=time_limit,
+                     values=values)
         stop = r.stop
         got = evaluate(r.expr, library, prims)
         if got is None or got[0] >= best[1][0] - 1e-9:
@@ -113,7 +116,7 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
         from .discover import network_best, network_payload
 
         payload = network if len(network) == 4 else network_payload(*network)
-        limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit}
+        limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values}
         search = {"batch": WAKE_BATCH, "batches": int(search_batches), "seconds": float(search_seconds)}
         expr, cost, err, _ = network_best(best[0], library, prims, payload, limits, search=search, seed=seed)
         if cost is not None and cost < best[1][0] - 1e-9:

@@ -144,6 +144,7 @@ def _declarations(lib: Library) -> str:
         "(function val (Flt) f64 :merge old)",
         "(relation norot (Shape))",
         "(ruleset rw)",
+        "(ruleset facts)",
     ])
 
 
@@ -170,7 +171,8 @@ def _bookkeeping(lib: Library) -> list:
                    for n in walk(ab.body)):
             pats = " ".join("_" for _ in ab.params)
             rules.append(f"(rule ((= s ({_AB}{ab.name} {pats}))) ((norot s)) :ruleset rw)")
-    return rules
+    # the same rules in the ruleset of the eager schedule (VALUES), run to saturation before each iteration
+    return rules + [r.replace(":ruleset rw)", ":ruleset facts)") for r in rules]
 
 
 def _norot_ab(lib: Library, name: str) -> bool:
@@ -518,6 +520,10 @@ _LOG = logging.getLogger(__name__)
 
 #: Default limits (the reference's egg settings: 5 iterations, 10,000 e-nodes, 5 s).
 MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT = 5, 10_000, 5.0
+#: How the value table and ``norot`` follow the e-graph (:func:`refactor`'s ``values``).
+VALUE_SCHEDULES = ("eager", "lagged")
+#: The default: the reference's (values of every e-node there is, before each iteration).
+VALUES = "eager"
 
 
 def check_limits(iterations, max_nodes, time_limit):
@@ -538,7 +544,7 @@ def _node_count(eg, bindings) -> int:
 
 def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | None = None, *,
              iterations: int = MAX_ITERATIONS, max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT,
-             rules: str | None = None, scheme: str = "conditional") -> Refactored:
+             rules: str | None = None, scheme: str = "conditional", values: str | None = None) -> Refactored:
     """Refactor one program with the semantic rewrites and the library's abstractions.
 
     Args:
@@ -550,6 +556,11 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
         rules: the text of :func:`egglog_program` for ``library`` (of :func:`naive_egglog_program` with the naive
             scheme), when the caller has it already.
         scheme: one of :data:`SCHEMES`; ``"naive"`` is the paper's Table 1 ablation, for benchmarks.
+        values: one of :data:`VALUE_SCHEDULES` (default :data:`VALUES`): ``"eager"`` brings the value table and
+            ``norot`` up to date before every iteration, so that a guarded rule sees the values of the
+            e-nodes there are (the reference keeps them as e-class data); ``"lagged"`` keeps them with
+            the rewrites, one iteration behind (the guarded rules cannot fire in the first iteration): the
+            behaviour of runs made before 2026-11-29, to reproduce them.
 
     Returns:
         :class:`Refactored`; the input program itself when extraction finds nothing cheaper.
@@ -565,6 +576,9 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
     t0 = time.perf_counter()
     lib = _library(library)
     check_limits(iterations, max_nodes, time_limit)
+    values = VALUES if values is None else values
+    if values not in VALUE_SCHEDULES:
+        raise RefactorError(f"values must be one of {', '.join(VALUE_SCHEDULES)}, got {values!r}")
     if scheme not in SCHEMES:
         raise RefactorError(f"scheme must be one of {SCHEMES}, got {scheme!r}")
     try:
@@ -596,6 +610,8 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
             if time.perf_counter() - t0 > time_limit:
                 stop = "time"
                 break
+            if values == "eager":
+                eg.run_program(*eg.parse_program("(run-schedule (saturate (run facts)))"))
             rep = eg.run_program(*eg.parse_program("(run rw 1)"))
             done += 1
             nodes = _node_count(eg, bindings)

@@ -38,7 +38,7 @@ from .discover import Summary, evaluate, summarize
 from .infer import check_search_budget, infer, shipped_libraries
 from .lang import LANG_3D, Call, Library, parse, walk
 from .objective import naive_summary, omega
-from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT
+from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
 __all__ = ["BASELINE_ROWS", "PAPER_TABLE2", "PAPER_TABLE3", "Phi", "Run", "Table2", "baseline", "format_tables", "from_run", "phi",
@@ -248,13 +248,13 @@ def _infer_one(task):
 
 def phi(split: str, records: Sequence, library: Library, *, executor=None, iterations: int = MAX_ITERATIONS,
         max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None,
-        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES) -> Phi:
+        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES, values: str | None = None) -> Phi:
     """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed;
     with ``network`` (a ``(model, vocab)`` pair) as :func:`~shapeprog.coder.infer.infer` with the network,
     shape k's search seeded with k and budgeted by ``search_seconds`` / ``search_batches`` (as
-    :func:`~shapeprog.coder.infer.infer`)."""
+    :func:`~shapeprog.coder.infer.infer`; ``values``: the e-graph's value schedule, as there)."""
     check_search_budget(search_seconds, search_batches)
-    limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit}
+    limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values}
     budget = {"search_seconds": float(search_seconds), "search_batches": int(search_batches)}
     kept = [r for r in records if len(r.prims) <= library.lang.max_prims]
     if not kept:
@@ -289,8 +289,8 @@ def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
 
 
 def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
-                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network: bool = False,
-                  search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
+                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, values: str | None = None,
+                  network: bool = False, search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
                   baselines: Sequence[tuple] = ()) -> str:
     """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours; ``baselines``, ``[(kind,
     Table2)]`` with kind ``"input"`` or ``"wake"`` (:func:`baseline`), add the structure-only rows to Table 2."""
@@ -314,7 +314,8 @@ def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = 
         how += (f", the search's budget {search_seconds:g} s / {search_batches} batches of {WAKE_BATCH} per step: "
                 + ("the wake's" if paper_budget else "ours, not the paper's 1 s"))
     out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions by {how}; e-graph limits "
-            f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which})", "",
+            f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which}"
+            + ("" if values in (None, VALUES) else f"; e-graph values {values}") + ")", "",
             "| split | shapes | F | abstractions used | CPU s / shape | wall s | paper F |",
             "| --- | --- | --- | --- | --- | --- | --- |"]
     paper = PAPER_TABLE3.get(cat, {})

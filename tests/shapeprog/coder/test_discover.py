@@ -83,6 +83,15 @@ def test_discovery_finds_and_uses_a_planted_structure(tmp_path):
     lines = []
     discover(shapes, dataclasses.replace(cfg, max_nodes=20_000), out=tmp_path, log=lines.append)
     assert any("max_nodes 10000 -> 20000" in line for line in lines), lines
+    # a state written before the e-graph value schedule was a setting ran with the lagged one: said on resume
+    st = json.loads((tmp_path / "state.json").read_text())
+    del st["config"]["egraph_values"]
+    (tmp_path / "state.json").write_text(json.dumps(st))
+    lines = []
+    discover(shapes, cfg, out=tmp_path, log=lines.append)
+    assert any("egraph_values 'lagged' -> 'eager'" in line for line in lines), lines
+    with pytest.raises(ValueError, match="Config.egraph_values must be one of eager, lagged"):
+        Config(egraph_values="soon")
     # deterministic under the seed
     other = discover(shapes, cfg, log=None)
     assert other.library.to_text() == res.library.to_text() and other.programs == res.programs

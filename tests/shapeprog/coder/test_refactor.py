@@ -270,3 +270,18 @@ def test_naive_scheme_finds_what_the_conditional_scheme_finds_on_a_small_scene()
     eg3.run_program(*eg3.parse_program(naive_egglog_program(load_library("chair"))))
     with pytest.raises(RefactorError, match="scheme"):
         refactor(p, lib, scheme="greedy")
+
+
+def test_guarded_rules_see_the_values_from_the_first_iteration():
+    """The reference keeps values as e-class data, so a guarded rewrite can fire in the first iteration; the
+    lagged schedule (runs before 2026-11-29) needs a second one."""
+    from shapeprog.coder.refactor import VALUES
+
+    p = parse("Union(Move(Cuboid(0.1,0.2,0.3),-0.4,0.1,0.2),Move(Cuboid(0.1,0.2,0.3),0.4,0.1,0.2))", Library())
+    assert VALUES == "eager"
+    one = refactor(p, iterations=1)
+    assert one.expr.fn == "SymRef" and one.iterations == 1 and _same_geometry(one.expr, p)
+    assert refactor(p, iterations=1, values="lagged").expr == p
+    assert refactor(p, iterations=2, values="lagged").expr == one.expr
+    with pytest.raises(RefactorError, match="values must be one of eager, lagged"):
+        refactor(p, values="soon")
