@@ -224,6 +224,12 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
     assert main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "8", "--max-nodes",
                  "40000", "--time-limit", "30"]) == 0
     assert cost(capsys.readouterr().out) <= cost(out) + 1e-9
+    # the earlier e-graph value schedule, named: on this shape the same program (bench_shapecoder_values.py)
+    assert main(["abstract-infer", "chair/401", "--library", str(lib), "--egraph-values", "lagged"]) == 0
+    assert capsys.readouterr().out == out
+    with pytest.raises(SystemExit):
+        main(["abstract-infer", "chair/401", "--library", str(lib), "--egraph-values", "soon"])
+    assert "invalid choice: 'soon'" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="chair/401: iterations must be an int"):
         main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "-1"])
     with pytest.raises(SystemExit, match="error: Config.iterations must be an int >= 0"):
