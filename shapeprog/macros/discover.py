@@ -345,8 +345,9 @@ def _propose(nodes: Nodes, state: Discovery, lib: Library, cfg: Mapping, rng, lo
     cands: dict[str, Candidate] = {}
     steps = cfg["cand_cluster_num"]
     t0 = time.time()
+    missed: list = []
     for s in range(steps):
-        for c in propose_step(nodes, state.current, index, lib, tpls, cfg, rng):
+        for c in propose_step(nodes, state.current, index, lib, tpls, cfg, rng, missed=missed):
             k = c.key
             if k in cands:
                 cands[k].coverage |= c.coverage
@@ -366,7 +367,9 @@ def _propose(nodes: Nodes, state: Discovery, lib: Library, cfg: Mapping, rng, lo
         best[key] = max(best.get(key, -math.inf), gains[k])
     kept = {k: c for k, c in gen.items() if gains[k] >= best[(comp[k], len(c.coverage))] and gains[k] > 0}
     if log:
-        log(f"  proposal: {len(cands)} candidates, {len(gen)} after generalisation, {len(kept)} kept")
+        log(f"  proposal: {len(cands)} candidates, {len(gen)} after generalisation, {len(kept)} kept"
+            + (f"; {len(missed)} of {steps} steps found no signature with {cfg['cand_cluster_size']} orderings "
+               f"in 50 draws" if missed else ""))
     return kept, {k: comp[k] for k in kept}
 
 

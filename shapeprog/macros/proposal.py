@@ -313,7 +313,8 @@ def candidates(steps: Sequence[_Step], library: Library, member_ids: Sequence[tu
 
 
 def propose_step(nodes, current: Sequence[Sequence[int]], index: Mapping, library: Library,
-                 tpls: Sequence[Template], cfg: Mapping, rng: np.random.Generator, tries: int = 50) -> list[Candidate]:
+                 tpls: Sequence[Template], cfg: Mapping, rng: np.random.Generator, tries: int = 50,
+                 missed: list | None = None) -> list[Candidate]:
     """One proposal step (a cluster, its abstracted programs from every start line, their candidates).
 
     Args:
@@ -321,6 +322,8 @@ def propose_step(nodes, current: Sequence[Sequence[int]], index: Mapping, librar
         current: per node, the indices of its current orderings.
         index: signature -> list of (node, order) among current orderings.
         tries: draws whose signature has fewer than ``cluster_size`` orderings are retried this often.
+        missed: when given, a step whose ``tries`` draws all failed appends 1 to it (the step proposes nothing
+            and still counts toward ``cand_cluster_num``; the specification retries without a bound).
     """
     size = cfg["cand_cluster_size"]
     live = [i for i, c in enumerate(current) if c]
@@ -346,6 +349,8 @@ def propose_step(nodes, current: Sequence[Sequence[int]], index: Mapping, librar
             out += candidates(steps, library, ids, cstart, cfg["cand_max_lines"])
             start += steps[0].k
         return out
+    if missed is not None:
+        missed.append(1)
     return []
 
 

@@ -186,3 +186,24 @@ def test_continuing_from_a_library_equals_resuming():
     assert cont.history[1]["f_after"] == full.history[1]["f_after"]
     assert Library(cont.macros).to_text() == Library(full.macros).to_text()
     assert prior_rounds("def f(x: float):\n    c = Cuboid(x, x, x, True)\n") == []
+
+
+def test_a_proposal_step_without_a_common_signature_is_counted_as_missed():
+    from shapeprog.macros.discover import _index
+    from shapeprog.macros.objective import templates
+    from shapeprog.macros.proposal import propose_step
+
+    nodes = planted(30)
+    cfg = small_cfg()
+    current = [[0] for _ in nodes.lines]
+    lib = Library()
+    tpls = list(templates(lib))
+    missed: list = []
+    rng = np.random.default_rng(0)
+    # 30 programs of one signature, clusters of 20: a step proposes, and misses nothing
+    assert propose_step(nodes, current, _index(nodes, current), lib, tpls, cfg, rng, missed=missed)
+    assert missed == []
+    # every signature below the cluster size: 50 failed draws, nothing proposed, the step counted as missed
+    few = [[0] if i < 10 else [] for i in range(len(nodes.lines))]
+    assert propose_step(nodes, few, _index(nodes, few), lib, tpls, cfg, rng, missed=missed) == []
+    assert missed == [1]
