@@ -169,12 +169,12 @@ def serve_until_interrupted(app, what: str, export_dir, open_browser: bool) -> i
     served until Ctrl-C; returns the exit status 0."""
     import time
 
-    print(f"editing {what} at {app.url} (exports go to {Path(export_dir).resolve()}); Ctrl-C stops", flush=True)
-    if open_browser:
-        import webbrowser
+    try:  # an interrupt that comes while the address is still being printed ends it cleanly too
+        print(f"editing {what} at {app.url} (exports go to {Path(export_dir).resolve()}); Ctrl-C stops", flush=True)
+        if open_browser:
+            import webbrowser
 
-        webbrowser.open(app.url)
-    try:
+            webbrowser.open(app.url)
         while True:
             time.sleep(3600)
     except KeyboardInterrupt:

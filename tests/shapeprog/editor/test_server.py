@@ -419,3 +419,21 @@ def test_refactored_chair_page_moves_every_leg_and_expands(tmp_path):
         assert len(a._handles) == 14
     finally:
         a.stop()
+
+
+def test_an_interrupt_while_the_address_is_printed_stops_the_server_cleanly(monkeypatch, tmp_path):
+    import builtins
+
+    from shapeio.editing import serve_until_interrupted
+
+    class App:
+        url, stopped = "http://127.0.0.1:1", False
+
+        def stop(self):
+            App.stopped = True
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(builtins, "print", interrupted)
+    assert serve_until_interrupted(App(), "x", tmp_path, False) == 0 and App.stopped
