@@ -714,7 +714,7 @@ def _add_egraph_limits(parser) -> None:
     parser.add_argument("--egraph-values", choices=VALUE_SCHEDULES, default=VALUES,
                         help=f"the e-graph's value table: {VALUES} (default, as the reference: up to date before every "
                              f"iteration) or lagged (one iteration behind, as runs made before 2026-11-29; to "
-                             f"reproduce them)"),
+                             f"reproduce them)")
 
 
 def _cmd_abstract_infer(args) -> int:

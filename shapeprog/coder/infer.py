@@ -24,7 +24,7 @@ from .discover import evaluate
 from .execute import order
 from .lang import LANG_3D, Library, Num, expand, substitute, to_text
 from .objective import naive_program
-from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, RefactorError, refactor
+from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES, RefactorError, refactor
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
 __all__ = ["Inferred", "check_search_budget", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
@@ -66,7 +66,7 @@ def _prims(shape) -> tuple:
 def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITERATIONS,
           max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None, seed: int = 0,
           search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
-          values: str | None = None) -> Inferred:
+          values: str = VALUES) -> Inferred:
     """The program of one shape under ``library``.
 
     Args:
@@ -83,7 +83,7 @@ def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITE
             :data:`~shapeprog.coder.search.WAKE_BATCH` samples starts after ``search_seconds`` or
             ``search_batches`` batches (the paper's wake: 1 s, and 16 batches, ours). A larger budget is ours,
             not the paper's post hoc inference.
-        values: the e-graph's value schedule (:func:`~shapeprog.coder.refactor.refactor`; None: the default).
+        values: the e-graph's value schedule (:func:`~shapeprog.coder.refactor.refactor`).
 
     Raises:
         ParseError: a malformed line. ValueError: primitives of the wrong width, or more than the

@@ -544,7 +544,7 @@ def _node_count(eg, bindings) -> int:
 
 def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | None = None, *,
              iterations: int = MAX_ITERATIONS, max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT,
-             rules: str | None = None, scheme: str = "conditional", values: str | None = None) -> Refactored:
+             rules: str | None = None, scheme: str = "conditional", values: str = VALUES) -> Refactored:
     """Refactor one program with the semantic rewrites and the library's abstractions.
 
     Args:
@@ -556,7 +556,7 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
         rules: the text of :func:`egglog_program` for ``library`` (of :func:`naive_egglog_program` with the naive
             scheme), when the caller has it already.
         scheme: one of :data:`SCHEMES`; ``"naive"`` is the paper's Table 1 ablation, for benchmarks.
-        values: one of :data:`VALUE_SCHEDULES` (default :data:`VALUES`): ``"eager"`` brings the value table and
+        values: one of :data:`VALUE_SCHEDULES`: ``"eager"`` brings the value table and
             ``norot`` up to date before every iteration, so that a guarded rule sees the values of the
             e-nodes there are (the reference keeps them as e-class data); ``"lagged"`` keeps them with
             the rewrites, one iteration behind (the guarded rules cannot fire in the first iteration): the
@@ -576,7 +576,6 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
     t0 = time.perf_counter()
     lib = _library(library)
     check_limits(iterations, max_nodes, time_limit)
-    values = VALUES if values is None else values
     if values not in VALUE_SCHEDULES:
         raise RefactorError(f"values must be one of {', '.join(VALUE_SCHEDULES)}, got {values!r}")
     if scheme not in SCHEMES:

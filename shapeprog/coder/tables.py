@@ -248,7 +248,7 @@ def _infer_one(task):
 
 def phi(split: str, records: Sequence, library: Library, *, executor=None, iterations: int = MAX_ITERATIONS,
         max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None,
-        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES, values: str | None = None) -> Phi:
+        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES, values: str = VALUES) -> Phi:
     """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed;
     with ``network`` (a ``(model, vocab)`` pair) as :func:`~shapeprog.coder.infer.infer` with the network,
     shape k's search seeded with k and budgeted by ``search_seconds`` / ``search_batches`` (as
@@ -289,7 +289,7 @@ def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
 
 
 def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
-                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, values: str | None = None,
+                  max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, values: str = VALUES,
                   network: bool = False, search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
                   baselines: Sequence[tuple] = ()) -> str:
     """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours; ``baselines``, ``[(kind,
@@ -315,7 +315,7 @@ def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = 
                 + ("the wake's" if paper_budget else "ours, not the paper's 1 s"))
     out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions by {how}; e-graph limits "
             f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which}"
-            + ("" if values in (None, VALUES) else f"; e-graph values {values}") + ")", "",
+            + ("" if values == VALUES else f"; e-graph values {values}") + ")", "",
             "| split | shapes | F | abstractions used | CPU s / shape | wall s | paper F |",
             "| --- | --- | --- | --- | --- | --- | --- |"]
     paper = PAPER_TABLE3.get(cat, {})

@@ -52,7 +52,7 @@ from .grammar import Line
 from .lang import BASE, MacroDef, check_def, def_text
 from .library import Library
 from .objective import WEIGHTS, beam_search, exact_search, fit_options, templates
-from .proposal import Candidate, gain, generalise, heur_score, propose_step
+from .proposal import PROPOSAL_TRIES, Candidate, gain, generalise, heur_score, propose_step
 
 __all__ = ["DEFAULTS", "Discovery", "Nodes", "discover", "evaluate", "load_config", "nodes_from_subprograms",
            "prior_rounds"]
@@ -369,7 +369,7 @@ def _propose(nodes: Nodes, state: Discovery, lib: Library, cfg: Mapping, rng, lo
     if log:
         log(f"  proposal: {len(cands)} candidates, {len(gen)} after generalisation, {len(kept)} kept"
             + (f"; {len(missed)} of {steps} steps found no signature with {cfg['cand_cluster_size']} orderings "
-               f"in 50 draws" if missed else ""))
+               f"in {PROPOSAL_TRIES} draws" if missed else ""))
     return kept, {k: comp[k] for k in kept}
 
 

@@ -31,7 +31,7 @@ from .lang import (AXIS, BB_DIMS, BOOL, CUBE, FACE, FLOAT, Call, Linear, Literal
 from .library import Library
 from .objective import WEIGHTS, Template, fit, interface_cost
 
-__all__ = ["Candidate", "abstract", "base_cost", "candidates", "cluster", "gain", "generalise", "heur_score",
+__all__ = ["PROPOSAL_TRIES", "Candidate", "abstract", "base_cost", "candidates", "cluster", "gain", "generalise", "heur_score",
            "propose_step"]
 
 _TYPE_PREFIX = {FLOAT: "x", BOOL: "b", FACE: "k", AXIS: "a", CUBE: "t"}
@@ -312,8 +312,12 @@ def candidates(steps: Sequence[_Step], library: Library, member_ids: Sequence[tu
     return out
 
 
+#: Draws of a proposal step before it gives up (the specification retries without a bound).
+PROPOSAL_TRIES = 50
+
+
 def propose_step(nodes, current: Sequence[Sequence[int]], index: Mapping, library: Library,
-                 tpls: Sequence[Template], cfg: Mapping, rng: np.random.Generator, tries: int = 50,
+                 tpls: Sequence[Template], cfg: Mapping, rng: np.random.Generator, tries: int = PROPOSAL_TRIES,
                  missed: list | None = None) -> list[Candidate]:
     """One proposal step (a cluster, its abstracted programs from every start line, their candidates).
 
