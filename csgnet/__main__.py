@@ -456,7 +456,8 @@ def cmd_edit(args) -> int:
     return serve_until_interrupted(app, repr(text), args.export_dir, not args.no_browser)
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser, every sub-command with its options (``main`` runs what it parses)."""
     ap = argparse.ArgumentParser(prog="python -m csgnet", description="CSG programs: render, generate datasets, parse shapes, evaluate parsers.")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
@@ -575,7 +576,11 @@ def main(argv=None) -> int:
     ed.add_argument("--no-browser", action="store_true", help="do not open a browser")
     ed.set_defaults(func=cmd_edit)
 
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     args.argv = list(argv) if argv is not None else sys.argv[1:]
     if args.cmd == "render" and args.dim is None:
         args.dim = 3 if any(h + "(" in args.program for p in primitives(3) for h in (p.kind, p.long) if h) else 2

@@ -6,7 +6,7 @@
   ``val`` and ``test``; this set stands in for the paper's CAD set and is not the same data.
 * :func:`load_cad_h5`: the paper's ``cad.h5`` (datasets ``train_images``, ``val_images``,
   ``test_images``, each N x 64 x 64), for users who have that file. Needs ``h5py``, the ``cad``
-  extra: ``pip install 'shape-programs[cad]'``.
+  extra (``pip install -e '.[cad]'`` in the checkout).
 
 Both return ``(N, 64, 64)`` bool arrays with rows as stored (``img[row, col]``, no transposition, as
 the reference feeds the CAD images to the network). Nothing is read at import.
@@ -63,7 +63,7 @@ def _h5py():
         import h5py
     except ImportError as e:
         raise ImportError("reading cad.h5 needs h5py, which is not installed; install the 'cad' extra: "
-                          "pip install 'shape-programs[cad]' (or pip install h5py)") from e
+                          "pip install -e '.[cad]' in the checkout (or pip install h5py)") from e
     return h5py
 
 

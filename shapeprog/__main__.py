@@ -17,7 +17,7 @@
     python -m shapeprog discover-macros --category chair --rounds 5 --workers 2 --out runs/shapemod_chair
     python -m shapeprog refactor chair/173 --library chair
     python -m shapeprog refactor-corpus --category chair --library chair --workers 2 --out chair_macros
-    python -m shapeprog table1 --category chair --limit 200 --out table1.md
+    python -m shapeprog table1 --categories chair --limit 200 --out table1.md
     python -m shapeprog table2-coder --categories chair table storage --workers 2 --out shapecoder_tables.md
 
 A program is named by a corpus id (``chair/173``, ``table/33075``, ``storage/46436``) or the
@@ -1045,7 +1045,8 @@ def _cmd_table2_coder(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser, every sub-command with its options (``main`` runs what it parses)."""
     ap = argparse.ArgumentParser(prog="shapeprog", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -1406,7 +1407,11 @@ def main(argv=None) -> int:
     t2.add_argument("--out", help="also write the tables (markdown) here, atomically")
     t2.add_argument("--quiet", action="store_true")
     t2.set_defaults(func=_cmd_table2_coder, argv=None)
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     if getattr(args, "argv", False) is None:  # commands that record their own command line
         args.argv = list(argv) if argv is not None else None
     try:

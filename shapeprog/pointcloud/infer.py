@@ -393,8 +393,10 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         search: decode more codes around the predicted one and keep the program closest to the cloud
             (:func:`shapeprog.pointcloud.search.latent_search`, about 1 s), before any fitting; the
             papers' protocol is ``search=False``.
-        search_schedule: the search's ``(samples, sigma)`` steps (default
-            :data:`~shapeprog.pointcloud.search.SEARCH_SCHEDULE`).
+        search_schedule: the search's ``(samples, sigma)`` steps, or a name of
+            :data:`~shapeprog.pointcloud.search.NAMED_SCHEDULES` (``"default"``, ``"fast"``, ``"quick"``) or a
+            ``"samples:sigma,..."`` string as the CLI's ``--search-schedule`` (default
+            :data:`~shapeprog.pointcloud.search.SEARCH_SCHEDULE`); only with ``search=True``.
         retrieval: a :class:`~shapeprog.pointcloud.retrieval.RetrievalIndex` of the category's training
             shapes: the ``retrieval_candidates`` training programs nearest to the cloud by the index's coarse
             stage compete with the decoded (or searched) program, and the one of lowest selection chamfer to
@@ -409,8 +411,10 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         PointCloudError: not ``(N, 3)``, fewer than :data:`MIN_POINTS` points, a NaN or infinite coordinate,
             all points at one place; or the model decodes no shape (no cuboid) for this cloud (nor does the
             search find one).
-        ValueError: a bad ``search_schedule``.
+        ValueError: a bad ``search_schedule``, or one given without ``search=True``.
     """
+    if search_schedule is not None and not search:
+        raise ValueError("search_schedule is given but search is False: pass search=True to use it")
     x = _as_cloud(points)
     try:
         unit, t = normalize(x, up=up)
@@ -426,9 +430,14 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     code = model.codes(cloud[None])[0]
     searched = None
     if search:
-        from .search import SEARCH_SCHEDULE, latent_search
+        from .search import SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule
 
-        schedule = SEARCH_SCHEDULE if search_schedule is None else search_schedule
+        if search_schedule is None:
+            schedule = SEARCH_SCHEDULE
+        elif isinstance(search_schedule, str):
+            schedule = parse_schedule(search_schedule)
+        else:
+            schedule = check_schedule(search_schedule)
         r = latent_search(model, code, torch.from_numpy(unit), schedule, seed=seed)
         program = r.program
         searched = {"start_cd": None if np.isinf(r.start_cd) else r.start_cd, "cd": None if np.isinf(r.cd) else r.cd,

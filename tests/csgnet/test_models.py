@@ -120,14 +120,20 @@ def test_beam_scores_are_sorted_and_equal_teacher_forced_logprobs(stack):
     for i in range(2):
         for j in range(4):
             assert (d.tokens[i, j, int(d.lengths[i, j]):] == m.stop).all()  # only '$' after the program
-    # unconstrained: the beam score equals the teacher-forced log-probability of program + '$'
+    # unconstrained: the beam score equals the teacher-forced log-probability of program + '$' (a larger
+    # '$' bias makes beams end before max_len, so the comparison runs; it is counted)
+    with torch.no_grad():
+        m.head[-1].bias[m.stop] += 1.0
     d = beam_search(m, tgt, 3, max_len=5)
+    compared = 0
     for i in range(2):
         for j in range(3):
             n = int(d.lengths[i, j])
             if n < 5:
                 got = teacher_forced_logprob(m, tgt[i], d.tokens[i, j], n)
                 assert got == pytest.approx(float(d.logprob[i, j]), abs=1e-3)
+                compared += 1
+    assert compared >= 3
 
 
 def test_finished_beams_stop_and_reference_mode_keeps_decoding():

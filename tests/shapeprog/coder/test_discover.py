@@ -10,6 +10,7 @@ import pytest
 
 pytest.importorskip("egglog")
 
+from shapeprog.errors import ParseError
 from shapeprog.coder import data
 from shapeprog.coder.discover import Config, discover, evaluate, start_from, summarize
 from shapeprog.coder.execute import execute
@@ -193,10 +194,12 @@ def test_infer_uses_the_library_and_reports_bad_input():
     assert evaluate(parse(r2.expanded), lib, data.parse_record(line).prims) is not None
     with pytest.raises(ValueError, match="primitives"):
         infer([(0.1, 0.1, 0.1, 0, 0, 0, 0, 0, 0)] * 17, lib)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"9-tuples \(3D\) or 4-tuples \(2D\); got widths \[2\]"):
         infer([(0.1, 0.1)], lib)
-    with pytest.raises(Exception, match="<shape>:1"):
+    with pytest.raises(ParseError, match="^<shape>:1:1: expected '<PartNet id>_0_<index>:<program>'"):
         infer("172_0_0 Union(", lib)
+    with pytest.raises(ParseError, match="^<shape>:1:15: unexpected end of the text"):
+        infer("172_0_0:Union(", lib)
     with pytest.raises(ValueError, match="no shipped library"):
         load_library("sofa")
     assert set(shipped_libraries()) == {"chair", "table", "storage"}

@@ -255,7 +255,7 @@ def test_naive_scheme_finds_what_the_conditional_scheme_finds_on_a_small_scene()
     pairs = [("(Num 0.1)", "(Num 0.11)"), ("(Num 0.11)", "(Num 0.12)"), ("(Num 0.12)", "(Num 0.13)")]
     pairs += [("(K 0.0)", f"(Num {v})") for v in vals]
     for a, b in pairs:
-        with pytest.raises(Exception, match="Check failed"):
+        with pytest.raises(bindings.EggSmolError, match="Check failed"):
             eg.run_program(*eg.parse_program(f"(check (= {a} {b}))"))
     eg.run_program(*eg.parse_program("(check (= (Add (Num 0.05) (Num 0.07)) (Num 0.12)))"))
     # an offset 0.03 from a + b: within the 2D abstraction tolerance (0.04) of the guarded rule, not a

@@ -5,6 +5,7 @@ from importlib import resources
 
 import pytest
 
+from shapeprog.errors import ParseError
 from shapeprog.coder import data, tables
 from shapeprog.coder.discover import evaluate
 from shapeprog.coder.infer import infer
@@ -104,7 +105,7 @@ def test_table2_of_a_run_folder_and_its_errors(tmp_path):
     with pytest.raises(ValueError, match=r"programs.txt:1: expected '<key>:<program>'"):
         tables.from_run(tmp_path, "chair")
     (tmp_path / "programs.txt").write_text("172_0_0:Cubiod(0.1,0.1,0.1)\n")
-    with pytest.raises(Exception, match=r"programs.txt:1:"):
+    with pytest.raises(ParseError, match=r"programs.txt:1:9: unknown function 'Cubiod'"):
         tables.from_run(tmp_path, "chair")
     (tmp_path / "programs.txt").unlink()
     with pytest.raises(FileNotFoundError, match="programs.txt: not found"):

@@ -150,6 +150,15 @@ def test_infer_with_search_reports_it_and_keeps_the_frame(model):
     assert np.allclose(moved.corners(), r.corners() * k + b, atol=1e-3 * k)
     with pytest.raises(ValueError, match="sigma"):
         infer(cloud, model=model, physics=False, search=True, search_schedule=((2, -1.0),))
+    # the CLI's text form and names are accepted too, and a schedule without search=True is refused
+    as_text = ",".join(f"{n}:{sigma}" for n, sigma in SHORT)
+    t = infer(cloud, model=model, physics=False, search=True, search_schedule=as_text)
+    assert t.text == r.text and t.search == r.search
+    assert infer(cloud, model=model, physics=False, search=True, search_schedule="fast").search["decodes"] == 17
+    with pytest.raises(ValueError, match="search step 0: expected samples:sigma"):
+        infer(cloud, model=model, physics=False, search=True, search_schedule="fast-ish")
+    with pytest.raises(ValueError, match="search_schedule is given but search is False"):
+        infer(cloud, model=model, physics=False, search_schedule=SHORT)
 
 
 def test_cli_search_prints_and_records_it(tmp_path, model, capsys):

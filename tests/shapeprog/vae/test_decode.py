@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import shapeprog
-from shapeprog import corpus
+from shapeprog import corpus, limits
 from shapeprog.errors import ParseError
 from shapeprog.vae import VAE, Decoded, Decoder, InvalidSample, decode, decode_latent, encode, interpolate, sample
 from shapeprog.vae.decode import decode_programs
@@ -503,9 +503,19 @@ def test_the_size_limits_hold_for_huge_translate_counts():
         def sym(self, h, ctx, a):
             return [1.0, 0.0, 0.0, 1e6, 0.01]
 
+    translates = 0
     for seed in range(3):
         root, _ = _decode_tree(Copier(seed), None, False, DecodeOptions())
-        check_decoded(_program(root))
+        prog = _program(root)
+        check_decoded(prog)
+        counts = [st.n for b in prog.blocks for st in b.statements if isinstance(st, shapeprog.lang.Translate)]
+        # every translate the network asked 1e6 copies of got the language's maximum, and the whole
+        # program stays within the line and cuboid limits
+        assert counts == [limits.MAX_TRANSLATE_COPIES] * len(counts)
+        translates += len(counts)
+        assert len(shapeprog.to_text(prog).splitlines()) <= limits.MAX_LINES
+        assert len(shapeprog.execute(prog).corners) <= limits.MAX_CUBOIDS
+    assert translates > 0
     b = _Budget()
     b.charge(lines=999)
     with pytest.raises(InvalidSample, match="size limits"):
