@@ -21,7 +21,11 @@ def test_run_file_and_parse_error(tmp_path, capsys):
     good.write_text("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.5, 0.5, 0.5, True)\n"
                     "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n")
     assert main(["run", str(good), "-o", str(tmp_path / "p.ply")]) == 0
-    assert (tmp_path / "p.ply").stat().st_size > 0
+    import trimesh
+
+    mesh = trimesh.load(tmp_path / "p.ply", process=False)  # the one leaf cuboid: 8 vertices, 12 triangles
+    assert (len(mesh.vertices), len(mesh.faces)) == (8, 12)
+    assert mesh.bounds.ravel().tolist() == pytest.approx([-0.25, -0.5, -0.25, 0.25, 0.0, 0.25])
     bad = tmp_path / "bad.txt"
     bad.write_text("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = cubiod(1.0, 1.0, 1.0, True)\n")
     assert main(["run", str(bad)]) == 2

@@ -42,7 +42,7 @@ def test_load_reports_bad_files_by_name_and_keeps_the_rest(monkeypatch):
     with pytest.warns(corpus.CorpusWarning, match=rf"storage/{bad}\.txt:2:\d+: unknown command 'Cubiod'"):
         progs = corpus.load("storage", "val")
     assert len(progs) == 115 and bad not in [i for i, _ in progs]
-    with pytest.raises(ValueError, match="Cubiod"):
+    with pytest.raises(ParseError, match=rf"storage/{bad}\.txt:2:\d+: unknown command 'Cubiod'"):
         corpus.load("storage", "val", strict=True)
 
 

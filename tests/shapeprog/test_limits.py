@@ -42,7 +42,9 @@ def test_defect3_out_of_range_numbers_are_refused(text):
 
 
 def test_numbers_at_the_limit_and_ascii_digits_only():
-    parse(HEAD.replace("0.5, 0.1, 0.5", "1000.0, -1000, 0.5"))
+    p = parse(HEAD.replace("0.5, 0.1, 0.5", "1000.0, -1000, 0.5"))
+    cube = [s for s in p.blocks[0].statements if getattr(s, "l", None) == 1000.0]
+    assert len(cube) == 1 and (cube[0].l, cube[0].h, cube[0].w) == (1000.0, -1000.0, 0.5)
     e = _error(HEAD.replace("0.5, 0.1", "\u0663, 0.1"))  # an Arabic-Indic digit is no number
     assert (e.line, e.column) == (2, 16)
 

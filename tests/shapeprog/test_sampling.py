@@ -106,7 +106,7 @@ def test_errors_are_clear():
         sample_surface(boxes([0, 0, 0], [1e4, 1e4, 1]), 10)
     with pytest.raises(ValueError, match="positive int"):
         sample_surface(corners, 0)
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="`corners` must be floating point, got torch.int64"):
         sample_surface(corners.long(), 10)
 
 

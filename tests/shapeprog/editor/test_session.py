@@ -54,7 +54,7 @@ def test_history_against_a_model():
                 before = h.current
                 h.undo()
                 assert h.redo() == before
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="`limit` must be an int >= 1, got 0"):
         History(0, limit=0)
 
 

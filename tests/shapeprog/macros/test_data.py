@@ -77,7 +77,7 @@ def test_orderings_limit_and_count():
     assert orderings([1] * 8, limit=MAX_ORDERS)[1] == 40320
     sub = _one(LEVELS, max_orders=2)
     assert len(sub.orders) == 2 and sub.n_orders == 6
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="`limit` must be >= 1, got 0"):
         orderings([1], limit=0)
 
 

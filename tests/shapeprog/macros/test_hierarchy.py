@@ -54,6 +54,10 @@ def test_hierarchy_executes_as_its_shapeassembly_program():
     assert torch.allclose(b.corners.float(), a.corners, atol=1e-6)
     b.corners[:, :, 0].sum().backward()
     assert x.grad.abs().sum() > 0
+    # the gradients of every corner against central finite differences (float64)
+    y = hierarchy_parameters(h, torch.float64).requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda p: execute_hierarchy(h, params=p, dtype=torch.float64).corners, (y,),
+                                    eps=1e-6, atol=1e-5)
     # the legs scale into the parent's cuboid: doubling it doubles their width
     big = H.parse(SMALL.replace("Program_1 = Cuboid(0.5,", "Program_1 = Cuboid(1.0,"))
     assert execute_hierarchy(big).dims[0, 0] == pytest.approx(2 * float(a.dims[0, 0]))

@@ -51,7 +51,7 @@ def test_round_trip_and_ast():
     assert parameters(p) == [1.2, 0.9, 1.0, 0.1, 0.2, 1.2, 0.1, 1.0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5, 0.3, -0.25]
     q = replace_parameters(p, [float(i) for i in range(16)])
     assert parameters(q) == list(range(16)) and q.defs == p.defs
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^1 value\(s\) more than the program's parameters$"):
         replace_parameters(p, range(17))
 
 

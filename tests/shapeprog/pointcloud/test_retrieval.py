@@ -51,6 +51,15 @@ def test_the_two_stages_agree_with_the_exhaustive_search(index):
         assert a.distance >= b.distance and (a.id != b.id or a.distance == b.distance)
     assert sum(a.id == b.id for a, b in zip(fast, full)) >= 5  # 4 candidates of 14 on a 12^3 grid
     assert [m.id for m in idx.search(queries, candidates=len(idx))] == [m.id for m in full]
+    # the exhaustive search against the definition: mean nearest-point distance both ways, brute force
+    for q, m in zip(queries, full):
+        q = torch.from_numpy(q).double()
+        cds = []
+        for ref in idx.clouds.double():
+            d = torch.cdist(q, ref)
+            cds.append(float(d.min(1).values.mean() + d.min(0).values.mean()))
+        best = int(np.argmin(cds))
+        assert m.id == int(idx.ids[best]) and m.distance == pytest.approx(cds[best], rel=1e-9)
 
 
 def test_the_index_of_a_cache_leaves_out_the_test_split(tmp_path):

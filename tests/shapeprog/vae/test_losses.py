@@ -49,9 +49,17 @@ def test_each_term_against_a_hand_computation(two_levels):
     x1, x2 = pred[1, 62].item(), pred[2, 62].item()
     sp = lambda v: math.log1p(math.exp(v))  # noqa: E731  softplus
     assert t["align"] == pytest.approx(sp(x1) + 0.2 * sp(-x2), rel=1e-5)
-    child = tree.children[1].target_seq()
-    tc = line_losses(torch.randn_like(child), child)
-    assert tc["sym_prm"] > 0 and tc["sym_cub"] > 0 and tc["cub_prm"] > 0
+    child = tree.children[1].target_seq()  # rows: bbox, cube0, attach, translate, stop
+    pc = torch.randn_like(child)
+    tc = line_losses(pc, child)
+    cc = lambda rows, part: F.cross_entropy(pc[rows, part], child[rows, part].argmax(1), reduction="sum")  # noqa: E731
+    # the translate's count and distance (slots 52, 53), its cube and axis; the two Cuboid lines' dims
+    assert child[3, 52:54].tolist() == pytest.approx([2.0, 0.8])
+    assert tc["sym_prm"] == pytest.approx((pc[3, 52:54] - child[3, 52:54]).abs().sum().item())
+    assert tc["sym_cub"] == pytest.approx(cc([3], slice(7, 18)).item())
+    assert tc["axis"] == pytest.approx(cc([3], slice(49, 52)).item())
+    assert tc["cub_prm"] == pytest.approx((pc[:2, 40:43] - child[:2, 40:43]).abs().sum().item())
+    assert tc["uv_prm"].item() == 0.0 and tc["sq_cub"].item() == 0.0 and tc["face"].item() == 0.0
 
 
 def test_kl_has_no_half_and_leaf_is_a_mean():
