@@ -177,8 +177,16 @@ def _ply_points(path: Path, loaded) -> tuple[np.ndarray, np.ndarray | None]:
     pts = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
     raw = loaded.metadata.get("_ply_raw", {}).get("vertex", {}).get("data") if hasattr(loaded, "metadata") else None
     normals = None
-    if raw is not None and raw.dtype.names and {"nx", "ny", "nz"} <= set(raw.dtype.names):
-        normals = np.stack([raw["nx"], raw["ny"], raw["nz"]], axis=1).astype(np.float32)
+    # binary PLY: a structured array; ASCII PLY: a dict of columns (trimesh keeps each as it was read)
+    names = set(raw) if isinstance(raw, dict) else set(getattr(getattr(raw, "dtype", None), "names", None) or ())
+    if {"nx", "ny", "nz"} <= names:
+        try:
+            normals = np.stack([np.asarray(raw[k], dtype=np.float64).reshape(-1) for k in ("nx", "ny", "nz")], axis=1)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"{path}: unreadable vertex normals ({e})") from None
+        if normals.shape != (len(pts), 3):
+            raise InputError(f"{path}: {len(normals)} vertex normals for {len(pts)} vertices")
+        normals = normals.astype(np.float32)
     if pts.ndim != 2 or pts.shape[0] == 0:
         raise InputError(f"{path}: the PLY holds no vertex")
     if pts.shape[0] > MAX_POINTS:

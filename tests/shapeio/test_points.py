@@ -1,4 +1,4 @@
-"""Tests of shapeio.points: binary PLY and OBJ point clouds."""
+"""Tests of shapeio.points: binary and ASCII PLY and OBJ point clouds."""
 import numpy as np
 import pytest
 
@@ -16,6 +16,17 @@ def test_ply_round_trip_with_and_without_normals(tmp_path):
     q, qn = read_points(tmp_path / "q.ply", return_normals=True)
     assert np.array_equal(q, pts) and qn is None
     assert (tmp_path / "q.ply").read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\nelement vertex 30\n")
+
+
+def test_ascii_ply_with_and_without_normals(tmp_path):
+    head = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
+    (tmp_path / "a.ply").write_text(head + "end_header\n0 0 0\n1 2 3\n")
+    p, n = read_points(tmp_path / "a.ply", return_normals=True)
+    assert p.tolist() == [[0, 0, 0], [1, 2, 3]] and n is None
+    normals = "property float nx\nproperty float ny\nproperty float nz\n"
+    (tmp_path / "n.ply").write_text(head + normals + "end_header\n0 0 0 0 0 1\n1 2 3 1 0 0\n")
+    p, n = read_points(tmp_path / "n.ply", return_normals=True)
+    assert p.tolist() == [[0, 0, 0], [1, 2, 3]] and n.tolist() == [[0, 0, 1], [1, 0, 0]]
 
 
 def test_obj_points():
