@@ -25,7 +25,7 @@ from tqdm.auto import tqdm
 from shapeio import atomic_write
 
 from . import primitives as P
-from .lang import OPERATORS, STOP, Program, parse_lines
+from .lang import MAX_TOKENS, OPERATORS, STOP, Program, parse_lines
 from .synth import Rules, _check_dim, sample_chunk, worker_init
 from .vocab import vocabulary
 
@@ -264,12 +264,20 @@ class DatasetWarning(UserWarning):
 def _read_meta(path: Path) -> dict | None:
     if not path.exists():
         return None
+    from shapeio.files import parse_json
+
     try:
-        meta = json.loads(path.read_bytes().decode("utf-8"))
-    except (UnicodeDecodeError, ValueError) as e:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as e:
         raise ValueError(f"{path}: not a readable meta.json ({type(e).__name__}: {e})") from None
+    meta = parse_json(text, str(path))
     if not isinstance(meta, dict):
         raise ValueError(f"{path}: not a readable meta.json (a JSON object is expected)")
+    lengths = meta.get("lengths", [])
+    if not isinstance(lengths, list) or not all(type(n) is int and 0 < n <= MAX_TOKENS for n in lengths):
+        raise ValueError(f"{path}: not a readable meta.json ('lengths' is not a list of program lengths)")
+    if "complete" in meta and not isinstance(meta["complete"], bool):
+        raise ValueError(f"{path}: not a readable meta.json ('complete' is not true or false)")
     return meta
 
 

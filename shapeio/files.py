@@ -15,7 +15,8 @@ import time
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Union
 
-__all__ = ["InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new", "STALE_TEMP_SECONDS"]
+__all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "parse_json", "refuse_overwrite", "remove_stale_temps", "write_new",
+           "STALE_TEMP_SECONDS"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -28,6 +29,75 @@ _UMASK_LOCK = threading.Lock()
 
 class InputError(ValueError):
     """A user's file that cannot be read as asked; the message starts with the file's path."""
+
+
+MAX_JSON_DEPTH = 64
+"""The deepest nesting of arrays and objects :func:`parse_json` reads (the project's own JSON files nest a few
+levels)."""
+
+
+def _json_depth(text: str) -> tuple[int, int]:
+    """The deepest nesting of ``[`` / ``{`` outside strings, and the offset where it is first reached."""
+    depth = best = where = 0
+    in_str = esc = False
+    for i, ch in enumerate(text):
+        if in_str:
+            if esc:
+                esc = False
+            elif ch == "\\":
+                esc = True
+            elif ch == '"':
+                in_str = False
+        elif ch == '"':
+            in_str = True
+        elif ch in "[{":
+            depth += 1
+            if depth > best:
+                best, where = depth, i
+        elif ch in "]}":
+            depth -= 1
+    return best, where
+
+
+def parse_json(text: str, file: str, error: Callable[[str, int, int], Exception] | None = None):
+    """``text`` as JSON, strictly: no ``NaN`` / ``Infinity``, at most :data:`MAX_JSON_DEPTH` levels of nesting.
+
+    ``error(reason, line, column)`` makes the exception raised for bad text (default an :class:`InputError`
+    ``"<file>:<line>:<column>: <reason>"``), so that each format raises its own error type.
+
+    Raises:
+        what ``error`` makes: not JSON, too deep, a non-finite constant or a float out of range, an integer too
+        long to convert.
+    """
+    import json
+
+    def fail(reason: str, line: int = 1, column: int = 1) -> Exception:
+        if error is not None:
+            return error(reason, line, column)
+        return InputError(f"{file}:{line}:{column}: {reason}")
+
+    def line_col(offset: int) -> tuple[int, int]:
+        return text.count("\n", 0, offset) + 1, offset - (text.rfind("\n", 0, offset) + 1) + 1
+
+    depth, where = _json_depth(text)
+    if depth > MAX_JSON_DEPTH:
+        raise fail(f"nested more than {MAX_JSON_DEPTH} levels deep (MAX_JSON_DEPTH)", *line_col(where))
+
+    def constant(name: str):
+        raise ValueError(f"{name} is not a JSON number")
+
+    def finite(token: str) -> float:
+        value = float(token)
+        if value in (float("inf"), float("-inf")):
+            raise ValueError(f"{token} is out of the range of a float")
+        return value
+
+    try:
+        return json.loads(text, parse_constant=constant, parse_float=finite)
+    except json.JSONDecodeError as e:
+        raise fail(f"not JSON: {e.msg}", e.lineno, e.colno) from None
+    except (ValueError, RecursionError) as e:  # a non-finite constant, an integer of too many digits
+        raise fail(f"not JSON: {e}") from None
 
 
 def _umask() -> int:

@@ -12,7 +12,6 @@ Written by :func:`write_silhouettes` (``python -m shapeprog silhouettes``), read
 from __future__ import annotations
 
 import os
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Union
@@ -21,7 +20,7 @@ import numpy as np
 
 from .files import atomic_write
 
-__all__ = ["FORMAT_VERSION", "SPLITS", "SilhouetteSplit", "check_split", "split_keys", "write_silhouettes",
+__all__ = ["FORMAT_VERSION", "MAX_SIZE", "SPLITS", "SilhouetteSplit", "check_split", "split_keys", "write_silhouettes",
            "read_silhouettes"]
 
 PathLike = Union[str, os.PathLike]
@@ -30,6 +29,16 @@ PathLike = Union[str, os.PathLike]
 FORMAT_VERSION = 1
 SPLITS = ("train", "val", "test")
 SIZE = 64  # the image side of files without a ``size`` entry
+MAX_SIZE = 1024
+"""The largest image side a silhouette file may declare."""
+
+
+def _int_entry(value: np.ndarray, p: Path, name: str, low: int, high: int) -> int:
+    """A stored integer scalar in ``[low, high]``, or a ValueError naming the file and the entry."""
+    if np.ndim(value) != 0 or not np.issubdtype(np.asarray(value).dtype, np.integer) or not low <= int(value) <= high:
+        raise ValueError(f"{p}: the entry {name!r} is not an integer in [{low}, {high}]: "
+                         f"dtype {np.asarray(value).dtype}, shape {np.shape(value)}")
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -116,8 +125,8 @@ def read_silhouettes(path: PathLike, split: str) -> SilhouetteSplit:
         raise FileNotFoundError(f"{p}: no such file")
     try:
         z = np.load(p, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise ValueError(f"{p}: not a readable .npz file ({e})") from None
+    except Exception as e:  # numpy and zipfile raise many types for damaged files
+        raise ValueError(f"{p}: not a readable .npz file ({type(e).__name__}: {e})") from None
     if not isinstance(z, np.lib.npyio.NpzFile):
         raise ValueError(f"{p}: not a silhouette set: a single array, not an .npz archive")
     key_images, key_ids, key_views = split_keys(split)
@@ -128,13 +137,17 @@ def read_silhouettes(path: PathLike, split: str) -> SilhouetteSplit:
             if not need <= keys:
                 raise ValueError(f"{p}: not a silhouette set: missing {', '.join(sorted(need - keys))} "
                                  f"(found {', '.join(sorted(keys)) or 'nothing'})")
-            version = int(z["version"]) if "version" in keys else FORMAT_VERSION
+            version = _int_entry(z["version"], p, "version", 0, 2**31) if "version" in keys else FORMAT_VERSION
             if version != FORMAT_VERSION:
                 raise ValueError(f"{p}: silhouette file version {version}; this reader reads version {FORMAT_VERSION}")
-            size = int(z["size"]) if "size" in keys else SIZE
+            size = _int_entry(z["size"], p, "size", 1, MAX_SIZE) if "size" in keys else SIZE
             raw, ids, views = z[key_images], z[key_ids], z[key_views]
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
+    except ValueError as e:
+        if str(e).startswith(f"{p}: "):
+            raise
         raise ValueError(f"{p}: corrupt .npz file ({e})") from None
+    except Exception as e:  # zipfile, zlib and numpy's readers raise many types for damaged members
+        raise ValueError(f"{p}: corrupt .npz file ({type(e).__name__}: {e})") from None
     if raw.dtype == np.uint8 and raw.ndim == 3 and raw.shape[1:] == (size, -(-size // 8)):
         images = np.unpackbits(raw, axis=-1, count=size).astype(bool)
     elif raw.dtype == np.bool_ and raw.ndim == 3 and raw.shape[1:] == (size, size):

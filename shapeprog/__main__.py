@@ -837,6 +837,7 @@ def _cmd_discover_macros(args) -> int:
     cfg = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
                       abs_shape_num=args.subsample, selection=args.selection, search=args.search)
     lib0, text0 = _macro_library(args.start_from, "--start-from: ", text=True) if args.start_from else (None, "")
+    prior = prior_rounds(text0, str(args.start_from)) if args.start_from else []
     out = Path(args.out)
     _refuse_overwrite([out / "library.txt"], [args.start_from, args.config])
     if (out / "library.txt").exists() and not (out / "state.json").exists():  # user files are never overwritten
@@ -851,7 +852,7 @@ def _cmd_discover_macros(args) -> int:
         nodes, ids = collection(args.category, args.split, args.limit, args.seed, executor=pool,
                                 max_orders=cfg["abs_order_num"])
         log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
-        start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior_rounds(text0), args.start_from)
+        start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior, args.start_from)
         state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
                          stop_after=args.stop_after, start=start)
     finally:

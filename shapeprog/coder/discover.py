@@ -574,19 +574,22 @@ def _save(out: Path | None, state: dict) -> None:
 def _load(out: Path | None, lang: Lang):
     if out is None or not (out / "state.json").is_file():
         return None
+    from shapeio.files import parse_json
+
     from ..errors import ParseError
     from ..limits import decode
 
     file = str(out / "state.json")
-    try:
-        st = json.loads(decode((out / "state.json").read_bytes(), file))
-    except json.JSONDecodeError as e:
-        raise ParseError(f"not JSON: {e.msg}", file, e.lineno, e.colno, "") from None
+    st = parse_json(decode((out / "state.json").read_bytes(), file), file,
+                    lambda why, line, col: ParseError(why, file, line, col, ""))
+    if not isinstance(st, dict):
+        raise ParseError("a damaged discovery state (not a JSON object)", file, 1, 1, "")
     where = "its library"
     try:
         missing = [k for k in _STATE_KEYS if k not in st]
         if missing:
             raise KeyError(missing[0])
+        _check_state_fields(st)
         lib = Library.from_text(st["library"], lang, file=file)
         programs = []
         for i, t in enumerate(st["programs"]):
@@ -604,6 +607,31 @@ def _load(out: Path | None, lang: Lang):
 
 #: The keys every discovery state holds (``stores``, ``repeat`` and ``config`` are optional).
 _STATE_KEYS = ("library", "programs", "costs", "errors", "round", "phase", "log", "weights", "index")
+
+
+def _check_state_fields(st: dict) -> None:
+    """The types a resumed run relies on; raises TypeError naming the first field that is wrong."""
+    def count(v) -> bool:
+        return type(v) is int and v >= 0
+
+    def number(v) -> bool:
+        return type(v) in (int, float)
+
+    n = len(st["programs"]) if isinstance(st["programs"], list) else -1
+    checks = [
+        ("library", isinstance(st["library"], str)),
+        ("programs", n >= 0 and all(isinstance(t, str) for t in st["programs"])),
+        ("round", count(st["round"])), ("phase", isinstance(st["phase"], str)), ("index", count(st["index"])),
+        ("repeat", count(st.get("repeat", 0))),
+        ("costs", isinstance(st["costs"], list) and len(st["costs"]) == n and all(number(c) for c in st["costs"])),
+        ("errors", isinstance(st["errors"], list) and len(st["errors"]) == n),
+        ("weights", isinstance(st["weights"], list) and all(number(w) for w in st["weights"])),
+        ("log", isinstance(st["log"], list) and all(isinstance(h, dict) and number(h.get("seconds", 0))
+                                                    for h in st["log"])),
+    ]
+    bad = [k for k, ok in checks if not ok]
+    if bad:
+        raise TypeError(f"field {bad[0]!r} does not hold what a discovery state writes there")
 
 
 def start_from(out: str | Path, shapes: Sequence, library: Library, programs: Sequence[Expr], cfg: Config = Config(),

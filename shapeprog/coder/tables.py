@@ -24,12 +24,13 @@ Example (``python -m shapeprog table2-coder --categories chair --train 20 --held
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Callable, Sequence
+
+from shapeio.files import parse_json
 
 from ..errors import ParseError
 from ..limits import decode
@@ -86,11 +87,11 @@ def _read_run(category: str, lib_text: str, lib_name: str, prog_text: str, prog_
             continue
         key, sep, text = line.partition(":")
         if not sep:
-            raise ValueError(f"{prog_name}:{i + 1}: expected '<key>:<program>', got {line[:40]!r}")
+            raise ParseError(f"expected '<key>:<program>', got {line[:40]!r}", prog_name, i + 1, 1, line[:40])
         keys.append(key)
         progs.append(parse(text, lib, file=prog_name, line=i + 1, column=len(key) + 2))
     if not progs:
-        raise ValueError(f"{prog_name}: no programs")
+        raise ParseError("no programs", prog_name, 1, 1, "")
     return Run(category, lib, tuple(keys), tuple(progs), source)
 
 
@@ -122,10 +123,9 @@ def log_of(run: Run) -> list:
     if not f.is_file():
         return []
     name = str(f)
+    record = parse_json(decode(f.read_bytes(), name), name, lambda why, line, col: ParseError(why, name, line, col, ""))
     try:
-        log = json.loads(decode(f.read_bytes(), name))["log"]
-    except json.JSONDecodeError as e:
-        raise ParseError(f"not JSON: {e.msg}", name, e.lineno, e.colno, "") from None
+        log = record["log"]
     except (KeyError, TypeError):
         raise ParseError("not a discovery log (no 'log' list)", name, 1, 1, "") from None
     if not isinstance(log, list) or not all(isinstance(h, dict) for h in log):

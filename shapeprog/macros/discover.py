@@ -47,6 +47,8 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from shapeio.files import parse_json
+
 from ..errors import ParseError
 from .grammar import Line
 from .lang import BASE, MacroDef, check_def, def_text
@@ -93,15 +95,20 @@ def load_config(path: str | Path | None = None, **overrides) -> dict:
         from ..limits import decode
         text = decode(Path(path).read_bytes(), str(path))
         try:
-            data = yaml.safe_load(text) or {}
+            data = yaml.safe_load(text)
             node = yaml.compose(text)
         except yaml.YAMLError as e:
             mark = getattr(e, "problem_mark", None)
             line, col = (mark.line + 1, mark.column + 1) if mark is not None else (1, 1)
             raise ParseError(f"not YAML: {getattr(e, 'problem', None) or e}", str(path), line, col, "") from None
-        if not isinstance(data, dict):
+        except (ValueError, RecursionError) as e:  # an integer of too many digits, nesting too deep
+            raise ParseError(f"not a config: {type(e).__name__}: {str(e)[:120]}", str(path), 1, 1, "") from None
+        if node is None:  # an empty file, or comments only: the defaults
+            data, node = {}, yaml.MappingNode("tag:yaml.org,2002:map", [])
+        if not isinstance(data, dict) or not isinstance(node, yaml.MappingNode):
             raise ParseError("a config is a mapping of settings", str(path), 1, 1, "")
-        marks = {k.value: (k.start_mark.line + 1, k.start_mark.column + 1) for k, _ in node.value}
+        marks = {k.value: (k.start_mark.line + 1, k.start_mark.column + 1) for k, _ in node.value
+                 if isinstance(k, yaml.ScalarNode)}
         items += [(k, v, str(path), *marks.get(str(k), (1, 1))) for k, v in data.items()]
     items += [(k, v, "<overrides>", 1, 1) for k, v in overrides.items() if v is not None]
     for k, v, where, line, col in items:
@@ -287,13 +294,20 @@ class Discovery:
 
     @classmethod
     def from_json(cls, text: str, file: str = "state.json") -> tuple["Discovery", dict]:
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise ParseError(f"not JSON: {e.msg}", file, e.lineno, e.colno, "") from None
+        d = parse_json(text, file, lambda why, line, col: ParseError(why, file, line, col, ""))
         if not isinstance(d, dict) or d.get("format") != "shapemod-discovery/1":
             raise ParseError("not a shapemod discovery state", file, 1, 1, "")
         try:
+            fields = [("library", isinstance(d["library"], str)),
+                      ("active", isinstance(d["active"], list) and all(isinstance(a, str) for a in d["active"])),
+                      ("current", isinstance(d["current"], list) and all(
+                          isinstance(c, list) and all(type(o) is int and o >= 0 for o in c) for c in d["current"])),
+                      ("history", isinstance(d["history"], list) and all(isinstance(h, dict) for h in d["history"])),
+                      ("counter", type(d["counter"]) is int and d["counter"] >= 0),
+                      ("config", isinstance(d["config"], dict)), ("nodes", isinstance(d["nodes"], str))]
+            bad = [k for k, ok in fields if not ok]
+            if bad:
+                raise TypeError(f"field {bad[0]!r} does not hold what a discovery state writes there")
             lib = Library.from_text(d["library"], file) if d["library"] else Library()
             state = cls(list(lib.macros), [str(a) for a in d["active"]], [[int(o) for o in c] for c in d["current"]],
                         list(d["history"]), int(d["counter"]))
@@ -563,15 +577,32 @@ def rounds_line(state: Discovery, cfg: Mapping) -> str:
             "f per sub-program (subsample): " + ", ".join(f"{h['f_after']:.2f}" for h in state.history))
 
 
-def prior_rounds(text: str) -> list[float]:
+def prior_rounds(text: str, file: str = "<library>") -> list[float]:
     """The f per sub-program of each round recorded in a library file's header (the ``# rounds:`` line that
-    ``discover-macros`` writes); [] when there is none."""
-    for line in text.splitlines():
+    ``discover-macros`` writes); [] when there is none.
+
+    Raises:
+        ParseError: a value of that line that is not a finite non-negative number (at its line and column).
+    """
+    for no, line in enumerate(text.splitlines(), start=1):
         if not line.startswith("#"):
             break
         if line.startswith("# rounds:") and "(subsample):" in line:
-            tail = line.split("(subsample):", 1)[1]
-            return [float(x) for x in tail.split(",") if x.strip()]
+            col = line.index("(subsample):") + len("(subsample):") + 1
+            values = []
+            for part in line[col - 1:].split(","):
+                token = part.strip()
+                if token:
+                    try:
+                        v = float(token)
+                    except ValueError:
+                        v = math.nan
+                    if not (math.isfinite(v) and v >= 0):
+                        raise ParseError("the '# rounds:' header holds f values (finite numbers >= 0)", file, no,
+                                         col + len(part) - len(part.lstrip()), token)
+                    values.append(v)
+                col += len(part) + 1
+            return values
     return []
 
 

@@ -37,9 +37,11 @@ from typing import Sequence
 
 import numpy as np
 
+from shapeio.files import parse_json
+
 from .lang import MacroError
 
-__all__ = ["CHUNK", "CHECK_TOL", "SHIPPED", "SUMMARY", "RefactoredCorpus", "ShapeRefactor", "check_target", "load_refactored",
+__all__ = ["CHUNK", "CHECK_TOL", "MAX_ARCHIVE_BYTES", "SHIPPED", "SUMMARY", "RefactoredCorpus", "ShapeRefactor", "check_target", "load_refactored",
            "read_refactored", "refactor_corpus", "refactor_texts", "write_refactored"]
 
 #: Shapes per executor task.
@@ -50,6 +52,8 @@ CHUNK = 25
 CHECK_TOL = 0.24
 #: The summary file's name in a refactored-corpus folder.
 SUMMARY = "summary.json"
+#: The most bytes a ``.tar.xz`` refactored corpus may decompress to (the shipped chair corpus: 11 MB).
+MAX_ARCHIVE_BYTES = 256 * 2**20
 
 _COUNTS = ("lines", "float", "cube", "categorical", "bool")
 
@@ -366,6 +370,23 @@ def load_refactored(category: str, ids: Sequence[int] | None = None) -> tuple[di
         return read_refactored(path, ids=ids)
 
 
+def _decompress(path: Path) -> bytes:
+    """The ``.xz`` file at ``path``, decompressed, at most :data:`MAX_ARCHIVE_BYTES`.
+
+    Raises:
+        shapeio.InputError: larger than the limit, truncated, or not xz.
+    """
+    from shapeio import InputError
+
+    d = lzma.LZMADecompressor()
+    out = d.decompress(path.read_bytes(), max_length=MAX_ARCHIVE_BYTES + 1)
+    if len(out) > MAX_ARCHIVE_BYTES:
+        raise InputError(f"{path}: decompresses to more than MAX_ARCHIVE_BYTES = {MAX_ARCHIVE_BYTES} bytes")
+    if not d.eof:
+        raise InputError(f"{path}: a truncated .xz file")
+    return out
+
+
 def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tuple[dict, dict]:
     """Read a refactored corpus: a folder :func:`write_refactored` wrote, or a ``.tar.xz`` of one.
 
@@ -379,7 +400,8 @@ def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tup
 
     Raises:
         ParseError: a program file that does not parse (named, with line and column).
-        shapeio.InputError: a file that is not such an archive, a summary that is not JSON.
+        shapeio.InputError: a file that is not such an archive (or one that decompresses to more than
+            :data:`MAX_ARCHIVE_BYTES`), a summary that is not a JSON object.
         FileNotFoundError: no such folder or archive.
     """
     from shapeio import InputError
@@ -395,7 +417,7 @@ def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tup
                 files[f.name] = f.read_bytes()
     elif path.is_file():
         try:
-            with tarfile.open(fileobj=io.BytesIO(lzma.decompress(path.read_bytes())), mode="r:") as tar:
+            with tarfile.open(fileobj=io.BytesIO(_decompress(path)), mode="r:") as tar:
                 for m in tar.getmembers():
                     name = m.name.rsplit("/", 1)[-1]
                     if m.isfile() and (name.endswith(".txt") or name == SUMMARY):
@@ -404,10 +426,15 @@ def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tup
             raise InputError(f"{path}: not a .tar.xz archive of a refactored corpus ({e})") from None
     else:
         raise FileNotFoundError(f"{path}: no such folder or archive")
-    try:
-        summary = json.loads(files.pop(SUMMARY).decode("utf-8")) if SUMMARY in files else {}
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise InputError(f"{path}/{SUMMARY}: not a summary JSON ({e})") from None
+    summary = {}
+    if SUMMARY in files:
+        where = f"{path}/{SUMMARY}"
+        try:
+            summary = parse_json(files.pop(SUMMARY).decode("utf-8"), where)
+        except UnicodeDecodeError as e:
+            raise InputError(f"{where}: not a summary JSON ({e})") from None
+        if not isinstance(summary, dict):
+            raise InputError(f"{where}: not a summary JSON (a JSON object is expected)")
     wanted = set() if ids is None else {int(i) for i in ids}
     programs = {}
     for name in sorted(files, key=lambda n: (len(n), n)):

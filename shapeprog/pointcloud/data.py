@@ -36,7 +36,7 @@ from typing import Callable, Mapping, Optional, Sequence, Union
 import numpy as np
 import torch
 
-from shapeio.files import InputError, atomic_write
+from shapeio.files import InputError, atomic_write, parse_json
 
 from .. import corpus
 from ..errors import ExecutionError, ParseError
@@ -399,9 +399,16 @@ def load_cache(root: PathLike, category: str) -> CloudCache:
     missing = [k for k in need if k not in d]
     if missing:
         raise InputError(f"{path}: not a cloud cache (missing {', '.join(missing)})")
+    for k in ("version", "n_points", "seed"):
+        v = d[k]
+        if np.ndim(v) != 0 or not np.issubdtype(v.dtype, np.integer) or int(v) < 0:
+            raise InputError(f"{path}: not a cloud cache ('{k}' is not a non-negative integer: dtype {v.dtype}, "
+                             f"shape {np.shape(v)})")
     if int(d["version"]) != CACHE_VERSION:
         raise InputError(f"{path}: cache version {int(d['version'])}, this code reads version {CACHE_VERSION}; "
                          "make it again with `python -m shapeprog make-clouds`")
+    if np.ndim(d["category"]) != 0:
+        raise InputError(f"{path}: not a cloud cache ('category' is not one name)")
     if str(d["category"]) != category:
         raise InputError(f"{path}: holds {str(d['category'])!r} clouds, not {category!r}")
     s = len(d["ids"])
@@ -409,6 +416,17 @@ def load_cache(root: PathLike, category: str) -> CloudCache:
             d["center"].shape != (s, 3) or d["scale"].shape != (s,):
         raise InputError(f"{path}: inconsistent shapes: ids {d['ids'].shape}, points {d['points'].shape}, "
                          f"center {d['center'].shape}, scale {d['scale'].shape}")
+    for k in ("ids", "failed_ids"):
+        if d[k].ndim != 1 or not np.issubdtype(d[k].dtype, np.integer):
+            raise InputError(f"{path}: not a cloud cache ('{k}' is not a list of shape ids)")
+    for k in ("points", "center", "scale"):
+        if not np.issubdtype(d[k].dtype, np.floating) or not np.isfinite(d[k]).all():
+            raise InputError(f"{path}: not a cloud cache ('{k}' holds a non-finite or non-float value)")
+    if (d["scale"] <= 0).any():
+        raise InputError(f"{path}: not a cloud cache (a scale <= 0)")
+    if d["failed_reasons"].shape != d["failed_ids"].shape:
+        raise InputError(f"{path}: not a cloud cache ({len(d['failed_ids'])} failed ids but "
+                         f"{len(d['failed_reasons'])} reasons)")
     return CloudCache(category, d["ids"].astype(np.int64), d["points"], d["center"].astype(np.float64),
                       d["scale"].astype(np.float64), int(d["n_points"]), int(d["seed"]),
                       dict(zip(d["failed_ids"].tolist(), d["failed_reasons"].tolist())), path)
@@ -421,11 +439,17 @@ def read_split(root: PathLike, category: str) -> dict[str, list[int]]:
         raise FileNotFoundError(f"{path}: no such split file; make it with "
                                 f"`python -m shapeprog make-clouds --category {category} --out {root}`")
     try:
-        record = json.loads(path.read_text(encoding="utf-8"))
-        out = {k: [int(i) for i in record[k]] for k in SPLITS}
-    except (ValueError, KeyError, TypeError) as e:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
         raise InputError(f"{path}: not a split file ({type(e).__name__}: {e})") from None
-    return out
+    record = parse_json(text, str(path))
+    if not isinstance(record, dict):
+        raise InputError(f"{path}: not a split file (a JSON object is expected)")
+    for k in SPLITS:
+        ids = record.get(k)
+        if not isinstance(ids, list) or not all(type(i) is int and i >= 0 for i in ids):
+            raise InputError(f"{path}: not a split file ('{k}' is not a list of shape ids)")
+    return {k: list(record[k]) for k in SPLITS}
 
 
 # --------------------------------------------------------------------------------------------------

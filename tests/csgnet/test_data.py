@@ -158,7 +158,14 @@ def test_defect7_interrupted_or_mixed_generate_warns(tmp_path, monkeypatch):
     assert json.loads((tmp_path / "2d" / "meta.json").read_text())["complete"] is False
     with pytest.warns(DatasetWarning, match="did not finish"):
         load_dataset(tmp_path, 2, "test")
-    (tmp_path / "2d" / "meta.json").unlink()
+    meta = tmp_path / "2d" / "meta.json"
+    for text, match in (('{"lengths": [1e999]}', "out of the range of a float"), ('{"lengths": [null]}', "'lengths'"),
+                        ('{"lengths": "3"}', "'lengths'"), ('{"lengths": [1e308]}', "'lengths'"),
+                        ('{"lengths": [3], "complete": "yes"}', "'complete'"), ("[" * 200, "nested more than 64")):
+        meta.write_text(text)
+        with pytest.raises(ValueError, match="meta.json.*" + match):
+            load_dataset(tmp_path, 2, "test")
+    meta.unlink()
     with pytest.warns(DatasetWarning, match="meta.json is missing"):
         load_dataset(tmp_path, 2, "test")
 

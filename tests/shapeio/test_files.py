@@ -72,3 +72,22 @@ def test_defect10_stale_temp_of_a_killed_write_is_removed(tmp_path):
     other.write_text("partial")
     assert remove_stale_temps(tmp_path) == [other]
     assert sorted(os.listdir(tmp_path)) == [live.name, "a.txt"]
+
+
+def test_parse_json_is_strict_and_locates_its_errors():
+    from shapeio.files import MAX_JSON_DEPTH, InputError, parse_json
+
+    assert parse_json('{"a": [1, 2.5, "[{"], "b": null}', "x.json") == {"a": [1, 2.5, "[{"], "b": None}
+    assert parse_json("[" * MAX_JSON_DEPTH + "]" * MAX_JSON_DEPTH, "x.json") == parse_json("[" * 64 + "]" * 64, "y")
+    cases = [('{"a": 1,}', "x.json:1:9: not JSON: Expecting property name"),
+             ("[\n" + "[" * MAX_JSON_DEPTH, f"x.json:2:{MAX_JSON_DEPTH}: nested more than {MAX_JSON_DEPTH} levels"),
+             ('{"a": NaN}', "x.json:1:1: not JSON: NaN is not a JSON number"),
+             ("[-Infinity]", "not JSON: -Infinity is not a JSON number"),
+             ("[1e400]", "not JSON: 1e400 is out of the range of a float"),
+             ("1" * 5000, "not JSON: Exceeds the limit")]
+    for text, message in cases:
+        with pytest.raises(InputError, match=message.replace("[", r"\[")):
+            parse_json(text, "x.json")
+    # a format's own error type
+    with pytest.raises(KeyError, match="bad 1 9"):
+        parse_json('{"a": 1,}', "x.json", lambda why, line, col: KeyError(f"bad {line} {col}"))

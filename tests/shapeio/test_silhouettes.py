@@ -46,6 +46,26 @@ def test_bad_files_name_the_file(tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match=r"junk\.npz: not a readable \.npz file"):
         read_silhouettes(tmp_path / "junk.npz", "val")
+    (tmp_path / "zip.npz").write_bytes(b"PK\x03\x04")  # the start of a zip, nothing more
+    with pytest.raises(ValueError, match=r"zip\.npz: not a readable \.npz file \(BadZipFile"):
+        read_silhouettes(tmp_path / "zip.npz", "val")
+    # entries of the wrong type or range are refused by name
+    with np.load(path, allow_pickle=False) as z:
+        good = {k: z[k] for k in z.files}
+    for change, match in (({"version": np.array([1, 2])}, "'version' is not an integer"),
+                          ({"version": np.array("x")}, "'version' is not an integer"),
+                          ({"size": np.array(np.nan)}, r"'size' is not an integer in \[1, 1024\]"),
+                          ({"size": np.array(-8)}, r"'size' is not an integer in \[1, 1024\]")):
+        np.savez(tmp_path / "e.npz", **{**good, **change})
+        with pytest.raises(ValueError, match=r"e\.npz: the entry " + match):
+            read_silhouettes(tmp_path / "e.npz", "val")
+    # a damaged member (its bytes flipped inside the archive) is reported as a corrupt file naming it
+    raw = bytearray((tmp_path / "s.npz").read_bytes())
+    at = raw.find(b"val_images") + 200
+    raw[at:at + 16] = bytes(16)
+    (tmp_path / "d.npz").write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"d\.npz: "):
+        read_silhouettes(tmp_path / "d.npz", "val")
     bad = SilhouetteSplit(np.zeros((2, 16, 16), bool), np.array(["a/1"]), np.array(["front", "side"]))
     with pytest.raises(ValueError, match=r"w\.npz: val has 2 images but 1 ids"):
         write_silhouettes(tmp_path / "w.npz", {"val": bad}, margin=0)

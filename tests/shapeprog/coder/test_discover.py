@@ -172,6 +172,13 @@ def test_a_damaged_state_is_refused_naming_the_file(tmp_path):
     assert "its program 0 (shape 0)" in e.reason
     e = refused(json.dumps(dict(good, library="Nope(F0: Float) = Cuboid(F0,F0,Q)")))
     assert "its library" in e.reason
+    for key, value in (("round", "x"), ("index", -1), ("phase", 3), ("costs", good["costs"][:-1]),
+                       ("weights", "abc"), ("log", [1])):
+        e = refused(json.dumps(dict(good, **{key: value})))
+        assert f"field {key!r} does not hold what a discovery state writes there" in e.reason
+    e = refused(json.dumps(good).replace('"index": ', '"index": 1e999, "x": ', 1))
+    assert e.reason.startswith("not JSON: 1e999 is out of the range of a float")
+    assert refused("[" * 100).reason.startswith("nested more than 64 levels")
 
 
 def test_propose_ranks_candidates_and_respects_frequency():

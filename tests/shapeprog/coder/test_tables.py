@@ -106,7 +106,7 @@ def test_table2_of_a_run_folder_and_its_errors(tmp_path):
     with pytest.raises(ValueError, match="'nope_0_0' is not a chair shape"):
         tables.table2(tables.from_run(tmp_path, "chair"))
     (tmp_path / "programs.txt").write_text("172_0_0 Cuboid(0.1,0.1,0.1)\n")
-    with pytest.raises(ValueError, match=r"programs.txt:1: expected '<key>:<program>'"):
+    with pytest.raises(ParseError, match=r"programs.txt:1:1: expected '<key>:<program>'"):
         tables.from_run(tmp_path, "chair")
     (tmp_path / "programs.txt").write_text("172_0_0:Cubiod(0.1,0.1,0.1)\n")
     with pytest.raises(ParseError, match=r"programs.txt:1:9: unknown function 'Cubiod'"):

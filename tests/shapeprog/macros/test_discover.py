@@ -130,6 +130,16 @@ def test_config_file_and_errors(tmp_path):
     with pytest.raises(ParseError, match="not UTF-8") as e:
         load_config(bad)
     assert e.value.line == 2
+    # an empty file or comments only: the defaults; a scalar, a huge number, deep nesting: our error
+    for text in ("", "# nothing set\n"):
+        bad.write_text(text)
+        assert load_config(bad) == DEFAULTS
+    for text, match in (("null\n", "a config is a mapping"), ("0\n", "a config is a mapping"),
+                        ("prec: " + "1" * 4301 + "\n", "not a config: ValueError"),
+                        ("prec: " + "[" * 2000 + "\n", "not a config: RecursionError")):
+        bad.write_text(text)
+        with pytest.raises(ParseError, match=match):
+            load_config(bad)
     from shapeprog.macros.discover import LIMITS
     assert set(LIMITS) == {k for k, v in DEFAULTS.items() if type(v) in (int, float)}
     assert all(lo <= DEFAULTS[k] <= hi for k, (lo, hi) in LIMITS.items())
@@ -159,6 +169,19 @@ def test_generalise_snaps_coefficients_and_edits():
      '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "expected a parameter name"),
     ('{"format": "shapemod-discovery/1", "library": "", "active": ["nfunc_0"], "current": [], "history": [], '
      '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "not defined"),
+    ('{"format": "shapemod-discovery/1", "library": 5, "active": [], "current": [], "history": [], '
+     '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "field 'library'"),
+    ('{"format": "shapemod-discovery/1", "library": "", "active": "xyz", "current": [], "history": [], '
+     '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "field 'active'"),
+    ('{"format": "shapemod-discovery/1", "library": "", "active": [], "current": [[1.5]], "history": [], '
+     '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "field 'current'"),
+    ('{"format": "shapemod-discovery/1", "library": "", "active": [], "current": [], "history": "abc", '
+     '"counter": 0, "nodes": "", "seed": 0, "config": {}}', "field 'history'"),
+    ('{"format": "shapemod-discovery/1", "library": "", "active": [], "current": [], "history": [], '
+     '"counter": Infinity, "nodes": "", "seed": 0, "config": {}}', "Infinity is not a JSON number"),
+    ('{"format": "shapemod-discovery/1", "library": "", "active": [], "current": [], "history": [], '
+     '"counter": 0, "nodes": "", "seed": 0, "config": []}', "field 'config'"),
+    ("[" * 3000, "nested more than 64 levels"), ("1" * 5000, "not JSON"),
 ])
 def test_damaged_state_is_refused(tmp_path, text, match):
     (tmp_path / "state.json").write_text(text)
@@ -177,6 +200,10 @@ def test_continuing_from_a_library_equals_resuming():
     assert [m.name for m in one.macros] == one.active  # nothing removed: the library is the state
     text = rounds_line(one, cfg) + "\n" + one.library().to_text()  # the header line discover-macros writes
     assert prior_rounds(text) == [round(one.history[0]["f_after"], 2)]
+    for bad, column in (("abc", 26), ("1.0, nan", 31), ("-2", 26)):
+        with pytest.raises(ParseError, match="the '# rounds:' header holds f values") as e:
+            prior_rounds(f"# rounds: 1 (subsample): {bad}\n", "lib.txt")
+        assert (e.value.file, e.value.line, e.value.column) == ("lib.txt", 1, column)
     start = Discovery.from_library(Library.from_text(text), nodes, prior_rounds(text), "one")
     assert start.counter == 1 + max(int(m.name[6:]) for m in one.macros)
     msgs = []

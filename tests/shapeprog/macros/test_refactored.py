@@ -113,7 +113,7 @@ def test_outputs_are_never_overwritten(three, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.tar.xz", "empty"]  # no temporary left
 
 
-def test_read_refactored_names_a_bad_file(tmp_path):
+def test_read_refactored_names_a_bad_file(tmp_path, monkeypatch):
     (tmp_path / "5.txt").write_text("# Program_0\nbbox = Cuboid(1.0, 1.0, 1.0, True)\nc = nope(1.0)\n\n")
     with pytest.raises(ParseError, match=r"5\.txt:3:"):
         read_refactored(tmp_path)
@@ -122,14 +122,31 @@ def test_read_refactored_names_a_bad_file(tmp_path):
         read_refactored(tmp_path)
     (tmp_path / "5.txt").unlink()
     (tmp_path / SUMMARY).write_text("{")
-    with pytest.raises(InputError, match="not a summary JSON"):
+    with pytest.raises(InputError, match="summary.json:1:2: not JSON"):
         read_refactored(tmp_path)
+    for text, match in (("[1, 2]", "not a summary JSON"), ("[" * 5000, "nested more than 64"), ("1" * 5000, "not JSON")):
+        (tmp_path / SUMMARY).write_text(text)
+        with pytest.raises(InputError, match=match):
+            read_refactored(tmp_path)
+    (tmp_path / SUMMARY).unlink()
     bad = tmp_path / "x.tar.xz"
     bad.write_bytes(b"not xz")
     with pytest.raises(InputError, match=r"x\.tar\.xz: not a \.tar\.xz archive"):
         read_refactored(bad)
     with pytest.raises(FileNotFoundError):
         read_refactored(tmp_path / "none")
+    # an archive that decompresses past the limit is refused before it is unpacked; a truncated one too
+    import lzma
+
+    from shapeprog.macros import refactored
+    bomb = tmp_path / "bomb.tar.xz"
+    bomb.write_bytes(lzma.compress(bytes(4096)))
+    monkeypatch.setattr(refactored, "MAX_ARCHIVE_BYTES", 1024)
+    with pytest.raises(InputError, match=r"bomb\.tar\.xz: decompresses to more than MAX_ARCHIVE_BYTES = 1024"):
+        read_refactored(bomb)
+    bomb.write_bytes(lzma.compress(bytes(512))[:-8])
+    with pytest.raises(InputError, match=r"bomb\.tar\.xz: a truncated \.xz file"):
+        read_refactored(bomb)
 
 
 def test_refactor_corpus_command(tmp_path, capsys):

@@ -107,6 +107,28 @@ def test_cache_errors_name_the_file(cache, tmp_path):
     (tmp_path / "chair_clouds.npz").write_bytes(b"junk")
     with pytest.raises(InputError, match="chair_clouds.npz: cannot read the cloud cache"):
         load_cache(tmp_path, "chair")
+    # damaged entries of a real cache: each refused by name, none read as something else
+    with np.load(root / "chair_clouds.npz", allow_pickle=False) as z:
+        good = {k: z[k] for k in z.files}
+    damaged = [({"version": np.array([1, 2])}, "'version' is not a non-negative integer"),
+               ({"n_points": np.array([])}, "'n_points' is not a non-negative integer"),
+               ({"points": np.where(np.arange(3) == 0, np.nan, good["points"])}, "'points' holds a non-finite"),
+               ({"scale": np.zeros_like(good["scale"])}, "a scale <= 0"),
+               ({"scale": np.full_like(good["scale"], -np.inf)}, "'scale' holds a non-finite"),
+               ({"failed_ids": np.array([1, 2]), "failed_reasons": np.array(["x"])}, "2 failed ids but 1 reasons")]
+    for change, match in damaged:
+        np.savez(tmp_path / "chair_clouds.npz", **{**good, **change})
+        with pytest.raises(InputError, match=match):
+            load_cache(tmp_path, "chair")
+    split = tmp_path / "chair_split.json"
+    for text, match in (('{"train": [1e999], "val": [], "test": []}', "out of the range of a float"),
+                        ("[" * 100, "nested more than 64"),
+                        ('{"train": [1.5], "val": [], "test": []}', "'train' is not a list of shape ids"),
+                        ('{"train": "12", "val": [], "test": []}', "'train' is not a list of shape ids"),
+                        ('{"train": [], "val": []}', "'test' is not a list of shape ids"), ("[]", "a JSON object")):
+        split.write_text(text)
+        with pytest.raises(InputError, match=match):
+            read_split(tmp_path, "chair")
 
 
 def test_dataset_items(cache):
