@@ -28,7 +28,7 @@ _DIR = tempfile.mkdtemp(prefix="fuzz-clouds-")
 
 
 def seeds() -> list[bytes]:
-    """One valid file per suffix: clouds (.xyz, .npy, .ply, .obj) and meshes (.obj, .ply, .stl, .off, .glb)."""
+    """One valid file per suffix: clouds (.xyz, .npy, binary and ASCII .ply, .obj) and meshes (.obj, .ply, .stl, .off, .glb)."""
     import trimesh
 
     box = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
@@ -37,7 +37,8 @@ def seeds() -> list[bytes]:
     np.save(npy, pts)
     cloud = trimesh.PointCloud(pts)
     out = [(".xyz", "".join(f"{x} {y} {z}\n" for x, y, z in pts.tolist()).encode()), (".npy", npy.getvalue()),
-           (".ply", cloud.export(file_type="ply")), (".obj", "".join(f"v {x} {y} {z}\n" for x, y, z in pts.tolist()).encode())]
+           (".ply", cloud.export(file_type="ply")), (".ply", cloud.export(file_type="ply", encoding="ascii")),
+           (".obj", "".join(f"v {x} {y} {z}\n" for x, y, z in pts.tolist()).encode())]
     for suffix in ("obj", "ply", "stl", "off", "glb"):
         data = box.export(file_type=suffix)
         out.append((f".{suffix}", data.encode() if isinstance(data, str) else data))
