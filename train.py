@@ -16,7 +16,18 @@ configs.
 from pathlib import Path
 
 import lightning as L
-from lightning.pytorch.cli import LightningCLI
+from lightning.pytorch.cli import LightningCLI, SaveConfigCallback
+
+
+class SaveConfig(SaveConfigCallback):
+    """Saves the run's config in its TensorBoard folder; a run without a logger has no run folder, and its
+    config is not written (Lightning would write ``config.yaml`` into the working folder, over any file of
+    that name)."""
+
+    def setup(self, trainer, pl_module, stage: str) -> None:
+        if trainer.logger is None:
+            return
+        super().setup(trainer, pl_module, stage)
 
 
 class CLI(LightningCLI):
@@ -25,7 +36,10 @@ class CLI(LightningCLI):
     def before_fit(self) -> None:
         """A ``fit`` without ``--ckpt_path`` into a checkpoint folder that already holds checkpoints stops
         before training: resume that run (``--ckpt_path last``) or move its folder away."""
-        if self.config[self.subcommand].get("ckpt_path") is not None:
+        ckpt = self.config[self.subcommand].get("ckpt_path")
+        if ckpt == "last":
+            self._check_last()
+        if ckpt is not None:
             return
         for cb in self.trainer.checkpoint_callbacks:
             folder = Path(cb.dirpath) if getattr(cb, "dirpath", None) else None
@@ -33,12 +47,25 @@ class CLI(LightningCLI):
                 raise SystemExit(f"error: {folder} holds the checkpoints of an earlier run; resume it with "
                                  "--ckpt_path last, or move that folder away to start a new run")
 
+    def _check_last(self) -> None:
+        """``--ckpt_path last`` into a folder of checkpoints without a readable ``last*.ckpt`` (a link lost in a
+        copy, a kill while it was replaced) stops: Lightning would start from scratch beside them."""
+        for cb in self.trainer.checkpoint_callbacks:
+            folder = Path(cb.dirpath) if getattr(cb, "dirpath", None) else None
+            if folder is None or not folder.is_dir() or not any(folder.glob("*.ckpt")):
+                continue
+            if not any(p.is_file() for p in folder.glob("last*.ckpt")):  # is_file follows links
+                names = ", ".join(sorted(p.name for p in folder.glob("*.ckpt"))[:5])
+                raise SystemExit(f"error: --ckpt_path last: {folder} holds checkpoints ({names}) but no readable "
+                                 "last.ckpt; resume from one of them with --ckpt_path <file>")
+
 
 def main(args=None, run: bool = True) -> LightningCLI:
     """Run the CLI on ``args`` (default: ``sys.argv``); ``run=False`` only parses and builds the config's
     model, data module and trainer (``args`` then takes no subcommand)."""
     return CLI(L.LightningModule, L.LightningDataModule, subclass_mode_model=True,
-               subclass_mode_data=True, save_config_kwargs={"overwrite": True}, args=args, run=run)
+               subclass_mode_data=True, save_config_callback=SaveConfig, save_config_kwargs={"overwrite": True},
+               args=args, run=run)
 
 
 if __name__ == "__main__":

@@ -75,6 +75,10 @@ def cmd_render(args) -> int:
 def cmd_generate(args) -> int:
     from .data import generate_dataset
 
+    existing = Path(args.out) / f"{args.dim}d"
+    if (existing / "meta.json").exists() or any(existing.glob("len_*")):
+        raise SystemExit(f"error: {existing} holds a dataset already; generate never replaces one (a model may "
+                         "have been trained on it): choose another --out or remove that folder")
     counts = generate_dataset(args.out, dim=args.dim, scale=args.scale, seed=args.seed, workers=args.workers,
                               lengths=args.lengths, progress=not args.quiet)
     print(json.dumps(counts, indent=1, sort_keys=True))
@@ -248,6 +252,7 @@ def cmd_evaluate(args) -> int:
     from .data import load_dataset
     from .paper.tables import evaluate_model, markdown_tables, nearest_neighbour
 
+    _refuse_table_over_inputs(args)
     tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
     tests = {L: p[: args.per_length] for L, p in tests.items()}
     rows = []
@@ -318,6 +323,19 @@ def _decoding(args) -> str:
     return f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
 
 
+def _refuse_table_over_inputs(args) -> None:
+    """Stop before any work when a table's ``--out`` is one of its input files (weights, silhouettes)."""
+    if not getattr(args, "out", None):
+        return
+    weights = getattr(args, "weights", None) or []
+    inputs = [w.rpartition("=")[2] for w in ([weights] if isinstance(weights, str) else weights)]
+    inputs += [getattr(args, "silhouettes", None)]
+    try:
+        refuse_overwrite([args.out], [p for p in inputs if p and Path(p).is_file()])
+    except FileExistsError as e:
+        raise SystemExit(f"error: {e}") from None
+
+
 def _write_table(text: str, out) -> None:
     print(text)
     if out:
@@ -336,6 +354,7 @@ def cmd_table4(args) -> int:
     from .inference import WEIGHTS
     from .paper.protocols import subset, table4, table4_markdown
 
+    _refuse_table_over_inputs(args)
     test = load_silhouettes("test", args.silhouettes)
     idx = subset(len(test), None if args.images <= 0 else args.images, args.seed)
     train = None if args.no_nn else load_silhouettes("train", args.silhouettes)
@@ -352,6 +371,7 @@ def cmd_table4(args) -> int:
 def cmd_table6(args) -> int:
     from .paper.protocols import table6, table6_markdown
 
+    _refuse_table_over_inputs(args)
     lengths = args.lengths or [3, 5, 7, 9, 11, 13]
     if args.data:
         from .data import load_dataset

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import torch
 
-from shapeio import InputError, atomic_write, refuse_overwrite
+from shapeio import InputError, atomic_write, refuse_overwrite, write_new
 from shapeio.mesh import WRITE_SUFFIXES
 
 from . import corpus, io
@@ -260,14 +260,38 @@ def _cmd_infer(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {src}: {e}") from None
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write(files["program"], r.text)
+    written: list[Path] = []  # removed again if a later write fails: no half result is left
+    try:
+        _write_inference(r, points, src, model, files, args, written)
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return _print_inference(r, files)
+
+
+def _write_inference(r, points, src, model, files, args, written: list) -> None:
+    """The files of ``infer``, each new (``write_new``; the caller checked that none exists), in order; each
+    path is appended to ``written`` once it is complete."""
+    import json
+
+    import numpy as np
+
+    from .picture import render_grid
+    from .pointcloud.infer import cloud_corners
+
+    write_new(files["program"], r.text)
+    written.append(files["program"])
     if "macros" in files and r.macro_text is not None:
-        atomic_write(files["macros"], r.macro_text)
+        write_new(files["macros"], r.macro_text)
+        written.append(files["macros"])
     io.write_obj(files["mesh"], torch.from_numpy(r.corners()))
+    written.append(files["mesh"])
     unit = r.transform.apply(points)
     canon = execute(r.canonical).corners + torch.from_numpy(r.canonical_offset).float()
     render_grid([cloud_corners(unit[np.random.default_rng(args.seed).permutation(len(unit))]), canon],
                 files["png"], cols=2, size=args.size)
+    written.append(files["png"])
     record = {"input": str(src), "category": args.category if model is None else model.category,
               "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
@@ -275,7 +299,13 @@ def _cmd_infer(args) -> int:
               "macro_text": r.macro_text,
               "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
                       "canonical units (bounding-box diagonal 2)"}
-    atomic_write(files["json"], json.dumps(record, indent=1) + "\n")
+    write_new(files["json"], json.dumps(record, indent=1) + "\n")
+    written.append(files["json"])
+
+
+def _print_inference(r, files) -> int:
+    import numpy as np
+
     if r.search is not None:
         s = r.search
         start = "none" if s["start_cd"] is None else f"{1000 * s['start_cd']:.1f}"
@@ -300,6 +330,7 @@ def _cmd_infer(args) -> int:
 def _cmd_pointcloud_tables(args) -> int:
     from .pointcloud.tables import evaluate, write_tables
 
+    _refuse_overwrite([args.out], [args.weights])
     executor = None
     if args.workers > 1:
         import multiprocessing
@@ -373,11 +404,25 @@ def _load_vae(args, category: str | None, macro: bool = False):
         raise SystemExit(f"error: {e}") from None
 
 
+def _planned_files(out: str | None, name: str, n: int) -> list[Path]:
+    """The ``.txt`` and ``.obj`` files :func:`_export_decoded` writes into ``out`` for ``n`` programs."""
+    return [] if not out else [Path(out) / f"{name.format(i)}{s}" for i in range(n) for s in (".txt", ".obj")]
+
+
+def _refuse_existing(paths) -> None:
+    """Stop before writing when one of ``paths`` exists: a second run into the same folder would leave a mix
+    of both runs' files that looks like one."""
+    taken = [p for p in paths if Path(p).exists()]
+    if taken:
+        raise SystemExit(f"error: {taken[0]}: exists ({len(taken)} of the outputs do); the command never "
+                         "overwrites a file: choose another --out or remove them")
+
+
 def _export_decoded(results, out: str | None, name: str, png: str | None, cols: int, size: int,
                     progress: bool = False) -> None:
-    """Write decoded programs: ``name.format(i)`` + ``.txt`` and ``.obj`` in ``out``, a picture grid ``png``
-    (``cols`` cells of ``size`` pixels per row); print the programs when neither is given. Each program is
-    executed once."""
+    """Write decoded programs: ``name.format(i)`` + ``.txt`` and ``.obj`` in ``out`` (none of which may exist
+    yet), a picture grid ``png`` (``cols`` cells of ``size`` pixels per row); print the programs when neither
+    is given. Each program is executed once."""
     from tqdm import tqdm
 
     if not out and not png:
@@ -385,13 +430,14 @@ def _export_decoded(results, out: str | None, name: str, png: str | None, cols: 
             print(f"# {name.split('_')[0]} {i}\n{r.text}")
         return
     if out:
+        _refuse_existing(_planned_files(out, name, len(results)))
         Path(out).mkdir(parents=True, exist_ok=True)
     shapes = []
     for i, r in enumerate(tqdm(results, desc="writing", unit="shape", disable=not progress)):
         with torch.no_grad():
             shape = execute(r.program)
         if out:
-            atomic_write(Path(out) / f"{name.format(i)}.txt", r.text)
+            write_new(Path(out) / f"{name.format(i)}.txt", r.text)
             io.write_obj(Path(out) / f"{name.format(i)}.obj", shape.corners)
         shapes.append((shape.corners, shape.line.numpy()))
     if out:
@@ -419,6 +465,7 @@ def _cmd_sample(args) -> int:
     from .vae.macro_model import MacroVAE
 
     _check_outputs(others=[args.png])
+    _refuse_existing(_planned_files(args.out, "sample_{:04d}", args.n))
     vae = _load_vae(args, args.category, macro=True)
     t0 = time.perf_counter()
     if isinstance(vae, MacroVAE):  # macro programs: written as macro text, executed through their expansion
@@ -445,7 +492,8 @@ def _cmd_interpolate(args) -> int:
 
     _check_outputs(others=[args.png])
     a, b = _Program(args.a), _Program(args.b)
-    _refuse_overwrite([args.png], [args.a, args.b])
+    _refuse_overwrite([args.png, *_planned_files(args.out, "step_{:03d}", args.steps)], [args.a, args.b])
+    _refuse_existing(_planned_files(args.out, "step_{:03d}", args.steps))
     vae = _load_vae(args, args.category or _category_of(args.a) or _category_of(args.b))
     results = interpolate(vae, a.program, b.program, args.steps)
     _export_decoded(results, args.out, "step_{:03d}", args.png, len(results), args.size)

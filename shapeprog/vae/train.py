@@ -244,8 +244,11 @@ class VAEDataModule(L.LightningDataModule):
                 self.train_keys, self.train_trees = load_macro_trees(train, self.layout, progs)
                 self.val_keys, self.val_trees = load_macro_trees(val, self.layout, progs)
         if self.trainer is not None and stage in (None, "fit"):
-            folder = self.trainer.log_dir or self.trainer.default_root_dir  # log_dir broadcasts: every rank asks
-            if self.trainer.is_global_zero:
+            folder = self.trainer.log_dir  # broadcasts: every rank asks
+            if self.trainer.logger is None:  # no run folder: beside the checkpoints, never in the working folder
+                dirs = [cb.dirpath for cb in self.trainer.checkpoint_callbacks if getattr(cb, "dirpath", None)]
+                folder = dirs[0] if dirs else None
+            if folder is not None and self.trainer.is_global_zero:
                 self.write_split(Path(folder) / self.split_file)
 
     def split(self) -> dict:

@@ -172,3 +172,27 @@ def test_depth_view_shades_the_first_voxel_along_the_axis():
     view = depth_view(vol, 2)
     assert view[10, 20] == 30 and view[5, 6] == 200 and view[0, 0] == 255 and view.dtype == np.uint8
     assert (view < 255).sum() == 2
+
+
+def test_generate_never_replaces_a_dataset(tmp_path, capsys):
+    args = ["generate", "--dim", "2", "--scale", "0.0002", "--lengths", "3", "--out", str(tmp_path), "--quiet"]
+    assert main(args) == 0
+    meta = (tmp_path / "2d" / "meta.json").read_bytes()
+    with pytest.raises(SystemExit, match=r"2d holds a dataset already; generate never replaces one"):
+        main(args + ["--seed", "1"])
+    assert (tmp_path / "2d" / "meta.json").read_bytes() == meta
+    assert main(["generate", "--dim", "3", "--scale", "0.0002", "--lengths", "3", "--out", str(tmp_path), "--quiet"]) == 0
+
+
+def test_a_table_is_never_written_over_its_weights(tmp_path):
+    from csgnet.inference import WEIGHTS
+
+    weights = tmp_path / "w.pt"
+    weights.write_bytes((WEIGHTS / "csgnet2d.pt").read_bytes())
+    before = weights.read_bytes()
+    for argv in (["table6", "--weights", str(weights), "--per-length", "1", "--out", str(weights)],
+                 ["table4", "--weights", f"mine={weights}", "--images", "1", "--out", str(weights)],
+                 ["evaluate", "--dim", "2", "--data", str(tmp_path), "--weights", str(weights), "--out", str(weights)]):
+        with pytest.raises(SystemExit, match=r"w\.pt"):
+            main(argv)
+    assert weights.read_bytes() == before

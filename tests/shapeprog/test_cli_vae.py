@@ -25,8 +25,15 @@ def test_sample_writes_programs_meshes_and_grid(weights, tmp_path, capsys):
         assert (out / f"sample_{i:04d}.obj").is_file()  # an untrained model writes bbox-only programs: no leaf
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     first = (out / "sample_0000.txt").read_text()
-    assert main(["sample", "chair", "-n", "3", "--seed", "1", "--out", str(out), "--weights", weights, "--quiet"]) == 0
-    assert (out / "sample_0000.txt").read_text() == first  # the same seed gives the same programs
+    again = tmp_path / "again"
+    assert main(["sample", "chair", "-n", "3", "--seed", "1", "--out", str(again), "--weights", weights, "--quiet"]) == 0
+    assert (again / "sample_0000.txt").read_text() == first  # the same seed gives the same programs
+    # a second run into a folder with samples is refused before sampling: no mix of two runs' files
+    (out / "sample_0001.txt").unlink()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    with pytest.raises(SystemExit, match=r"sample_0000\.txt: exists \(5 of the outputs do\)"):
+        main(["sample", "chair", "-n", "3", "--seed", "7", "--out", str(out), "--weights", weights, "--quiet"])
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
 def test_sample_usage_errors(weights, capsys):
@@ -53,6 +60,17 @@ def test_interpolate_and_reconstruct(weights, tmp_path, capsys):
     parse(recon.read_text())
     with pytest.raises(SystemExit):
         main(["interpolate", "chair/173", "chair/44017", "--steps", "1", "--weights", weights])
+    # an input among the outputs, or outputs of an earlier run: refused, the input unchanged
+    src = tmp_path / "mine"
+    src.mkdir()
+    (src / "step_000.txt").write_text((out / "step_000.txt").read_text())
+    before = (src / "step_000.txt").read_bytes()
+    with pytest.raises(SystemExit, match=r"step_000\.txt"):
+        main(["interpolate", str(src / "step_000.txt"), "chair/173", "--steps", "3", "--out", str(src),
+              "--weights", weights])
+    assert (src / "step_000.txt").read_bytes() == before and [p.name for p in src.iterdir()] == ["step_000.txt"]
+    with pytest.raises(SystemExit, match="exists"):
+        main(["interpolate", "chair/173", "chair/44017", "--steps", "3", "--out", str(out), "--weights", weights])
 
 
 def test_export_weights_from_a_checkpoint(tmp_path, capsys):

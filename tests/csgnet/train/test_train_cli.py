@@ -29,7 +29,7 @@ def _config(tmp_path: Path) -> Path:
     return path
 
 
-def test_fit_resume_and_validate_through_the_one_cli(tmp_path, train_main):
+def test_fit_resume_and_validate_through_the_one_cli(tmp_path, train_main, monkeypatch):
     config = _config(tmp_path)
     cli = train_main(["fit", "--config", str(config)])
     assert cli.trainer.global_step == 2 and (tmp_path / "ckpt" / "last.ckpt").is_file()
@@ -42,9 +42,18 @@ def test_fit_resume_and_validate_through_the_one_cli(tmp_path, train_main):
     assert (tmp_path / "ckpt" / "last.ckpt").read_bytes() == before
     resumed = train_main(["fit", "--config", str(config), "--trainer.max_steps", "3", "--ckpt_path", "last"])
     assert resumed.trainer.global_step == 3
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "config.yaml").write_text("a user's file\n")
+    monkeypatch.chdir(work)  # without a logger there is no run folder: nothing is written in the working folder
     val = train_main(["validate", "--config", str(config), "--trainer.logger", "false",
                       "--ckpt_path", str(tmp_path / "ckpt" / "last.ckpt")])
     assert "val/iou" in val.trainer.callback_metrics
+    assert [p.name for p in work.iterdir()] == ["config.yaml"] and (work / "config.yaml").read_text() == "a user's file\n"
+    # --ckpt_path last where the folder's last.ckpt is gone (a link lost in a copy): stop, never start over
+    (tmp_path / "ckpt" / "last.ckpt").unlink()
+    with pytest.raises(SystemExit, match=r"--ckpt_path last: .*ckpt holds checkpoints .* but no readable last\.ckpt"):
+        train_main(["fit", "--config", str(config), "--trainer.max_steps", "4", "--ckpt_path", "last"])
 
 
 def test_the_configs_last_checkpoint_is_the_last_epoch_even_without_improvement(tmp_path, train_main):

@@ -131,6 +131,21 @@ def test_cli_on_the_vendored_real_cloud_writes_four_files_and_never_overwrites(t
     assert (out / "comp_pc.txt").read_bytes() == before
 
 
+def test_cli_leaves_no_half_result_when_a_write_fails(tmp_path, weights, monkeypatch, capsys):
+    import shapeprog.picture
+
+    def broken(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(shapeprog.picture, "render_grid", broken)  # the picture is written third
+    src = tmp_path / "comp_pc.npy"
+    np.save(src, corpus.example_points("comp_pc.obj"))
+    out = tmp_path / "out"
+    assert main(["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]) == 1
+    assert "error: disk full" in capsys.readouterr().err
+    assert list(out.iterdir()) == []  # the program and the mesh written before it are removed again
+
+
 def test_the_shipped_models_on_the_real_clouds_at_any_scale_and_position():
     """The real-geometry check (bench/pointcloud_real.py): clouds sampled from real PartNet meshes, not from
     cuboids, moved and scaled. The shipped chair model reads the real chair (F-score 88.8 in its frame on
@@ -212,3 +227,11 @@ def test_a_code_that_decodes_to_nothing_is_a_clear_error_naming_the_search(model
     monkeypatch.setattr(model, "decode", lambda codes: [None] * len(codes))
     with pytest.raises(ValueError, match="decoded no shape for this cloud; the latent search"):
         infer(cloud, model=model, physics=False)
+
+
+def test_pointcloud_tables_never_write_over_the_weights(tmp_path, weights):
+    before = weights.read_bytes()
+    with pytest.raises(SystemExit, match=r"tiny\.pt: this output would overwrite an input file"):
+        main(["pointcloud-tables", "--category", "chair", "--clouds", str(tmp_path), "--weights", str(weights),
+              "--out", str(weights)])
+    assert weights.read_bytes() == before

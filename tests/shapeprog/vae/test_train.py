@@ -208,6 +208,9 @@ def test_fast_dev_run_of_module_and_data_module(tmp_path):
     trainer = _tiny_trainer(tmp_path, fast_dev_run=True, log_every_n_steps=1)  # the terms log every N steps
     trainer.fit(model, dm)
     metrics = trainer.callback_metrics
+    # no logger and no checkpoint folder: no run folder, so the split file is not written (never into the
+    # working or root folder)
+    assert not (tmp_path / "split.json").exists()
     for stage in ("train", "val"):
         for name in ("loss", "kl", "cmd", "leaf", "bb", "xyz_prm"):
             assert torch.isfinite(metrics[f"{stage}/{name}"]), f"{stage}/{name}"
