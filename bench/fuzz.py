@@ -9,6 +9,7 @@ Prints inputs per second and findings per target; writes each finding's input un
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
 from pathlib import Path
 
@@ -38,10 +39,13 @@ def main(argv=None) -> int:
     for t in targets:
         stats = fuzz(t, seconds=per, seed=args.seed)
         print(f"| {t.name} | {stats.inputs} | {stats.rate:.0f} | {len(stats.findings)} |", flush=True)
-        for i, f in enumerate(stats.findings):
+        for f in stats.findings:
             print(f"    {f.kind}: {f.detail}", file=sys.stderr)
-            if args.out:
-                atomic_write(Path(args.out) / f"{t.name.replace('/', '_')}_{i}.bin", f.data, mkdir=True)
+            if args.out:  # named by the input's hash: a later run adds its findings, never replaces one
+                digest = hashlib.sha256(f.data).hexdigest()[:16]
+                path = Path(args.out) / f"{t.name.replace('/', '_')}_{digest}.bin"
+                if not path.exists():
+                    atomic_write(path, f.data, mkdir=True)
         found += len(stats.findings)
     return 1 if found else 0
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Union
 
 __all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "parse_json", "refuse_overwrite", "remove_stale_temps", "write_new",
-           "STALE_TEMP_SECONDS"]
+           "write_new_set", "STALE_TEMP_SECONDS"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -270,6 +270,25 @@ def write_new(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], objec
         except FileNotFoundError:
             pass
     return path
+
+
+def write_new_set(items: Iterable[tuple[PathLike, Union[bytes, str, Callable[[BinaryIO], object]]]]) -> list[Path]:
+    """Write several new files as one: each with :func:`write_new`, in order; if one fails (it exists, the
+    disk is full), the files this call already wrote are removed again before the error propagates, so no
+    partial set is left.
+
+    Returns:
+        The paths, in order.
+    """
+    written: list[Path] = []
+    try:
+        for path, data in items:
+            written.append(write_new(path, data))
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return written
 
 
 def refuse_overwrite(outputs: Iterable[PathLike | None], inputs: Iterable[PathLike | None]) -> None:

@@ -34,7 +34,7 @@ from typing import Mapping, Union
 
 import numpy as np
 
-from shapeio import write_new
+from shapeio.files import write_new_set
 from shapeio.editing import History, UndoableSession
 
 from .. import primitives as P
@@ -291,6 +291,6 @@ class CSGEditSession(UndoableSession):
         n = max([int(m.group(1)) for m in taken if m] + [0]) + 1
         while True:
             try:
-                return [write_new(folder / f"{self.name}_edit{n:03d}.{k}", v) for k, v in data.items()]
+                return write_new_set((folder / f"{self.name}_edit{n:03d}.{k}", v) for k, v in data.items())
             except FileExistsError:
                 n += 1

@@ -27,7 +27,7 @@ from typing import Mapping
 
 import torch
 
-from shapeio import write_new
+from shapeio.files import write_new_set
 from shapeio.editing import History, UndoableSession
 
 from .. import corpus
@@ -308,7 +308,7 @@ class EditSession(UndoableSession):
 
         Nothing is written outside ``folder`` and no file is replaced: NNN is one more than the largest
         number of a ``<name>_edit<NNN>.*`` file there, and each file is written atomically as a new file
-        (:func:`shapeio.write_new`).
+        (:func:`shapeio.files.write_new_set`: all the kinds under one number, or none).
 
         Args:
             folder: an existing directory.
@@ -349,12 +349,7 @@ class EditSession(UndoableSession):
         taken = [re.fullmatch(re.escape(self.name) + r"_edit(\d+)\..*", p.name) for p in folder.iterdir()]
         n = max([int(m.group(1)) for m in taken if m] + [0]) + 1
         while True:
-            paths = {k: folder / f"{self.name}_edit{n:03d}.{k}" for k in kinds}
-            written = []
-            try:
-                for k in kinds:
-                    written.append(write_new(paths[k], data[k]))
+            try:  # all the kinds under one number, or none of them
+                return write_new_set((folder / f"{self.name}_edit{n:03d}.{k}", data[k]) for k in kinds)
             except FileExistsError:  # made meanwhile by someone else: the next number
                 n += 1
-                continue
-            return written

@@ -91,3 +91,21 @@ def test_parse_json_is_strict_and_locates_its_errors():
     # a format's own error type
     with pytest.raises(KeyError, match="bad 1 9"):
         parse_json('{"a": 1,}', "x.json", lambda why, line, col: KeyError(f"bad {line} {col}"))
+
+
+def test_write_new_set_writes_all_or_none(tmp_path):
+    from shapeio.files import write_new_set
+
+    assert write_new_set([(tmp_path / "a.txt", "a"), (tmp_path / "b.bin", b"b")]) == [tmp_path / "a.txt", tmp_path / "b.bin"]
+    assert (tmp_path / "a.txt").read_text() == "a" and (tmp_path / "b.bin").read_bytes() == b"b"
+    (tmp_path / "d.txt").write_text("mine")
+    with pytest.raises(FileExistsError, match=r"d\.txt: the file exists"):
+        write_new_set([(tmp_path / "c.txt", "c"), (tmp_path / "d.txt", "d")])
+    assert not (tmp_path / "c.txt").exists() and (tmp_path / "d.txt").read_text() == "mine"
+
+    def broken(f):
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        write_new_set([(tmp_path / "e.txt", "e"), (tmp_path / "f.txt", broken)])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.bin", "d.txt"]  # no temporary left either
