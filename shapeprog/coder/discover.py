@@ -771,13 +771,21 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
 
 def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str], header: str = "") -> None:
     """Write ``library.txt`` (one abstraction per line), ``programs.txt`` (``<key>:<program>`` lines) and
-    ``log.json`` (the F log and the summary) into ``out``, each atomically."""
+    ``log.json`` (the F log, the summary and the SHA-256 of the other two files) into ``out``, each atomically
+    and ``log.json`` last: a write interrupted between the files leaves digests that do not match, which
+    :func:`shapeprog.coder.tables.from_run` refuses."""
+    import hashlib
+
     from shapeio import atomic_write
 
     out = Path(out)
-    atomic_write(out / "library.txt", header + result.library.to_text(), mkdir=True)
-    atomic_write(out / "programs.txt", "".join(f"{k}:{to_text(p)}\n" for k, p in zip(keys, result.programs)))
-    atomic_write(out / "log.json", json.dumps({"log": result.log, "summary": asdict(result.summary())}, indent=1))
+    texts = {"library.txt": header + result.library.to_text(),
+             "programs.txt": "".join(f"{k}:{to_text(p)}\n" for k, p in zip(keys, result.programs))}
+    for name, text in texts.items():
+        atomic_write(out / name, text, mkdir=True)
+    digests = {name: hashlib.sha256(text.encode("utf-8")).hexdigest() for name, text in texts.items()}
+    atomic_write(out / "log.json", json.dumps({"log": result.log, "summary": asdict(result.summary()),
+                                               "files": digests}, indent=1))
 
 
 def discover_category(category: str, out: str | Path, cfg: Config = Config(), shapes: int = 400, workers: int = 2,

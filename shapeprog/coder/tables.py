@@ -157,14 +157,28 @@ def from_run(folder, category: str) -> Run:
 
     Raises:
         OSError: ``library.txt`` or ``programs.txt`` is missing (the message names it).
-        ParseError: a malformed line (file, line, column).
+        ParseError: a malformed line (file, line, column); a file whose SHA-256 is not the one the folder's
+            ``log.json`` records (a write interrupted between the files; folders written before the digests
+            were recorded are not checked).
     """
+    import hashlib
+
     folder = Path(folder)
     lib_path, prog_path = folder / "library.txt", folder / "programs.txt"
     for p in (lib_path, prog_path):
         if not p.is_file():
             raise FileNotFoundError(f"{p}: not found (a discover-abstractions output folder has library.txt and "
                                     "programs.txt)")
+    log_path = folder / "log.json"
+    if log_path.is_file():
+        name = str(log_path)
+        record = parse_json(decode(log_path.read_bytes(), name), name,
+                            lambda why, line, col: ParseError(why, name, line, col, ""))
+        files = record.get("files") if isinstance(record, dict) else None
+        for p in (lib_path, prog_path) if isinstance(files, dict) else ():
+            if files.get(p.name) != hashlib.sha256(p.read_bytes()).hexdigest():
+                raise ParseError(f"not the {p.name} that log.json records (a write interrupted between the "
+                                 "files?); rerun or resume the discovery into this folder", str(p), 1, 1, "")
     return _read_run(category, decode(lib_path.read_bytes(), str(lib_path)), str(lib_path),
                      decode(prog_path.read_bytes(), str(prog_path)), str(prog_path), str(folder))
 

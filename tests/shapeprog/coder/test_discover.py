@@ -137,6 +137,17 @@ def test_a_run_starts_from_an_earlier_library_and_its_programs(tmp_path, capsys)
     assert rest == load_library("chair").to_text().splitlines()
     # only the final wake ran: the header claims no proposal settings and says where it started
     assert "proposals=" not in header and "started at round 4 from an earlier library" in header
+    # log.json, written last, records the other two files: the folder reads back; a programs file left by an
+    # interrupted write (not the one the log records) is refused
+    from shapeprog.coder import tables
+    from shapeprog.errors import ParseError
+
+    assert len(tables.from_run(out, "chair").programs) == 3
+    text = (out / "programs.txt").read_text()
+    (out / "programs.txt").write_text(text.replace("\n", "\n", 1)[: text.index("\n") + 1])
+    with pytest.raises(ParseError, match=r"programs\.txt:1:1: not the programs\.txt that log\.json records"):
+        tables.from_run(out, "chair")
+    (out / "programs.txt").write_text(text)
     capsys.readouterr()
     with pytest.raises(SystemExit, match="--start-round needs --start-from"):
         main(["discover-abstractions", "chair", "--start-round", "2", "--out", str(tmp_path / "y"), "--quiet"])
