@@ -363,6 +363,8 @@ def _cmd_make_clouds(args) -> int:
 
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise SystemExit(f"error: {args.out}: not a folder")
+    from .pointcloud.data import cache_paths
+    _refuse_existing(cache_paths(args.out, args.category))  # an expensive cache is never replaced
     ids = None
     if args.limit:
         ids = corpus.ids(args.category, "train")[:args.limit] + corpus.ids(args.category, "val")[:args.limit]

@@ -432,8 +432,17 @@ def load_cache(root: PathLike, category: str) -> CloudCache:
                       dict(zip(d["failed_ids"].tolist(), d["failed_reasons"].tolist())), path)
 
 
-def read_split(root: PathLike, category: str) -> dict[str, list[int]]:
-    """The ``train`` / ``val`` / ``test`` ids of ``root/<category>_split.json``."""
+def read_split(root: PathLike, category: str, cache: "CloudCache | None" = None) -> dict[str, list[int]]:
+    """The ``train`` / ``val`` / ``test`` ids of ``root/<category>_split.json``.
+
+    ``cache``: the :func:`load_cache` of the same folder, checked against the split file (the points per
+    cloud and the sampling seed it records, and every id among the cached ones): the two files are written
+    one after the other, and a split left by another run is refused.
+
+    Raises:
+        FileNotFoundError: no split file.
+        InputError: not a split file, or not the split of ``cache``.
+    """
     path = cache_paths(root, category)[1]
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such split file; make it with "
@@ -449,6 +458,16 @@ def read_split(root: PathLike, category: str) -> dict[str, list[int]]:
         ids = record.get(k)
         if not isinstance(ids, list) or not all(type(i) is int and i >= 0 for i in ids):
             raise InputError(f"{path}: not a split file ('{k}' is not a list of shape ids)")
+    if cache is not None:
+        made = {"n_points": cache.n_points, "sampling_seed": cache.seed}
+        other = [k for k, v in made.items() if record.get(k, v) != v]
+        cached = set(cache.ids.tolist())
+        missing = [i for k in SPLITS for i in record[k] if i not in cached]
+        if other or missing:
+            why = (f"{other[0]} {record[other[0]]!r} against the cache's {made[other[0]]!r}" if other
+                   else f"shape {missing[0]} is not in the cache")
+            raise InputError(f"{path}: not the split of {cache.path.name} ({why}); make both again with "
+                             f"`python -m shapeprog make-clouds --category {category} --out NEW_FOLDER`")
     return {k: list(record[k]) for k in SPLITS}
 
 
@@ -490,7 +509,7 @@ class CloudDataset(torch.utils.data.Dataset):
         if not (noise >= 0 and np.isfinite(noise)):
             raise ValueError(f"`noise` must be a finite number >= 0, got {noise!r}")
         cache = load_cache(root, category)
-        ids = read_split(root, category)[split]
+        ids = read_split(root, category, cache)[split]
         rows = cache.index(ids)
         stored = cache.points.shape[1]
         if points is None:

@@ -177,7 +177,7 @@ class RetrievalIndex:
         if "test" in splits:
             raise ValueError("the test split (the corpus val split) must not be retrieved from")
         cache = load_cache(root, category)
-        split = read_split(root, category)
+        split = read_split(root, category, cache)
         ids = sorted(i for s in splits for i in split[s])
         rows = cache.index(ids)
         m = min(int(points), cache.points.shape[1])

@@ -233,7 +233,7 @@ def evaluate(root, category: str = "chair", weights=None, limit: Optional[int] =
     """
     t0 = time.perf_counter()
     cache = load_cache(root, category)
-    ids = read_split(root, category)["test"]
+    ids = read_split(root, category, cache)["test"]
     ids = ids[: int(limit)] if limit is not None else ids
     rows = cache.index(ids)
     clean = cache.normalized(rows).astype(np.float64)

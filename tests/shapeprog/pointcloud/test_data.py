@@ -166,3 +166,18 @@ def test_make_clouds_command(tmp_path, capsys):
     assert "2 clouds of 32 points" in out and "storage_split.json" in out
     c = load_cache(tmp_path / "c", "storage")
     assert c.points.shape == (2, 32, 3)
+    assert read_split(tmp_path / "c", "storage", c) == read_split(tmp_path / "c", "storage")
+    # a second run into the folder never replaces the cache
+    before = (tmp_path / "c" / "storage_clouds.npz").read_bytes()
+    with pytest.raises(SystemExit, match=r"storage_clouds\.npz: exists"):
+        main(["make-clouds", "--category", "storage", "--limit", "2", "--points", "32", "--workers", "1", "--quiet",
+              "--out", str(tmp_path / "c")])
+    assert (tmp_path / "c" / "storage_clouds.npz").read_bytes() == before
+    # a split file of another run beside the cache is refused where both are read
+    record = json.loads((tmp_path / "c" / "storage_split.json").read_text())
+    (tmp_path / "c" / "storage_split.json").write_text(json.dumps(dict(record, n_points=64)))
+    with pytest.raises(InputError, match=r"storage_split\.json: not the split of storage_clouds\.npz \(n_points 64"):
+        CloudDataset(tmp_path / "c", "storage", "train")
+    (tmp_path / "c" / "storage_split.json").write_text(json.dumps(dict(record, test=record["test"] + [99999999])))
+    with pytest.raises(InputError, match="shape 99999999 is not in the cache"):
+        read_split(tmp_path / "c", "storage", c)
