@@ -206,12 +206,6 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
                                    + [depth_view(img, a) for a in range(3)], cols=3), compare)
     if program is not None:
         written.append(export.save_scad(program, stem.with_suffix(".scad")))
-    # this shape's outputs of an earlier run that this one does not rewrite (a 3D mesh beside a 2D result, an
-    # OpenSCAD file beside an invalid program) would read as part of this result: removed
-    for stale in (stem.with_suffix(s) for s in (".png", ".obj", ".scad")):
-        if stale not in written and stale.is_file():
-            stale.unlink()
-            print(f"  removed {stale} (an earlier run's output for this name)")
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))
 
 

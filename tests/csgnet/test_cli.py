@@ -196,17 +196,3 @@ def test_a_table_is_never_written_over_its_weights(tmp_path):
         with pytest.raises(SystemExit, match=r"w\.pt"):
             main(argv)
     assert weights.read_bytes() == before
-
-
-def test_parse_removes_its_own_stale_outputs_of_the_same_name(tmp_path, capsys):
-    src = tmp_path / "in" / "shape.png"
-    src.parent.mkdir()
-    assert main(["render", "c(32,32,20)", "-o", str(src)]) == 0
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "shape.obj").write_text("# a 3D result of an earlier run for this name\n")
-    (out / "other.obj").write_text("# not this shape's\n")
-    assert main(["parse", str(src), "--beam", "1", "--out", str(out)]) == 0
-    assert f"removed {out / 'shape.obj'}" in capsys.readouterr().out
-    assert sorted(p.name for p in out.iterdir())[:2] == ["other.obj", "shape.png"]
-    assert not (out / "shape.obj").exists() and (out / "shape.txt").is_file()
