@@ -122,6 +122,12 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _named(stem: Path, end: str) -> Path:
+    """``stem`` with ``end`` appended (``a.v1`` -> ``a.v1.png``; ``with_suffix`` would give ``a.png``, another
+    shape's name)."""
+    return stem.with_name(stem.name + end)
+
+
 def _output_stems(inputs, out: Path) -> list[Path]:
     """One output stem per input under ``out``: the input's stem, or ``stem_2``, ``stem_3``, ... when
     an earlier input (or another input's own stem) already has that name, compared case-insensitively."""
@@ -193,19 +199,19 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
             print(f"  refinement lowered IoU by more than {100 * MAX_IOU_DROP:g} points: "
                   f"wrote the unrefined program {program.text()}")
     stem.parent.mkdir(parents=True, exist_ok=True)
-    txt = atomic_write(stem.with_suffix(".txt"), (res.text if program is None else program.text()) + "\n")
+    txt = atomic_write(_named(stem, ".txt"), (res.text if program is None else program.text()) + "\n")
     img = np.zeros((64,) * dim, dtype=bool) if program is None else render(program, dim)[0]
     if dim == 2:
         compare = stem.with_name(stem.name + "_compare.png")
-        written = [export.save_png(img, stem.with_suffix(".png")), compare]
+        written = [export.save_png(img, _named(stem, ".png")), compare]
         _save_sheet(_contact_sheet([shape, img], cols=2), compare)
     else:
         compare = stem.with_name(stem.name + "_compare.png")
-        written = [export.save_obj(img, stem.with_suffix(".obj")), compare]
+        written = [export.save_obj(img, _named(stem, ".obj")), compare]
         _save_sheet(_contact_sheet([depth_view(shape, a) for a in range(3)]
                                    + [depth_view(img, a) for a in range(3)], cols=3), compare)
     if program is not None:
-        written.append(export.save_scad(program, stem.with_suffix(".scad")))
+        written.append(export.save_scad(program, _named(stem, ".scad")))
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))
 
 

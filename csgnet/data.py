@@ -293,7 +293,8 @@ def _check_meta(meta: dict | None, path: Path, lengths: list[int]) -> None:
         problem = f"does not list lengths {stale}: their files come from another run"
     else:
         return
-    warnings.warn(f"{path} {problem}; regenerate the dataset to be sure", DatasetWarning, stacklevel=3)
+    warnings.warn(f"{path} {problem}; regenerate the dataset to be sure (into a new folder: `generate` never "
+                  "replaces one)", DatasetWarning, stacklevel=3)
 
 
 def _text_lines(f: Path) -> tuple[list[str], list[str]]:

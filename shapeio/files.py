@@ -9,6 +9,7 @@ import glob
 import os
 import re
 import stat
+import sys
 import tempfile
 import threading
 import time
@@ -36,9 +37,8 @@ MAX_JSON_DEPTH = 64
 levels)."""
 
 
-def _json_depth(text: str) -> tuple[int, int]:
-    """The deepest nesting of ``[`` / ``{`` outside strings, and the offset where it is first reached."""
-    depth = best = where = 0
+def _outside_strings(text: str):
+    """``(offset, char)`` of each character of JSON ``text`` that is not inside a string literal."""
     in_str = esc = False
     for i, ch in enumerate(text):
         if in_str:
@@ -50,13 +50,32 @@ def _json_depth(text: str) -> tuple[int, int]:
                 in_str = False
         elif ch == '"':
             in_str = True
-        elif ch in "[{":
+        else:
+            yield i, ch
+
+
+def _too_deep(text: str, limit: int) -> int | None:
+    """The offset of the first ``[`` / ``{`` (outside strings) that opens level ``limit + 1``, or None."""
+    depth = 0
+    for i, ch in _outside_strings(text):
+        if ch in "[{":
             depth += 1
-            if depth > best:
-                best, where = depth, i
+            if depth > limit:
+                return i
         elif ch in "]}":
             depth -= 1
-    return best, where
+    return None
+
+
+def _token_at(text: str, pattern: str) -> int:
+    """The offset of the first match of ``pattern`` that starts outside strings (0 when none does)."""
+    import re
+
+    outside = {i for i, _ in _outside_strings(text)}
+    for m in re.finditer(pattern, text):
+        if m.start() in outside:
+            return m.start()
+    return 0
 
 
 def parse_json(text: str, file: str, error: Callable[[str, int, int], Exception] | None = None):
@@ -79,16 +98,22 @@ def parse_json(text: str, file: str, error: Callable[[str, int, int], Exception]
     def line_col(offset: int) -> tuple[int, int]:
         return text.count("\n", 0, offset) + 1, offset - (text.rfind("\n", 0, offset) + 1) + 1
 
-    depth, where = _json_depth(text)
-    if depth > MAX_JSON_DEPTH:
+    where = _too_deep(text, MAX_JSON_DEPTH)
+    if where is not None:
         raise fail(f"nested more than {MAX_JSON_DEPTH} levels deep (MAX_JSON_DEPTH)", *line_col(where))
 
+    bad: list[str] = []  # the regular expression of the token that failed, to locate it
+
     def constant(name: str):
+        bad.append(r"-?" + name if name != "-Infinity" else r"-Infinity")
         raise ValueError(f"{name} is not a JSON number")
 
     def finite(token: str) -> float:
         value = float(token)
         if value in (float("inf"), float("-inf")):
+            import re
+
+            bad.append(re.escape(token) + r"(?![0-9.eE+-])")
             raise ValueError(f"{token} is out of the range of a float")
         return value
 
@@ -96,8 +121,9 @@ def parse_json(text: str, file: str, error: Callable[[str, int, int], Exception]
         return json.loads(text, parse_constant=constant, parse_float=finite)
     except json.JSONDecodeError as e:
         raise fail(f"not JSON: {e.msg}", e.lineno, e.colno) from None
-    except (ValueError, RecursionError) as e:  # a non-finite constant, an integer of too many digits
-        raise fail(f"not JSON: {e}") from None
+    except (ValueError, RecursionError) as e:  # a non-finite constant or float, an integer of too many digits
+        pattern = bad[0] if bad else r"[0-9]{%d,}" % (sys.get_int_max_str_digits() + 1)
+        raise fail(f"not JSON: {e}", *line_col(_token_at(text, pattern))) from None
 
 
 def _umask() -> int:

@@ -87,6 +87,8 @@ def write_silhouettes(path: PathLike, data: Mapping[str, SilhouetteSplit], margi
     if not data:
         raise ValueError(f"{path}: no split to write")
     size = next(iter(data.values())).images.shape[-1]
+    if not 1 <= size <= MAX_SIZE:
+        raise ValueError(f"{path}: images of side {size}; at most MAX_SIZE = {MAX_SIZE} are written (and read)")
     arrays = {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(FORMAT_VERSION)}
     for split, s in data.items():
         check_split(split)

@@ -399,14 +399,14 @@ def load_cache(root: PathLike, category: str) -> CloudCache:
     missing = [k for k in need if k not in d]
     if missing:
         raise InputError(f"{path}: not a cloud cache (missing {', '.join(missing)})")
-    for k in ("version", "n_points", "seed"):
+    for k in ("version", "n_points", "seed"):  # any integer seed; counts and versions are >= 0
         v = d[k]
-        if np.ndim(v) != 0 or not np.issubdtype(v.dtype, np.integer) or int(v) < 0:
-            raise InputError(f"{path}: not a cloud cache ('{k}' is not a non-negative integer: dtype {v.dtype}, "
-                             f"shape {np.shape(v)})")
+        if np.ndim(v) != 0 or not np.issubdtype(v.dtype, np.integer) or (k != "seed" and int(v) < 0):
+            raise InputError(f"{path}: not a cloud cache ('{k}' is not a{'n' if k == 'seed' else ' non-negative'} "
+                             f"integer: dtype {v.dtype}, shape {np.shape(v)})")
     if int(d["version"]) != CACHE_VERSION:
         raise InputError(f"{path}: cache version {int(d['version'])}, this code reads version {CACHE_VERSION}; "
-                         "make it again with `python -m shapeprog make-clouds`")
+                         "make it again with `python -m shapeprog make-clouds --out NEW_FOLDER`")
     if np.ndim(d["category"]) != 0:
         raise InputError(f"{path}: not a cloud cache ('category' is not one name)")
     if str(d["category"]) != category:
@@ -445,8 +445,9 @@ def read_split(root: PathLike, category: str, cache: "CloudCache | None" = None)
     """
     path = cache_paths(root, category)[1]
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such split file; make it with "
-                                f"`python -m shapeprog make-clouds --category {category} --out {root}`")
+        raise FileNotFoundError(f"{path}: no such split file; make the cache and its split again with "
+                                f"`python -m shapeprog make-clouds --category {category} --out NEW_FOLDER` (it never "
+                                "writes beside an existing cache)")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as e:

@@ -245,9 +245,12 @@ class VAEDataModule(L.LightningDataModule):
                 self.val_keys, self.val_trees = load_macro_trees(val, self.layout, progs)
         if self.trainer is not None and stage in (None, "fit"):
             folder = self.trainer.log_dir  # broadcasts: every rank asks
-            if self.trainer.logger is None:  # no run folder: beside the checkpoints, never in the working folder
-                dirs = [cb.dirpath for cb in self.trainer.checkpoint_callbacks if getattr(cb, "dirpath", None)]
-                folder = dirs[0] if dirs else None
+            if self.trainer.logger is None or folder is None:
+                # no run folder: beside the checkpoints (a checkpoint callback without a folder of its own writes
+                # into <default_root_dir>/checkpoints), never in the working folder; nowhere without checkpoints
+                cbs = self.trainer.checkpoint_callbacks
+                dirs = [cb.dirpath for cb in cbs if getattr(cb, "dirpath", None)]
+                folder = dirs[0] if dirs else (Path(self.trainer.default_root_dir) / "checkpoints" if cbs else None)
             if folder is not None and self.trainer.is_global_zero:
                 self.write_split(Path(folder) / self.split_file)
 

@@ -196,3 +196,15 @@ def test_a_table_is_never_written_over_its_weights(tmp_path):
         with pytest.raises(SystemExit, match=r"w\.pt"):
             main(argv)
     assert weights.read_bytes() == before
+
+
+def test_parse_of_a_dotted_name_writes_its_own_names(tmp_path, capsys):
+    src = tmp_path / "in" / "a.v1.png"
+    src.parent.mkdir()
+    assert main(["render", "c(32,32,20)", "-o", str(src)]) == 0
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.png").write_bytes(b"another shape's picture")
+    assert main(["parse", str(src), "--beam", "1", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["a.png", "a.v1.png", "a.v1.scad", "a.v1.txt", "a.v1_compare.png"]
+    assert (out / "a.png").read_bytes() == b"another shape's picture"

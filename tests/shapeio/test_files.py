@@ -81,10 +81,10 @@ def test_parse_json_is_strict_and_locates_its_errors():
     assert parse_json("[" * MAX_JSON_DEPTH + "]" * MAX_JSON_DEPTH, "x.json") == parse_json("[" * 64 + "]" * 64, "y")
     cases = [('{"a": 1,}', "x.json:1:9: not JSON: Expecting property name"),
              ("[\n" + "[" * MAX_JSON_DEPTH, f"x.json:2:{MAX_JSON_DEPTH}: nested more than {MAX_JSON_DEPTH} levels"),
-             ('{"a": NaN}', "x.json:1:1: not JSON: NaN is not a JSON number"),
-             ("[-Infinity]", "not JSON: -Infinity is not a JSON number"),
-             ("[1e400]", "not JSON: 1e400 is out of the range of a float"),
-             ("1" * 5000, "not JSON: Exceeds the limit")]
+             ('{"a": "NaN",\n "b": NaN}', "x.json:2:7: not JSON: NaN is not a JSON number"),
+             ("[0, -Infinity]", "x.json:1:5: not JSON: -Infinity is not a JSON number"),
+             ('["1e400", 1e400]', "x.json:1:11: not JSON: 1e400 is out of the range of a float"),
+             ("[0,\n " + "1" * 5000 + "]", "x.json:2:2: not JSON: Exceeds the limit")]
     for text, message in cases:
         with pytest.raises(InputError, match=message.replace("[", r"\[")):
             parse_json(text, "x.json")

@@ -73,3 +73,12 @@ def test_bad_files_name_the_file(tmp_path):
         write_silhouettes(tmp_path / "w.npz", {"val": SilhouetteSplit(np.zeros((2, 16, 16), np.uint8), bad.views, bad.views)},
                           margin=0)
     assert not (tmp_path / "w.npz").exists()
+
+
+def test_a_side_beyond_the_reader_limit_is_not_written(tmp_path, monkeypatch):
+    import shapeio.silhouettes as sil
+
+    monkeypatch.setattr(sil, "MAX_SIZE", 8)
+    with pytest.raises(ValueError, match=r"s\.npz: images of side 16; at most MAX_SIZE = 8"):
+        write_silhouettes(tmp_path / "s.npz", {"val": split(2)}, margin=0)
+    assert not (tmp_path / "s.npz").exists()

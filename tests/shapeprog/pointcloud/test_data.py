@@ -181,3 +181,9 @@ def test_make_clouds_command(tmp_path, capsys):
     (tmp_path / "c" / "storage_split.json").write_text(json.dumps(dict(record, test=record["test"] + [99999999])))
     with pytest.raises(InputError, match="shape 99999999 is not in the cache"):
         read_split(tmp_path / "c", "storage", c)
+
+
+def test_a_cache_of_any_integer_seed_reads_back(tmp_path):
+    make_clouds("storage", tmp_path, n_points=16, workers=1, seed=-1, ids=corpus_splits("storage")["train"][:1])
+    c = load_cache(tmp_path, "storage")
+    assert c.seed == -1 and read_split(tmp_path, "storage", c)["train"] == c.ids.tolist()

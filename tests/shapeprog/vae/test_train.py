@@ -211,6 +211,11 @@ def test_fast_dev_run_of_module_and_data_module(tmp_path):
     # no logger and no checkpoint folder: no run folder, so the split file is not written (never into the
     # working or root folder)
     assert not (tmp_path / "split.json").exists()
+    # no logger, the default checkpoint callback: the split goes where its checkpoints go
+    ckpt = _tiny_trainer(tmp_path / "b", fast_dev_run=True, enable_checkpointing=True)
+    ckpt.fit(VAEModule("storage", hidden_dim=16, batch_shapes=2), VAEDataModule("storage", val_count=3, max_train_shapes=4))
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["checkpoints"]
+    assert json.loads((tmp_path / "b" / "checkpoints" / "split.json").read_text())["category"] == "storage"
     for stage in ("train", "val"):
         for name in ("loss", "kl", "cmd", "leaf", "bb", "xyz_prm"):
             assert torch.isfinite(metrics[f"{stage}/{name}"]), f"{stage}/{name}"
