@@ -14,6 +14,7 @@ MODULES = [
     "fuzz.pointcloud_targets",
     "fuzz.shapecoder_targets",
     "fuzz.editor_targets",
+    "fuzz.file_targets",
 ]
 
 
