@@ -325,8 +325,18 @@ def _command(args) -> str:
 
 
 def _decoding(args) -> str:
-    """How the written tables' programs were decoded, for their notes."""
-    return f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
+    """How the written tables' programs were decoded, and where and when their times were measured, for their
+    notes."""
+    import datetime
+    import platform
+
+    import torch
+
+    where = (f"{platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
+             f"{torch.get_num_threads()} thread{'s' if torch.get_num_threads() != 1 else ''}"
+             f"{', CUDA available' if torch.cuda.is_available() else ''}")
+    return (f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding; times measured on "
+            f"{where}, {datetime.date.today().isoformat()} (the load of other jobs is not recorded)")
 
 
 def _refuse_table_over_inputs(args) -> None:

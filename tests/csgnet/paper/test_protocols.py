@@ -156,3 +156,11 @@ def test_cli_writes_both_tables(tmp_path, capsys):
     assert main(["table6", "--per-length", "2", "--lengths", "3", "--beams", "2", "--out", str(out6)]) == 0
     text = out6.read_text()
     assert "| 2 |" in text and "sampled with seed 0" in text
+    # where and when the times were measured
+    import datetime
+    import os
+
+    today = datetime.date.today()
+    days = {(today - datetime.timedelta(days=k)).isoformat() for k in (0, 1)}  # a run across midnight
+    for t in (text, out4.read_text()):
+        assert "times measured on " in t and f"{os.cpu_count()} CPUs" in t and any(d in t for d in days)
