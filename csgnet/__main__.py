@@ -91,6 +91,9 @@ def cmd_demo(args) -> int:
 
     out = Path(args.out)
     data_dir = out / "synthetic"
+    earlier = [p for p in (data_dir / "2d", data_dir / "3d", out / "preview_2d", out / "preview_3d") if p.exists()]
+    if earlier:  # a second demo into the folder would mix its previews and data with the first one's
+        raise SystemExit(f"error: {earlier[0]} exists (an earlier demo's output); choose another --out or remove it")
     for dim in (2, 3):
         counts = generate_dataset(data_dir, dim=dim, scale=args.scale, seed=args.seed, workers=args.workers,
                                   progress=not args.quiet)

@@ -31,6 +31,13 @@ def test_render_bad_program_is_a_clear_error(tmp_path, capsys):
     assert not (tmp_path / "a.png").exists()
 
 
+def test_demo_refuses_an_earlier_demo_folder(tmp_path):
+    (tmp_path / "preview_2d").mkdir()
+    with pytest.raises(SystemExit, match=r"preview_2d exists \(an earlier demo's output\)"):
+        main(["demo", "--out", str(tmp_path), "--quiet"])
+    assert [p.name for p in tmp_path.iterdir()] == ["preview_2d"]
+
+
 def test_demo_main_job(tmp_path):
     r = subprocess.run([sys.executable, "-m", "csgnet", "demo", "--out", str(tmp_path), "--quiet", "--workers", "1",
                         "--per-length", "1"], capture_output=True, text=True, timeout=600)
