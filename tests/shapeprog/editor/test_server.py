@@ -370,29 +370,38 @@ def test_a_websocket_client_receives_the_new_geometry(app):
         data = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(m[16:16 + c], max_output_size=n))
         return [x for batch in (data if isinstance(data, list) else [data]) for x in batch["messages"]]
 
-    async def drain(ws, seconds):
+    async def drain(ws, done, seconds=20.0):
+        """Messages until ``done(messages)`` holds and no message came for 0.5 s, or ``seconds`` pass (a loaded
+        machine may pause between the server's messages: a quiet gap alone does not end the wait)."""
         out, t = [], time.time()
-        try:
-            while time.time() - t < seconds:
+        while time.time() - t < seconds:
+            try:
                 out += decode(await asyncio.wait_for(ws.recv(), 0.5))
-        except asyncio.TimeoutError:
-            pass
+            except asyncio.TimeoutError:
+                if done(out):
+                    break
         return out
+
+    def moved_parts(messages):
+        return {m["name"] for m in messages if m["type"] == "SceneNodeUpdateMessage" and "vertices" in m["updates"]}
+
+    def program_texts(messages):
+        return [m["updates"]["value"] for m in messages if m["type"] == "GuiUpdateMessage"
+                and isinstance(m["updates"].get("value"), str) and m["updates"]["value"].startswith("Assembly")]
 
     async def session():
         url = app.url.replace("http://", "ws://")
         async with websockets.connect(url, subprotocols=[f"viser-v{viser.__version__}"], max_size=None) as ws:
-            first = await drain(ws, 2.0)
+            first = await drain(ws, lambda ms: any(m.get("name", "").startswith("/shape/part") for m in ms))
             assert any(m.get("name", "").startswith("/shape/part") for m in first)
             app.handle("Program_0:1:cuboid.h").value = 0.5
-            return await drain(ws, 2.0)
+            return await drain(ws, lambda ms: moved_parts(ms) and program_texts(ms))
 
     after = asyncio.run(session())
-    moved = {m["name"] for m in after if m["type"] == "SceneNodeUpdateMessage" and "vertices" in m["updates"]}
+    moved = moved_parts(after)
     parts = {f"/shape/part{k}" for k in range(len(set(app.state["lines"].tolist())))}
     assert moved and moved <= parts
-    texts = [m["updates"]["value"] for m in after if m["type"] == "GuiUpdateMessage"
-             and isinstance(m["updates"].get("value"), str) and m["updates"]["value"].startswith("Assembly")]
+    texts = program_texts(after)
     assert texts and texts[-1] == app.state["text"]
 
 
