@@ -23,7 +23,7 @@ from PIL import Image
 from .arrays import as_numpy
 from .files import InputError, atomic_write
 
-__all__ = ["IMAGE_SUFFIXES", "MAX_IMAGE_PIXELS", "write_png", "read_gray", "binarise", "read_mask", "fit_to_canvas",
+__all__ = ["IMAGE_SUFFIXES", "MAX_IMAGE_PIXELS", "write_png", "png_bytes", "read_gray", "binarise", "read_mask", "fit_to_canvas",
            "centre_on_canvas", "list_images", "read_masks", "read_image_folder"]
 
 PathLike = Union[str, os.PathLike]
@@ -56,6 +56,19 @@ def write_png(path: PathLike, image, scale: int = 1, mkdir: bool = False) -> Pat
     Raises:
         ValueError: naming ``path``, for a bad shape, dtype, value range or ``scale``.
     """
+    return atomic_write(path, png_bytes(image, scale, where=path), mkdir=mkdir)
+
+
+def png_bytes(image, scale: int = 1, where: PathLike = "<image>") -> bytes:
+    """The PNG encoding of ``image`` (the images and ``scale`` of :func:`write_png`), for writers that place
+    the bytes themselves (``shapeio.files.write_new_set``).
+
+    Raises:
+        ValueError: naming ``where``, for a bad shape, dtype, value range or ``scale``.
+    """
+    import io
+
+    path = where
     arr = as_numpy(image)
     if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (3, 4))) or 0 in arr.shape[:2]:
         raise ValueError(f"{path}: `image` must be (H, W), (H, W, 3) or (H, W, 4) and not empty, got {arr.shape}")
@@ -71,8 +84,9 @@ def write_png(path: PathLike, image, scale: int = 1, mkdir: bool = False) -> Pat
         raise ValueError(f"{path}: `image` must be bool, uint8 or float, got dtype {arr.dtype}")
     if scale > 1:
         arr = np.repeat(np.repeat(arr, scale, axis=0), scale, axis=1)
-    picture = Image.fromarray(np.ascontiguousarray(arr))
-    return atomic_write(path, lambda f: picture.save(f, format="PNG"), mkdir=mkdir)
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(arr)).save(buf, format="PNG")
+    return buf.getvalue()
 
 
 # ------------------------------------------------------------------------------------------------

@@ -37,6 +37,7 @@ from pathlib import Path
 import torch
 
 from shapeio import InputError, atomic_write, refuse_overwrite, write_new
+from shapeio.files import write_new_set
 from shapeio.mesh import WRITE_SUFFIXES
 
 from . import corpus, io
@@ -260,38 +261,31 @@ def _cmd_infer(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {src}: {e}") from None
     out.mkdir(parents=True, exist_ok=True)
-    written: list[Path] = []  # removed again if a later write fails: no half result is left
-    try:
-        _write_inference(r, points, src, model, files, args, written)
-    except BaseException:
-        for path in written:
-            path.unlink(missing_ok=True)
-        raise
+    write_new_set(_inference_files(r, points, src, model, files, args))  # all or none: no half result is left
     return _print_inference(r, files)
 
 
-def _write_inference(r, points, src, model, files, args, written: list) -> None:
-    """The files of ``infer``, each new (``write_new``; the caller checked that none exists), in order; each
-    path is appended to ``written`` once it is complete."""
+def _inference_files(r, points, src, model, files, args) -> list[tuple[Path, str | bytes]]:
+    """``(path, content)`` of each file of ``infer``, in writing order."""
     import json
 
     import numpy as np
 
+    from shapeio.image import png_bytes
+
+    from .io import obj_text
     from .picture import render_grid
     from .pointcloud.infer import cloud_corners
 
-    write_new(files["program"], r.text)
-    written.append(files["program"])
+    out = [(files["program"], r.text)]
     if "macros" in files and r.macro_text is not None:
-        write_new(files["macros"], r.macro_text)
-        written.append(files["macros"])
-    io.write_obj(files["mesh"], torch.from_numpy(r.corners()))
-    written.append(files["mesh"])
+        out.append((files["macros"], r.macro_text))
+    out.append((files["mesh"], obj_text(torch.from_numpy(r.corners()))))
     unit = r.transform.apply(points)
     canon = execute(r.canonical).corners + torch.from_numpy(r.canonical_offset).float()
-    render_grid([cloud_corners(unit[np.random.default_rng(args.seed).permutation(len(unit))]), canon],
-                files["png"], cols=2, size=args.size)
-    written.append(files["png"])
+    sheet = render_grid([cloud_corners(unit[np.random.default_rng(args.seed).permutation(len(unit))]), canon],
+                        cols=2, size=args.size)
+    out.append((files["png"], png_bytes(sheet, where=files["png"])))
     record = {"input": str(src), "category": args.category if model is None else model.category,
               "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
@@ -299,8 +293,8 @@ def _write_inference(r, points, src, model, files, args, written: list) -> None:
               "macro_text": r.macro_text,
               "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
                       "canonical units (bounding-box diagonal 2)"}
-    write_new(files["json"], json.dumps(record, indent=1) + "\n")
-    written.append(files["json"])
+    out.append((files["json"], json.dumps(record, indent=1) + "\n"))
+    return out
 
 
 def _print_inference(r, files) -> int:

@@ -19,7 +19,6 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-import io as _io
 import math
 import re
 from pathlib import Path
@@ -340,12 +339,10 @@ class EditSession(UndoableSession):
             elif k == "obj":
                 data[k] = obj_text(self.shape.corners)
             else:
-                from PIL import Image
+                from shapeio.image import png_bytes
 
                 img = render_png(self.shape.corners, None, labels=self.shape.line.numpy(), size=PNG_SIZE)
-                buf = _io.BytesIO()
-                Image.fromarray(img).save(buf, format="PNG")
-                data[k] = buf.getvalue()
+                data[k] = png_bytes(img)
         taken = [re.fullmatch(re.escape(self.name) + r"_edit(\d+)\..*", p.name) for p in folder.iterdir()]
         n = max([int(m.group(1)) for m in taken if m] + [0]) + 1
         while True:

@@ -132,18 +132,22 @@ def test_cli_on_the_vendored_real_cloud_writes_four_files_and_never_overwrites(t
 
 
 def test_cli_leaves_no_half_result_when_a_write_fails(tmp_path, weights, monkeypatch, capsys):
-    import shapeprog.picture
+    import shapeio.files
 
-    def broken(*args, **kwargs):
-        raise OSError("disk full")
+    write_new = shapeio.files.write_new
 
-    monkeypatch.setattr(shapeprog.picture, "render_grid", broken)  # the picture is written third
+    def broken(path, data):  # the record, written last, fails
+        if str(path).endswith(".json"):
+            raise OSError("disk full")
+        return write_new(path, data)
+
+    monkeypatch.setattr(shapeio.files, "write_new", broken)
     src = tmp_path / "comp_pc.npy"
     np.save(src, corpus.example_points("comp_pc.obj"))
     out = tmp_path / "out"
     assert main(["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]) == 1
     assert "error: disk full" in capsys.readouterr().err
-    assert list(out.iterdir()) == []  # the program and the mesh written before it are removed again
+    assert list(out.iterdir()) == []  # the program, mesh and picture written before it are removed again
 
 
 def test_the_shipped_models_on_the_real_clouds_at_any_scale_and_position():
