@@ -69,8 +69,6 @@ def _too_deep(text: str, limit: int) -> int | None:
 
 def _token_at(text: str, pattern: str) -> int:
     """The offset of the first match of ``pattern`` that starts outside strings (0 when none does)."""
-    import re
-
     outside = {i for i, _ in _outside_strings(text)}
     for m in re.finditer(pattern, text):
         if m.start() in outside:
@@ -111,8 +109,6 @@ def parse_json(text: str, file: str, error: Callable[[str, int, int], Exception]
     def finite(token: str) -> float:
         value = float(token)
         if value in (float("inf"), float("-inf")):
-            import re
-
             bad.append(re.escape(token) + r"(?![0-9.eE+-])")
             raise ValueError(f"{token} is out of the range of a float")
         return value

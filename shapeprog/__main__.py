@@ -417,8 +417,9 @@ def _refuse_existing(paths) -> None:
 def _export_decoded(results, out: str | None, name: str, png: str | None, cols: int, size: int,
                     progress: bool = False) -> None:
     """Write decoded programs: ``name.format(i)`` + ``.txt`` and ``.obj`` in ``out`` (none of which may exist
-    yet), a picture grid ``png`` (``cols`` cells of ``size`` pixels per row); print the programs when neither
-    is given. Each program is executed once."""
+    yet: the commands check :func:`_planned_files` with :func:`_refuse_existing` before their work, and the text
+    files are written with ``write_new``), a picture grid ``png`` (``cols`` cells of ``size`` pixels per row);
+    print the programs when neither is given. Each program is executed once."""
     from tqdm import tqdm
 
     if not out and not png:
@@ -426,7 +427,6 @@ def _export_decoded(results, out: str | None, name: str, png: str | None, cols: 
             print(f"# {name.split('_')[0]} {i}\n{r.text}")
         return
     if out:
-        _refuse_existing(_planned_files(out, name, len(results)))
         Path(out).mkdir(parents=True, exist_ok=True)
     shapes = []
     for i, r in enumerate(tqdm(results, desc="writing", unit="shape", disable=not progress)):
@@ -488,8 +488,9 @@ def _cmd_interpolate(args) -> int:
 
     _check_outputs(others=[args.png])
     a, b = _Program(args.a), _Program(args.b)
-    _refuse_overwrite([args.png, *_planned_files(args.out, "step_{:03d}", args.steps)], [args.a, args.b])
-    _refuse_existing(_planned_files(args.out, "step_{:03d}", args.steps))
+    planned = _planned_files(args.out, "step_{:03d}", args.steps)
+    _refuse_overwrite([args.png, *planned], [args.a, args.b])
+    _refuse_existing(planned)
     vae = _load_vae(args, args.category or _category_of(args.a) or _category_of(args.b))
     results = interpolate(vae, a.program, b.program, args.steps)
     _export_decoded(results, args.out, "step_{:03d}", args.png, len(results), args.size)
