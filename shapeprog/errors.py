@@ -32,6 +32,12 @@ class ParseError(ValueError):
         self.reason, self.file, self.line, self.column, self.token = reason, file, line, column, token
         super().__init__(f"{file}:{line}:{column}: {reason}")
 
+    @classmethod
+    def in_file(cls, file: str):
+        """``(reason, line, column) -> ParseError`` in ``file`` (no token): the ``error`` argument of
+        :func:`shapeio.files.parse_json`."""
+        return lambda reason, line, column: cls(reason, file, line, column, "")
+
 
 class EditError(ParseError):
     """An edit of a program that cannot be made: an unknown control, a value of the wrong type or outside

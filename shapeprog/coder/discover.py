@@ -581,7 +581,7 @@ def _load(out: Path | None, lang: Lang):
 
     file = str(out / "state.json")
     st = parse_json(decode((out / "state.json").read_bytes(), file), file,
-                    lambda why, line, col: ParseError(why, file, line, col, ""))
+                    ParseError.in_file(file))
     if not isinstance(st, dict):
         raise ParseError("a damaged discovery state (not a JSON object)", file, 1, 1, "")
     where = "its library"

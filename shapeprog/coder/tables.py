@@ -123,7 +123,7 @@ def log_of(run: Run) -> list:
     if not f.is_file():
         return []
     name = str(f)
-    record = parse_json(decode(f.read_bytes(), name), name, lambda why, line, col: ParseError(why, name, line, col, ""))
+    record = parse_json(decode(f.read_bytes(), name), name, ParseError.in_file(name))
     try:
         log = record["log"]
     except (KeyError, TypeError):
@@ -173,7 +173,7 @@ def from_run(folder, category: str) -> Run:
     if log_path.is_file():
         name = str(log_path)
         record = parse_json(decode(log_path.read_bytes(), name), name,
-                            lambda why, line, col: ParseError(why, name, line, col, ""))
+                            ParseError.in_file(name))
         files = record.get("files") if isinstance(record, dict) else None
         for p in (lib_path, prog_path) if isinstance(files, dict) else ():
             if files.get(p.name) != hashlib.sha256(p.read_bytes()).hexdigest():

@@ -294,7 +294,7 @@ class Discovery:
 
     @classmethod
     def from_json(cls, text: str, file: str = "state.json") -> tuple["Discovery", dict]:
-        d = parse_json(text, file, lambda why, line, col: ParseError(why, file, line, col, ""))
+        d = parse_json(text, file, ParseError.in_file(file))
         if not isinstance(d, dict) or d.get("format") != "shapemod-discovery/1":
             raise ParseError("not a shapemod discovery state", file, 1, 1, "")
         try:
