@@ -35,29 +35,23 @@ class CLI(LightningCLI):
 
     def before_fit(self) -> None:
         """A ``fit`` without ``--ckpt_path`` into a checkpoint folder that already holds checkpoints stops
-        before training: resume that run (``--ckpt_path last``) or move its folder away."""
+        before training: resume that run (``--ckpt_path last``) or move its folder away. ``--ckpt_path last``
+        into such a folder without a readable ``last*.ckpt`` (a link lost in a copy, a kill while it was
+        replaced) stops too: Lightning would start from scratch beside them."""
         ckpt = self.config[self.subcommand].get("ckpt_path")
-        if ckpt == "last":
-            self._check_last()
-        if ckpt is not None:
-            return
-        for cb in self.trainer.checkpoint_callbacks:
-            folder = Path(cb.dirpath) if getattr(cb, "dirpath", None) else None
-            if folder is not None and folder.is_dir() and any(folder.glob("*.ckpt")):
+        for folder in self._used_checkpoint_folders():
+            if ckpt is None:
                 raise SystemExit(f"error: {folder} holds the checkpoints of an earlier run; resume it with "
                                  "--ckpt_path last, or move that folder away to start a new run")
-
-    def _check_last(self) -> None:
-        """``--ckpt_path last`` into a folder of checkpoints without a readable ``last*.ckpt`` (a link lost in a
-        copy, a kill while it was replaced) stops: Lightning would start from scratch beside them."""
-        for cb in self.trainer.checkpoint_callbacks:
-            folder = Path(cb.dirpath) if getattr(cb, "dirpath", None) else None
-            if folder is None or not folder.is_dir() or not any(folder.glob("*.ckpt")):
-                continue
-            if not any(p.is_file() for p in folder.glob("last*.ckpt")):  # is_file follows links
+            if ckpt == "last" and not any(p.is_file() for p in folder.glob("last*.ckpt")):  # is_file follows links
                 names = ", ".join(sorted(p.name for p in folder.glob("*.ckpt"))[:5])
                 raise SystemExit(f"error: --ckpt_path last: {folder} holds checkpoints ({names}) but no readable "
                                  "last.ckpt; resume from one of them with --ckpt_path <file>")
+
+    def _used_checkpoint_folders(self) -> list[Path]:
+        """The checkpoint callbacks' folders that already hold checkpoints."""
+        folders = [Path(cb.dirpath) for cb in self.trainer.checkpoint_callbacks if getattr(cb, "dirpath", None)]
+        return [f for f in folders if f.is_dir() and any(f.glob("*.ckpt"))]
 
 
 def main(args=None, run: bool = True) -> LightningCLI:

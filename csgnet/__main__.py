@@ -277,7 +277,7 @@ def cmd_evaluate(args) -> int:
         print(f"decoding with {name} ...", flush=True)
         rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
                                constrained=args.constrained)
-    note = f"`{_command(args)}`; beam mode {args.mode!r}, {_decoding(args)}."
+    note = f"`{_command(args)}`; beam mode {args.mode!r}, {_decoding(args)}; {_measured_on()}."
     _write_table(markdown_tables(rows, args.dim, note), args.out)
     return 0
 
@@ -328,18 +328,21 @@ def _command(args) -> str:
 
 
 def _decoding(args) -> str:
-    """How the written tables' programs were decoded, and where and when their times were measured, for their
-    notes."""
+    """How the written tables' programs were decoded, for their notes."""
+    return f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
+
+
+def _measured_on() -> str:
+    """Where and when the written tables' times were measured, for their notes."""
     import datetime
     import platform
 
     import torch
 
-    where = (f"{platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
-             f"{torch.get_num_threads()} thread{'s' if torch.get_num_threads() != 1 else ''}"
+    n = torch.get_num_threads()
+    where = (f"{platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, {n} thread{'s' if n != 1 else ''}"
              f"{', CUDA available' if torch.cuda.is_available() else ''}")
-    return (f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding; times measured on "
-            f"{where}, {datetime.date.today().isoformat()} (the load of other jobs is not recorded)")
+    return f"times measured on {where}, {datetime.date.today().isoformat()} (the load of other jobs is not recorded)"
 
 
 def _refuse_table_over_inputs(args) -> None:
@@ -382,7 +385,7 @@ def cmd_table4(args) -> int:
     rows = table4(_labelled_models(specs), test[idx], train, tuple(args.beams), iters,
                   constrained=args.constrained, progress=lambda s: print(s, flush=True))
     note = (f"`{_command(args)}`; {len(idx)} of {len(test)} test silhouettes "
-            f"(seed {args.seed}); {_decoding(args)}.")
+            f"(seed {args.seed}); {_decoding(args)}; {_measured_on()}.")
     _write_table(table4_markdown(rows, note, iters), args.out)
     return 0
 
@@ -409,7 +412,7 @@ def cmd_table6(args) -> int:
     rows = table6(model, programs, tuple(args.beams), constrained=args.constrained,
                   progress=lambda s: print(s, flush=True))
     note = (f"`{_command(args)}`; {label}; targets: {source}, lengths "
-            f"{', '.join(map(str, lengths))}; {_decoding(args)}.")
+            f"{', '.join(map(str, lengths))}; {_decoding(args)}; {_measured_on()}.")
     _write_table(table6_markdown(rows, note), args.out)
     return 0
 
