@@ -241,9 +241,7 @@ def _cmd_infer(args) -> int:
         kinds.append(("macros", "_macros.txt"))  # the decoded macro program (ShapeMOD)
     files = {k: out / f"{stem}{suffix}" for k, suffix in kinds}
     _refuse_overwrite(list(files.values()), [args.file])
-    for path in files.values():
-        if path.exists():
-            raise SystemExit(f"error: {path}: exists; infer never overwrites a file (choose another --out)")
+    _refuse_existing(files.values())
     points = read_cloud(src)
     index = None
     if args.retrieval is not None:

@@ -27,9 +27,11 @@ from .objective import naive_program
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES, RefactorError, refactor
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
-__all__ = ["Inferred", "check_search_budget", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
+__all__ = ["PASSES", "Inferred", "check_search_budget", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
 
 _DIR = ("data", "coder_libraries")
+PASSES = 3
+"""Refactor calls of :func:`infer` at most (each on the previous call's program)."""
 
 
 @dataclass(frozen=True)
@@ -63,7 +65,7 @@ def _prims(shape) -> tuple:
     return order(tuple(round(v, 2) + 0.0 for v in p) for p in prims)
 
 
-def infer(shape, library: Library, *, passes: int = 3, iterations: int = MAX_ITERATIONS,
+def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MAX_ITERATIONS,
           max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None, seed: int = 0,
           search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
           values: str = VALUES) -> Inferred:

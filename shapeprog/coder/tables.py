@@ -36,7 +36,7 @@ from ..errors import ParseError
 from ..limits import decode
 from . import data
 from .discover import Summary, evaluate, summarize
-from .infer import check_search_budget, infer, shipped_libraries
+from .infer import PASSES, check_search_budget, infer, shipped_libraries
 from .lang import LANG_3D, Call, Library, parse, walk
 from .objective import naive_summary, omega
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES
@@ -262,13 +262,16 @@ def _infer_one(task):
 
 def phi(split: str, records: Sequence, library: Library, *, executor=None, iterations: int = MAX_ITERATIONS,
         max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None,
-        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES, values: str = VALUES) -> Phi:
+        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES, values: str = VALUES,
+        passes: int = PASSES) -> Phi:
     """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed;
     with ``network`` (a ``(model, vocab)`` pair) as :func:`~shapeprog.coder.infer.infer` with the network,
     shape k's search seeded with k and budgeted by ``search_seconds`` / ``search_batches`` (as
-    :func:`~shapeprog.coder.infer.infer`; ``values``: the e-graph's value schedule, as there)."""
+    :func:`~shapeprog.coder.infer.infer`; ``values``: the e-graph's value schedule, and ``passes``, the
+    refactor calls per shape, as there)."""
     check_search_budget(search_seconds, search_batches)
-    limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values}
+    limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values,
+              "passes": passes}
     budget = {"search_seconds": float(search_seconds), "search_batches": int(search_batches)}
     kept = [r for r in records if len(r.prims) <= library.lang.max_prims]
     if not kept:
@@ -305,7 +308,7 @@ def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
 def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
                   max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, values: str = VALUES,
                   network: bool = False, search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
-                  baselines: Sequence[tuple] = ()) -> str:
+                  baselines: Sequence[tuple] = (), passes: int = PASSES) -> str:
     """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours; ``baselines``, ``[(kind,
     Table2)]`` with kind ``"input"`` or ``"wake"`` (:func:`baseline`), add the structure-only rows to Table 2."""
     cat = run.category
@@ -329,7 +332,9 @@ def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = 
                 + ("the wake's" if paper_budget else "ours, not the paper's 1 s"))
     out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions by {how}; e-graph limits "
             f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which}"
-            + ("" if values == VALUES else f"; e-graph values {values}") + ")", "",
+            + ("" if values == VALUES else f"; e-graph values {values}")
+            + ("" if passes == PASSES else f"; {passes} refactor call{'s' if passes > 1 else ''} per shape, not {PASSES}")
+            + ")", "",
             "| split | shapes | F | abstractions used | CPU s / shape | wall s | paper F |",
             "| --- | --- | --- | --- | --- | --- | --- |"]
     paper = PAPER_TABLE3.get(cat, {})

@@ -89,6 +89,20 @@ def test_phi_is_the_inference_cost_plus_the_library_and_skips_large_shapes(tmp_p
         assert tables.phi("train-PHI", recs, lib, executor=ex).F == pytest.approx(row.F)
     with pytest.raises(ValueError, match="no shape with at most 16"):
         tables.phi("train-PHI", [big], lib)
+    # passes: the refactor calls per shape, as infer's
+    one = tables.phi("train-PHI", recs, lib, passes=1)
+    assert one.F == pytest.approx(sum(infer(r.prims, lib, passes=1).cost for r in recs) / 3
+                                  + omega(lib.abstractions[0], lib))
+    assert one.F >= row.F
+
+
+def test_table3_header_names_passes_other_than_the_default(tmp_path):
+    _run_folder(tmp_path, n=2)
+    run = tables.from_run(tmp_path, "chair")
+    t2 = tables.table2(run)
+    t3 = tables.table3(run, train=1, heldout=1, passes=1)
+    assert "; 1 refactor call per shape, not 3)" in tables.format_tables(run, t2, t3, passes=1)
+    assert "refactor call" not in tables.format_tables(run, t2, t3)
 
 
 def test_table2_of_a_run_folder_and_its_errors(tmp_path):

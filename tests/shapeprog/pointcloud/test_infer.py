@@ -126,7 +126,7 @@ def test_cli_on_the_vendored_real_cloud_writes_four_files_and_never_overwrites(t
     assert record["fit"] is True and record["metrics"]["rooted"] in (True, False)
     parse((out / "comp_pc.txt").read_text())
     before = (out / "comp_pc.txt").read_bytes()
-    with pytest.raises(SystemExit, match="exists; infer never overwrites"):
+    with pytest.raises(SystemExit, match=r"comp_pc.txt: exists \(4 of the outputs do\); the command never overwrites"):
         main(args)
     assert (out / "comp_pc.txt").read_bytes() == before
 
