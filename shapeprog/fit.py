@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from .errors import ExecutionError
 from .execute import ExecutionPlan, parameter_names, program_parameters
 from .lang import Cuboid, Program, replace_numbers, to_text
 from .metrics import chamfer
@@ -44,6 +45,10 @@ class FitResult:
         losses: the loss (chamfer + penalty) at every step.
         chamfer: the chamfer term at every step.
         seconds: wall time of the optimisation.
+        stopped: None when every step ran; else why the fit stopped early: a step took the numbers where
+            the program no longer executes to finite cuboids (an :class:`~shapeprog.errors.ExecutionError`,
+            e.g. an attachment that degenerates), so that step was undone and the result is the numbers
+            before it.
     """
 
     program: Program
@@ -52,6 +57,7 @@ class FitResult:
     losses: list[float] = field(default_factory=list)
     chamfer: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    stopped: str | None = None
 
 
 def _sharing(program: Program, names: list[str]) -> torch.Tensor:
@@ -107,7 +113,12 @@ def fit(
         dtype: execution dtype.
 
     Returns:
-        A :class:`FitResult`.
+        A :class:`FitResult`. A step whose numbers no longer execute to finite cuboids is undone and the fit
+        stops there with the last numbers that executed (:attr:`FitResult.stopped` says where and why).
+
+    Raises:
+        ValueError: bad ``points`` or ``steps``.
+        ExecutionError: ``program`` itself does not execute to finite cuboids.
     """
     if not isinstance(points, torch.Tensor):
         points = torch.as_tensor(points)
@@ -132,9 +143,19 @@ def fit(
     plan = ExecutionPlan([program], dtype, device)  # compiled once, run every step
     res = FitResult(program, "", full0)
     t0 = time.perf_counter()
-    for _ in range(steps):
+    previous = z.detach().clone()
+    for step in range(steps):
         opt.zero_grad()
-        shape = plan.run([z[gather]])[0]
+        try:
+            shape = plan.run([z[gather]])[0]
+        except ExecutionError as e:
+            if step == 0:
+                raise  # the starting program itself
+            with torch.no_grad():
+                z.copy_(previous)  # undo the step that left the executable numbers
+            res.stopped = f"step {step} of {steps} undone and the fit stopped: {e}"
+            break
+        previous = z.detach().clone()
         pts, _ = sample_surface(shape.corners, samples, generator=generator)
         tgt = target
         if target_samples is not None and target.shape[0] > target_samples:

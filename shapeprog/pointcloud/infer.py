@@ -331,6 +331,9 @@ class Inference:
             decoded program's selection chamfer, None when it decoded to no shape), ``cd`` (the kept
             program's) and ``chosen`` (the kept training program's corpus name, ``"chair/173"``, or None when
             the decoded program was kept); else None.
+        fit_stopped: with ``fit=True``, None when every fitting step ran; else why the fitting stopped early
+            (:attr:`shapeprog.fit.FitResult.stopped`: a step would have broken the program's execution, so the
+            numbers before it are kept).
     """
 
     program: Program
@@ -346,6 +349,7 @@ class Inference:
     search: Optional[dict] = None
     macro_text: Optional[str] = None
     retrieval: Optional[dict] = None
+    fit_stopped: Optional[str] = None
 
     def place(self, points):
         """Points of the executed :attr:`program` ``(..., 3)`` -> the input's frame."""
@@ -468,7 +472,7 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         seconds["search" if search else "decode"] -= seconds_retrieval
         seconds["retrieval"] = seconds_retrieval
     target = torch.from_numpy(unit)
-    before = None
+    before = fit_stopped = None
     if fit:
         t1 = time.perf_counter()
         g = torch.Generator().manual_seed(int(seed))
@@ -476,7 +480,7 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
                                physics=physics, stability=stability)
         r = fit_program(canon, target.float() - torch.from_numpy(off).float(), steps=fit_steps, lr=fit_lr,
                         generator=g)
-        canon = r.program
+        canon, fit_stopped = r.program, r.stopped
         seconds["fit"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     metrics = shape_metrics(_corners_of(canon) + torch.from_numpy(off).float(), target, seed=seed,
@@ -487,7 +491,7 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / scale
     offset = np.asarray(t.center) + (off / t.scale) @ rotation
     return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics, before,
-                     seconds, searched, macro_text, retrieved)
+                     seconds, searched, macro_text, retrieved, fit_stopped)
 
 
 def _check_retrieval(index, k, model) -> None:

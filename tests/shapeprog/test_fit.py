@@ -48,3 +48,38 @@ def test_fit_zero_steps_returns_the_program_and_checks_points():
     assert r.program == p and r.text == PROG and r.losses == []
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         shapeprog.fit(p, torch.zeros(10, 2))
+
+
+def test_a_step_that_breaks_execution_is_undone_and_the_fit_stops_there(monkeypatch):
+    """A step that moves the numbers where the program no longer executes to finite cuboids (seen on decoded
+    programs whose rotated cuboids have two attachments) is undone: the result is the numbers before it."""
+    from shapeprog.errors import ExecutionError
+    from shapeprog.execute import ExecutionPlan
+
+    p = parse(PROG)
+    g = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        target, _ = sample_surface(shapeprog.execute(p).corners * 1.1, 2048, generator=g)
+    kw = dict(lr=1e-2, samples=512, target_samples=512)
+    four = shapeprog.fit(p, target, steps=4, generator=torch.Generator().manual_seed(1), **kw)
+    assert four.stopped is None
+    run = ExecutionPlan.run
+    calls = []
+
+    def breaks_at_the_sixth_run(self, params):
+        calls.append(1)
+        if len(calls) == 6:
+            raise ExecutionError("execution gives a non-finite cuboid (created by this line)", 10)
+        return run(self, params)
+
+    monkeypatch.setattr(ExecutionPlan, "run", breaks_at_the_sixth_run)
+    r = shapeprog.fit(p, target, steps=20, generator=torch.Generator().manual_seed(1), **kw)
+    assert r.stopped == ("step 5 of 20 undone and the fit stopped: line 10: execution gives a non-finite cuboid "
+                         "(created by this line)")
+    assert len(r.losses) == 5 and r.losses[:4] == four.losses
+    assert torch.equal(r.params, four.params) and r.text == four.text
+    # the starting program itself: the error is raised
+    calls.clear()
+    calls.extend([1] * 5)
+    with pytest.raises(ExecutionError, match="line 10"):
+        shapeprog.fit(p, target, steps=3, **kw)
