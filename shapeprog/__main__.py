@@ -172,7 +172,7 @@ def _cmd_fit(args) -> int:
     res = fit(prog.program, pts, steps=args.steps, lr=args.lr, reg=args.reg, decimals=args.decimals, generator=g)
     cd1, f1 = score(res.program)
     print(f"{prog.name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score {f0:.1f} -> {f1:.1f}, "
-          f"{args.steps} steps in {res.seconds:.1f} s")
+          f"{len(res.losses)} of {args.steps} steps in {res.seconds:.1f} s")
     if res.stopped is not None:
         print(f"{prog.name}: {res.stopped}")
     _emit_text(args.output, res.text)
@@ -289,7 +289,8 @@ def _inference_files(r, points, src, model, files, args) -> list[tuple[Path, str
     record = {"input": str(src), "category": args.category if model is None else model.category,
               "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
-              "before_fit": r.before, "fit_stopped": r.fit_stopped, "search": r.search, "retrieval": r.retrieval, "seconds": r.seconds,
+              "before_fit": r.before, "fit_stopped": r.fit_stopped, "search": r.search, "retrieval": r.retrieval,
+              "seconds": r.seconds,
               "macro_text": r.macro_text,
               "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
                       "canonical units (bounding-box diagonal 2)"}

@@ -144,7 +144,7 @@ def fit(
     res = FitResult(program, "", full0)
     t0 = time.perf_counter()
     previous = z.detach().clone()
-    for step in range(steps):
+    for step in range(steps + 1):  # run k executes the numbers after k updates; the last run only checks them
         opt.zero_grad()
         try:
             shape = plan.run([z[gather]])[0]
@@ -152,8 +152,10 @@ def fit(
             if step == 0:
                 raise  # the starting program itself
             with torch.no_grad():
-                z.copy_(previous)  # undo the step that left the executable numbers
+                z.copy_(previous)  # undo the update that left the executable numbers
             res.stopped = f"step {step} of {steps} undone and the fit stopped: {e}"
+            break
+        if step == steps:
             break
         previous = z.detach().clone()
         pts, _ = sample_surface(shape.corners, samples, generator=generator)

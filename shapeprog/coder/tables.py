@@ -294,8 +294,8 @@ def phi(split: str, records: Sequence, library: Library, *, executor=None, itera
 def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
            progress: Callable[[str], None] | None = None, network=None, **limits) -> list:
     """The two post hoc inference rows: the first ``train`` discovery shapes and the first ``heldout``
-    held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit``, and ``network``,
-    ``search_seconds``, ``search_batches`` as :func:`phi`)."""
+    held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit``, ``values``, ``passes``, and
+    ``network``, ``search_seconds``, ``search_batches`` as :func:`phi`)."""
     rows = []
     for split, recs in (("train-PHI", data.load(run.category)[:train]),
                         ("validation-PHI", data.load(run.category, "heldout")[:heldout])):

@@ -78,6 +78,11 @@ def test_a_step_that_breaks_execution_is_undone_and_the_fit_stops_there(monkeypa
                          "(created by this line)")
     assert len(r.losses) == 5 and r.losses[:4] == four.losses
     assert torch.equal(r.params, four.params) and r.text == four.text
+    # the last update is executed too before it is returned
+    calls.clear()
+    last = shapeprog.fit(p, target, steps=5, generator=torch.Generator().manual_seed(1), **kw)
+    assert last.stopped.startswith("step 5 of 5 undone and the fit stopped: line 10")
+    assert len(last.losses) == 5 and torch.equal(last.params, four.params)
     # the starting program itself: the error is raised
     calls.clear()
     calls.extend([1] * 5)

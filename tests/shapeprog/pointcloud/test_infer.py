@@ -124,11 +124,46 @@ def test_cli_on_the_vendored_real_cloud_writes_four_files_and_never_overwrites(t
     assert names == ["comp_pc.json", "comp_pc.obj", "comp_pc.png", "comp_pc.txt"]
     record = json.loads((out / "comp_pc.json").read_text())
     assert record["fit"] is True and record["metrics"]["rooted"] in (True, False)
+    assert record["fit_stopped"] is None and "undone" not in printed
     parse((out / "comp_pc.txt").read_text())
     before = (out / "comp_pc.txt").read_bytes()
     with pytest.raises(SystemExit, match=r"comp_pc.txt: exists \(4 of the outputs do\); the command never overwrites"):
         main(args)
     assert (out / "comp_pc.txt").read_bytes() == before
+
+
+def test_a_fit_that_stops_early_is_reported_by_infer_and_the_cli(tmp_path, weights, model, monkeypatch, capsys):
+    """A fitting step that breaks the program's execution (shapeprog.fit undoes it and stops) is reported:
+    Inference.fit_stopped, the printed line and the JSON record."""
+    import importlib
+
+    from shapeprog.errors import ExecutionError
+
+    fit_module = importlib.import_module("shapeprog.fit")  # the package's name `fit` is the function
+
+    class Breaking(fit_module.ExecutionPlan):
+        calls = 0
+
+        def run(self, params):
+            Breaking.calls += 1
+            if Breaking.calls == 3:
+                raise ExecutionError("execution gives a non-finite cuboid (created by this line)", 10)
+            return super().run(params)
+
+    monkeypatch.setattr(fit_module, "ExecutionPlan", Breaking)
+    stop = "step 2 of 5 undone and the fit stopped: line 10: execution gives a non-finite cuboid"
+    pts = corpus.example_points("comp_pc.obj")
+    r = infer(pts, model=model, fit=True, fit_steps=5, stability=False)
+    assert r.fit_stopped.startswith(stop) and r.before is not None
+    assert infer(pts, model=model, stability=False).fit_stopped is None
+    Breaking.calls = 0
+    src = tmp_path / "comp_pc.npy"
+    np.save(src, pts)
+    out = tmp_path / "out"
+    assert main(["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability", "--fit",
+                 "--steps", "5"]) == 0
+    assert f"fitting: {stop}" in capsys.readouterr().out
+    assert json.loads((out / "comp_pc.json").read_text())["fit_stopped"].startswith(stop)
 
 
 def test_cli_leaves_no_half_result_when_a_write_fails(tmp_path, weights, monkeypatch, capsys):
