@@ -54,6 +54,8 @@ INPUT_POINTS, NOISE = 2048, 0.005
 #: ``U(-SHIFT, SHIFT)`` per axis.
 SCALE_RANGE, SHIFT = 10.0, 5.0
 #: The methods measured.
+#: Failed shapes listed by name under the tables (the rest are counted).
+MAX_LISTED_ERRORS = 20
 ROWS = ("model", "opt_program", "opt_cuboids", "retrieval", "search", "search_opt_program", "augmented",
         "augmented_opt_program")
 #: ShapeMOD Table 3, "No Macros" row: CD x1000, F-score, % rooted, % stable (dense PartNet mesh samples).
@@ -128,18 +130,22 @@ def _shape_job(job) -> dict:
     g = torch.Generator().manual_seed(int(seed))
     empty = lambda: shape_metrics(torch.zeros(0, 8, 3), target)  # noqa: E731 - no shape: F 0, not rooted
 
+    errors = {}  # row -> the message of the error that left it without a result
+
     def row(name, make):
         """One row's metrics; a ValueError (no shape decoded, a fit that fails) empties this row only."""
         try:
             out[name] = shape_metrics(back(make()), target, seed=seed, stability=stability)
-        except ValueError:
+        except ValueError as e:
             out[name] = empty()
+            errors[name] = str(e)
 
     try:
         plain = infer(x, model=model, physics=False, seed=seed)
-    except ValueError:  # no shape decoded: every row that starts from the decoded program fails for this shape
+    except ValueError as e:  # no shape decoded: every row that starts from the decoded program fails for this shape
         plain = None
         out.update({r: empty() for r in ("model", "opt_program", "opt_cuboids")})
+        errors.update({r: str(e) for r in ("model", "opt_program", "opt_cuboids")})
     if plain is not None:
         out["model"] = shape_metrics(back(plain.corners()), target, seed=seed, stability=stability)
         row("opt_program", lambda: infer(x, model=model, fit=True, fit_steps=steps, physics=False, seed=seed).corners())
@@ -163,6 +169,8 @@ def _shape_job(job) -> dict:
     if retrieved is not None:
         corners, t = retrieved
         out["retrieval"] = shape_metrics(back(t.invert(corners)), target, seed=seed, stability=stability)
+    if errors:
+        out["errors"] = errors
     return out
 
 
@@ -193,6 +201,7 @@ class TableResult:
     shapes: int
     rows: dict = field(default_factory=dict)  # row -> {"cd": x1000 mean, "fscore", "rooted" %, "stable" %}
     failed: dict = field(default_factory=dict)  # row -> shapes without a result
+    errors: dict = field(default_factory=dict)  # row -> [(shape id, the error's message)] of those shapes
     seconds: float = 0.0
     settings: dict = field(default_factory=dict)
 
@@ -268,6 +277,8 @@ def evaluate(root, category: str = "chair", weights=None, limit: Optional[int] =
         if any(row in r for r in results):
             out.rows[row] = _mean(results, row)
             out.failed[row] = sum(1 for r in results if row in r and r[row]["cd"] is None)
+            out.errors[row] = [(int(i), r["errors"][row]) for i, r in zip(ids, results)
+                               if row in r.get("errors", {})]
     return out
 
 
@@ -358,6 +369,13 @@ def write_tables(result: TableResult, out, command: str = "") -> Path:
     failed = {k: v for k, v in result.failed.items() if v}
     lines += [f"Shapes without a decoded shape (scored F 0, not rooted): {failed or 'none'}. "
               f"Settings: {result.settings}. Wall time {result.seconds:.0f} s.", ""]
+    named = [(row, e) for row, errs in result.errors.items() for e in errs]
+    if named:
+        lines += ["Why (row: shape: error):", ""]
+        lines += [f"* {row}: {cat}/{i}: {msg}" for row, (i, msg) in named[:MAX_LISTED_ERRORS]]
+        if len(named) > MAX_LISTED_ERRORS:
+            lines.append(f"* and {len(named) - MAX_LISTED_ERRORS} more")
+        lines.append("")
     if command:
         lines += ["Command:", "", f"    {command}", ""]
     return atomic_write(out, "\n".join(lines), mkdir=True)

@@ -100,3 +100,9 @@ def test_a_fit_that_fails_empties_its_own_row_only(tmp_path, monkeypatch):
     res = evaluate(tmp_path / "c", "chair", weights=w, limit=1, steps=2, stability=False, retrieval=False)
     assert res.rows["opt_program"]["fscore"] == 0.0 and res.rows["opt_program"]["rooted"] == 0.0
     assert res.rows["model"]["fscore"] > 0.0 and res.rows["opt_cuboids"]["fscore"] > 0.0
+    # the shape and the error are named under the tables, per row
+    test_id = SPLITS["test"][0]
+    assert res.failed == {"model": 0, "opt_program": 1, "opt_cuboids": 0}
+    assert res.errors == {"model": [], "opt_program": [(test_id, "the fit failed")], "opt_cuboids": []}
+    text = write_tables(res, tmp_path / "t.md").read_text()
+    assert f"* opt_program: chair/{test_id}: the fit failed\n" in text
