@@ -167,8 +167,16 @@ def editor_preflight(export_dir) -> str | None:
 def serve_until_interrupted(app, what: str, export_dir, open_browser: bool) -> int:
     """Print where the editor page of ``what`` is served, optionally open it in a browser, and keep it
     served until Ctrl-C; returns the exit status 0."""
+    import signal
+    import threading
     import time
 
+    if threading.current_thread() is threading.main_thread():
+        # A parent process can hand SIGINT down ignored (SIG_IGN survives exec) or blocked (so does the signal
+        # mask); Ctrl-C must stop the editor either way.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        if hasattr(signal, "pthread_sigmask"):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     try:  # an interrupt that comes while the address is still being printed ends it cleanly too
         print(f"editing {what} at {app.url} (exports go to {Path(export_dir).resolve()}); Ctrl-C stops", flush=True)
         if open_browser:
