@@ -444,5 +444,13 @@ def test_an_interrupt_while_the_address_is_printed_stops_the_server_cleanly(monk
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
+    import signal
+
+    before = signal.getsignal(signal.SIGINT)
     monkeypatch.setattr(builtins, "print", interrupted)
-    assert serve_until_interrupted(App(), "x", tmp_path, False) == 0 and App.stopped
+    try:
+        assert serve_until_interrupted(App(), "x", tmp_path, False) == 0 and App.stopped
+        # Ctrl-C works even when the parent handed SIGINT down ignored
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, before)
