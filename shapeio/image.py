@@ -68,20 +68,19 @@ def png_bytes(image, scale: int = 1, where: PathLike = "<image>") -> bytes:
     """
     import io
 
-    path = where
     arr = as_numpy(image)
     if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (3, 4))) or 0 in arr.shape[:2]:
-        raise ValueError(f"{path}: `image` must be (H, W), (H, W, 3) or (H, W, 4) and not empty, got {arr.shape}")
+        raise ValueError(f"{where}: `image` must be (H, W), (H, W, 3) or (H, W, 4) and not empty, got {arr.shape}")
     if isinstance(scale, bool) or not isinstance(scale, (int, np.integer)) or scale < 1:
-        raise ValueError(f"{path}: scale must be a positive integer, got {scale!r}")
+        raise ValueError(f"{where}: scale must be a positive integer, got {scale!r}")
     if arr.dtype == np.bool_:
         arr = arr.astype(np.uint8) * np.uint8(255)
     elif np.issubdtype(arr.dtype, np.floating):
         if not (np.isfinite(arr).all() and arr.min() >= 0.0 and arr.max() <= 1.0):
-            raise ValueError(f"{path}: a float `image` must hold values in [0, 1]")
+            raise ValueError(f"{where}: a float `image` must hold values in [0, 1]")
         arr = np.rint(arr * 255.0).astype(np.uint8)
     elif arr.dtype != np.uint8:
-        raise ValueError(f"{path}: `image` must be bool, uint8 or float, got dtype {arr.dtype}")
+        raise ValueError(f"{where}: `image` must be bool, uint8 or float, got dtype {arr.dtype}")
     if scale > 1:
         arr = np.repeat(np.repeat(arr, scale, axis=0), scale, axis=1)
     buf = io.BytesIO()

@@ -200,10 +200,14 @@ class TableResult:
     category: str
     shapes: int
     rows: dict = field(default_factory=dict)  # row -> {"cd": x1000 mean, "fscore", "rooted" %, "stable" %}
-    failed: dict = field(default_factory=dict)  # row -> shapes without a result
-    errors: dict = field(default_factory=dict)  # row -> [(shape id, the error's message)] of those shapes
+    errors: dict = field(default_factory=dict)  # row -> [(shape id, the error's message)]: shapes without a result
     seconds: float = 0.0
     settings: dict = field(default_factory=dict)
+
+    @property
+    def failed(self) -> dict:
+        """Row -> the number of shapes without a result (scored F 0, not rooted)."""
+        return {row: len(errs) for row, errs in self.errors.items()}
 
 
 def _mean(results: list[dict], row: str) -> dict:
@@ -276,7 +280,6 @@ def evaluate(root, category: str = "chair", weights=None, limit: Optional[int] =
     for row in ROWS:
         if any(row in r for r in results):
             out.rows[row] = _mean(results, row)
-            out.failed[row] = sum(1 for r in results if row in r and r[row]["cd"] is None)
             out.errors[row] = [(int(i), r["errors"][row]) for i, r in zip(ids, results)
                                if row in r.get("errors", {})]
     return out
@@ -367,7 +370,7 @@ def write_tables(result: TableResult, out, command: str = "") -> Path:
                   "ground truth; the index holds the corpus train split only). It is ours, not the papers' protocol.", ""]
         lines += _against_retrieval(r, "augmented", "Retrieval-augmented decoding {} retrieval alone")
     failed = {k: v for k, v in result.failed.items() if v}
-    lines += [f"Shapes without a decoded shape (scored F 0, not rooted): {failed or 'none'}. "
+    lines += [f"Shapes without a result (scored F 0, not rooted): {failed or 'none'}. "
               f"Settings: {result.settings}. Wall time {result.seconds:.0f} s.", ""]
     named = [(row, e) for row, errs in result.errors.items() for e in errs]
     if named:
