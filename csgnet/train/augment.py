@@ -1,11 +1,65 @@
-"""Training-time augmentation of target images."""
+"""Training-time augmentation: the 2D jitter of target images, and the mirror symmetries of 3D programs."""
 
 from __future__ import annotations
+
+from functools import lru_cache
+from itertools import product
 
 import numpy as np
 import torch
 
-__all__ = ["jitter", "jitter_reference"]
+from ..lang import Draw
+from ..primitives import SIZE
+from ..vocab import vocabulary
+
+__all__ = ["jitter", "jitter_reference", "symmetry_tables", "mirror_programs"]
+
+
+@lru_cache(maxsize=None)
+def symmetry_tables(dim: int = 3) -> torch.Tensor:
+    """Token maps of the 3D canvas symmetries that every primitive type keeps: the 8 mirrorings of the axes
+    (centre ``c`` → ``64 - c``) times the exchange of the first two axes (cylinders stand along the third).
+
+    A mirrored program draws the mirrored shape moved by one voxel (exactly ``flip`` then ``roll 1`` along
+    the mirrored axis, tested), so it keeps the sampler's rules. Some primitives that fit the canvas do not
+    fit it mirrored (their mirror image is not in the vocabulary): their entry is -1.
+
+    Returns:
+        ``(16, V) int64``: row 0 the identity.
+    """
+    if dim != 3:
+        raise ValueError(f"the program symmetries are defined for 3D programs, got dim {dim}")
+    vocab = vocabulary(dim)
+    rows = []
+    for swap, flips in product((False, True), product((False, True), repeat=3)):
+        row = []
+        for i, draw in enumerate(vocab._draws):
+            if not isinstance(draw, Draw):
+                row.append(i)
+                continue
+            p = list(draw.params)
+            for a in range(3):
+                if flips[a]:
+                    p[a] = SIZE - p[a]
+            if swap:
+                p[0], p[1] = p[1], p[0]
+            try:
+                row.append(vocab.index(Draw(draw.kind, tuple(p))))
+            except KeyError:
+                row.append(-1)
+        rows.append(row)
+    return torch.tensor(rows, dtype=torch.int64)
+
+
+def mirror_programs(tokens: torch.Tensor, generator: np.random.Generator) -> torch.Tensor:
+    """3D programs ``(B, T)`` (``$``-padded token indices), each mapped by one of the 16
+    :func:`symmetry_tables` drawn uniformly (one draw per program, always consumed); a program with a
+    primitive whose image is not in the vocabulary stays as it is."""
+    tables = symmetry_tables(3).to(tokens.device)
+    g = torch.as_tensor(generator.integers(0, len(tables), size=tokens.shape[0]), device=tokens.device)
+    mapped = tables[g[:, None], tokens]
+    keep = (mapped < 0).any(1, keepdim=True)
+    return torch.where(keep, tokens, mapped)
 
 _CENTRE = 32.5  # Keras' centre h / 2 + 0.5
 

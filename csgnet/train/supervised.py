@@ -26,7 +26,7 @@ import torch.nn.functional as F
 
 from ..data import ProgramDataset, load_dataset, split_sizes
 from ..synth import sample_programs
-from .augment import jitter
+from .augment import jitter, mirror_programs
 from ..decode import greedy
 from ..inference import load_model
 from ..models import CSGNet, ModelConfig, preset
@@ -132,11 +132,15 @@ class CSGDataModule(L.LightningDataModule):
         render_in_workers: render each training batch's targets (and CSGNetStack's stack traces) in the
             DataLoader workers (:func:`packed_inputs`) instead of in the training step; for GPU runs,
             with ``num_workers`` > 0. The losses are the same (tested).
+        exclude: dataset folders whose validation and test programs are removed from the training
+            programs (``data_dir`` only), so that a model trained on one generated set can be tested on
+            another set's test split: the programs removed are counted in ``excluded``.
     """
 
     def __init__(self, dim: int = 2, data_dir: str | None = "data/synthetic", lengths: list[int] | None = None,
                  batch_size: int = 100, steps_per_epoch: int | None = None, val_per_length: int = 200,
-                 num_workers: int = 0, seed: int = 0, render_in_workers: bool = False):
+                 num_workers: int = 0, seed: int = 0, render_in_workers: bool = False,
+                 exclude: list[str] | None = None):
         super().__init__()
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim!r}")
@@ -146,11 +150,29 @@ class CSGDataModule(L.LightningDataModule):
         self.batch_size, self.steps_per_epoch = int(batch_size), steps_per_epoch
         self.val_per_length, self.num_workers, self.seed = int(val_per_length), int(num_workers), int(seed)
         self.render_in_workers = bool(render_in_workers)
+        self.exclude = [str(e) for e in (exclude or [])]
+        if self.exclude and data_dir is None:
+            raise ValueError("exclude needs a data_dir (programs sampled on the fly are not filtered)")
+        self.excluded = 0
         self.train_tables: dict[int, torch.Tensor] | None = None
         self.val_tokens: torch.Tensor | None = None
 
+    def _held_out(self) -> set[str]:
+        """The program texts of the ``exclude`` folders' val and test splits."""
+        texts: set[str] = set()
+        for folder in self.exclude:
+            for split in ("val", "test"):
+                for ps in load_dataset(folder, self.dim, split, self.lengths).values():
+                    texts.update(p.text() for p in ps)
+        return texts
+
     def _tables(self, split: str) -> dict[int, torch.Tensor]:
         progs = load_dataset(self.data_dir, self.dim, split, self.lengths)
+        if split == "train" and self.exclude:
+            held = self._held_out()
+            before = sum(map(len, progs.values()))
+            progs = {n: [p for p in ps if p.text() not in held] for n, ps in progs.items()}
+            self.excluded = before - sum(map(len, progs.values()))
         out = {}
         for n, ps in progs.items():
             if not ps:
@@ -223,6 +245,10 @@ class CSGNetModule(L.LightningModule):
         loss_norm: ``"per_step"`` (2D reference: a program's summed NLL divided by its k + 1 steps) or
             ``"sum"`` (3D reference: not divided); default by ``dim``.
         augment: the 2D jitter of the targets (default: on in 2D, as the reference); no effect in 3D.
+        mirror: 3D only: each training program is mapped by one of the 16 mirror symmetries of the canvas
+            (:func:`csgnet.train.augment.mirror_programs`) before its target is rendered, so that a dataset of
+            N programs gives up to 16 N (off by default: the reference trains on the programs as sampled).
+            The targets must then be rendered in the step (``render_in_workers`` off).
         plateau_patience: epochs without improvement before the learning rate drops (8).
         plateau_factor: the drop (0.2).
         log_images: targets / predictions shown in the TensorBoard grid each validation.
@@ -235,7 +261,7 @@ class CSGNetModule(L.LightningModule):
     def __init__(self, dim: int = 2, stack: bool = False, size: str = "small", model: dict | None = None,
                  lr: float = 1e-3, loss_norm: str | None = None, augment: bool | None = None,
                  plateau_patience: int = 8, plateau_factor: float = 0.2, log_images: int = 16, seed: int = 0,
-                 init: str | None = None):
+                 init: str | None = None, mirror: bool = False):
         super().__init__()
         self.save_hyperparameters()
         self.config: ModelConfig = preset(size, dim, stack, **(model or {}))
@@ -250,6 +276,9 @@ class CSGNetModule(L.LightningModule):
         if self.loss_norm not in ("per_step", "sum"):
             raise ValueError(f"loss_norm must be 'per_step' or 'sum', got {loss_norm!r}")
         self.augment = (dim == 2) if augment is None else bool(augment and dim == 2)
+        if mirror and dim != 3:
+            raise ValueError("mirror is a 3D augmentation (2D training jitters its targets: augment)")
+        self.mirror = bool(mirror)
         self.monitor = "val/chamfer" if dim == 2 else "val/iou"
         self._rng = np.random.default_rng(seed)
         self._val = EpochValues()
@@ -275,6 +304,11 @@ class CSGNetModule(L.LightningModule):
 
     def training_step(self, batch, batch_idx):
         tokens, lengths, *packed = batch
+        if self.mirror:
+            if packed:
+                raise ValueError("mirror needs the targets rendered in the training step: set "
+                                 "data.init_args.render_in_workers to false")
+            tokens = mirror_programs(tokens, self._rng)
         loss, acc, _ = self._loss(tokens, lengths, self.augment, packed or None)
         self.log("train/loss", loss, prog_bar=True, batch_size=tokens.shape[0])
         self.log("train/exact", acc, batch_size=tokens.shape[0])

@@ -257,3 +257,77 @@ def test_3d_decoding(stack):
     d = beam_search(m, tgt, 2, constrained=True)
     assert d.tokens.shape[:2] == (2, 2) and d.valid.all()
     assert all(csgnet.is_valid(csgnet.parse(t, 3)) for row in d.texts() for t in row)
+
+
+# ---------------------------------------------------------------------------------------------
+# the lite 3D encoder and the factored output layer
+
+def test_token_attributes_share_types_centres_and_parameters():
+    from csgnet.models import token_attributes
+    vocab = vocabulary(3)
+    index, n = token_attributes(3)
+    assert index.shape[0] == len(vocab) and int(index.max()) == n
+    row = lambda text: set(index[vocab.index(text)].tolist()) - {n}
+    a, b = row("p(16,16,16,12)"), row("u(16,24,16,12)")
+    # type, 3 centre values and 4 parameter values for a sphere; x and z centre values shared with the cube
+    assert len(a) == 8 and len(a & b) == 2
+    assert len(row("y(16,16,16,12,12)")) == 9
+    ops = [row(t) for t in "+*-$"]
+    assert all(len(r) == 1 for r in ops) and len(set().union(*ops)) == 4
+    assert not any(r & a for r in ops)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_factored_layer_starts_as_linear_and_applies_its_folded_weights(dim):
+    from csgnet.models import FactoredLinear, token_attributes
+    torch.manual_seed(0)
+    layer = FactoredLinear(8, dim)
+    x = torch.randn(5, 8)
+    torch.testing.assert_close(layer(x), F.linear(x, layer.weight, layer.bias))
+    with torch.no_grad():
+        layer.attr_weight.normal_()
+        layer.attr_bias.normal_()
+    index, n = token_attributes(dim)
+    t = 7
+    attrs = [a for a in index[t].tolist() if a != n]
+    w = layer.weight[t] + layer.attr_weight[attrs].sum(0)
+    b = layer.bias[t] + layer.attr_bias[attrs].sum()
+    torch.testing.assert_close(layer(x)[:, t], x @ w + b)
+    with torch.no_grad():  # the cached fold follows an in-place change of a parameter
+        first = layer(x).clone()
+        layer.attr_bias[attrs[0]] += 1.0
+        torch.testing.assert_close(layer(x)[:, t], first[:, t] + 1.0)
+
+
+def test_factored_layer_gradients_match_finite_differences():
+    from csgnet.models import FactoredLinear
+    torch.manual_seed(1)
+    layer = FactoredLinear(3, 3).double()
+    x = torch.randn(2, 3, dtype=torch.float64)
+    names = ("weight", "bias", "attr_weight", "attr_bias")
+
+    def f(*params):
+        return torch.func.functional_call(layer, dict(zip(names, params)), (x,)).sin().sum()
+
+    params = tuple(getattr(layer, k).detach().clone().normal_().requires_grad_() for k in names)
+    assert torch.autograd.gradcheck(f, params, fast_mode=True)
+
+
+def test_lite_preset_decodes_like_any_model_and_keeps_the_side():
+    cfg = preset("lite", 3)
+    assert cfg.encoder == "lite" and cfg.head == "factored" and cfg.feature_side == 2
+    assert cfg.feature_size == 64 * 8
+    torch.manual_seed(0)
+    m = CSGNet(preset("lite", 3, hidden=32, channels=(2, 2, 2, 2))).eval()
+    t = targets(["sp(32,32,32,16)", "cu(24,24,24,12)"], dim=3)
+    tokens_in = torch.tensor([[m.start, 5, 700], [m.start, 2000, 6631]])
+    logits = m(t, tokens_in)
+    proj, h, w = m.project_features(m.encode(t)), None, m.token_input_weight()
+    for step in range(3):  # the decoders' projected step gives the teacher-forced logits
+        out, h = m.step_projected(proj, tokens_in[:, step], h, w)
+        torch.testing.assert_close(out, logits[:, step], atol=1e-5, rtol=1e-5)
+    assert greedy(m, t).tokens.shape[:2] == (2, 1)
+    with pytest.raises(ValueError, match="3D only"):
+        ModelConfig(dim=2, encoder="lite")
+    with pytest.raises(ValueError, match="head must be"):
+        ModelConfig(dim=3, head="tied")

@@ -80,3 +80,50 @@ def test_jitter_on_the_gpu_equals_the_cpu():
     cpu = jitter(imgs, np.random.default_rng(2))
     gpu = jitter(imgs.cuda(), np.random.default_rng(2))
     assert gpu.device.type == "cuda" and torch.equal(gpu.cpu(), cpu)
+
+
+# ---------------------------------------------------------------------------------------------
+# mirror symmetries of 3D programs
+
+def test_mirrored_programs_draw_the_mirrored_shape_moved_by_one_voxel():
+    from itertools import product
+    from csgnet.renderer import render_tokens
+    from csgnet.synth import sample_programs
+    from csgnet.train.augment import symmetry_tables
+    tables = symmetry_tables(3)
+    assert tables.shape[0] == 16 and torch.equal(tables[0], torch.arange(tables.shape[1]))
+    rows = torch.as_tensor(np.asarray(sample_programs(3, 7, 12, np.random.default_rng(3))))
+    lengths = torch.full((len(rows),), 7)
+    image = render_tokens(rows, 3, lengths).clone()
+    checked = 0
+    for g, (swap, flips) in enumerate(product((False, True), product((False, True), repeat=3))):
+        mapped = tables[g][rows]
+        ok = (mapped >= 0).all(1)
+        want = image[ok]
+        for a in range(3):
+            if flips[a]:
+                want = torch.roll(want.flip(1 + a), 1, 1 + a)
+        if swap:
+            want = want.transpose(1, 2)
+        got = render_tokens(mapped[ok], 3, lengths[ok])
+        assert torch.equal(got, want), g
+        checked += int(ok.sum())
+    assert checked > 12 * 12
+
+
+def test_mirror_programs_keeps_programs_whose_image_leaves_the_vocabulary():
+    from csgnet.train.augment import mirror_programs, symmetry_tables
+    from csgnet.vocab import vocabulary
+    vocab, tables = vocabulary(3), symmetry_tables(3)
+    missing = int((tables < 0).any(0).nonzero()[0])
+    row = torch.tensor([missing, vocab.index("sp(32,32,32,16)"), vocab.index("+"), vocab.stop])
+    images = {tuple(tables[g][row].tolist()) for g in range(16) if (tables[g][row] >= 0).all()}
+    assert 1 <= len(images) < 16
+    out = mirror_programs(row.repeat(200, 1), np.random.default_rng(0))
+    got = {tuple(r) for r in out.tolist()}
+    assert got <= images | {tuple(row.tolist())} and len(got) == len(images)
+    tokens = torch.tensor([[vocab.index("cu(16,24,40,12)"), vocab.index("sp(32,32,32,16)"), vocab.index("+"),
+                            vocab.stop]] * 200)
+    out = mirror_programs(tokens, np.random.default_rng(0))
+    assert len({tuple(r) for r in out.tolist()}) == 16
+    assert (out[:, 2:] == tokens[:, 2:]).all()

@@ -173,3 +173,22 @@ def test_configs_parse_and_build(config, monkeypatch, train_main):
         assert cli.model.hparams.size == "small" and cli.model.config.hidden > preset("small", 2, False).hidden
     else:
         assert cli.model.hparams.size == word
+
+
+def test_exclude_removes_another_sets_held_out_programs_from_training(tmp_path):
+    from csgnet.data import generate_dataset, load_dataset
+    generate_dataset(tmp_path / "a", dim=3, scale=0.0002, seed=0, lengths=[3], progress=False)
+    generate_dataset(tmp_path / "b", dim=3, scale=0.0005, seed=0, lengths=[3], progress=False)
+    held = {p.text() for s in ("val", "test") for p in load_dataset(tmp_path / "a", 3, s, [3])[3]}
+    train_b = [p.text() for p in load_dataset(tmp_path / "b", 3, "train", [3])[3]]
+    overlap = sum(t in held for t in train_b)
+    assert overlap > 0  # the same seed: a's programs lead b's training split
+    dm = CSGDataModule(dim=3, data_dir=str(tmp_path / "b"), lengths=[3], exclude=[str(tmp_path / "a")],
+                       val_per_length=1)
+    dm.setup("fit")
+    vocab = vocabulary(3)
+    kept = {vocab.text([i for i in row.tolist() if i != vocab.stop]) for row in dm.train_tables[3]}
+    assert dm.excluded == overlap and len(dm.train_tables[3]) == len(train_b) - overlap
+    assert not {vocab.text(vocab.encode(t)) for t in held} & kept
+    with pytest.raises(ValueError, match="needs a data_dir"):
+        CSGDataModule(dim=3, data_dir=None, exclude=["x"])
