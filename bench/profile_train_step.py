@@ -45,6 +45,8 @@ MODELS = {
     "csgnetstack2d_medium": (2, True, "small", {"hidden": 384, "channels": [8, 16, 32]}, 300),
     "csgnet3d_small": (3, False, "small", {}, 48),
     "csgnetstack3d_small": (3, True, "small", {}, 48),
+    "csgnet3d_lite": (3, False, "lite", {}, 48),
+    "csgnet3d_lite_fullhead": (3, False, "lite", {"head": "full"}, 48),
     "csgnet3d_paper": (3, False, "paper", {}, 48),
     "csgnetstack3d_paper": (3, True, "paper", {}, 48),
 }

@@ -171,8 +171,14 @@ def _parse_model(models: dict, dim: int, weights):
     return models[dim]
 
 
-def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
-    """Infer, optionally refine, report and write one input's program (``parse``)."""
+def _scores_line(iou: float, chamfer: float, program) -> str:
+    line = f"IoU {100 * iou:.2f}%" + ("" if np.isnan(chamfer) else f", chamfer {chamfer:.3f} px")
+    return line + f", {len(program.draws) if program is not None else 0} primitives"
+
+
+def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> dict:
+    """Infer, optionally refine, report and write one input's program (``parse``); returns its record
+    for the results file."""
     from .inference import infer
 
     dim = shape.ndim
@@ -184,23 +190,26 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
         line += " (invalid program: renders empty)"
     print(line)
     program = res.program if res.valid else None
+    record = {"input": str(src), "decoded": res.text, "valid": bool(res.valid), "iou": float(res.iou),
+              "chamfer": None if dim == 3 else float(res.chamfer),
+              "primitives": len(program.draws) if program is not None else 0}
     if args.refine and program is not None:
         from .refinement import MAX_IOU_DROP, refine_guarded
 
         valid = [b for b in res.beams if _is_valid(b, dim)]
         ref = refine_guarded(program, valid, shape, rule=args.refine_rule, maxiter=args.refine_iters)
-        program = ref.program
+        start, program = program, ref.program
         (i0, c0), (i1, c1) = ref.before, ref.after
-        if dim == 3:  # refined by IoU from every valid beam, the chosen one included: IoU never drops
-            print(f"  refined by IoU ({len(valid)} beams): {ref.result.text}\n"
-                  f"  before: IoU {100 * i0:.2f}%; after: IoU {100 * i1:.2f}%")
-        else:
-            print(f"  refined ({len(valid)} beams, rule {ref.rule!r}): {ref.result.text}\n"
-                  f"  before: IoU {100 * i0:.2f}%, chamfer {c0:.3f} px; after: IoU {100 * i1:.2f}%, "
-                  f"chamfer {c1:.3f} px")
-        if ref.kept_start:
+        what = {"short": "IoU - %g per primitive" % _penalty(dim), "guarded": "guarded", "chamfer": "chamfer"}
+        print(f"  refined ({len(valid)} beams, by {'IoU' if dim == 3 else 'chamfer'}; chosen by "
+              f"{what[ref.rule]}): {program.text()}\n"
+              f"  before: {_scores_line(i0, c0, start)}; "
+              f"after: {_scores_line(i1, c1, program)}")
+        if ref.kept_start and ref.rule == "guarded":
             print(f"  refinement lowered IoU by more than {100 * MAX_IOU_DROP:g} points: "
                   f"wrote the unrefined program {program.text()}")
+        record.update(refined=program.text(), rule=ref.rule, iou_refined=float(i1),
+                      chamfer_refined=None if dim == 3 else float(c1), primitives_refined=len(program.draws))
     stem.parent.mkdir(parents=True, exist_ok=True)
     txt = atomic_write(_named(stem, ".txt"), (res.text if program is None else program.text()) + "\n")
     img = np.zeros((64,) * dim, dtype=bool) if program is None else render(program, dim)[0]
@@ -216,6 +225,21 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> None:
     if program is not None:
         written.append(export.save_scad(program, _named(stem, ".scad")))
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))
+    return record
+
+
+def _penalty(dim: int) -> float:
+    from .rewrite import LENGTH_PENALTY
+
+    return LENGTH_PENALTY[dim]
+
+
+def _results_path(out: Path) -> Path:
+    """``out/results.json``, or ``results_2.json``, ... : the first name not taken (never overwritten)."""
+    path, k = out / "results.json", 2
+    while path.exists():
+        path, k = out / f"results_{k}.json", k + 1
+    return path
 
 
 def cmd_parse(args) -> int:
@@ -239,14 +263,20 @@ def cmd_parse(args) -> int:
     models: dict = {}
     weights = {2: args.weights_2d, 3: args.weights_3d}
     status = 0
+    records = []
     for src, stem in zip(args.inputs, stems):
         try:
             shape = load_shape(src)
             model = _parse_model(models, shape.ndim, weights[shape.ndim])
-            _parse_one(src, shape, stem, model, args)
+            records.append(_parse_one(src, shape, stem, model, args))
         except (InputError, ParseError, ValueError, OSError) as e:
             print(f"error: {_located(src, e)}", file=sys.stderr)
+            records.append({"input": str(src), "error": _located(src, e)})
             status = 2
+    if out.is_dir():
+        results = _results_path(out)
+        atomic_write(results, json.dumps(records, indent=1) + "\n")
+        print(f"results of the {len(records)} inputs: {results}")
     return status
 
 
@@ -550,9 +580,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Powell refinement of every valid beam (by chamfer in 2D, by IoU in 3D)")
     p.add_argument("--refine-iters", type=_non_negative, default=None,
                    help="Powell iterations, 0 or more (default: to convergence)")
-    p.add_argument("--refine-rule", choices=("guarded", "chamfer"), default="guarded",
-                   help="guarded: keep the unrefined program if refinement costs more than 5 IoU points; "
-                   "chamfer: the paper's choice, the lowest chamfer (docs/refinement.md)")
+    p.add_argument("--refine-rule", choices=("short", "guarded", "chamfer"), default="short",
+                   help="short: among the decoded program and every refined beam, each also pruned, the "
+                   "highest IoU minus a price per primitive (csgnet.rewrite.LENGTH_PENALTY); guarded: the best "
+                   "refined beam unless it costs more than 5 IoU points; chamfer: the paper's choice, the "
+                   "lowest chamfer (docs/refinement.md)")
     p.add_argument("--weights-2d", default=None, help="2D weights file or checkpoint (default: the shipped model)")
     p.add_argument("--weights-3d", default=None, help="3D weights file or checkpoint (default: the shipped model)")
     p.add_argument("--out", default="parse_output", help="folder for the outputs (default parse_output/)")

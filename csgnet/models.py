@@ -153,6 +153,7 @@ class _ConvEncoder(nn.Module):
     """Conv blocks (:meth:`block`) after an optional max-pool of the input, flattened channel-major."""
 
     pool = None  # the max-pool function of the input's dimension
+    memory_format = torch.contiguous_format  # 3D: channels-last (about 1.6 times faster on a CPU)
 
     def __init__(self, in_channels: int, channels: tuple[int, ...], dropout: float, input_pool: int = 1):
         super().__init__()
@@ -163,6 +164,7 @@ class _ConvEncoder(nn.Module):
             layers += self.block(c_in, c, dropout, last=i == len(channels) - 1)
             c_in = c
         self.net = nn.Sequential(*layers)
+        self.net.to(memory_format=self.memory_format)
 
     @staticmethod
     def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
@@ -172,7 +174,7 @@ class _ConvEncoder(nn.Module):
         """``(B, C, 64, 64)`` or ``(B, C, 64, 64, 64)`` float → ``(B, F)`` features, flattened channel-major."""
         if self.input_pool > 1:
             x = self.pool(x, self.input_pool)
-        return self.net(x).flatten(1)
+        return self.net(x.contiguous(memory_format=self.memory_format)).flatten(1)
 
 
 class Encoder2D(_ConvEncoder):
@@ -190,6 +192,7 @@ class Encoder3D(_ConvEncoder):
     """conv3d 4 (stride 1, pad 2) → ReLU → MaxPool3d 2 → Dropout → BatchNorm3d, per block."""
 
     pool = staticmethod(F.max_pool3d)
+    memory_format = torch.channels_last_3d
 
     @staticmethod
     def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
@@ -201,6 +204,7 @@ class Encoder3DLite(_ConvEncoder):
     """conv3d 3 (pad 1) → ReLU → MaxPool3d 2 → BatchNorm3d, per block (``encoder: lite``)."""
 
     pool = staticmethod(F.max_pool3d)
+    memory_format = torch.channels_last_3d
 
     @staticmethod
     def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:

@@ -36,7 +36,7 @@ from .score import score_renders
 from .vocab import codes
 
 __all__ = ["METRICS", "MODES", "RULES", "MAX_IOU_DROP", "RefineResult", "Refined", "refine", "refine_beams",
-           "refine_guarded", "program_scores"]
+           "refine_each", "refine_guarded", "program_scores"]
 
 METRICS = ("chamfer", "iou")
 """Objectives: the edge chamfer distance (2D only) and IoU (2D ``/|A∨B|``, 3D ``/(|A∨B| + 1)``)."""
@@ -53,7 +53,7 @@ PREFETCH = 8
 """2D: a missing primitive is drawn together with its axis neighbours up to this many pixels away."""
 PREFETCH_3D = 0
 """3D: the same; 0, drawing only the missing primitive, is the fastest in 3D (docs/refinement.md)."""
-RULES = ("guarded", "chamfer")
+RULES = ("short", "guarded", "chamfer")
 """How :func:`refine_guarded` picks between the refined and the unrefined program (docs/refinement.md)."""
 MAX_IOU_DROP = 0.05
 """The ``"guarded"`` rule keeps the unrefined program when refinement lowers IoU by more than this."""
@@ -421,18 +421,24 @@ def refine_beams(programs: Sequence[Program | str], target, metric: str | None =
     Returns:
         The :class:`RefineResult` with the best ``score`` (lowest chamfer / highest IoU).
     """
+    best = None
+    for r in refine_each(programs, target, metric, maxiter, mode, bounds):
+        if best is None or _better(r.score, best.score, r.metric):
+            best = r
+    return best
+
+
+def refine_each(programs: Sequence[Program | str], target, metric: str | None = None,
+                maxiter: int | None = None, mode: str = "improved", bounds=None) -> list[RefineResult]:
+    """:func:`refine` of every candidate program toward one target, in order (sharing the target's
+    preprocessing and the cache of drawn primitives)."""
     t = _check_target(target)
     metric = _check_args(metric, maxiter, mode, t.ndim)
     progs = [_check_program(p, t.ndim) for p in programs]
     if not progs:
         raise ValueError("refine_beams needs at least one program")
     scorer = _Scorer(t, metric)
-    best = None
-    for p in progs:
-        r = _run(p, scorer, metric, maxiter, mode, bounds)
-        if best is None or _better(r.score, best.score, metric):
-            best = r
-    return best
+    return [_run(p, scorer, metric, maxiter, mode, bounds) for p in progs]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -445,11 +451,13 @@ class Refined:
 
     Attributes:
         program: the program to use: the refined one, or ``start`` when the rule kept it.
-        result: the refinement of the candidates (:func:`refine_beams`; chamfer in 2D, IoU in 3D).
+        result: the best refinement of the candidates by the refinement's metric (:func:`refine_beams`;
+            chamfer in 2D, IoU in 3D).
         before: ``(iou, chamfer)`` of ``start`` against the target (chamfer NaN in 3D).
-        after: ``(iou, chamfer)`` of the refined program.
-        kept_start: the rule rejected the refined program.
-        rule: ``"guarded"`` or ``"chamfer"``.
+        after: ``(iou, chamfer)`` of ``program``.
+        kept_start: the rule kept ``start`` (``"short"``: it scored best; ``"guarded"``: refinement cost
+            too much IoU).
+        rule: ``"short"``, ``"guarded"`` or ``"chamfer"``.
     """
 
     program: Program
@@ -472,31 +480,55 @@ def program_scores(programs: Sequence[Program | str], target) -> list[tuple[floa
     return [(float(a), float(b)) for a, b in zip(ious, cds)]
 
 
-def refine_guarded(start: Program | str, programs: Sequence[Program | str], target, rule: str = "guarded",
-                   maxiter: int | None = None, max_iou_drop: float = MAX_IOU_DROP) -> Refined:
+def refine_guarded(start: Program | str, programs: Sequence[Program | str], target, rule: str = "short",
+                   maxiter: int | None = None, max_iou_drop: float = MAX_IOU_DROP,
+                   penalty: float | None = None) -> Refined:
     """Refine candidates and decide what a parser should write.
 
-    2D candidates are refined by chamfer (the paper's objective), 3D ones by IoU (the only 3D metric;
-    a refined program then never has a lower IoU than the best candidate it started from).
+    2D candidates are refined by chamfer (the paper's objective), 3D ones by IoU.
 
     Args:
         start: the program chosen before refinement (e.g. the most likely beam).
         programs: the candidates refined (e.g. every valid beam; ``start`` need not be among them).
         target: (64, 64) image or (64, 64, 64) volume (non-zero = on).
-        rule: ``"guarded"`` (default): the refined program unless its IoU is more than
-            ``max_iou_drop`` below ``start``'s, then ``start``; ``"chamfer"``: the paper's choice, the
-            refined program with the best score (lowest chamfer in 2D), whatever its IoU.
+        rule: ``"short"`` (default): among ``start``, every refined candidate and each of those pruned
+            (:func:`csgnet.rewrite.prune`), the one with the highest ``IoU - penalty * primitives``
+            (:func:`csgnet.rewrite.choose`; ties go to ``start``, then to the refined candidates in
+            order): a longer program must pay for its primitives in IoU. ``"guarded"``: the best
+            refined candidate by the refinement's metric unless its IoU is more than ``max_iou_drop``
+            below ``start``'s, then ``start``. ``"chamfer"``: the paper's choice, the refined candidate
+            with the best score (lowest chamfer in 2D), whatever its IoU or length.
         maxiter: Powell iterations (see :func:`refine`).
         max_iou_drop: the IoU loss the ``"guarded"`` rule tolerates.
+        penalty: the ``"short"`` rule's IoU per primitive (default
+            :data:`csgnet.rewrite.LENGTH_PENALTY` of the dimension).
 
     Returns:
         A :class:`Refined` with the chosen program and both programs' IoU and chamfer.
     """
+    from .rewrite import choose, prune
+
     if rule not in RULES:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
     dim = _check_target(target).ndim
     start = _check_program(start, dim)
-    result = refine_beams(programs, target, maxiter=maxiter)
-    before, after = program_scores([start, result.program], target)
-    kept = rule == "guarded" and after[0] < before[0] - max_iou_drop
-    return Refined(start if kept else result.program, result, before, after, kept, rule)
+    results = refine_each(programs, target, maxiter=maxiter)
+    result = results[0]
+    for r in results[1:]:
+        if _better(r.score, result.score, r.metric):
+            result = r
+    if rule == "short":
+        cands: list[Program] = []
+        for p in [start] + [r.program for r in results]:
+            for c in (p, prune(p, target, penalty)):
+                if c not in cands:
+                    cands.append(c)
+        chosen = cands[choose(cands, target, penalty)[0]]
+    elif rule == "guarded":
+        before_iou = program_scores([start, result.program], target)
+        chosen = start if before_iou[1][0] < before_iou[0][0] - max_iou_drop else result.program
+    else:
+        chosen = result.program
+    before, after = program_scores([start, chosen], target)
+    kept = chosen is start if rule == "guarded" else rule == "short" and chosen == start
+    return Refined(chosen, result, before, after, kept, rule)

@@ -260,7 +260,7 @@ def test_defect6_guarded_rule_keeps_the_program_when_chamfer_costs_iou():
     assert paper.after[1] < paper.before[1]  # chamfer improves ...
     assert paper.after[0] < paper.before[0] - MAX_IOU_DROP  # ... while IoU drops a lot
     assert paper.program == paper.result.program and not paper.kept_start
-    guarded = refine_guarded(start, [start], target)
+    guarded = refine_guarded(start, [start], target, rule="guarded")
     assert guarded.kept_start and guarded.program == csgnet.parse(start)
     assert program_scores([guarded.program], target)[0] == guarded.before
 
@@ -355,7 +355,7 @@ def test_3d_refine_beams_and_guarded_rule_never_lower_iou():
     beams = [perturbed(truth, rng, 4) for _ in range(3)] + [Program((Op("+"),), 3)]
     best = csgnet.refine_beams(beams, torch.from_numpy(target), maxiter=1)
     assert best.score == max(csgnet.refine(b, target, maxiter=1).score for b in beams)
-    ref = refinement.refine_guarded(beams[1], beams, target, maxiter=1)
+    ref = refinement.refine_guarded(beams[1], beams, target, maxiter=1, rule="guarded")
     assert not ref.kept_start and ref.program == best.program
     assert ref.after[0] == best.score >= ref.before[0] == metrics.iou_3d(volume(beams[1]), target)
     assert np.isnan(ref.before[1]) and np.isnan(ref.after[1])  # no 3D chamfer

@@ -1,0 +1,115 @@
+"""Choosing the price per primitive of the ``short`` refinement rule (``csgnet.rewrite.LENGTH_PENALTY``) on
+the validation split of a synthetic dataset.
+
+For each validation program (``--per-length`` per length) the script renders its target, decodes it with
+beam search (``--beam``), takes the beam closest to the target as the start (``parse --select match``),
+refines every valid beam (``csgnet.refinement.refine_each``: chamfer in 2D, IoU in 3D) and then, for each
+price λ of ``--penalties``, chooses among the start and the refined beams, each also pruned
+(``csgnet.rewrite.prune``), the program with the highest IoU − λ · primitives (what ``parse --refine`` does
+with ``--refine-rule short``). It prints, per λ, the chosen programs' mean IoU, mean primitives, the mean
+absolute difference from the true program's primitives, and the share of programs longer than the truth;
+then the chosen λ: the largest price whose mean IoU is at most ``MAX_VAL_IOU_COST`` below λ = 0's (the shortest
+programs for a bounded cost). The true programs' length is shown, not used: the generator's programs are
+not the shortest that draw their shapes (its rules accept an operand that changes a tenth of the result).
+
+    python -m csgnet generate --dim 2 --scale 0.01 --out data/synthetic2d
+    python bench/length_penalty.py --dim 2 --data data/synthetic2d --per-length 20
+    python bench/length_penalty.py --dim 3 --data data/synthetic --per-length 20
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shlex
+import sys
+import time
+
+import numpy as np
+import torch
+
+from csgnet import render
+from csgnet.data import load_dataset
+from csgnet.inference import infer, load_model, load_pretrained
+from csgnet.lang import is_valid, parse
+from csgnet.refinement import program_scores, refine_each
+from csgnet.rewrite import LENGTH_PENALTY, MAX_VAL_IOU_COST, objective, prune
+
+DEFAULT_PENALTIES = (0.0, 0.001, 0.0025, 0.005, 0.0075, 0.01, 0.015, 0.02, 0.03)
+
+
+def choose_penalty(rows: list[dict], max_cost: float) -> float:
+    """The largest λ of ``rows`` (one dict per λ with ``penalty`` and mean ``iou``) whose mean IoU is at most
+    ``max_cost`` below that of λ = 0."""
+    base = next(r for r in rows if r["penalty"] == 0.0)["iou"]
+    return max(r["penalty"] for r in rows if r["iou"] >= base - max_cost)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2)
+    ap.add_argument("--data", required=True, help="dataset folder written by `python -m csgnet generate`")
+    ap.add_argument("--weights", default=None, help="weights file (default: the shipped default model)")
+    ap.add_argument("--per-length", type=int, default=20)
+    ap.add_argument("--beam", type=int, default=10)
+    ap.add_argument("--penalties", type=float, nargs="+", default=list(DEFAULT_PENALTIES))
+    ap.add_argument("--refine-iters", type=int, default=None, help="Powell iterations (default: to convergence)")
+    ap.add_argument("--threads", type=int, default=1)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    if 0.0 not in args.penalties:
+        args.penalties = [0.0] + list(args.penalties)
+    model = load_model(args.weights) if args.weights else load_pretrained(args.dim)
+    programs = [p for ps in load_dataset(args.data, args.dim, "val").values() for p in ps[: args.per_length]]
+    targets = render([p.text() for p in programs], args.dim)
+    t0 = time.process_time()
+    starts = infer(model, targets, beam=args.beam, select="match")
+    per_penalty: dict[float, list[tuple[float, int, int]]] = {lam: [] for lam in args.penalties}
+    for prog, target, start in zip(programs, targets, starts):
+        valid = [parse(b, args.dim) for b in start.beams if b and _valid(b, args.dim)]
+        base = [start.program] if start.valid else []
+        refined = [r.program for r in refine_each(valid, target, maxiter=args.refine_iters)] if valid else []
+        for lam in args.penalties:
+            cands = []
+            for p in base + refined:
+                for c in (p, prune(p, target, lam)):
+                    if c not in cands:
+                        cands.append(c)
+            if not cands:
+                per_penalty[lam].append((0.0, 0, len(prog.draws)))
+                continue
+            ious = [i for i, _ in program_scores(cands, target)]
+            j = max(range(len(cands)), key=lambda k: (objective(ious[k], cands[k], lam), -k))
+            per_penalty[lam].append((ious[j], len(cands[j].draws), len(prog.draws)))
+    seconds = time.process_time() - t0
+    rows = []
+    for lam, vals in per_penalty.items():
+        a = np.asarray(vals, dtype=float)
+        rows.append({"penalty": lam, "iou": a[:, 0].mean(), "primitives": a[:, 1].mean(),
+                     "length_error": np.abs(a[:, 1] - a[:, 2]).mean(), "longer": (a[:, 1] > a[:, 2]).mean(),
+                     "truth": a[:, 2].mean()})
+    print(f"# {args.dim}D validation programs: {len(programs)} ({args.per_length} per length) of {args.data}, "
+          f"beam {args.beam}, model {args.weights or 'shipped default'}; {seconds:.0f} CPU s")
+    print(f"# machine: {platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, threads {args.threads}")
+    print("| λ (IoU per primitive) | mean IoU | mean primitives | true primitives | mean abs. length error "
+          "| longer than the truth |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['penalty']:g} | {100 * r['iou']:.2f} | {r['primitives']:.2f} | {r['truth']:.2f} "
+              f"| {r['length_error']:.3f} | {100 * r['longer']:.1f}% |")
+    chosen = choose_penalty(rows, MAX_VAL_IOU_COST)
+    print(f"chosen λ: {chosen:g} (the largest whose mean IoU is at most {100 * MAX_VAL_IOU_COST:g} points below "
+          f"λ = 0's); csgnet.rewrite.LENGTH_PENALTY[{args.dim}] is {LENGTH_PENALTY[args.dim]:g}")
+    print("command: python " + " ".join(shlex.quote(a) for a in sys.argv))
+    return 0
+
+
+def _valid(text: str, dim: int) -> bool:
+    try:
+        return is_valid(parse(text, dim))
+    except ValueError:
+        return False
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,69 @@
+"""Short programs: pruning operands, choosing by IoU minus a price per primitive, the short refinement rule."""
+import numpy as np
+import pytest
+
+import csgnet
+from csgnet.lang import parse
+from csgnet.refinement import program_scores, refine_guarded
+from csgnet.rewrite import LENGTH_PENALTY, choose, objective, prune, removals
+
+
+def test_removals_replace_each_operator_by_each_operand():
+    p = parse("c(32,32,20)s(32,32,8)c(20,20,8)+-")
+    got = [r.text() for r in removals(p)]
+    assert got == ["c(32,32,20)s(32,32,8)-", "c(32,32,20)c(20,20,8)-",
+                   "c(32,32,20)", "s(32,32,8)c(20,20,8)+"]
+    assert removals(parse("c(32,32,20)")) == []
+    assert removals(parse("c(32,32,20)+", strict=False)) == []  # invalid: nothing to remove
+
+
+def test_prune_removes_what_does_not_pay_and_keeps_what_does():
+    target = csgnet.render("c(32,32,20)")[0]
+    assert prune("c(32,32,20)c(8,8,8)-", target).text() == "c(32,32,20)"  # subtracts nothing
+    assert prune("c(32,32,20)c(32,32,20)+", target).text() == "c(32,32,20)"  # a union with itself
+    ring = csgnet.render("c(32,32,28)c(32,32,12)-")[0]
+    assert prune("c(32,32,28)c(32,32,12)-", ring).text() == "c(32,32,28)c(32,32,12)-"
+    # a hole of 113 pixels in 2,500: worth a primitive at the default price, not at a price of 0.5
+    assert prune("c(32,32,28)c(32,32,6)-", ring, penalty=0.5).text() == "c(32,32,28)"
+    bad = parse("c(32,32,20)+", strict=False)
+    assert prune(bad, target) == bad
+
+
+def test_prune_never_lowers_the_objective():
+    rng = np.random.default_rng(0)
+    from csgnet.synth import sample_programs
+    from csgnet.vocab import vocabulary
+    vocab = vocabulary(2)
+    for row in sample_programs(2, 9, 8, rng):
+        p = vocab.decode(list(row))
+        target = csgnet.render(vocab.decode(list(sample_programs(2, 5, 1, rng)[0])).text())[0]
+        q = prune(p, target, 0.01)
+        (a, _), (b, _) = program_scores([p, q], target)
+        assert objective(b, q, 0.01) >= objective(a, p, 0.01)
+        assert len(q.draws) <= len(p.draws)
+
+
+def test_choose_prefers_the_shorter_program_unless_the_longer_pays():
+    target = csgnet.render("c(32,32,28)c(32,32,12)-")[0]
+    exact, longer = "c(32,32,28)c(32,32,12)-", "c(32,32,28)c(32,32,12)-c(32,32,4)-"
+    i, ious = choose([longer, exact], target)
+    assert i == 1 and ious[0] == ious[1] == 1.0
+    i, _ = choose(["c(32,32,28)", exact], target, penalty=0.0)
+    assert i == 1
+    i, _ = choose(["c(32,32,28)", exact], target, penalty=1.0)
+    assert i == 0
+    with pytest.raises(ValueError, match="at least one"):
+        choose([], target)
+    with pytest.raises(ValueError, match="2D program for a 3D"):
+        choose([parse("c(32,32,8)")], csgnet.render("sp(32,32,32,12)", 3)[0])
+
+
+def test_short_rule_writes_the_exact_two_circle_ring():
+    target = csgnet.render("c(32,32,28)c(32,32,12)-")[0]
+    bloated = "c(32,32,28)c(31,30,8)c(32,32,12)--c(31,31,12)-s(49,24,27)c(24,40,20)*+c(32,32,12)-"
+    ref = refine_guarded("c(32,32,28)c(32,32,12)-", [bloated], target)
+    assert ref.rule == "short" and ref.program.text() == "c(32,32,28)c(32,32,12)-" and ref.kept_start
+    assert ref.after == ref.before
+    paper = refine_guarded("c(32,32,28)c(32,32,12)-", [bloated], target, rule="chamfer")
+    assert len(paper.program.draws) > 2
+    assert LENGTH_PENALTY[2] > 0 and LENGTH_PENALTY[3] > 0
