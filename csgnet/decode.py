@@ -85,8 +85,10 @@ def _token_classes(dim: int, device) -> tuple[torch.Tensor, torch.Tensor, int]:
 class _Rows:
     """Decoding state of ``B`` rows (targets repeated per beam): GRU state, previous token, stack."""
 
-    def __init__(self, model, targets: torch.Tensor, repeat: int, max_len: int):
+    def __init__(self, model, targets: torch.Tensor, repeat: int, max_len: int, skip_done: bool = False):
         cfg = model.config
+        self.repeat, self.skip_done, self.steps = repeat, skip_done, 0
+        self.unique_targets = targets
         self.model, self.dim, self.max_len = model, cfg.dim, max_len
         self.device = targets.device
         self.is_draw, self.is_op, self.stop = _token_classes(cfg.dim, self.device)
@@ -116,9 +118,25 @@ class _Rows:
 
     def logits(self) -> tuple[torch.Tensor, torch.Tensor]:
         if self.machine is not None:
-            stack = unpack(self.machine.top(self.model.config.stack_k), self.dim)
-            return self.model.step(self.model.encode(self.targets, stack), self.prev, self.h)
+            return self.model.step(self._stack_features(), self.prev, self.h)
         return self.model.step_projected(self.projected, self.prev, self.h, self.w_tok)
+
+    def _stack_features(self) -> torch.Tensor:
+        """CSGNetStack's encoder features of every row, computed only where they can differ: at the first
+        step the rows of a target are equal (encoded once per target), and with ``skip_done`` a finished
+        row, whose next token is forced to ``$``, gets zeros instead."""
+        step, self.steps = self.steps, self.steps + 1
+        k = self.model.config.stack_k
+        if step == 0 and self.repeat > 1:
+            first = self.machine.top(k)[:: self.repeat]
+            f = self.model.encode(self.unique_targets, unpack(first, self.dim))
+            return f.repeat_interleave(self.repeat, 0)
+        if self.skip_done and bool(self.done.any()):
+            live = torch.nonzero(~self.done).flatten()  # not empty: decoding stops when every row is done
+            stack = unpack(self.machine.top(k).index_select(0, live), self.dim)
+            f = self.model.encode(self.targets.index_select(0, live), stack)
+            return f.new_zeros((self.B, f.shape[1])).index_copy(0, live, f)
+        return self.model.encode(self.targets, unpack(self.machine.top(k), self.dim))
 
     def mask(self, logp: torch.Tensor, t: int, constrained: bool, finish: bool) -> torch.Tensor:
         """Apply the validity constraint and the finished-row rule to log-probabilities ``(B, V)``."""
@@ -211,7 +229,7 @@ def beam_search(model, targets, width: int = 10, max_len: int | None = None, mod
     """
     targets, T = _check(model, targets, max_len, mode)
     N, w = targets.shape[0], check_beam(width, "width")
-    rows = _Rows(model, targets, w, T)
+    rows = _Rows(model, targets, w, T, skip_done=mode == "improved")
     V = model.config.vocab_size
     score = torch.full((N, w), float("-inf"), device=targets.device)
     score[:, 0] = 0.0
@@ -239,7 +257,7 @@ def greedy(model, targets, max_len: int | None = None, mode: str = "improved", c
     """Arg-max decoding (what the reference validates with). ``k = 1``."""
     targets, T = _check(model, targets, max_len, mode)
     N = targets.shape[0]
-    rows = _Rows(model, targets, 1, T)
+    rows = _Rows(model, targets, 1, T, skip_done=mode == "improved")
     score = torch.zeros(N, device=targets.device)
     finish = mode == "improved"
     for t in range(T):

@@ -153,7 +153,7 @@ class _ConvEncoder(nn.Module):
     """Conv blocks (:meth:`block`) after an optional max-pool of the input, flattened channel-major."""
 
     pool = None  # the max-pool function of the input's dimension
-    memory_format = torch.contiguous_format  # 3D: channels-last (about 1.6 times faster on a CPU)
+    memory_format = torch.contiguous_format  # both encoders use channels-last (1.3 to 1.6 times faster on a CPU)
 
     def __init__(self, in_channels: int, channels: tuple[int, ...], dropout: float, input_pool: int = 1):
         super().__init__()
@@ -178,37 +178,41 @@ class _ConvEncoder(nn.Module):
 
 
 class Encoder2D(_ConvEncoder):
-    """conv 3×3 (pad 1) → ReLU → [Dropout] → MaxPool 2, per block; no dropout in the last block."""
+    """conv 3×3 (pad 1) → ReLU → [Dropout] → MaxPool 2, per block; no dropout in the last block. The
+    ReLU is applied after the pooling (the same values, on a quarter of the elements: ReLU commutes with
+    max-pooling and with dropout)."""
 
     pool = staticmethod(F.max_pool2d)
+    memory_format = torch.channels_last
 
     @staticmethod
     def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
-        return [nn.Conv2d(c_in, c_out, 3, padding=1), nn.ReLU(), *([] if last else [nn.Dropout(dropout)]),
-                nn.MaxPool2d(2)]
+        return [nn.Conv2d(c_in, c_out, 3, padding=1), *([] if last else [nn.Dropout(dropout)]), nn.MaxPool2d(2),
+                nn.ReLU()]
 
 
 class Encoder3D(_ConvEncoder):
-    """conv3d 4 (stride 1, pad 2) → ReLU → MaxPool3d 2 → Dropout → BatchNorm3d, per block."""
+    """conv3d 4 (stride 1, pad 2) → ReLU → MaxPool3d 2 → Dropout → BatchNorm3d, per block (the ReLU
+    applied after the pooling: the same values)."""
 
     pool = staticmethod(F.max_pool3d)
     memory_format = torch.channels_last_3d
 
     @staticmethod
     def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
-        return [nn.Conv3d(c_in, c_out, 4, padding=2), nn.ReLU(), nn.MaxPool3d(2), nn.Dropout(dropout),
+        return [nn.Conv3d(c_in, c_out, 4, padding=2), nn.MaxPool3d(2), nn.ReLU(), nn.Dropout(dropout),
                 nn.BatchNorm3d(c_out)]
 
 
 class Encoder3DLite(_ConvEncoder):
-    """conv3d 3 (pad 1) → ReLU → MaxPool3d 2 → BatchNorm3d, per block (``encoder: lite``)."""
+    """conv3d 3 (pad 1) → MaxPool3d 2 → ReLU → BatchNorm3d, per block (``encoder: lite``)."""
 
     pool = staticmethod(F.max_pool3d)
     memory_format = torch.channels_last_3d
 
     @staticmethod
     def block(c_in: int, c_out: int, dropout: float, last: bool) -> list[nn.Module]:
-        return [nn.Conv3d(c_in, c_out, 3, padding=1), nn.ReLU(), nn.MaxPool3d(2),
+        return [nn.Conv3d(c_in, c_out, 3, padding=1), nn.MaxPool3d(2), nn.ReLU(),
                 *([nn.Dropout(dropout)] if dropout > 0 else []), nn.BatchNorm3d(c_out)]
 
 

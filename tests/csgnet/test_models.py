@@ -331,3 +331,28 @@ def test_lite_preset_decodes_like_any_model_and_keeps_the_side():
         ModelConfig(dim=2, encoder="lite")
     with pytest.raises(ValueError, match="head must be"):
         ModelConfig(dim=3, head="tied")
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_stack_decoders_skip_finished_rows_and_repeated_first_steps_exactly(dim, monkeypatch):
+    """CSGNetStack decoding encodes a target's rows once at the first step and skips finished rows: the
+    programs and scores equal those of encoding every row at every step."""
+    from csgnet import decode
+    from csgnet.renderer import unpack
+    m = tiny(dim, stack=True, seed=3)
+    texts = (["c(32,32,16)", "s(20,20,12)c(40,40,12)+", "c(32,32,24)s(32,32,12)-t(32,20,8)+"] if dim == 2 else
+             ["sp(32,32,32,16)", "cu(24,24,24,12)sp(40,40,40,12)+"])
+    t = targets(texts, dim)
+    with torch.no_grad():
+        m.head[-1].bias[m.stop] += 4.0  # programs end as soon as they may (constrained), at other steps in other beams
+    fast = [decode.beam_search(m, t, 4, constrained=True), decode.greedy(m, t, constrained=True)]
+
+    def every_row(self):
+        return self.model.encode(self.targets, unpack(self.machine.top(self.model.config.stack_k), self.dim))
+
+    monkeypatch.setattr(decode._Rows, "_stack_features", every_row)
+    slow = [decode.beam_search(m, t, 4, constrained=True), decode.greedy(m, t, constrained=True)]
+    for a, b in zip(fast, slow):
+        assert torch.equal(a.tokens, b.tokens) and torch.equal(a.logprob, b.logprob)
+        assert torch.equal(a.lengths, b.lengths) and torch.equal(a.valid, b.valid)
+    assert (fast[0].lengths < fast[0].tokens.shape[-1]).any()  # some rows finished early
