@@ -20,13 +20,14 @@ from functools import partial
 from pathlib import Path
 
 import lightning as L
+from lightning.pytorch.utilities import rank_zero_info
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from ..data import ProgramDataset, load_dataset, split_sizes
 from ..synth import sample_programs
-from .augment import jitter, mirror_programs
+from .augment import jitter, mirror_programs, symmetry_tables
 from ..decode import greedy
 from ..inference import load_model
 from ..models import CSGNet, ModelConfig, preset
@@ -134,7 +135,9 @@ class CSGDataModule(L.LightningDataModule):
             with ``num_workers`` > 0. The losses are the same (tested).
         exclude: dataset folders whose validation and test programs are removed from the training
             programs (``data_dir`` only), so that a model trained on one generated set can be tested on
-            another set's test split: the programs removed are counted in ``excluded``.
+            another set's test split; in 3D their mirror images (:func:`csgnet.train.augment.symmetry_tables`)
+            are removed too, so that the ``mirror`` augmentation cannot draw them. The programs removed are
+            counted in ``excluded``.
     """
 
     def __init__(self, dim: int = 2, data_dir: str | None = "data/synthetic", lengths: list[int] | None = None,
@@ -157,27 +160,38 @@ class CSGDataModule(L.LightningDataModule):
         self.train_tables: dict[int, torch.Tensor] | None = None
         self.val_tokens: torch.Tensor | None = None
 
-    def _held_out(self) -> set[str]:
-        """The program texts of the ``exclude`` folders' val and test splits."""
-        texts: set[str] = set()
+    def _held_out(self) -> set[tuple[int, ...]]:
+        """The token rows of the ``exclude`` folders' val and test programs (3D: and of their mirror images)."""
+        rows: set[tuple[int, ...]] = set()
+        maps = symmetry_tables(3) if self.dim == 3 else torch.arange(len(vocabulary(self.dim)))[None]
         for folder in self.exclude:
             for split in ("val", "test"):
                 for ps in load_dataset(folder, self.dim, split, self.lengths).values():
-                    texts.update(p.text() for p in ps)
-        return texts
+                    if ps:
+                        tokens = ProgramDataset(ps, self.dim, max_len=self.max_len).tokens
+                        for table in maps:
+                            mapped = table[tokens]
+                            rows.update(map(tuple, mapped[(mapped >= 0).all(1)].tolist()))
+        return rows
 
     def _tables(self, split: str) -> dict[int, torch.Tensor]:
         progs = load_dataset(self.data_dir, self.dim, split, self.lengths)
-        if split == "train" and self.exclude:
-            held = self._held_out()
-            before = sum(map(len, progs.values()))
-            progs = {n: [p for p in ps if p.text() not in held] for n, ps in progs.items()}
-            self.excluded = before - sum(map(len, progs.values()))
         out = {}
+        held = self._held_out() if split == "train" and self.exclude else set()
+        if held:
+            self.excluded = 0
         for n, ps in progs.items():
             if not ps:
                 raise ValueError(f"the {split} split of {self.data_dir!r} has no {self.dim}D programs of length {n}")
-            out[n] = ProgramDataset(ps, self.dim, max_len=self.max_len).tokens
+            tokens = ProgramDataset(ps, self.dim, max_len=self.max_len).tokens
+            if held:
+                keep = torch.tensor([tuple(r) not in held for r in tokens.tolist()], dtype=torch.bool)
+                self.excluded += int((~keep).sum())
+                tokens = tokens[keep]
+            out[n] = tokens
+        if held:
+            rank_zero_info(f"{self.excluded} training programs of {self.data_dir} are held-out programs of "
+                           f"{', '.join(self.exclude)} (or their mirror images): left out")
         return out
 
     def setup(self, stage: str | None = None) -> None:

@@ -181,14 +181,32 @@ def test_exclude_removes_another_sets_held_out_programs_from_training(tmp_path):
     generate_dataset(tmp_path / "b", dim=3, scale=0.0005, seed=0, lengths=[3], progress=False)
     held = {p.text() for s in ("val", "test") for p in load_dataset(tmp_path / "a", 3, s, [3])[3]}
     train_b = [p.text() for p in load_dataset(tmp_path / "b", 3, "train", [3])[3]]
-    overlap = sum(t in held for t in train_b)
-    assert overlap > 0  # the same seed: a's programs lead b's training split
+    from csgnet.train.augment import symmetry_tables
+    vocab = vocabulary(3)
+    images = set()
+    for t in held:
+        row = torch.tensor(vocab.encode(t))
+        images.update(tuple(m.tolist()) for m in symmetry_tables(3)[:, row] if (m >= 0).all())
+    overlap = sum(tuple(vocab.encode(t)) in images for t in train_b)
+    assert overlap >= sum(t in held for t in train_b) > 0  # the same seed: a's programs lead b's training split
     dm = CSGDataModule(dim=3, data_dir=str(tmp_path / "b"), lengths=[3], exclude=[str(tmp_path / "a")],
                        val_per_length=1)
     dm.setup("fit")
-    vocab = vocabulary(3)
     kept = {vocab.text([i for i in row.tolist() if i != vocab.stop]) for row in dm.train_tables[3]}
     assert dm.excluded == overlap and len(dm.train_tables[3]) == len(train_b) - overlap
     assert not {vocab.text(vocab.encode(t)) for t in held} & kept
+    # a mirror image of a held-out program, added to b's training programs, is left out too
+    import shutil
+    shutil.copytree(tmp_path / "b", tmp_path / "c")
+    test_a = load_dataset(tmp_path / "a", 3, "test", [3])[3][0]
+    mirrored = next(m for m in symmetry_tables(3)[1:, torch.tensor(vocab.encode(test_a))] if (m >= 0).all())
+    text = vocab.decode(mirrored.tolist()).text()
+    assert text != test_a.text()
+    with open(tmp_path / "c" / "3d" / "len_03" / "train.txt", "a") as f:
+        f.write(text + "\n")
+    dm = CSGDataModule(dim=3, data_dir=str(tmp_path / "c"), lengths=[3], exclude=[str(tmp_path / "a")],
+                       val_per_length=1)
+    dm.setup("fit")
+    assert dm.excluded == overlap + 1
     with pytest.raises(ValueError, match="needs a data_dir"):
         CSGDataModule(dim=3, data_dir=None, exclude=["x"])
