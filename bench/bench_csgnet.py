@@ -3,9 +3,10 @@
     python bench/bench_csgnet.py --threads 2
     python bench/bench_csgnet.py --threads 2 --weights runs/csgnetstack2d_small/checkpoints/last.ckpt
 
-Beam search: the shipped 2D model (or ``--weights``) decodes synthetic length-13 targets with k = 10,
-``--batch`` images at a time, including rendering every beam's program (what ``infer`` does before
-scoring). Training: one optimiser step (teacher-forced forward, backward, Adam) on a mixed-length
+Beam search: the shipped 2D model (or ``--weights``) decodes synthetic targets with k = 10, ``--batch``
+images at a time, including rendering every beam's program (what ``infer`` does before scoring). The
+targets are programs of ``--lengths`` in equal counts (default: 3 to 13, the test split's mix; ``--lengths
+13`` is the slowest case, every beam decoding to the last step). Training: one optimiser step (teacher-forced forward, backward, Adam) on a mixed-length
 batch of the configured size, targets and stack traces rendered inside the step as in training.
 """
 from __future__ import annotations
@@ -32,10 +33,14 @@ def _device(name):
     return name
 
 
-def bench_beam(model, n: int, batch: int, width: int, constrained: bool, device) -> float:
+def bench_beam(model, n: int, batch: int, width: int, constrained: bool, device, lengths=(13,)) -> float:
     rng = np.random.default_rng(0)
     vocab = vocabulary(2)
-    progs = [vocab.text(r) for r in sample_programs(2, 13, n, rng)]
+    progs = []
+    for i, length in enumerate(lengths):  # equal counts, interleaved so that every batch mixes them
+        progs += [vocab.text(r) for r in sample_programs(2, length, n // len(lengths) + (i < n % len(lengths)), rng)]
+    order = np.argsort(np.arange(len(progs)) % (n // len(lengths) + 1), kind="stable")
+    progs = [progs[i] for i in order]
     targets = render_programs(progs, 2).to(device)
     beam_search(model, targets[:batch], width, constrained=constrained)  # warm-up
     if device == "cuda":
@@ -80,9 +85,11 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="auto")
     ap.add_argument("--weights", default=None, help="2D weights for the beam benchmark (default: shipped)")
     ap.add_argument("--images", type=int, default=200)
-    ap.add_argument("--batch", type=int, default=100)
+    ap.add_argument("--batch", type=int, default=16, help="images decoded together (default 16, infer's)")
     ap.add_argument("--width", type=int, default=10)
     ap.add_argument("--constrained", action="store_true")
+    ap.add_argument("--lengths", type=int, nargs="+", default=[3, 5, 7, 9, 11, 13],
+                    help="target program lengths, equal counts (default: 3 to 13)")
     ap.add_argument("--train-steps", type=int, default=3)
     ap.add_argument("--skip-train", action="store_true")
     args = ap.parse_args(argv)
@@ -94,8 +101,9 @@ def main(argv=None) -> int:
     print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
           f"{torch.__version__}, threads {torch.get_num_threads()}, device {device}, "
           f"load average {os.getloadavg()[0]:.2f}")
-    ips = bench_beam(model, args.images, args.batch, args.width, args.constrained, device)
-    print(f"beam search k={args.width} ({name}, batch {args.batch}, length-13 targets"
+    ips = bench_beam(model, args.images, args.batch, args.width, args.constrained, device, args.lengths)
+    print(f"beam search k={args.width} ({name}, batch {args.batch}, targets of lengths "
+          f"{', '.join(map(str, args.lengths))}"
           f"{', constrained' if args.constrained else ''}): {ips:.1f} images/s")
     if not args.skip_train:
         for dim, stack, size, over, batch in [

@@ -153,17 +153,29 @@ def _located(src, err: Exception) -> str:
     return msg if msg.startswith(str(src)) else f"{src}: {msg}"
 
 
-def _parse_model(models: dict, dim: int, weights):
-    """The ``dim``-D model (loaded once; a failure is kept and raised again for every input)."""
-    from .inference import load_model, load_pretrained
+def _parse_models(args) -> dict:
+    """The models ``parse`` uses, by dimension: a weights file given with ``--weights-2d`` / ``--weights-3d``
+    is loaded now, so that a bad one is reported once, before any input; the shipped models (``--model``,
+    default the strongest of each dimension) are loaded when an input of their dimension comes."""
+    from .inference import load_model
+
+    models: dict = {}
+    for dim, weights in ((2, args.weights_2d), (3, args.weights_3d)):
+        if weights:
+            model = load_model(weights)
+            if model.config.dim != dim:
+                raise ValueError(f"{weights}: a {model.config.dim}D model, given for {dim}D inputs (--weights-{dim}d)")
+            models[dim] = model
+    return models
+
+
+def _parse_model(models: dict, dim: int, kind: str | None):
+    """The ``dim``-D model (a shipped one loaded once; a failure is kept and raised again for every input)."""
+    from .inference import load_pretrained
 
     if dim not in models:
         try:
-            model = load_model(weights) if weights else load_pretrained(dim)
-            if model.config.dim != dim:
-                raise ValueError(f"{weights}: a {model.config.dim}D model, given for {dim}D inputs "
-                                 f"(--weights-{dim}d)")
-            models[dim] = model
+            models[dim] = load_pretrained(dim, kind=kind)
         except (ValueError, OSError) as e:
             models[dim] = e
     if isinstance(models[dim], Exception):
@@ -260,14 +272,17 @@ def cmd_parse(args) -> int:
     except FileExistsError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    models: dict = {}
-    weights = {2: args.weights_2d, 3: args.weights_3d}
+    try:
+        models = _parse_models(args)
+    except (ValueError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     status = 0
     records = []
     for src, stem in zip(args.inputs, stems):
         try:
             shape = load_shape(src)
-            model = _parse_model(models, shape.ndim, weights[shape.ndim])
+            model = _parse_model(models, shape.ndim, args.model)
             records.append(_parse_one(src, shape, stem, model, args))
         except (InputError, ParseError, ValueError, OSError) as e:
             print(f"error: {_located(src, e)}", file=sys.stderr)
@@ -585,8 +600,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "highest IoU minus a price per primitive (csgnet.rewrite.LENGTH_PENALTY); guarded: the best "
                    "refined beam unless it costs more than 5 IoU points; chamfer: the paper's choice, the "
                    "lowest chamfer (docs/refinement.md)")
-    p.add_argument("--weights-2d", default=None, help="2D weights file or checkpoint (default: the shipped model)")
-    p.add_argument("--weights-3d", default=None, help="3D weights file or checkpoint (default: the shipped model)")
+    p.add_argument("--model", choices=("csgnet", "csgnetstack"), default=None,
+                   help="the shipped model to use (default: the strongest of each dimension, CSGNetStack in 2D and "
+                   "CSGNet in 3D; docs/csgnet.md)")
+    p.add_argument("--weights-2d", default=None, help="2D weights file or checkpoint (instead of a shipped model)")
+    p.add_argument("--weights-3d", default=None, help="3D weights file or checkpoint (instead of a shipped model)")
     p.add_argument("--out", default="parse_output", help="folder for the outputs (default parse_output/)")
     p.set_defaults(func=cmd_parse)
 

@@ -27,7 +27,7 @@ from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
            "load_pretrained", "infer", "Inference",
-           "WEIGHTS", "PRETRAINED", "SHIPPED"]
+           "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH"]
 
 WEIGHTS = Path(__file__).parent / "weights"
 KINDS = ("csgnet", "csgnetstack")
@@ -41,7 +41,12 @@ SHIPPED = {
     (2, "csgnet", "selftrain"): "st_csgnet2d.pt",
     (2, "csgnetstack", "reinforce"): "rl_csgnetstack2d.pt",
 }
-PRETRAINED = {dim: SHIPPED[(dim, "csgnet", "supervised")] for dim in (2, 3)}  # load_pretrained(dim)'s defaults
+DEFAULT_KIND = {2: "csgnetstack", 3: "csgnet"}
+"""The kind :func:`load_pretrained` returns by default: the strongest shipped model of each dimension."""
+PRETRAINED = {dim: SHIPPED[(dim, kind, "supervised")] for dim, kind in DEFAULT_KIND.items()}  # load_pretrained(dim)'s defaults
+INFER_BATCH = 16
+"""Shapes :func:`infer` decodes together by default: beam search over 16 to 32 shapes was fastest on a 2-core
+CPU for both shipped 2D kinds (``python bench/bench_csgnet.py --threads 2 --skip-train --batch B``)."""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -174,12 +179,13 @@ def export_weights(checkpoint, out, half: bool = True) -> Path:
     return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
 
 
-def load_pretrained(dim: int = 2, kind: str = "csgnet", tuning: str = "supervised", device=None) -> CSGNet:
-    """A model shipped with the package (see ``docs/benchmarks.md`` for how each was trained).
+def load_pretrained(dim: int = 2, kind: str | None = None, tuning: str = "supervised", device=None) -> CSGNet:
+    """A model shipped with the package (see ``docs/csgnet.md`` for how each was trained and how it scores).
 
     Args:
         dim: 2 or 3.
-        kind: ``"csgnet"`` or ``"csgnetstack"``.
+        kind: ``"csgnet"`` or ``"csgnetstack"`` (default :data:`DEFAULT_KIND`: the strongest shipped model,
+            CSGNetStack in 2D, CSGNet in 3D).
         tuning: ``"supervised"`` (trained on synthetic programs), or fine-tuned on the silhouettes without
             programs: ``"reinforce"`` or ``"selftrain"``.
         device: where to put the model.
@@ -190,6 +196,7 @@ def load_pretrained(dim: int = 2, kind: str = "csgnet", tuning: str = "supervise
     """
     if dim not in PRETRAINED:
         raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+    kind = DEFAULT_KIND[dim] if kind is None else kind
     if kind not in KINDS or tuning not in TUNINGS:
         raise ValueError(f"kind must be one of {KINDS} and tuning one of {TUNINGS}, got {kind!r}, {tuning!r}")
     if (dim, kind, tuning) not in SHIPPED:
@@ -232,7 +239,7 @@ class Inference:
 
 
 def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", constrained: bool = True,
-          batch: int = 64, mode: str = "improved") -> list[Inference]:
+          batch: int = INFER_BATCH, mode: str = "improved") -> list[Inference]:
     """Parse shapes into programs.
 
     Args:

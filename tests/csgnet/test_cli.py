@@ -147,8 +147,8 @@ def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
     assert main(["parse", str(EXAMPLES / "table.obj"), "--beam", "3", "--refine", "--refine-iters", "1",
                  "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "refined by IoU (3 beams)" in out and "skipped" not in out
-    before, after = (float(v) for v in re.search(r"before: IoU ([\d.]+)%; after: IoU ([\d.]+)%", out).groups())
+    assert "refined (3 beams, by IoU; chosen by IoU - 0.005 per primitive)" in out and "skipped" not in out
+    before, after = (float(v) for v in re.search(r"before: IoU ([\d.]+)%, \d+ primitives; after: IoU ([\d.]+)%", out).groups())
     assert after >= before
     written = csgnet.parse((tmp_path / "table.txt").read_text().strip(), dim=3)
     (iou, _), = program_scores([written], load_shape(EXAMPLES / "table.obj"))
@@ -213,5 +213,54 @@ def test_parse_of_a_dotted_name_writes_its_own_names(tmp_path, capsys):
     out.mkdir()
     (out / "a.png").write_bytes(b"another shape's picture")
     assert main(["parse", str(src), "--beam", "1", "--out", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["a.png", "a.v1.png", "a.v1.scad", "a.v1.txt", "a.v1_compare.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["a.png", "a.v1.png", "a.v1.scad", "a.v1.txt", "a.v1_compare.png",
+                                                     "results.json"]
     assert (out / "a.png").read_bytes() == b"another shape's picture"
+
+
+def test_parse_writes_a_results_file_per_batch_and_never_over_one(tmp_path, capsys):
+    import json
+
+    src = tmp_path / "in"
+    src.mkdir()
+    assert main(["render", "c(32,32,28)c(32,32,12)-", "-o", str(src / "ring.npy")]) == 0
+    (src / "bad.png").write_bytes(b"not a picture")
+    out = tmp_path / "out"
+    assert main(["parse", str(src / "ring.npy"), str(src / "bad.png"), "--beam", "3", "--refine",
+                 "--out", str(out)]) == 2
+    text = capsys.readouterr().out
+    records = json.loads((out / "results.json").read_text())
+    assert [r["input"] for r in records] == [str(src / "ring.npy"), str(src / "bad.png")]
+    ring, bad = records
+    assert ring["decoded"] == "c(32,32,28)c(32,32,12)-" and ring["primitives"] == 2 and ring["iou"] == 1.0
+    assert ring["refined"] == "c(32,32,28)c(32,32,12)-" and ring["primitives_refined"] == 2 and ring["rule"] == "short"
+    assert (out / "ring.txt").read_text().strip() == ring["refined"]
+    assert bad["error"].startswith(str(src / "bad.png"))
+    assert "2 primitives; after: IoU 100.00%, chamfer 0.000 px, 2 primitives" in text
+    (out / "other").mkdir()
+    assert main(["render", "c(20,20,8)", "-o", str(src / "dot.png")]) == 0
+    assert main(["parse", str(src / "dot.png"), "--beam", "1", "--out", str(out)]) == 0
+    assert json.loads((out / "results_2.json").read_text())[0]["input"] == str(src / "dot.png")
+    assert len(json.loads((out / "results.json").read_text())) == 2  # the first batch's file is untouched
+
+
+def test_parse_reports_a_bad_weights_file_once_before_any_input(tmp_path, capsys):
+    src = tmp_path / "c.png"
+    assert main(["render", "c(32,32,20)", "-o", str(src)]) == 0
+    capsys.readouterr()
+    assert main(["parse", str(src), str(src), "--weights-2d", str(tmp_path / "none.pt"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("none.pt") == 1 and not (tmp_path / "o").exists()
+
+
+def test_parse_uses_the_named_shipped_model(tmp_path, capsys):
+    from csgnet.inference import SHIPPED, WEIGHTS
+    texts = {}
+    for name, opts in [("default", []), ("stack", ["--model", "csgnetstack"]), ("csgnet", ["--model", "csgnet"]),
+                       ("stack_file", ["--weights-2d", str(WEIGHTS / SHIPPED[(2, "csgnetstack", "supervised")])]),
+                       ("csgnet_file", ["--weights-2d", str(WEIGHTS / SHIPPED[(2, "csgnet", "supervised")])])]:
+        assert main(["parse", str(EXAMPLES / "house.png"), "--beam", "2", *opts, "--out", str(tmp_path / name)]) == 0
+        texts[name] = (tmp_path / name / "house.txt").read_text()
+    assert texts["default"] == texts["stack"] == texts["stack_file"] != texts["csgnet"] == texts["csgnet_file"]
+    with pytest.raises(SystemExit):
+        main(["parse", str(EXAMPLES / "house.png"), "--model", "paper"])
