@@ -188,7 +188,7 @@ def _scores_line(iou: float, chamfer: float, program) -> str:
     return line + f", {len(program.draws) if program is not None else 0} primitives"
 
 
-def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> dict:
+def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> dict:
     """Infer, optionally refine, report and write one input's program (``parse``); returns its record
     for the results file."""
     from .inference import infer
@@ -231,11 +231,11 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args) -> dict:
         _save_sheet(_contact_sheet([shape, img], cols=2), compare)
     else:
         compare = stem.with_name(stem.name + "_compare.png")
-        written = [export.save_obj(img, _named(stem, ".obj")), compare]
+        written = [export.save_obj(img, _named(stem, ".obj"), transform=frame), compare]
         _save_sheet(_contact_sheet([depth_view(shape, a) for a in range(3)]
                                    + [depth_view(img, a) for a in range(3)], cols=3), compare)
     if program is not None:
-        written.append(export.save_scad(program, _named(stem, ".scad")))
+        written.append(export.save_scad(program, _named(stem, ".scad"), transform=frame))
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))
     return record
 
@@ -258,7 +258,7 @@ def cmd_parse(args) -> int:
     """Infer a program for each input shape with a trained model; a bad input is reported and skipped."""
     from shapeio import InputError
 
-    from .inference import load_shape
+    from .inference import load_shape_framed
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -281,9 +281,9 @@ def cmd_parse(args) -> int:
     records = []
     for src, stem in zip(args.inputs, stems):
         try:
-            shape = load_shape(src)
+            shape, frame = load_shape_framed(src)  # a mesh's outputs are written in its own units
             model = _parse_model(models, shape.ndim, args.model)
-            records.append(_parse_one(src, shape, stem, model, args))
+            records.append(_parse_one(src, shape, stem, model, args, frame))
         except (InputError, ParseError, ValueError, OSError) as e:
             print(f"error: {_located(src, e)}", file=sys.stderr)
             records.append({"input": str(src), "error": _located(src, e)})
@@ -579,7 +579,10 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Infer a CSG program for each input shape and write, per input, "
                        "NAME.txt (the program), a render (NAME.png in 2D, NAME.obj in 3D), NAME_compare.png "
                        "(the input beside the result; in 3D depth views along x, y and z, input above, "
-                       "result below) and NAME.scad into --out. Inputs with the same name get NAME_2, NAME_3, ...; "
+                       "result below) and NAME.scad into --out; for a mesh, NAME.obj and NAME.scad are in the mesh's "
+                       "own units and overlay it. results.json (or results_2.json, ...) lists every input's "
+                       "program, IoU, chamfer and primitives, before and after --refine. "
+                       "Inputs with the same name get NAME_2, NAME_3, ...; "
                        "a command that would write over one of its inputs is refused. A file that cannot "
                        "be parsed is reported as 'error: FILE: reason' and the others are processed; the "
                        "exit status is 2 if any failed.")

@@ -83,14 +83,27 @@ def voxels_to_mesh(vol) -> tuple[np.ndarray, np.ndarray]:
     return verts, faces
 
 
-def save_obj(vol, path) -> Path:
+def _check_transform(transform) -> np.ndarray:
+    t = np.asarray(transform, dtype=np.float64)
+    if t.shape != (4, 4) or not np.isfinite(t).all() or abs(np.linalg.det(t[:3, :3])) < 1e-300:
+        raise ValueError(f"transform must be an invertible, finite 4x4 affine matrix, got shape {t.shape}")
+    return t
+
+
+def save_obj(vol, path, transform=None) -> Path:
     """Save the marching-cubes mesh of a (64, 64, 64) bool volume as a Wavefront OBJ file.
 
-    The first line is a comment naming the frame; coordinates are written with 6 significant digits.
+    ``transform``: a 4x4 affine from voxel coordinates to the frame to write in (e.g. the input mesh's
+    units, :func:`csgnet.inference.load_shape_framed`); default: voxel units. The first line is a comment
+    naming the frame; coordinates are written with 6 significant digits.
     """
     verts, faces = voxels_to_mesh(vol)
-    return write_mesh(path, verts, faces, file_type="obj", digits=6,
-                      comment="csgnet voxel mesh: vertices in voxel units, vol[x, y, z] frame, voxel centres at integers")
+    frame = "vertices in voxel units, vol[x, y, z] frame, voxel centres at integers"
+    if transform is not None:
+        t = _check_transform(transform)
+        verts = verts @ t[:3, :3].T + t[:3, 3]
+        frame = "vertices in the input's units (the voxel frame mapped back by the input's transform)"
+    return write_mesh(path, verts, faces, file_type="obj", digits=6, comment="csgnet voxel mesh: " + frame)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -111,13 +124,15 @@ def _scad_tree(node, fn: int, indent: str) -> list[str]:
             + _scad_tree(node.right, fn, inner) + [f"{indent}}}"])
 
 
-def to_scad(program, dim: int | None = None, fn: int = 128) -> str:
+def to_scad(program, dim: int | None = None, fn: int = 128, transform=None) -> str:
     """OpenSCAD source that reproduces a program (see the module docstring for the conventions).
 
     Args:
         program: a :class:`~csgnet.lang.Program` or program text (then ``dim`` says 2 or 3, default 2).
         dim: the dimension of a text program.
         fn: ``$fn`` for circles, spheres and cylinders.
+        transform: 3D only: a 4x4 affine from voxel coordinates to the frame to model in (e.g. the input
+            mesh's units); the model is wrapped in ``multmatrix``.
 
     Returns:
         The ``.scad`` text.
@@ -143,12 +158,20 @@ def to_scad(program, dim: int | None = None, fn: int = 128) -> str:
     else:
         head += ["// 3D: x, y, z = volume axes 0, 1, 2 (vol[x, y, z]); cylinders stand along z."]
         body = _scad_tree(tree, fn, "    ")
-        lines = head + ["intersection() {"] + body + [
+        lines = ["intersection() {"] + body + [
             "    translate([-0.5, -0.5, -0.5]) cube([64, 64, 64]);  // the canvas (the renderer clips)",
             "}"]
+        if transform is not None:
+            t = _check_transform(transform)
+            rows = ", ".join("[" + ", ".join(f"{v:.9g}" for v in row) + "]" for row in t)
+            head += ["// multmatrix: voxel coordinates to the input's units"]
+            lines = [f"multmatrix([{rows}]) {{"] + ["    " + line for line in lines] + ["}"]
+        lines = head + lines
+    if program.dim == 2 and transform is not None:
+        raise ValueError("transform applies to 3D programs only")
     return "\n".join(lines) + "\n"
 
 
-def save_scad(program, path, dim: int | None = None, fn: int = 128) -> Path:
+def save_scad(program, path, dim: int | None = None, fn: int = 128, transform=None) -> Path:
     """Write :func:`to_scad` of ``program`` to ``path`` (atomically)."""
-    return atomic_write(path, to_scad(program, dim, fn).encode())
+    return atomic_write(path, to_scad(program, dim, fn, transform).encode())

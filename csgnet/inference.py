@@ -25,7 +25,7 @@ from .lang import Program, parse
 from .models import CSGNet, ModelConfig, preset
 from .score import score_beams
 
-__all__ = ["InputError", "load_shape", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
+__all__ = ["InputError", "load_shape", "load_shape_framed", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
            "load_pretrained", "infer", "Inference",
            "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH"]
 
@@ -83,12 +83,32 @@ def load_shape(path) -> np.ndarray:
             raise InputError(f"{name}: every cell is non-zero (no background); nothing to parse")
         return fit_to_canvas(mask, MARGIN, name)
     if suffix in MESH_SUFFIXES:
-        return _voxelise(path)
+        return _voxelise(path)[0]
     raise InputError(f"{name}: unknown file type {suffix!r}; use an image "
                      f"({', '.join(sorted(IMAGE_SUFFIXES))}), .npy, or a mesh ({', '.join(sorted(MESH_SUFFIXES))})")
 
 
-def _voxelise(path: Path) -> np.ndarray:
+def load_shape_framed(path) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`load_shape` and, for a mesh, the 4x4 affine that maps the volume's voxel coordinates
+    (``vol[x, y, z]``, voxel centres at integers) back to the mesh's own units, so that outputs can be
+    written over the input (``export.save_obj`` / ``save_scad`` with ``transform``); ``None`` for images
+    and grids, whose cells are the frame."""
+    path = Path(path)
+    if path.suffix.lower() in MESH_SUFFIXES and path.is_file():
+        return _voxelise(path)
+    return load_shape(path), None
+
+
+def _affine(scale, shift) -> np.ndarray:
+    """The 4x4 affine ``x -> scale * x + shift`` (per axis)."""
+    t = np.eye(4)
+    t[:3, :3] = np.diag(np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)))
+    t[:3, 3] = shift
+    return t
+
+
+def _voxelise(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The filled 64³ volume of a mesh and the affine from its voxel coordinates to the mesh's units."""
     # SciPy's ndimage takes tenths of a second to import: loaded only where a mesh is voxelised
     from scipy.ndimage import binary_fill_holes
 
@@ -106,9 +126,18 @@ def _voxelise(path: Path) -> np.ndarray:
     vol = binary_fill_holes(np.asarray(grid.matrix, dtype=bool))
     if not vol.any():
         raise InputError(f"{name}: the mesh has no volume")
+    to_mesh = np.asarray(grid.transform, dtype=np.float64)  # grid index -> mesh units
     if max(vol.shape) > side:  # voxelisation can add one layer
-        return fit_to_canvas(vol, MARGIN, name)
-    return centre_on_canvas(vol)
+        # fit_to_canvas crops to the shape, scales by s (cell centres: i = (c + 0.5) / s - 0.5 + lo) and centres
+        idx = np.nonzero(vol)
+        lo = np.array([i.min() for i in idx], dtype=np.float64)
+        extent = np.array([i.max() + 1 for i in idx], dtype=np.float64) - lo
+        s = side / extent.max()
+        scaled = np.minimum(np.floor(extent * s + 0.5), side)  # zoom's output size, cut to the side
+        start = (64 - scaled) // 2
+        return fit_to_canvas(vol, MARGIN, name), to_mesh @ _affine(1 / s, (0.5 - start) / s - 0.5 + lo)
+    start = np.array([(64 - n) // 2 for n in vol.shape], dtype=np.float64)
+    return centre_on_canvas(vol), to_mesh @ _affine(1.0, -start)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -264,3 +264,43 @@ def test_parse_uses_the_named_shipped_model(tmp_path, capsys):
     assert texts["default"] == texts["stack"] == texts["stack_file"] != texts["csgnet"] == texts["csgnet_file"]
     with pytest.raises(SystemExit):
         main(["parse", str(EXAMPLES / "house.png"), "--model", "paper"])
+
+
+def test_parse_writes_a_meshs_outputs_in_its_own_units(tmp_path):
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
+    box.apply_translation((100.0, -5.0, 3.0))
+    src = tmp_path / "box.stl"
+    box.export(src)
+    out = tmp_path / "out"
+    assert main(["parse", str(src), "--beam", "3", "--refine", "--out", str(out)]) == 0
+    written = trimesh.load(out / "box.obj", force="mesh")
+    pitch = 2.0 / 55
+    # the parsed program covers most of the box: its mesh lies over the input, not in the 64-voxel frame
+    assert np.all(np.abs(written.bounds - box.bounds) < 8 * pitch), (written.bounds, box.bounds)
+    scad = (out / "box.scad").read_text()
+    assert "multmatrix([[" in scad and "voxel coordinates to the input's units" in scad
+
+
+def test_framed_mesh_loading_maps_voxel_centres_onto_the_mesh():
+    import tempfile
+
+    import trimesh
+
+    from csgnet.inference import load_shape, load_shape_framed
+    for extents, shift in [((2.0, 1.0, 0.5), (100.0, -5.0, 3.0)), ((0.003, 0.001, 0.002), (0.0, 0.0, 0.0)),
+                           ((1.0, 3.0, 2.0), (-7.0, 0.5, 1e3))]:
+        box = trimesh.creation.box(extents=extents)
+        box.apply_translation(shift)
+        with tempfile.TemporaryDirectory() as d:
+            path = f"{d}/b.ply"
+            box.export(path)
+            vol, frame = load_shape_framed(path)
+            assert np.array_equal(vol, load_shape(path))
+        pitch = max(extents) / 55
+        centres = np.argwhere(vol) @ frame[:3, :3].T + frame[:3, 3]
+        assert np.all(np.abs(centres.min(0) - box.bounds[0]) <= pitch)
+        assert np.all(np.abs(centres.max(0) - box.bounds[1]) <= pitch)
+    vol, frame = load_shape_framed(EXAMPLES / "house.png")
+    assert frame is None and vol.shape == (64, 64)
