@@ -251,7 +251,10 @@ class FactoredLinear(nn.Module):
     def __init__(self, in_features: int, dim: int):
         super().__init__()
         index, n = token_attributes(dim)
-        self.register_buffer("index", index, persistent=False)
+        incidence = torch.zeros(index.shape[0], n + 1)
+        incidence.scatter_(1, index, 1.0)
+        # (V, n) 0/1: token t has attribute a; a dense product is faster than a gather of (V, G, in) rows
+        self.register_buffer("incidence", incidence[:, :n].contiguous(), persistent=False)
         plain = nn.Linear(in_features, index.shape[0])
         self.weight, self.bias = plain.weight, plain.bias
         self.attr_weight = nn.Parameter(torch.zeros(n, in_features))
@@ -265,10 +268,8 @@ class FactoredLinear(nn.Module):
                self.weight.device, self.weight.dtype)
         if not torch.is_grad_enabled() and self._cache is not None and self._cache[0] == key:
             return self._cache[1]
-        aw = torch.cat([self.attr_weight, self.attr_weight.new_zeros(1, self.attr_weight.shape[1])])
-        ab = torch.cat([self.attr_bias, self.attr_bias.new_zeros(1)])
-        w = self.weight + aw[self.index].sum(1)
-        b = self.bias + ab[self.index].sum(1)
+        w = self.weight + self.incidence.to(self.attr_weight.dtype) @ self.attr_weight
+        b = self.bias + self.incidence.to(self.attr_bias.dtype) @ self.attr_bias
         if not torch.is_grad_enabled():
             self._cache = (key, (w, b))
         return w, b
