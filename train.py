@@ -17,6 +17,7 @@ from pathlib import Path
 
 import lightning as L
 from lightning.pytorch.cli import LightningCLI, SaveConfigCallback
+from lightning.pytorch.loggers import TensorBoardLogger
 
 
 class SaveConfig(SaveConfigCallback):
@@ -47,6 +48,19 @@ class CLI(LightningCLI):
                 names = ", ".join(sorted(p.name for p in folder.glob("*.ckpt"))[:5])
                 raise SystemExit(f"error: --ckpt_path last: {folder} holds checkpoints ({names}) but no readable "
                                  "last.ckpt; resume from one of them with --ckpt_path <file>")
+        if ckpt == "last":
+            self._continue_log_version()
+
+    def _continue_log_version(self) -> None:
+        """A resumed run logs into its latest TensorBoard version folder, so that its curve stays in one
+        folder (Lightning would start ``version_N+1``)."""
+        logger = self.trainer.logger
+        if not isinstance(logger, TensorBoardLogger) or getattr(logger, "_version", None) is not None:
+            return
+        root = Path(logger.root_dir)
+        versions = [int(p.name[8:]) for p in root.glob("version_*") if p.is_dir() and p.name[8:].isdigit()]
+        if versions:
+            logger._version = max(versions)
 
     def _used_checkpoint_folders(self) -> list[Path]:
         """The checkpoint callbacks' folders that already hold checkpoints."""

@@ -42,6 +42,9 @@ def test_fit_resume_and_validate_through_the_one_cli(tmp_path, train_main, monke
     assert (tmp_path / "ckpt" / "last.ckpt").read_bytes() == before
     resumed = train_main(["fit", "--config", str(config), "--trainer.max_steps", "3", "--ckpt_path", "last"])
     assert resumed.trainer.global_step == 3
+    # the resumed run logs on in the same TensorBoard folder: one curve, not one folder per resumption
+    assert sorted(p.name for p in (tmp_path / "tb").iterdir()) == ["version_0"]
+    assert len(list((tmp_path / "tb").glob("version_0/events.out.tfevents.*"))) == 2
     work = tmp_path / "work"
     work.mkdir()
     (work / "config.yaml").write_text("a user's file\n")
