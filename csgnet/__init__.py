@@ -6,6 +6,8 @@ Entry points:
 * :func:`vocabulary`: the 2D (400) and 3D (6635) token tables.
 * :func:`render`: programs -> bool arrays ``(N, 64, 64)`` or ``(N, 64, 64, 64)``.
 * :mod:`csgnet.metrics`: chamfer distance and IoU as the paper computes them.
+* :func:`parse_shape`: a shape file (image, grid, mesh) or array -> its program, as ``python -m csgnet
+  parse`` does it (beam search, refinement, a short program).
 * :func:`load_pretrained` / :func:`infer`: the shipped neural parsers and program inference on
   bool images / volumes (:mod:`csgnet.inference`); models in :mod:`csgnet.models`, decoding in
   :mod:`csgnet.decode`, Lightning training in :mod:`csgnet.train.supervised`, tables in :mod:`csgnet.paper.tables`.
@@ -67,7 +69,7 @@ def __getattr__(name):  # lazy submodules: csgnet.metrics etc. without work at i
     if name in {"metrics", "export", "data", "renderer", "primitives", "refinement", "models", "score",
                 "decode", "train", "paper", "inference"}:
         return importlib.import_module(f".{name}", __name__)
-    if name in {"load_pretrained", "infer", "load_model", "load_shape"}:  # functions of csgnet.inference
+    if name in {"load_pretrained", "infer", "load_model", "load_shape", "parse_shape"}:  # of csgnet.inference
         return getattr(importlib.import_module(".inference", __name__), name)
     if name in {"refine", "refine_beams"}:  # functions of csgnet.refinement
         return getattr(importlib.import_module(".refinement", __name__), name)

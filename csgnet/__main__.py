@@ -189,33 +189,32 @@ def _scores_line(iou: float, chamfer: float, program) -> str:
 
 
 def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> dict:
-    """Infer, optionally refine, report and write one input's program (``parse``); returns its record
-    for the results file."""
-    from .inference import infer
+    """Infer, optionally refine, report and write one input's program (``parse``: one
+    :func:`csgnet.inference.parse_shape`); returns its record for the results file."""
+    from .inference import parse_shape
 
     dim = shape.ndim
-    res = infer(model, shape[None], beam=args.beam, select=args.select, constrained=not args.unconstrained)[0]
+    parsed = parse_shape(shape, model=model, beam=args.beam, select=args.select, refine=args.refine,
+                         rule=args.refine_rule, refine_iters=args.refine_iters, constrained=not args.unconstrained)
+    res, ref, program = parsed.decoded, parsed.refined, parsed.program
     line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
     if dim == 2:
         line += f", chamfer {res.chamfer:.3f} px"
     if not res.valid:
         line += " (invalid program: renders empty)"
     print(line)
-    program = res.program if res.valid else None
     record = {"input": str(src), "decoded": res.text, "valid": bool(res.valid), "iou": float(res.iou),
               "chamfer": None if dim == 3 else float(res.chamfer),
-              "primitives": len(program.draws) if program is not None else 0}
-    if args.refine and program is not None:
-        from .refinement import MAX_IOU_DROP, refine_guarded
+              "primitives": len(res.program.draws) if res.valid else 0}
+    if ref is not None:
+        from .refinement import MAX_IOU_DROP
 
-        valid = [b for b in res.beams if _is_valid(b, dim)]
-        ref = refine_guarded(program, valid, shape, rule=args.refine_rule, maxiter=args.refine_iters)
-        start, program = program, ref.program
         (i0, c0), (i1, c1) = ref.before, ref.after
         what = {"short": "IoU - %g per primitive" % _penalty(dim), "guarded": "guarded", "chamfer": "chamfer"}
-        print(f"  refined ({len(valid)} beams, by {'IoU' if dim == 3 else 'chamfer'}; chosen by "
+        n = sum(_is_valid(b, dim) for b in res.beams)
+        print(f"  refined ({n} beams, by {'IoU' if dim == 3 else 'chamfer'}; chosen by "
               f"{what[ref.rule]}): {program.text()}\n"
-              f"  before: {_scores_line(i0, c0, start)}; "
+              f"  before: {_scores_line(i0, c0, res.program)}; "
               f"after: {_scores_line(i1, c1, program)}")
         if ref.kept_start and ref.rule == "guarded":
             print(f"  refinement lowered IoU by more than {100 * MAX_IOU_DROP:g} points: "

@@ -6,6 +6,8 @@
   weights file written by :func:`export_weights` or a Lightning checkpoint.
 * :func:`infer` decodes a batch of shapes with beam search and returns, per shape, the chosen program
   with its log-probability and its IoU / chamfer to the input.
+* :func:`parse_shape` is the whole parse of one shape file or array as ``python -m csgnet parse`` runs it:
+  beam search, refinement of every valid beam and the choice of a short program.
 """
 from __future__ import annotations
 
@@ -26,7 +28,7 @@ from .models import CSGNet, ModelConfig, preset
 from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "load_shape_framed", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
-           "load_pretrained", "infer", "Inference",
+           "load_pretrained", "infer", "Inference", "parse_shape", "Parsed",
            "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH"]
 
 WEIGHTS = Path(__file__).parent / "weights"
@@ -305,3 +307,81 @@ def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", con
             out.append(Inference(texts[i][j], float(dec.logprob[i, j]), float(iou[i, j]), float(cd[i, j]),
                                  bool(dec.valid[i, j]), texts[i], dim))
     return out
+
+
+# ------------------------------------------------------------------------------------------------
+# the whole parse of one shape, as `python -m csgnet parse` runs it
+
+@dataclass
+class Parsed:
+    """What :func:`parse_shape` found for one shape.
+
+    Attributes:
+        program: the program to use: the refined and chosen one with ``refine``, else the decoded one;
+            ``None`` when no valid program was decoded.
+        decoded: the beam search's result (:class:`Inference`: the chosen beam, its scores, every beam).
+        refined: the refinement's record (:class:`csgnet.refinement.Refined`: IoU and chamfer before and
+            after, the rule), or ``None`` without ``refine`` or without a valid decoded program.
+        shape: the ``(64, 64)`` image or ``(64, 64, 64)`` volume that was parsed.
+        frame: for a mesh file, the 4x4 affine from the volume's voxel coordinates to the mesh's units
+            (:func:`load_shape_framed`); else ``None``.
+    """
+
+    program: Program | None
+    decoded: Inference
+    refined: object | None
+    shape: np.ndarray
+    frame: np.ndarray | None = None
+
+    @property
+    def text(self) -> str:
+        """The program's text ('' when there is none)."""
+        return "" if self.program is None else self.program.text()
+
+
+def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, beam: int = 10,
+                select: str = "match", refine: bool = True, rule: str = "short", refine_iters: int | None = None,
+                constrained: bool = True) -> Parsed:
+    """Infer a program for one shape the way ``python -m csgnet parse --select match --refine`` does.
+
+    Args:
+        shape: a shape file (image, ``.npy`` grid or mesh; :func:`load_shape_framed`) or a bool ``(64, 64)``
+            image / ``(64, 64, 64)`` volume.
+        model: the parser (default: :func:`load_pretrained` of the shape's dimension and ``kind``).
+        kind: the shipped kind when ``model`` is not given (default: the strongest, :data:`DEFAULT_KIND`).
+        beam: beam width.
+        select: ``"match"`` (the beam closest to the shape) or ``"likelihood"`` (the most likely).
+        refine: refine every valid beam and choose by ``rule`` (:func:`csgnet.refinement.refine_guarded`).
+        rule: ``"short"`` (IoU minus a price per primitive), ``"guarded"`` or ``"chamfer"``.
+        refine_iters: Powell iterations (default: to convergence).
+        constrained: grammar-constrained decoding.
+    """
+    from .lang import is_valid
+
+    frame = None
+    if isinstance(shape, (str, Path)):
+        shape, frame = load_shape_framed(shape)
+    shape = np.asarray(shape.cpu() if isinstance(shape, torch.Tensor) else shape).astype(bool)
+    if shape.shape not in ((64, 64), (64, 64, 64)):
+        raise ValueError(f"a shape must be a (64, 64) image or a (64, 64, 64) volume, got shape {shape.shape}")
+    if model is None:
+        model = load_pretrained(shape.ndim, kind=kind)
+    elif model.config.dim != shape.ndim:
+        raise ValueError(f"a {model.config.dim}D model cannot parse a {shape.ndim}D shape")
+    decoded = infer(model, shape[None], beam=beam, select=select, constrained=constrained)[0]
+    program = decoded.program if decoded.valid else None
+    refined = None
+    if refine and program is not None:
+        from .refinement import refine_guarded
+
+        beams = []
+        for text in decoded.beams:
+            try:
+                p = parse(text, shape.ndim, strict=False)
+            except ValueError:
+                continue
+            if is_valid(p):
+                beams.append(p)
+        refined = refine_guarded(program, beams, shape, rule=rule, maxiter=refine_iters)
+        program = refined.program
+    return Parsed(program, decoded, refined, shape, frame)

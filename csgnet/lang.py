@@ -427,6 +427,17 @@ def _parse_args(args: str, head: str, row: P.Primitive, text: str, pos: int):
     return tuple(values)
 
 
+_SHAPE_FILE = re.compile(r"\.(png|jpe?g|bmp|gif|tiff?|webp|npy|obj|ply|stl|off|glb|gltf)$", re.IGNORECASE)
+
+
+def _refuse_file_name(text: str) -> None:
+    """A shape file's name given as program text gets an error that says which call reads shapes."""
+    if _SHAPE_FILE.search(text.strip()):
+        raise ParseError(f"{text.strip()!r} is a shape file's name, not program text: csgnet.parse reads "
+                         f"programs; csgnet.parse_shape({text.strip()!r}) infers a program for a shape file",
+                         text)
+
+
 def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
     """Parse a program text.
 
@@ -451,6 +462,7 @@ def parse(text: str, dim: int = 2, strict: bool = True) -> Program:
     if fast is not None and (
             not strict or (fast and prefix_status(fast) == "complete")):
         return Program(tuple(fast), dim)
+    _refuse_file_name(text)
     # the full scan: locates the first error (or accepts what the fast path could not)
     tokens: list[Token] = []
     positions: list[int] = []

@@ -102,7 +102,7 @@ def test_every_name_in___all___exists(name):
 
 
 def test_the_readme_python_entry_points():
-    for name in ("parse", "render", "vocabulary", "load_pretrained", "infer", "refine"):
+    for name in ("parse", "render", "vocabulary", "load_pretrained", "infer", "refine", "parse_shape"):
         assert callable(getattr(csgnet, name))
     for name in ("parse", "execute", "corpus", "fit"):
         assert hasattr(shapeprog, name)

@@ -220,3 +220,32 @@ def test_defect9_beam_width_is_checked(beam):
     model = CSGNet(preset("small", 2, False))
     with pytest.raises(ValueError, match="beam must be an integer from 1 to 256"):
         infer(model, np.zeros((64, 64), bool), beam=beam)
+
+
+def test_parse_shape_is_the_clis_parse_in_one_call(tmp_path):
+    from csgnet.__main__ import main
+    from csgnet.inference import Parsed, load_pretrained, parse_shape
+    examples = Path(__file__).resolve().parents[2] / "examples"
+    assert main(["parse", str(examples / "house.png"), str(examples / "snowman.stl"), "--beam", "4",
+                 "--select", "match", "--refine", "--out", str(tmp_path)]) == 0
+    for name in ("house.png", "snowman.stl"):
+        got = csgnet.parse_shape(examples / name, beam=4)
+        assert isinstance(got, Parsed) and got.text == (tmp_path / f"{Path(name).stem}.txt").read_text().strip()
+        assert got.refined.after[0] >= got.decoded.iou - 0.025 * 8  # the short rule trades at most its price
+    mesh = csgnet.parse_shape(examples / "snowman.stl", beam=2, refine=False)
+    assert mesh.frame is not None and mesh.refined is None and mesh.program == mesh.decoded.program
+    image = csgnet.render("c(32,32,20)")[0]
+    got = parse_shape(image, model=load_pretrained(2, kind="csgnet"), beam=2)
+    assert got.frame is None and got.shape.shape == (64, 64)
+    with pytest.raises(ValueError, match="3D model cannot parse a 2D shape"):
+        parse_shape(image, model=load_pretrained(3))
+    with pytest.raises(ValueError, match=r"\(64, 64\) image or a \(64, 64, 64\) volume"):
+        parse_shape(np.ones((3, 3), bool))
+
+
+def test_parse_of_a_shape_file_name_says_which_call_reads_shapes():
+    with pytest.raises(csgnet.ParseError, match=r"csgnet.parse_shape\('house.png'\)"):
+        csgnet.parse("house.png")
+    with pytest.raises(csgnet.ParseError, match="shape file"):
+        csgnet.parse("chair.STL", dim=3)
+    assert csgnet.parse("c(32,32,8)").text() == "c(32,32,8)"
