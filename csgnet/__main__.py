@@ -321,7 +321,22 @@ def cmd_evaluate(args) -> int:
         print(f"decoding with {name} ...", flush=True)
         rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
                                constrained=args.constrained)
+        if args.refined:
+            from .paper.tables import evaluate_refined
+
+            print(f"parsing with refinement ({name}, {args.refined} per length) ...", flush=True)
+            rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined))
     note = f"`{_command(args)}`; beam mode {args.mode!r}, {_decoding(args)}; {_measured_on()}."
+    if args.out and str(args.out).endswith(".json"):
+        from shapeio.results import markdown, write_result
+
+        from .paper.tables import table_result
+
+        result = table_result(rows, args.dim, [f"Beam mode {args.mode!r}, {_decoding(args)}; {_measured_on()}."],
+                              _command(args))
+        print(markdown(result))
+        print(f"wrote {write_result(args.out, result)}")
+        return 0
     _write_table(markdown_tables(rows, args.dim, note), args.out)
     return 0
 
@@ -622,7 +637,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--mode", choices=("improved", "reference"), default="improved",
                    help="beam search: improved, or the published reference behaviour")
     e.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
-    e.add_argument("--out", default=None, help="write the markdown table here")
+    e.add_argument("--refined", type=_non_negative, default=0, metavar="N",
+                   help="add a row of the whole parse (the widest beam, the closest beam, refinement, the short "
+                   "rule: what parse --select match --refine writes) on the first N test programs per length")
+    e.add_argument("--out", default=None, help="write the table here: FILE.json as a result file (data that "
+                   "docs tables are generated from, python -m shapeio.results), any other name as markdown")
     e.set_defaults(func=cmd_evaluate)
 
     x = sub.add_parser("export-weights", help="write a training checkpoint's model as a small weights file")

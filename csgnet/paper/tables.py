@@ -24,7 +24,7 @@ from ..lang import Program
 from ..renderer import render_programs
 from ..score import best_iou_matches, score_beams, score_renders
 
-__all__ = ["Row", "evaluate_model", "nearest_neighbour", "markdown_tables"]
+__all__ = ["Row", "evaluate_model", "evaluate_refined", "nearest_neighbour", "markdown_tables", "table_result"]
 
 
 @dataclass
@@ -83,6 +83,34 @@ def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), nam
     return list(rows.values())
 
 
+def evaluate_refined(model, tests: dict[int, list[Program]], beam: int = 10, name: str = "model",
+                     per_length: int | None = None, rule: str = "short") -> Row:
+    """The whole parse of :func:`csgnet.inference.parse_shape` (beam search, the beam closest to the target,
+    refinement of every valid beam, the ``rule``'s choice) on the first ``per_length`` targets per length:
+    a row ``"{name} k=K + refinement ({rule})"`` with the chosen programs' IoU (and chamfer in 2D);
+    ``seconds`` per image."""
+    from ..inference import parse_shape
+
+    dim = model.config.dim
+    row = Row(f"{name} k={beam} + refinement ({rule})")
+    t0, images = time.perf_counter(), 0
+    for L, progs in sorted(tests.items()):
+        progs = progs[:per_length] if per_length else progs
+        if not progs:
+            continue
+        targets = render_programs(progs, dim).cpu().numpy()
+        ious, cds = [], []
+        for target in targets:
+            parsed = parse_shape(target, model=model, beam=beam, select="match", refine=True, rule=rule)
+            iou, cd = parsed.refined.after if parsed.refined is not None else (parsed.decoded.iou, parsed.decoded.chamfer)
+            ious.append(iou)
+            cds.append(cd)
+        row.iou[L], row.chamfer[L], row.count[L] = float(np.mean(ious)), float(np.mean(cds)), len(progs)
+        images += len(progs)
+    row.seconds = (time.perf_counter() - t0) / max(images, 1)
+    return row
+
+
 def nearest_neighbour(train: list[Program], tests: dict[int, list[Program]], dim: int, chunk: int = 2048
                       ) -> Row:
     """The nearest-neighbour baseline: for each test target, the training render with the highest IoU."""
@@ -127,3 +155,26 @@ def markdown_tables(rows: list[Row], dim: int, note: str = "") -> str:
     if note:
         out += "\n" + note.strip() + "\n"
     return out
+
+
+def table_result(rows: list[Row], dim: int, notes=(), command: str | None = None) -> dict:
+    """The rows as a result file's content (:func:`shapeio.results.make_result`): per-length IoU, overall IoU,
+    (2D) chamfer in pixels and milliseconds per image, with the test programs per length in a note."""
+    from shapeio.results import column, make_result
+
+    lengths = sorted({L for r in rows for L in r.count})
+    cols = [column("method", "method")] + [column(f"iou_len{L}", f"IoU len {L}", 2, 100.0) for L in lengths]
+    cols.append(column("iou", "IoU all", 2, 100.0))
+    if dim == 2:
+        cols.append(column("chamfer", "CD all (px)", 3))
+    cols.append(column("ms", "ms / image", 2))
+    data = []
+    for r in rows:
+        d = {"method": r.method, "iou": r.overall("iou"), "ms": 1000 * r.seconds}
+        d.update({f"iou_len{L}": r.iou.get(L) for L in lengths})
+        if dim == 2:
+            d["chamfer"] = r.overall("chamfer")
+        data.append(d)
+    counts = ", ".join(f"len {L}: {next(r.count[L] for r in rows if L in r.count)}" for L in lengths)
+    title = "Table 3 layout (2D synthetic test)" if dim == 2 else "Table 5 layout (3D synthetic test)"
+    return make_result(title, cols, data, [f"Test programs per length: {counts}.", *notes], command)
