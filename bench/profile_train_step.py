@@ -132,6 +132,7 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=None, help="batch size for every model (default: each model's)")
     ap.add_argument("--precision", choices=("32", "bf16"), default="32",
                     help="bf16: forward and backward under bfloat16 autocast")
+    ap.add_argument("--out", default=None, help="also write the table as a result file (JSON, shapeio.results)")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -142,15 +143,34 @@ def main(argv=None) -> int:
           + " | model share | samples/s | samples/s without data | worker render ms (render_in_workers) "
           "| worker hands over MiB |")
     print("|---|---:|" + "---:|" * len(PHASES) + "---:|---:|---:|---:|---:|")
+    rows = []
     for name in args.models:
         r = profile(name, args.steps, args.device, args.batch, args.precision)
         total = sum(r[p] for p in PHASES)
         model = r["forward"] + r["backward"] + r["optimiser"]
+        dim, stack, size, over, _ = MODELS[name]
+        cfg = CSGNetModule(dim=dim, stack=stack, size=size, model=over).config
+        rows.append({"model": name, "encoder": f"{cfg.encoder}, {64 // cfg.input_pool}^{dim} input",
+                     "head": cfg.head, "batch": r["batch"], "step_ms": 1000 * (total - r["data"]),
+                     "model_ms": 1000 * model, "sps": r["batch"] / (total - r["data"]),
+                     "sps_fly": r["batch"] / total})
         print(f"| {name} | {r['batch']} | " + " | ".join(f"{1000 * r[p]:.1f}" for p in PHASES)
               + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} | {r['batch'] / (total - r['data']):.1f}"
               f" | {1000 * r['worker']:.1f} | {r['packed_mb']:.2f} |",
               flush=True)
-    print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
+    command = "python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
+    print("command: " + command)
+    if args.out:
+        from shapeio.results import column, make_result, write_result
+
+        cols = [column("model", "model"), column("encoder", "encoder, input"), column("head", "output layer"),
+                column("batch", "batch"), column("step_ms", "step ms (data from a dataset)", 0),
+                column("model_ms", "forward + backward + optimiser ms", 0),
+                column("sps", "samples/s (data from a dataset)", 1),
+                column("sps_fly", "samples/s (programs sampled in the step)", 1)]
+        note = (f"{torch.get_num_threads()} thread(s), device {args.device}, precision {args.precision}; median of "
+                f"{args.steps} steps after one warm-up.")
+        print(f"wrote {write_result(args.out, make_result('Supervised training step', cols, rows, [note], command))}")
     return 0
 
 

@@ -16,6 +16,12 @@ from pathlib import Path
 
 
 def curve(run: Path, every: int = 1) -> str:
+    return _curve(run, every)[0]
+
+
+def _curve(run: Path, every: int = 1) -> tuple[str, list[dict], list[str]]:
+    """The markdown table, its rows as dicts (epoch, step, minutes, train_loss and the validation columns)
+    and the validation columns' tags."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     ea = EventAccumulator(str(run), size_guidance={"scalars": 0})
@@ -37,6 +43,7 @@ def curve(run: Path, every: int = 1) -> str:
     head = "| epoch | step | minutes | train loss | " + " | ".join(extra + cols) + " |"
     lines = [head, "|" + "---|" * (4 + len(extra) + len(cols))]
     steps = sorted(rows)
+    data = []
     for i, step in enumerate(steps):
         if i % every and i != len(steps) - 1:
             continue
@@ -44,11 +51,13 @@ def curve(run: Path, every: int = 1) -> str:
         tl = [e.value for e in train if e.step <= step]
         seen = [e.value for e in entropy if e.step <= step]
         ent = [f"{seen[-1] if seen else float('nan'):.3f}"] if entropy else []
+        data.append({"epoch": epochs.get(step, ""), "step": step + 1, "minutes": (r["wall"] - t0) / 60,
+                     "train_loss": tl[-1] if tl else None, **{t: r.get(t) for t in cols}})
         lines.append(f"| {epochs.get(step, '')} | {step + 1} | {(r['wall'] - t0) / 60:.1f} | "
                      f"{tl[-1] if tl else float('nan'):.3f} | "
                      + " | ".join(ent + [f"{r[t]:.4f}" if t in r else "-" for t in cols]) + " |")
     lines += _schedule(ea, tags, entropy)
-    return "\n".join(lines)
+    return "\n".join(lines), data, cols
 
 
 def _schedule(ea, tags, entropy) -> list[str]:
@@ -72,12 +81,23 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("runs", nargs="+")
     ap.add_argument("--every", type=int, default=1, help="print every N-th validation (and the last)")
+    ap.add_argument("--out", default=None, help="also write the (first) run's curve as a result file (JSON)")
+    ap.add_argument("--title", default=None, help="the result file's title (default: the run folder)")
     args = ap.parse_args(argv)
-    for run in args.runs:
+    command = "python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
+    for i, run in enumerate(args.runs):
         print(f"#### {run}\n")
-        print(curve(Path(run), args.every))
+        text, data, cols = _curve(Path(run), args.every)
+        print(text)
         print()
-    print("command: python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:])))
+        if args.out and i == 0:
+            from shapeio.results import column, make_result, write_result
+
+            columns = [column("epoch", "epoch"), column("step", "step"), column("minutes", "minutes", 1),
+                       column("train_loss", "train loss", 3)] + [column(t, t, 4) for t in cols]
+            result = make_result(args.title or f"Validation curve of {run}", columns, data, (), command)
+            print(f"wrote {write_result(args.out, result)}")
+    print("command: " + command)
     return 0
 
 
