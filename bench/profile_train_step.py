@@ -23,6 +23,7 @@ replaces each model's batch size.
 from __future__ import annotations
 
 import argparse
+import shlex
 import os
 import platform
 import sys
@@ -158,7 +159,7 @@ def main(argv=None) -> int:
               + f" | {100 * model / total:.0f}% | {r['batch'] / total:.1f} | {r['batch'] / (total - r['data']):.1f}"
               f" | {1000 * r['worker']:.1f} | {r['packed_mb']:.2f} |",
               flush=True)
-    command = "python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
+    command = "python " + shlex.join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
     print("command: " + command)
     if args.out:
         from shapeio.results import column, make_result, write_result

@@ -11,6 +11,7 @@ changes (when a ``LearningRateMonitor`` logged them) and the first and last logg
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -84,7 +85,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="also write the (first) run's curve as a result file (JSON)")
     ap.add_argument("--title", default=None, help="the result file's title (default: the run folder)")
     args = ap.parse_args(argv)
-    command = "python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
+    command = "python " + shlex.join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
     for i, run in enumerate(args.runs):
         print(f"#### {run}\n")
         text, data, cols = _curve(Path(run), args.every)

@@ -136,8 +136,13 @@ def _cell(value, col: dict) -> str:
 def markdown(result: dict) -> str:
     """The result as a markdown table, its notes, and the command and machine that produced it."""
     cols = result["columns"]
+
+    def numeric(c):
+        values = [r.get(c["key"]) for r in result["rows"]]
+        return any(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+
     lines = ["| " + " | ".join(c["label"] for c in cols) + " |",
-             "|" + "|".join("---" if i == 0 else "---:" for i in range(len(cols))) + "|"]
+             "|" + "|".join("---:" if numeric(c) else "---" for c in cols) + "|"]
     for r in result["rows"]:
         lines.append("| " + " | ".join(_cell(r.get(c["key"]), c) for c in cols) + " |")
     out = [f"**{result['title']}**", "", *lines, ""]
