@@ -1,0 +1,20 @@
+"""The docs' result tables are generated from the result files under docs/results: they must agree."""
+from pathlib import Path
+
+from shapeio.results import _BLOCK, read_result, sync
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def test_every_result_block_matches_its_file():
+    stale = sync(PAGES, ROOT, check=True)
+    assert not stale, f"run `python -m shapeio.results README.md docs/*.md`: out of step: {stale}"
+
+
+def test_every_result_file_is_shown_and_readable():
+    shown = {m.group("path") for page in PAGES for m in _BLOCK.finditer(page.read_text(encoding="utf-8"))}
+    files = {str(p.relative_to(ROOT)) for p in (ROOT / "docs" / "results").rglob("*.json")}
+    for f in files:
+        read_result(ROOT / f)
+    assert shown <= files, f"blocks naming missing files: {sorted(shown - files)}"
