@@ -23,7 +23,7 @@ from . import primitives as P
 from .primitives import SIZE
 from .lang import Draw, Program, parse
 
-__all__ = ["save_png", "voxels_to_mesh", "save_obj", "to_scad", "save_scad"]
+__all__ = ["save_png", "voxels_to_mesh", "save_obj", "to_scad", "save_scad", "depth_view", "contact_sheet", "save_sheet"]
 
 
 def _to_numpy_bool(a, name: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -175,3 +175,31 @@ def to_scad(program, dim: int | None = None, fn: int = 128, transform=None) -> s
 def save_scad(program, path, dim: int | None = None, fn: int = 128, transform=None) -> Path:
     """Write :func:`to_scad` of ``program`` to ``path`` (atomically)."""
     return atomic_write(path, to_scad(program, dim, fn, transform).encode())
+
+
+# ---------------------------------------------------------------------------------------------
+# pictures: depth views of volumes and contact sheets
+
+def depth_view(vol, axis: int) -> np.ndarray:
+    """A grey picture ``(64, 64) uint8`` of a voxel volume seen along ``axis`` (from index 0 on): each
+    pixel's first occupied voxel, near dark and far light; white where the ray meets nothing."""
+    vol = np.asarray(vol, dtype=bool)
+    hit = vol.any(axis=axis)
+    depth = np.argmax(vol, axis=axis).astype(np.float64) / max(vol.shape[axis] - 1, 1)
+    return np.where(hit, np.round(30 + 170 * depth), 255).astype(np.uint8)
+
+def contact_sheet(images, cols: int = 6):
+    """Images side by side in grey frames: bool images are drawn black on white, uint8 ones as grey levels."""
+    h, w = images[0].shape
+    rows = -(-len(images) // cols)
+    sheet = np.full((rows * (h + 2), cols * (w + 2)), 128, np.uint8)  # grey frames
+    for i, img in enumerate(images):
+        r, c = divmod(i, cols)
+        img = np.asarray(img)
+        grey = img if img.dtype == np.uint8 else np.where(img, 0, 255)
+        sheet[r * (h + 2) + 1: r * (h + 2) + 1 + h, c * (w + 2) + 1: c * (w + 2) + 1 + w] = grey
+    return sheet
+
+def save_sheet(sheet, path, scale: int = 3) -> Path:
+    """Write a :func:`contact_sheet` as a PNG, each pixel ``scale`` times (atomically)."""
+    return write_png(path, sheet, scale=scale, mkdir=True)

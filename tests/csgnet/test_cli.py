@@ -159,7 +159,7 @@ def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
     import numpy as np
     from PIL import Image
 
-    from csgnet.__main__ import depth_view
+    from csgnet.export import depth_view
 
     sheet = np.asarray(Image.open(tmp_path / "table_compare.png").convert("L"))
     assert sheet.shape == (2 * 66 * 3, 3 * 66 * 3)
@@ -171,7 +171,7 @@ def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
 def test_depth_view_shades_the_first_voxel_along_the_axis():
     import numpy as np
 
-    from csgnet.__main__ import depth_view
+    from csgnet.export import depth_view
 
     vol = np.zeros((64, 64, 64), bool)
     vol[10, 20, 0] = vol[10, 20, 63] = True  # the near voxel hides the far one

@@ -1,0 +1,107 @@
+"""What the commands of ``python -m csgnet`` share: option types, error locations, table notes and writing."""
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+from pathlib import Path
+
+from shapeio import atomic_write, refuse_overwrite
+
+from ..lang import ParseError, is_valid, parse
+
+__all__ = ["named", "located", "is_valid_text", "labelled_models", "command_line", "decoding", "measured_on",
+           "refuse_table_over_inputs", "write_table", "beam_width", "non_negative"]
+
+
+def named(stem: Path, end: str) -> Path:
+    """``stem`` with ``end`` appended (``a.v1`` -> ``a.v1.png``; ``with_suffix`` would give ``a.png``, another
+    shape's name)."""
+    return stem.with_name(stem.name + end)
+
+def located(src, err: Exception) -> str:
+    """``FILE: reason`` for an error about ``src`` (messages that already start with a path are kept)."""
+    msg = str(err)
+    return msg if msg.startswith(str(src)) else f"{src}: {msg}"
+
+def is_valid_text(text: str, dim: int = 2) -> bool:
+    try:
+        return bool(text) and is_valid(parse(text, dim))
+    except ParseError:
+        return False
+
+def labelled_models(specs, dim: int = 2):
+    """``(label, model)`` per ``[LABEL=]PATH`` spec; the shipped ``dim``-D model when there is none."""
+    from ..inference import load_model, load_pretrained
+
+    def kind(model) -> str:
+        return "CSGNetStack" if model.config.stack else "CSGNet"
+
+    if not specs:
+        model = load_pretrained(dim)
+        return [(f"{kind(model)} (shipped)", model)]
+    out = []
+    for spec in specs:
+        label, sep, path = spec.rpartition("=")
+        model = load_model(path)
+        out.append((label if sep else f"{kind(model)} ({Path(path).name})", model))
+    return out
+
+def command_line(args) -> str:
+    """The command line that ran, for the notes under written tables."""
+    return "python -m csgnet " + shlex.join(args.argv)
+
+def decoding(args) -> str:
+    """How the written tables' programs were decoded, for their notes."""
+    return f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
+
+def measured_on() -> str:
+    """Where and when the written tables' times were measured, for their notes."""
+    import datetime
+    import platform
+
+    import torch
+
+    n = torch.get_num_threads()
+    where = (f"{platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, {n} thread{'s' if n != 1 else ''}"
+             f"{', CUDA available' if torch.cuda.is_available() else ''}")
+    return f"times measured on {where}, {datetime.date.today().isoformat()} (the load of other jobs is not recorded)"
+
+def refuse_table_over_inputs(args) -> None:
+    """Stop before any work when a table's ``--out`` is one of its input files (weights, silhouettes)."""
+    if not getattr(args, "out", None):
+        return
+    weights = getattr(args, "weights", None) or []
+    inputs = [w.rpartition("=")[2] for w in ([weights] if isinstance(weights, str) else weights)]
+    inputs += [getattr(args, "silhouettes", None)]
+    try:
+        refuse_overwrite([args.out], [p for p in inputs if p and Path(p).is_file()])
+    except FileExistsError as e:
+        raise SystemExit(f"error: {e}") from None
+
+def write_table(text: str, out) -> None:
+    print(text)
+    if out:
+        atomic_write(out, text, mkdir=True)
+        print(f"wrote {out}")
+
+def beam_width(text: str) -> int:
+    from ..decode import check_beam  # csgnet.decode imports torch: loaded only when --beam is given
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    try:
+        return check_beam(value, "the beam width")
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+def non_negative(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return value

@@ -1,0 +1,179 @@
+"""``evaluate``, ``table4``, ``table6`` and ``export-weights``: the papers' tables and shipped weights files."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from shapeio import refuse_overwrite
+
+from ..shapes2d import load_silhouettes
+from ..vocab import vocabulary
+from .common import (beam_width, command_line, decoding, labelled_models, located, measured_on, non_negative,
+                     refuse_table_over_inputs, write_table)
+
+
+def cmd_evaluate(args) -> int:
+    from ..data import load_dataset
+    from ..paper.tables import evaluate_model, markdown_tables, nearest_neighbour
+
+    refuse_table_over_inputs(args)
+    tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
+    tests = {L: p[: args.per_length] for L, p in tests.items()}
+    rows = []
+    if args.nn_train != 0:
+        train = [p for L, ps in sorted(load_dataset(args.data, args.dim, "train", args.lengths).items()) for p in ps]
+        if args.nn_train > 0:
+            train = train[: args.nn_train]
+        print(f"nearest neighbour over {len(train)} training programs ...", flush=True)
+        rows.append(nearest_neighbour(train, tests, args.dim))
+    for name, model in labelled_models(args.weights, args.dim):
+        if model.config.dim != args.dim:
+            raise SystemExit(f"error: {name} is a {model.config.dim}D model, not {args.dim}D")
+        print(f"decoding with {name} ...", flush=True)
+        rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
+                               constrained=args.constrained)
+        if args.refined:
+            from ..paper.tables import evaluate_refined
+
+            print(f"parsing with refinement ({name}, {args.refined} per length) ...", flush=True)
+            rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined))
+    note = f"`{command_line(args)}`; beam mode {args.mode!r}, {decoding(args)}; {measured_on()}."
+    if args.out and str(args.out).endswith(".json"):
+        from shapeio.results import markdown, write_result
+
+        from ..paper.tables import table_result
+
+        result = table_result(rows, args.dim, [f"Beam mode {args.mode!r}, {decoding(args)}; {measured_on()}."],
+                              command_line(args))
+        print(markdown(result))
+        print(f"wrote {write_result(args.out, result)}")
+        return 0
+    write_table(markdown_tables(rows, args.dim, note), args.out)
+    return 0
+
+def cmd_export_weights(args) -> int:
+    from ..inference import export_weights
+
+    if not Path(args.checkpoint).is_file():
+        print(f"error: {args.checkpoint}: no such checkpoint file", file=sys.stderr)
+        return 2
+    try:
+        refuse_overwrite([args.out], [args.checkpoint])
+        path = export_weights(args.checkpoint, args.out, half=not args.float32)
+    except ValueError as e:  # read_checkpoint names the file and what is wrong with it
+        print(f"error: {e}; `export-weights` reads the .ckpt files that training writes", file=sys.stderr)
+        return 2
+    except FileExistsError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"error: {located(args.out, e)}", file=sys.stderr)
+        return 2
+    print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
+    return 0
+
+# The shipped CSGNet and small CSGNetStack (csgnetstack2d.pt, the starting point of the RL run), supervised and
+# RL-tuned on the silhouettes (docs/benchmarks.md says how each was trained): Table 4's rows when no --weights
+# are given. The medium CSGNetStack (load_pretrained(2, kind="csgnetstack")) is added with --weights.
+TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2d.pt"),
+                 ("CSGNetStack supervised", "csgnetstack2d.pt"), ("CSGNetStack RL", "rl_csgnetstack2d.pt"))
+
+def cmd_table4(args) -> int:
+    from ..inference import WEIGHTS
+    from ..paper.protocols import subset, table4, table4_markdown
+
+    refuse_table_over_inputs(args)
+    test = load_silhouettes("test", args.silhouettes)
+    idx = subset(len(test), None if args.images <= 0 else args.images, args.seed)
+    train = None if args.no_nn else load_silhouettes("train", args.silhouettes)
+    iters = [None if i in ("inf", "none") else int(i) for i in args.iterations]
+    specs = args.weights or [f"{label}={WEIGHTS / name}" for label, name in TABLE4_MODELS]
+    rows = table4(labelled_models(specs), test[idx], train, tuple(args.beams), iters,
+                  constrained=args.constrained, progress=lambda s: print(s, flush=True))
+    note = (f"`{command_line(args)}`; {len(idx)} of {len(test)} test silhouettes "
+            f"(seed {args.seed}); {decoding(args)}; {measured_on()}.")
+    write_table(table4_markdown(rows, note, iters), args.out)
+    return 0
+
+def cmd_table6(args) -> int:
+    from ..paper.protocols import table6, table6_markdown
+
+    refuse_table_over_inputs(args)
+    lengths = args.lengths or [3, 5, 7, 9, 11, 13]
+    if args.data:
+        from ..data import load_dataset
+
+        tests = load_dataset(args.data, 2, "test", lengths, errors="raise")
+        programs = [p for L in sorted(tests) for p in tests[L][: args.per_length]]
+        source = f"{args.data} (test split, {args.per_length} per length)"
+    else:
+        from ..synth import sample_programs
+
+        rng = np.random.default_rng(args.seed)
+        vocab = vocabulary(2)
+        programs = [vocab.decode(r) for L in lengths for r in sample_programs(2, L, args.per_length, rng)]
+        source = f"sampled with seed {args.seed}, {args.per_length} per length"
+    (label, model), = labelled_models([args.weights] if args.weights else [])
+    rows = table6(model, programs, tuple(args.beams), constrained=args.constrained,
+                  progress=lambda s: print(s, flush=True))
+    note = (f"`{command_line(args)}`; {label}; targets: {source}, lengths "
+            f"{', '.join(map(str, lengths))}; {decoding(args)}; {measured_on()}.")
+    write_table(table6_markdown(rows, note), args.out)
+    return 0
+
+
+def register(sub) -> None:
+    """Add this module's subcommands to ``python -m csgnet``."""
+    e = sub.add_parser("evaluate", help="Table 3 / Table 5 style evaluation on a synthetic test split")
+    e.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D (default 2)")
+    e.add_argument("--data", required=True, help="dataset folder written by `generate`")
+    e.add_argument("--weights", nargs="*", default=None, help="weights files (default: the shipped model)")
+    e.add_argument("--beams", type=beam_width, nargs="+", default=[1, 5, 10], help="beam widths (default 1 5 10)")
+    e.add_argument("--lengths", type=int, nargs="*", default=None, help="program lengths (default: all)")
+    e.add_argument("--per-length", type=int, default=None, help="test programs per length (default: all)")
+    e.add_argument("--nn-train", type=int, default=-1, help="training programs for the nearest neighbour "
+                   "(-1: all, 0: skip)")
+    e.add_argument("--mode", choices=("improved", "reference"), default="improved",
+                   help="beam search: improved, or the published reference behaviour")
+    e.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
+    e.add_argument("--refined", type=non_negative, default=0, metavar="N",
+                   help="add a row of the whole parse (the widest beam, the closest beam, refinement, the short "
+                   "rule: what parse --select match --refine writes) on the first N test programs per length")
+    e.add_argument("--out", default=None, help="write the table here: FILE.json as a result file (data that "
+                   "docs tables are generated from, python -m shapeio.results), any other name as markdown")
+    e.set_defaults(func=cmd_evaluate)
+
+    x = sub.add_parser("export-weights", help="write a training checkpoint's model as a small weights file")
+    x.add_argument("checkpoint", help="a Lightning .ckpt file written by training")
+    x.add_argument("--out", required=True, help="the weights file to write (.pt)")
+    x.add_argument("--float32", action="store_true", help="keep float32 (default: float16 storage)")
+    x.set_defaults(func=cmd_export_weights)
+
+    t4 = sub.add_parser("table4", help="Table 4 protocol: parsing the test silhouettes, with refinement")
+    t4.add_argument("--weights", nargs="*", default=None,
+                    help="2D weights files or checkpoints, optionally LABEL=PATH (default: the four shipped "
+                    "2D models, supervised and RL-tuned)")
+    t4.add_argument("--images", type=int, default=50, help="test silhouettes evaluated (0: all 1,386)")
+    t4.add_argument("--seed", type=int, default=0, help="seed of the subset")
+    t4.add_argument("--beams", type=beam_width, nargs="+", default=[1, 10], help="beam widths (default 1 10)")
+    t4.add_argument("--iterations", nargs="+", default=["0", "1", "2", "4", "10", "inf"],
+                    help="refinement iteration limits ('inf': to convergence)")
+    t4.add_argument("--silhouettes", default=None, help="a silhouette file (default: the shipped set)")
+    t4.add_argument("--no-nn", action="store_true", help="skip the nearest-neighbour row")
+    t4.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
+    t4.add_argument("--out", default=None, help="write the markdown table here")
+    t4.set_defaults(func=cmd_table4)
+
+    t6 = sub.add_parser("table6", help="Table 6 protocol: primitive detection AP on synthetic 2D programs")
+    t6.add_argument("--weights", default=None, help="2D weights file or checkpoint, optionally LABEL=PATH "
+                    "(default: the shipped model)")
+    t6.add_argument("--data", default=None, help="dataset folder written by `generate` (default: sample programs)")
+    t6.add_argument("--per-length", type=int, default=100, help="test programs per length")
+    t6.add_argument("--lengths", type=int, nargs="*", default=None, help="program lengths (default 3..13)")
+    t6.add_argument("--seed", type=int, default=0, help="seed for sampled programs")
+    t6.add_argument("--beams", type=beam_width, nargs="+", default=[10, 40], help="beam widths (default 10 40)")
+    t6.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
+    t6.add_argument("--out", default=None, help="write the markdown table here")
+    t6.set_defaults(func=cmd_table6)
