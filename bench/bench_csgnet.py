@@ -12,6 +12,7 @@ batch of the configured size, targets and stack traces rendered inside the step 
 from __future__ import annotations
 
 import argparse
+import shlex
 import os
 import platform
 import sys
@@ -83,7 +84,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--device", default="auto")
-    ap.add_argument("--weights", default=None, help="2D weights for the beam benchmark (default: shipped)")
+    ap.add_argument("--weights", nargs="+", default=None,
+                    help="2D weights files for the beam benchmark, optionally LABEL=PATH (default: the shipped default)")
+    ap.add_argument("--out", default=None, help="also write the beam-search figures as a result file (JSON)")
     ap.add_argument("--images", type=int, default=200)
     ap.add_argument("--batch", type=int, default=16, help="images decoded together (default 16, infer's)")
     ap.add_argument("--width", type=int, default=10)
@@ -96,15 +99,29 @@ def main(argv=None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     device = _device(args.device)
-    model = (load_model(args.weights) if args.weights else load_pretrained(2)).to(device)
-    name = ("CSGNetStack" if model.config.stack else "CSGNet") + f" hidden {model.config.hidden}"
     print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
           f"{torch.__version__}, threads {torch.get_num_threads()}, device {device}, "
           f"load average {os.getloadavg()[0]:.2f}")
-    ips = bench_beam(model, args.images, args.batch, args.width, args.constrained, device, args.lengths)
-    print(f"beam search k={args.width} ({name}, batch {args.batch}, targets of lengths "
-          f"{', '.join(map(str, args.lengths))}"
-          f"{', constrained' if args.constrained else ''}): {ips:.1f} images/s")
+    rows = []
+    for spec in args.weights or [None]:
+        label, _, path = (spec or "").rpartition("=")
+        model = (load_model(path) if path else load_pretrained(2)).to(device)
+        name = label or (("CSGNetStack" if model.config.stack else "CSGNet") + f" hidden {model.config.hidden}")
+        ips = bench_beam(model, args.images, args.batch, args.width, args.constrained, device, args.lengths)
+        print(f"beam search k={args.width} ({name}, batch {args.batch}, targets of lengths "
+              f"{', '.join(map(str, args.lengths))}"
+              f"{', constrained' if args.constrained else ''}): {ips:.1f} images/s")
+        rows.append({"model": name, "beam": args.width, "batch": args.batch, "threads": torch.get_num_threads(),
+                     "images_per_s": ips})
+    if args.out:
+        from shapeio.results import column, make_result, write_result
+
+        cols = [column("model", "model"), column("beam", "beam width"), column("batch", "images per batch"),
+                column("threads", "threads"), column("images_per_s", "images/s", 1)]
+        note = (f"{args.images} synthetic targets, lengths {', '.join(map(str, args.lengths))} in equal counts; every "
+                f"beam's program rendered (what infer does before scoring); device {device}.")
+        command = "python " + shlex.join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
+        print(f"wrote {write_result(args.out, make_result('Beam-search decoding speed', cols, rows, [note], command))}")
     if not args.skip_train:
         for dim, stack, size, over, batch in [
                 (2, False, "small", {}, 96), (2, True, "small", {}, 96),
