@@ -55,6 +55,7 @@ def main(argv=None) -> int:
     ap.add_argument("--penalties", type=float, nargs="+", default=list(DEFAULT_PENALTIES))
     ap.add_argument("--refine-iters", type=int, default=None, help="Powell iterations (default: to convergence)")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--out", default=None, help="also write the table as a result file (JSON)")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     if 0.0 not in args.penalties:
@@ -100,7 +101,18 @@ def main(argv=None) -> int:
     chosen = choose_penalty(rows, MAX_VAL_IOU_COST)
     print(f"chosen λ: {chosen:g} (the largest whose mean IoU is at most {100 * MAX_VAL_IOU_COST:g} points below "
           f"λ = 0's); csgnet.rewrite.LENGTH_PENALTY[{args.dim}] is {LENGTH_PENALTY[args.dim]:g}")
-    print("command: python " + " ".join(shlex.quote(a) for a in sys.argv))
+    command = "python " + shlex.join(sys.argv if argv is None else [sys.argv[0], *argv])
+    print("command: " + command)
+    if args.out:
+        from shapeio.results import column, make_result, write_result
+
+        cols = [column("penalty", "λ (IoU per primitive)"), column("iou", "mean IoU", 2, 100.0),
+                column("primitives", "mean primitives", 2), column("truth", "true primitives", 2),
+                column("length_error", "mean abs. length error", 3), column("longer", "longer than the truth (%)", 1, 100.0)]
+        notes = [f"{len(programs)} validation programs ({args.per_length} per length) of {args.data}, beam {args.beam}, "
+                 f"model {args.weights or 'the shipped default'}. Chosen: λ = {chosen:g}, the largest whose mean IoU is at "
+                 f"most {100 * MAX_VAL_IOU_COST:g} points below λ = 0's."]
+        print(f"wrote {write_result(args.out, make_result(f'The short rule: price per primitive ({args.dim}D)', cols, rows, notes, command))}")
     return 0
 
 

@@ -1,17 +1,17 @@
 """``parse``: shapes (images, grids, meshes) to programs, with the files a user opens."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from shapeio import atomic_write, refuse_overwrite
+from shapeio.results import column, make_result, write_result
 
 from .. import export, render
 from ..lang import ParseError
-from .common import beam_width, is_valid_text, located, named, non_negative
+from .common import beam_width, command_line, is_valid_text, located, named, non_negative
 
 
 def _output_stems(inputs, out: Path) -> list[Path]:
@@ -116,6 +116,22 @@ def _penalty(dim: int) -> float:
 
     return LENGTH_PENALTY[dim]
 
+RESULT_COLUMNS = (("input", "input", None, 1.0), ("decoded", "decoded program", None, 1.0),
+                  ("iou", "IoU (%)", 1, 100.0), ("chamfer", "chamfer (px)", 3, 1.0), ("primitives", "primitives", None, 1.0),
+                  ("refined", "refined program", None, 1.0), ("iou_refined", "IoU refined (%)", 1, 100.0),
+                  ("chamfer_refined", "chamfer refined (px)", 3, 1.0),
+                  ("primitives_refined", "primitives refined", None, 1.0), ("error", "error", None, 1.0))
+
+
+def _results(records: list[dict], args) -> dict:
+    """The inputs' records as a result file (:mod:`shapeio.results`): one row per input, in order."""
+    keys = [c[0] for c in RESULT_COLUMNS]
+    present = [c for c in RESULT_COLUMNS if any(r.get(c[0]) is not None for r in records)] or RESULT_COLUMNS[:1]
+    rows = [{**{k: None for k in keys}, **r} for r in records]
+    cols = [column(k, label, digits, scale) for k, label, digits, scale in present]
+    return make_result("Shapes parsed into programs", cols, rows, command=command_line(args))
+
+
 def _results_path(out: Path) -> Path:
     """``out/results.json``, or ``results_2.json``, ... : the first name not taken (never overwritten)."""
     path, k = out / "results.json", 2
@@ -158,8 +174,7 @@ def cmd_parse(args) -> int:
             records.append({"input": str(src), "error": located(src, e)})
             status = 2
     if out.is_dir():
-        results = _results_path(out)
-        atomic_write(results, json.dumps(records, indent=1) + "\n")
+        results = write_result(_results_path(out), _results(records, args))
         print(f"results of the {len(records)} inputs: {results}")
     return status
 

@@ -229,7 +229,7 @@ def test_parse_writes_a_results_file_per_batch_and_never_over_one(tmp_path, caps
     assert main(["parse", str(src / "ring.npy"), str(src / "bad.png"), "--beam", "3", "--refine",
                  "--out", str(out)]) == 2
     text = capsys.readouterr().out
-    records = json.loads((out / "results.json").read_text())
+    records = json.loads((out / "results.json").read_text())["rows"]
     assert [r["input"] for r in records] == [str(src / "ring.npy"), str(src / "bad.png")]
     ring, bad = records
     assert ring["decoded"] == "c(32,32,28)c(32,32,12)-" and ring["primitives"] == 2 and ring["iou"] == 1.0
@@ -240,8 +240,11 @@ def test_parse_writes_a_results_file_per_batch_and_never_over_one(tmp_path, caps
     (out / "other").mkdir()
     assert main(["render", "c(20,20,8)", "-o", str(src / "dot.png")]) == 0
     assert main(["parse", str(src / "dot.png"), "--beam", "1", "--out", str(out)]) == 0
-    assert json.loads((out / "results_2.json").read_text())[0]["input"] == str(src / "dot.png")
-    assert len(json.loads((out / "results.json").read_text())) == 2  # the first batch's file is untouched
+    assert json.loads((out / "results_2.json").read_text())["rows"][0]["input"] == str(src / "dot.png")
+    assert len(json.loads((out / "results.json").read_text())["rows"]) == 2  # the first batch's file is untouched
+    from shapeio.results import markdown, read_result
+    table = markdown(read_result(out / "results.json"))  # a result file: the docs can show it as a table
+    assert "| input | decoded program | IoU (%) |" in table and "python -m csgnet parse" in table
 
 
 def test_parse_reports_a_bad_weights_file_once_before_any_input(tmp_path, capsys):
