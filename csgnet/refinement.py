@@ -482,7 +482,7 @@ def program_scores(programs: Sequence[Program | str], target) -> list[tuple[floa
 
 def refine_guarded(start: Program | str, programs: Sequence[Program | str], target, rule: str = "short",
                    maxiter: int | None = None, max_iou_drop: float = MAX_IOU_DROP,
-                   penalty: float | None = None) -> Refined:
+                   penalty: float | None = None, use_graft: bool = True) -> Refined:
     """Refine candidates and decide what a parser should write.
 
     2D candidates are refined by chamfer (the paper's objective), 3D ones by IoU.
@@ -502,11 +502,13 @@ def refine_guarded(start: Program | str, programs: Sequence[Program | str], targ
         max_iou_drop: the IoU loss the ``"guarded"`` rule tolerates.
         penalty: the ``"short"`` rule's IoU per primitive (default
             :data:`csgnet.rewrite.LENGTH_PENALTY` of the dimension).
+        use_graft: the ``"short"`` rule then tries adding primitives of the other candidates to its choice
+            (:func:`csgnet.rewrite.graft`), refines a grafted program again and keeps it if it scores better.
 
     Returns:
         A :class:`Refined` with the chosen program and both programs' IoU and chamfer.
     """
-    from .rewrite import choose, prune
+    from .rewrite import choose, graft, prune
 
     if rule not in RULES:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
@@ -524,6 +526,12 @@ def refine_guarded(start: Program | str, programs: Sequence[Program | str], targ
                 if c not in cands:
                     cands.append(c)
         chosen = cands[choose(cands, target, penalty)[0]]
+        if use_graft:
+            grafted = graft(chosen, cands, target, penalty)
+            if grafted != chosen:
+                polished = refine_each([grafted], target, maxiter=maxiter)[0].program
+                more = [grafted, polished, prune(polished, target, penalty)]
+                chosen = ([chosen] + more)[choose([chosen] + more, target, penalty)[0]]
     elif rule == "guarded":
         before_iou = program_scores([start, result.program], target)
         chosen = start if before_iou[1][0] < before_iou[0][0] - max_iou_drop else result.program

@@ -4,8 +4,10 @@ candidates by IoU minus a price per primitive.
 A decoded or refined program may carry primitives that change little of its shape (a small circle
 subtracted where there is nothing, a union with a sliver). :func:`prune` removes them: at every
 operator it tries keeping only the left or only the right operand, and takes the change that raises
-``IoU - penalty * primitives`` most, until no change raises it. :func:`choose` picks, among
-candidate programs, the one with the highest ``IoU - penalty * primitives`` (ties: the earlier).
+``IoU - penalty * primitives`` most, until no change raises it. :func:`graft` goes the other way: it
+adds a primitive of another candidate (e.g. another beam) by union, intersection or difference where
+that raises the same objective. :func:`choose` picks, among candidate programs, the one with the
+highest ``IoU - penalty * primitives`` (ties: the earlier).
 
 The price ``LENGTH_PENALTY`` (IoU per primitive, by dimension) is chosen on the synthetic validation
 split by ``python bench/length_penalty.py`` (docs/refinement.md): the largest price whose chosen
@@ -24,7 +26,8 @@ from typing import Sequence
 
 from .lang import Draw, Program, is_valid, parse
 
-__all__ = ["LENGTH_PENALTY", "MAX_PRUNE_ROUNDS", "MAX_VAL_IOU_COST", "objective", "removals", "prune", "choose"]
+__all__ = ["LENGTH_PENALTY", "MAX_PRUNE_ROUNDS", "MAX_GRAFT_ROUNDS", "MAX_GRAFT_DRAWS", "MAX_VAL_IOU_COST", "objective",
+           "removals", "prune", "graft", "choose"]
 
 LENGTH_PENALTY = {2: 0.025, 3: 0.005}
 """IoU given up per primitive saved (by dimension), chosen on the validation split (module docstring)."""
@@ -33,6 +36,12 @@ MAX_VAL_IOU_COST = 0.005
 MAX_PRUNE_ROUNDS = 16
 """Removals :func:`prune` makes at most (each removes at least one primitive, so 16 covers the
 longest decoded programs, 7 primitives in 2D and 4 in 3D, with room to spare)."""
+
+
+MAX_GRAFT_ROUNDS = 3
+"""Primitives :func:`graft` adds at most."""
+MAX_GRAFT_DRAWS = 8
+"""The most primitives a grafted program may reach (twice the longest 3D training program's)."""
 
 
 def _program(program: Program | str, dim: int) -> Program:
@@ -121,3 +130,36 @@ def choose(programs: Sequence[Program | str], target, penalty: float | None = No
     ious = _scores(progs, t)
     scored = [objective(s, p, penalty) for s, p in zip(ious, progs)]
     return max(range(len(progs)), key=lambda j: (scored[j], -j)), ious
+
+
+def graft(program: Program | str, donors: Sequence[Program | str], target, penalty: float | None = None,
+          max_rounds: int = MAX_GRAFT_ROUNDS, max_draws: int = MAX_GRAFT_DRAWS) -> Program:
+    """Combine ``program`` with primitives of other programs (e.g. the other beams) while that raises
+    :func:`objective`: each round tries the program with each donor primitive added by union, intersection
+    and difference at its end (``P q +``, ``P q *``, ``P q -``) and keeps the best change, until no change
+    raises the objective, ``max_rounds`` changes were made, or the program has ``max_draws`` primitives.
+    Returns ``program`` itself when it is invalid or nothing helps."""
+    from .lang import OPERATORS, Op
+    from .refinement import _check_target
+
+    t = _check_target(target)
+    penalty = LENGTH_PENALTY[t.ndim] if penalty is None else float(penalty)
+    best = _program(program, t.ndim)
+    if not is_valid(best):
+        return best
+    pool: list[Draw] = []
+    for d in donors:
+        for tok in _program(d, t.ndim).draws:
+            if tok not in pool:
+                pool.append(tok)
+    best_score = objective(_scores([best], t)[0], best, penalty)
+    for _ in range(int(max_rounds)):
+        if not pool or len(best.draws) >= max_draws:
+            break
+        cands = [Program(best.tokens + (q, Op(op)), t.ndim) for q in pool for op in OPERATORS]
+        scored = [objective(s, c, penalty) for s, c in zip(_scores(cands, t), cands)]
+        i = max(range(len(cands)), key=lambda j: (scored[j], -j))
+        if scored[i] <= best_score:
+            break
+        best, best_score = cands[i], scored[i]
+    return best

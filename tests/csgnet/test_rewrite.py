@@ -67,3 +67,26 @@ def test_short_rule_writes_the_exact_two_circle_ring():
     paper = refine_guarded("c(32,32,28)c(32,32,12)-", [bloated], target, rule="chamfer")
     assert len(paper.program.draws) > 2
     assert LENGTH_PENALTY[2] > 0 and LENGTH_PENALTY[3] > 0
+
+
+def test_graft_adds_a_donor_primitive_only_where_it_pays():
+    from csgnet.rewrite import MAX_GRAFT_DRAWS, graft
+    ring = csgnet.render("c(32,32,28)c(32,32,12)-")[0]
+    assert graft("c(32,32,28)", ["c(32,32,12)c(20,20,8)+"], ring).text() == "c(32,32,28)c(32,32,12)-"
+    assert graft("c(32,32,28)c(32,32,12)-", ["c(20,20,8)"], ring).text() == "c(32,32,28)c(32,32,12)-"
+    assert graft("c(32,32,28)", [], ring).text() == "c(32,32,28)"
+    # a hole of 113 of 2,460 pixels: worth a primitive at the default price, not at a price of 0.5
+    small_hole = csgnet.render("c(32,32,28)c(32,32,6)-")[0]
+    assert graft("c(32,32,28)", ["c(32,32,6)"], small_hole, penalty=0.5).text() == "c(32,32,28)"
+    assert graft("c(32,32,28)", ["c(32,32,6)"], small_hole).text() == "c(32,32,28)c(32,32,6)-"
+    many = "".join(f"c({8 + 4 * i},32,4)" for i in range(MAX_GRAFT_DRAWS)) + "+" * (MAX_GRAFT_DRAWS - 1)
+    assert graft(many, ["c(32,32,28)"], ring).text() == parse(many).text()  # at the size limit: unchanged
+
+
+def test_short_rule_grafts_a_missing_part_from_another_beam():
+    target = csgnet.render("c(20,32,12)s(44,32,12)+")[0]
+    without = refine_guarded("c(20,32,12)", ["c(20,32,12)", "s(44,32,12)c(8,8,8)*"], target, maxiter=0,
+                             use_graft=False)
+    assert without.program.text() == "c(20,32,12)"
+    grafted = refine_guarded("c(20,32,12)", ["c(20,32,12)", "s(44,32,12)c(8,8,8)*"], target, maxiter=0)
+    assert grafted.program.text() == "c(20,32,12)s(44,32,12)+" and grafted.after[0] == 1.0
