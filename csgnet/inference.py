@@ -341,7 +341,7 @@ class Parsed:
 
 def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, beam: int = 10,
                 select: str = "match", refine: bool = True, rule: str = "short", refine_iters: int | None = None,
-                constrained: bool = True, graft: bool = True) -> Parsed:
+                constrained: bool = True, graft: bool = True, extend: bool = True) -> Parsed:
     """Infer a program for one shape the way ``python -m csgnet parse --select match --refine`` does.
 
     Args:
@@ -357,6 +357,8 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
         constrained: grammar-constrained decoding.
         graft: with the ``"short"`` rule, also try adding other beams' primitives to the choice
             (:func:`csgnet.rewrite.graft`).
+        extend: with the ``"short"`` rule, also try adding any primitive of the vocabulary
+            (:func:`csgnet.rewrite.extend`).
     """
     from .lang import is_valid
 
@@ -384,6 +386,7 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
                 continue
             if is_valid(p):
                 beams.append(p)
-        refined = refine_guarded(program, beams, shape, rule=rule, maxiter=refine_iters, use_graft=graft)
+        refined = refine_guarded(program, beams, shape, rule=rule, maxiter=refine_iters, use_graft=graft,
+                                 use_extend=extend)
         program = refined.program
     return Parsed(program, decoded, refined, shape, frame)

@@ -86,7 +86,20 @@ def test_graft_adds_a_donor_primitive_only_where_it_pays():
 def test_short_rule_grafts_a_missing_part_from_another_beam():
     target = csgnet.render("c(20,32,12)s(44,32,12)+")[0]
     without = refine_guarded("c(20,32,12)", ["c(20,32,12)", "s(44,32,12)c(8,8,8)*"], target, maxiter=0,
-                             use_graft=False)
+                             use_graft=False, use_extend=False)
     assert without.program.text() == "c(20,32,12)"
-    grafted = refine_guarded("c(20,32,12)", ["c(20,32,12)", "s(44,32,12)c(8,8,8)*"], target, maxiter=0)
+    grafted = refine_guarded("c(20,32,12)", ["c(20,32,12)", "s(44,32,12)c(8,8,8)*"], target, maxiter=0,
+                             use_extend=False)
     assert grafted.program.text() == "c(20,32,12)s(44,32,12)+" and grafted.after[0] == 1.0
+
+
+def test_extend_finds_the_missing_primitive_in_the_whole_vocabulary():
+    from csgnet.rewrite import extend
+    target = csgnet.render("s(16,16,12)c(16,16,8)-c(48,48,12)+")[0]  # primitives of the vocabulary's grid
+    got = extend("s(16,16,12)", target)
+    assert got.text() == "s(16,16,12)c(48,48,12)+c(16,16,8)-"  # the larger gain first
+    assert program_scores([got], target)[0] == (1.0, 0.0)
+    assert extend(got, target) == got  # nothing left to add
+    assert extend("s(16,16,12)", target, penalty=1.0).text() == "s(16,16,12)"  # nothing pays at that price
+    vol = csgnet.render("sp(32,32,32,16)cy(32,32,24,8,28)-", dim=3)[0]
+    assert extend("sp(32,32,32,16)", vol).text() == "sp(32,32,32,16)cy(32,32,24,8,28)-"
