@@ -3,10 +3,9 @@ the validation split of a synthetic dataset.
 
 For each validation program (``--per-length`` per length) the script renders its target, decodes it with
 beam search (``--beam``), takes the beam closest to the target as the start (``parse --select match``),
-refines every valid beam (``csgnet.refinement.refine_each``: chamfer in 2D, IoU in 3D) and then, for each
-price λ of ``--penalties``, chooses among the start and the refined beams, each also pruned
-(``csgnet.rewrite.prune``), the program with the highest IoU − λ · primitives (what ``parse --refine`` does
-with ``--refine-rule short``). It prints, per λ, the chosen programs' mean IoU, mean primitives, the mean
+and then, for each price λ of ``--penalties``, runs the short refinement rule with that price
+(``csgnet.refinement.refine_guarded(..., penalty=λ)``: every valid beam refined, pruned, the choice grafted
+and extended; what ``parse --refine`` does). It prints, per λ, the chosen programs' mean IoU, mean primitives, the mean
 absolute difference from the true program's primitives, and the share of programs longer than the truth;
 then the chosen λ: the largest price whose mean IoU is at most ``MAX_VAL_IOU_COST`` below λ = 0's (the shortest
 programs for a bounded cost). The true programs' length is shown, not used: the generator's programs are
@@ -32,8 +31,8 @@ from csgnet import render
 from csgnet.data import load_dataset
 from csgnet.inference import infer, load_model, load_pretrained
 from csgnet.lang import is_valid, parse
-from csgnet.refinement import program_scores, refine_each
-from csgnet.rewrite import LENGTH_PENALTY, MAX_VAL_IOU_COST, objective, prune
+from csgnet.refinement import refine_guarded
+from csgnet.rewrite import LENGTH_PENALTY, MAX_VAL_IOU_COST
 
 DEFAULT_PENALTIES = (0.0, 0.001, 0.0025, 0.005, 0.0075, 0.01, 0.015, 0.02, 0.03)
 
@@ -68,20 +67,12 @@ def main(argv=None) -> int:
     per_penalty: dict[float, list[tuple[float, int, int]]] = {lam: [] for lam in args.penalties}
     for prog, target, start in zip(programs, targets, starts):
         valid = [parse(b, args.dim) for b in start.beams if b and _valid(b, args.dim)]
-        base = [start.program] if start.valid else []
-        refined = [r.program for r in refine_each(valid, target, maxiter=args.refine_iters)] if valid else []
         for lam in args.penalties:
-            cands = []
-            for p in base + refined:
-                for c in (p, prune(p, target, lam)):
-                    if c not in cands:
-                        cands.append(c)
-            if not cands:
+            if not start.valid:
                 per_penalty[lam].append((0.0, 0, len(prog.draws)))
                 continue
-            ious = [i for i, _ in program_scores(cands, target)]
-            j = max(range(len(cands)), key=lambda k: (objective(ious[k], cands[k], lam), -k))
-            per_penalty[lam].append((ious[j], len(cands[j].draws), len(prog.draws)))
+            ref = refine_guarded(start.program, valid, target, maxiter=args.refine_iters, penalty=lam)
+            per_penalty[lam].append((ref.after[0], len(ref.program.draws), len(prog.draws)))
     seconds = time.process_time() - t0
     rows = []
     for lam, vals in per_penalty.items():

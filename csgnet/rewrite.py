@@ -94,6 +94,22 @@ def _scores(programs: Sequence[Program], target) -> list[float]:
     return [iou for iou, _ in program_scores(programs, target)]
 
 
+def _improve(best: Program, changes, target, penalty: float, max_rounds: int) -> Program:
+    """Hill climbing on :func:`objective`: each round takes the best of ``changes(best)`` (the earliest on
+    ties) if it scores higher, for at most ``max_rounds`` rounds."""
+    best_score = objective(_scores([best], target)[0], best, penalty)
+    for _ in range(int(max_rounds)):
+        cands = changes(best)
+        if not cands:
+            break
+        scored = [objective(s, c, penalty) for s, c in zip(_scores(cands, target), cands)]
+        i = max(range(len(cands)), key=lambda j: (scored[j], -j))
+        if scored[i] <= best_score:
+            break
+        best, best_score = cands[i], scored[i]
+    return best
+
+
 def prune(program: Program | str, target, penalty: float | None = None,
           max_rounds: int = MAX_PRUNE_ROUNDS) -> Program:
     """Remove operands while that raises :func:`objective` (best removal first); returns the program
@@ -112,17 +128,7 @@ def prune(program: Program | str, target, penalty: float | None = None,
     best = _program(program, t.ndim)
     if not is_valid(best):
         return best
-    best_score = objective(_scores([best], t)[0], best, penalty)
-    for _ in range(int(max_rounds)):
-        cands = removals(best)
-        if not cands:
-            break
-        scored = [objective(s, c, penalty) for s, c in zip(_scores(cands, t), cands)]
-        i = max(range(len(cands)), key=lambda j: (scored[j], -j))
-        if scored[i] <= best_score:
-            break
-        best, best_score = cands[i], scored[i]
-    return best
+    return _improve(best, removals, t, penalty, max_rounds)
 
 
 def choose(programs: Sequence[Program | str], target, penalty: float | None = None) -> tuple[int, list[float]]:
@@ -160,17 +166,12 @@ def graft(program: Program | str, donors: Sequence[Program | str], target, penal
         for tok in _program(d, t.ndim).draws:
             if tok not in pool:
                 pool.append(tok)
-    best_score = objective(_scores([best], t)[0], best, penalty)
-    for _ in range(int(max_rounds)):
-        if not pool or len(best.draws) >= max_draws:
-            break
-        cands = [Program(best.tokens + (q, Op(op)), t.ndim) for q in pool for op in OPERATORS]
-        scored = [objective(s, c, penalty) for s, c in zip(_scores(cands, t), cands)]
-        i = max(range(len(cands)), key=lambda j: (scored[j], -j))
-        if scored[i] <= best_score:
-            break
-        best, best_score = cands[i], scored[i]
-    return best
+    def additions(p: Program) -> list[Program]:
+        if len(p.draws) >= max_draws:
+            return []
+        return [Program(p.tokens + (q, Op(op)), t.ndim) for q in pool for op in OPERATORS]
+
+    return _improve(best, additions, t, penalty, max_rounds)
 
 
 @lru_cache(maxsize=2)
