@@ -165,6 +165,8 @@ def test_configs_parse_and_build(config, monkeypatch, train_main):
     cli = train_main(["--config", f"configs/csgnet/{config}", "--trainer.logger", "false"], run=False)
     assert isinstance(cli.model, CSGNetModule) and isinstance(cli.datamodule, CSGDataModule)
     assert cli.model.config.dim == cli.datamodule.dim
+    steps = cli.datamodule.steps_per_epoch
+    assert steps is None or cli.trainer.log_every_n_steps <= steps // 4  # a curve within the first epoch
     name = config[:-5]
     assert cli.model.config.stack == ("stack" in name)
     # the name's second word is the preset, or "medium": the small preset with a wider GRU
