@@ -13,6 +13,7 @@ with their ``init_args``), so a new family adds a module and a YAML file and lea
 The modules, data and losses live in the library (:mod:`csgnet.train`); ``configs/README.md`` lists the
 configs.
 """
+import shutil
 from pathlib import Path
 
 import lightning as L
@@ -61,6 +62,26 @@ class CLI(LightningCLI):
         versions = [int(p.name[8:]) for p in root.glob("version_*") if p.is_dir() and p.name[8:].isdigit()]
         if versions:
             logger._version = max(versions)
+
+    def _run_subcommand(self, subcommand: str) -> None:
+        """Run it; a run that fails before its first step (a missing dataset, a bad value) stops with one
+        line naming the problem and leaves no empty TensorBoard folder behind."""
+        logger = self.trainer.logger
+        root = Path(logger.root_dir) if isinstance(logger, TensorBoardLogger) else None
+        before = set(root.glob("version_*")) if root is not None and root.is_dir() else set()
+        made = [] if root is None else [p for p in (root, root.parent) if not p.exists()]  # folders this run creates
+        try:
+            super()._run_subcommand(subcommand)
+        except (FileNotFoundError, ValueError) as e:
+            if self.trainer.global_step:
+                raise
+            if root is not None:
+                for folder in set(root.glob("version_*")) - before:
+                    shutil.rmtree(folder, ignore_errors=True)
+                for folder in made:
+                    if folder.is_dir() and not any(folder.iterdir()):
+                        folder.rmdir()
+            raise SystemExit(f"error: {e}") from None
 
     def _used_checkpoint_folders(self) -> list[Path]:
         """The checkpoint callbacks' folders that already hold checkpoints."""

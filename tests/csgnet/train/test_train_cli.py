@@ -80,3 +80,12 @@ def test_the_configs_last_checkpoint_is_the_last_epoch_even_without_improvement(
     assert best == ["best-epoch=000.ckpt"]
     last = torch.load(tmp_path / "ckpt" / "last.ckpt", map_location="cpu", weights_only=False)
     assert last["epoch"] == 2
+
+
+def test_a_run_that_fails_at_start_says_why_in_one_line_and_leaves_no_folder(tmp_path, train_main):
+    config = _config(tmp_path)
+    missing = tmp_path / "no_data"
+    with pytest.raises(SystemExit, match=r"^error: no 2D dataset under .*no_data.*csgnet generate"):
+        train_main(["fit", "--config", str(config), "--data.init_args.data_dir", str(missing),
+                    "--trainer.logger.init_args.save_dir", str(tmp_path / "logs")])
+    assert not (tmp_path / "logs").exists()
