@@ -287,13 +287,13 @@ def _inference_files(r, points, src, model, files, args) -> list[tuple[Path, str
                         cols=2, size=args.size)
     out.append((files["png"], png_bytes(sheet, where=files["png"])))
     record = {"input": str(src), "category": args.category if model is None else model.category,
-              "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
+              "fit": bool(args.fit), "points": int(len(points)), "unit": r.unit, "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
               "before_fit": r.before, "fit_stopped": r.fit_stopped, "search": r.search, "retrieval": r.retrieval,
               "seconds": r.seconds,
               "macro_text": r.macro_text,
-              "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
-                      "canonical units (bounding-box diagonal 2)"}
+              "note": "the program's executed points p lie on the input at (p * unit) @ rotation + offset; metrics "
+                      "are in canonical units (bounding-box diagonal 2)"}
     out.append((files["json"], json.dumps(record, indent=1) + "\n"))
     return out
 
@@ -317,7 +317,7 @@ def _print_inference(r, files) -> int:
         print(f"fitting: {r.fit_stopped}")
     print(("after fitting:  " if r.before is not None else "") + _fmt_metrics(r.metrics))
     print(f"wrote {files['program']}, {files['mesh']}, {files['png']} and {files['json']} "
-          f"(offset {np.round(r.offset, 4).tolist()})")
+          f"(offset {np.round(r.offset, 4).tolist()}" + ("" if r.unit == 1 else f", unit {r.unit:g}") + ")")
     if "macros" in files and r.macro_text is not None:
         print(f"wrote {files['macros']}: the decoded macro program (library calls; in the decoder's frame, before "
               f"alignment and fitting; {files['program']} is its expansion in the input's frame)")
@@ -1134,7 +1134,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Encode a point cloud (.ply .obj .xyz .npy) or a mesh (.obj .ply .stl .glb, "
                                    "sampled by area) with the trained point-cloud model, decode a program, "
                                    "optionally polish its numbers by fitting (--fit), and write into --out: "
-                                   "<name>.txt (the program at the input's scale), <name>.obj (its cuboids in "
+                                   "<name>.txt (the program at the input's scale, in the power of ten of input units that "
+                                   "keeps its numbers in the corpus's range: the json's unit), <name>.obj (its cuboids in "
                                    "the input's frame), <name>.png (input beside result) and <name>.json "
                                    "(offset, rotation, metrics). Existing files are never overwritten.")
     i.add_argument("file", help="point cloud or mesh file")
