@@ -37,6 +37,7 @@ from pathlib import Path
 import torch
 
 from shapeio import InputError, atomic_write, refuse_overwrite, write_new
+from shapeio.editing import port_argument
 from shapeio.files import write_new_set
 from shapeio.mesh import WRITE_SUFFIXES
 
@@ -1364,7 +1365,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "and its macro calls' parameters are edited; a macro program calls it")
     d.add_argument("--target", help="goal-directed mode: a program (corpus id or file) shown as a wireframe, "
                                     "with the live corner distance to it")
-    d.add_argument("--port", type=_int_at_least(1), default=8080, help="port of the page")
+    d.add_argument("--port", type=port_argument, default=8080, help="port of the page (0: a free one)")
     d.add_argument("--host", default="127.0.0.1", help="address to bind (default: this machine only)")
     d.add_argument("--export-dir", default=".", help="the folder exports are written to (never elsewhere)")
     d.add_argument("--no-browser", action="store_true", help="do not open a browser")
