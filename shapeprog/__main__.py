@@ -398,6 +398,9 @@ def _load_vae(args, category: str | None, macro: bool = False):
     try:
         if args.weights:
             vae = load_model(args.weights, category=args.category)
+            if args.category is None and category is not None and vae.category != category:
+                raise SystemExit(f"error: {args.weights}: a {vae.category} model, but the input is a {category} "
+                                 f"program (give --category {vae.category} to use this model anyway)")
             if isinstance(vae, MacroVAE) and not macro:
                 raise SystemExit(f"error: {args.weights} is a VAE over macro programs (ShapeMOD); this command reads "
                                  f"ShapeAssembly programs: use `sample` or `evaluate-generation` with it")

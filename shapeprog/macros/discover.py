@@ -648,7 +648,13 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
         stop_after: seconds after which no new round is started.
         start: the state to continue from when there is no ``state.json`` to resume
             (:meth:`Discovery.from_library`); its orderings are filtered with its library first.
+
+    Raises:
+        ValueError: ``stop_after`` is not a number from 0 to infinity (NaN is refused).
     """
+    if stop_after is not None and (isinstance(stop_after, bool) or not isinstance(stop_after, (int, float))
+                                   or not stop_after >= 0):
+        raise ValueError(f"stop_after must be a number of seconds >= 0, got {stop_after!r}")
     cfg = dict(DEFAULTS if cfg is None else cfg)
     digest = nodes.digest()
     start_digest = None if start is None else start.digest()

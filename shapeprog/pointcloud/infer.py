@@ -386,12 +386,15 @@ class Inference:
 
 def _as_cloud(points) -> np.ndarray:
     if isinstance(points, torch.Tensor):
-        points = points.detach().cpu().double().numpy()
+        points = points.detach().cpu().numpy()
     try:
-        x = np.asarray(points, dtype=np.float64)
+        raw = np.asarray(points)
     except (TypeError, ValueError):
-        raise PointCloudError(f"points must be an (N, 3) array of numbers, got {type(points).__name__}",
-                              "points") from None
+        raw = None
+    if raw is None or raw.dtype.kind not in "iuf":  # no strings, objects, booleans or complex numbers
+        kind = type(points).__name__ if raw is None else f"{type(points).__name__} of dtype {raw.dtype}"
+        raise PointCloudError(f"points must be an (N, 3) array of real numbers, got {kind}", "points")
+    x = raw.astype(np.float64)
     if x.ndim != 2 or x.shape[1] != 3:
         raise PointCloudError(f"points must have shape (N, 3), got {x.shape}", "points")
     if len(x) < MIN_POINTS:

@@ -169,3 +169,16 @@ def test_defect_bad_option_values_are_refused_by_the_library():
                           ({"decimals": 400}, r"`decimals` must be an integer from 0 to 12 \(MAX_DECIMALS\), got 400")):
         with pytest.raises(ValueError, match=match):
             fit(program, points, steps=1, **kwargs)
+
+
+def test_defect_reconstruct_with_another_categorys_weights_is_refused(tmp_path, capsys):
+    from shapeprog.vae.pretrained import WEIGHTS
+
+    table = WEIGHTS / "vae_table.pt"
+    out = tmp_path / "r.txt"
+    with pytest.raises(SystemExit) as e:
+        main(["reconstruct", "chair/173", "--weights", str(table), "-o", str(out)])
+    assert str(e.value) == (f"error: {table}: a table model, but the input is a chair program (give --category table "
+                            "to use this model anyway)")
+    assert not out.exists()
+    assert main(["reconstruct", "chair/173", "--weights", str(table), "--category", "table", "-o", str(out)]) == 0

@@ -260,3 +260,15 @@ def test_defect_yaml_alias_bomb_is_refused(tmp_path):
         load_config(long)
     assert str(e.value) == (f"{long}:1:1: setting 'num_rounds' must be int, got '{'y' * 59}... "
                             "(100002 characters)")
+
+
+def test_defect_discover_stop_after_nan_is_refused(capsys):
+    from shapeprog.__main__ import main
+
+    with pytest.raises(ValueError, match="stop_after must be a number of seconds >= 0, got nan"):
+        discover(Nodes([], [], []), stop_after=float("nan"))
+    with pytest.raises(SystemExit) as e:
+        main(["discover-macros", "--category", "chair", "--stop-after", "nan", "--out", "unused"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        "argument --stop-after: must be a number in [0, 3.16224e+07], got 'nan'")

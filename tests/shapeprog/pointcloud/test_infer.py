@@ -93,7 +93,7 @@ def test_metrics_of_a_shape_against_its_own_surface():
     (np.zeros((20, 2)), r"shape \(N, 3\)"),
     (np.ones((20, 3)), "one place"),
     (np.where(np.arange(60).reshape(20, 3) == 7, np.nan, 1.0 * np.arange(60).reshape(20, 3)), "point 2"),
-    ("abc", "array of numbers"),
+    ("abc", "array of real numbers, got str of dtype <U3"),
     (np.arange(60.0).reshape(20, 3) * 1e300, r"diagonal inf is outside \[1e-32, 1e\+32\] \(MIN_DIAGONAL, MAX_DIAGONAL\)"),
     (np.arange(60.0).reshape(20, 3) * 1e-40, r"diagonal 9.87e-39 is outside \[1e-32, 1e\+32\]"),
 ])
@@ -306,3 +306,23 @@ def test_defect_infer_writes_programs_its_own_tools_read_at_any_input_scale(tmp_
     assert main(["fit", str(txt), "--points", "example", "--steps", "2", "-o", str(tmp_path / "fit.txt")]) == 0
     assert main(["refactor", str(txt), "--library", "chair", "-o", str(tmp_path / "macros.txt")]) == 0
     assert EditSession(txt.read_text(), str(txt)).controls()
+
+
+@pytest.mark.parametrize("points, kind", [
+    ([["1", "2", "3"]] * 20, "list of dtype <U1"),
+    (np.ones((20, 3)) + 1j, "ndarray of dtype complex128"),
+    (np.ones((20, 3), dtype=bool), "ndarray of dtype bool"),
+    (torch.ones(20, 3, dtype=torch.complex64), "ndarray of dtype complex64"),
+])
+def test_defect_infer_accepts_strings_complex_and_bool_clouds_is_refused(model, points, kind):
+    with pytest.raises(PointCloudError) as e:
+        infer(points, model=model)
+    assert str(e.value) == f"`points`: points must be an (N, 3) array of real numbers, got {kind}"
+
+
+def test_defect_search_schedule_sigma_1e308_is_refused(tmp_path, capsys):
+    from shapeprog.pointcloud.search import parse_schedule
+
+    with pytest.raises(ValueError) as e:
+        parse_schedule("16:1e308")
+    assert str(e.value) == "search step 0: sigma must be a number in (0, 10] (MAX_SIGMA), got 1e+308"
