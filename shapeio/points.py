@@ -23,7 +23,7 @@ from .arrays import as_numpy
 from .files import InputError, atomic_write
 from .mesh import MESH_SUFFIXES, _trimesh, load_mesh
 
-__all__ = ["CLOUD_SUFFIXES", "MAX_POINTS", "MESH_POINTS", "MIN_POINTS", "obj_vertices", "read_cloud", "read_points",
+__all__ = ["CLOUD_SUFFIXES", "MAX_LINE_CHARS", "MAX_POINTS", "MESH_POINTS", "MIN_POINTS", "obj_vertices", "read_cloud", "read_points",
            "write_points"]
 
 PathLike = Union[str, os.PathLike]
@@ -37,6 +37,8 @@ MIN_POINTS = 16
 MAX_POINTS = 20_000_000
 #: Points :func:`read_cloud` samples from a mesh when no count is given (the papers' 10,000).
 MESH_POINTS = 10_000
+#: Characters of one line of a text cloud file (``.obj``, ``.xyz``); a longer line is refused as it is read.
+MAX_LINE_CHARS = 4096
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -194,11 +196,26 @@ def _ply_points(path: Path, loaded) -> tuple[np.ndarray, np.ndarray | None]:
     return pts, normals
 
 
+def _lines(f, where):
+    """The lines of text file ``f``, each read with at most :data:`MAX_LINE_CHARS` characters in memory."""
+    lineno = 0
+    while True:
+        line = f.readline(MAX_LINE_CHARS + 1)
+        if not line:
+            return
+        lineno += 1
+        if len(line) > MAX_LINE_CHARS and not line.endswith("\n"):
+            raise InputError(f"{where}:{lineno}: a line longer than MAX_LINE_CHARS = {MAX_LINE_CHARS} characters")
+        yield line
+
+
 def _open_text(path: Path):
     return open(path, "r", encoding="utf-8", errors="replace")
 
 
 def _check_file(path: Path) -> None:
+    if path.is_dir():
+        raise InputError(f"{path}: a folder, not a point-cloud or mesh file")
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     if path.stat().st_size == 0:
@@ -245,10 +262,10 @@ def read_points(path: PathLike, return_normals: bool = False):
     normals = None
     if suffix == ".obj":
         with _open_text(path) as f:
-            pts = obj_vertices(f, path)
+            pts = obj_vertices(_lines(f, path), path)
     elif suffix == ".xyz":
         with _open_text(path) as f:
-            pts = _xyz_points(f, path)
+            pts = _xyz_points(_lines(f, path), path)
     elif suffix == ".npy":
         pts = _npy_points(path)
     else:
@@ -261,7 +278,7 @@ def read_points(path: PathLike, return_normals: bool = False):
 
 def _obj_has_faces(path: Path) -> bool:
     with _open_text(path) as f:
-        return any(line.lstrip().startswith(("f ", "f\t")) for line in f)
+        return any(line.lstrip().startswith(("f ", "f\t")) for line in _lines(f, path))
 
 
 def _sample_mesh(mesh, n: int, seed: int, path: Path) -> np.ndarray:
@@ -330,7 +347,7 @@ def read_cloud(path: PathLike, n_points: int | None = None, seed: int = 0) -> np
             pts = _finite(_ply_points(path, loaded)[0], path)
     elif suffix == ".obj" and _obj_has_faces(path):
         with _open_text(path) as f:
-            obj_vertices(f, path)  # every 'v' line is a point: errors with the line number
+            obj_vertices(_lines(f, path), path)  # every 'v' line is a point: errors with the line number
         mesh = load_mesh(path)
     elif suffix in CLOUD_SUFFIXES:
         pts = read_points(path)

@@ -37,21 +37,27 @@ from pathlib import Path
 import torch
 
 from shapeio import InputError, atomic_write, refuse_overwrite, write_new
+from shapeio.editing import port_argument
 from shapeio.files import write_new_set
 from shapeio.mesh import WRITE_SUFFIXES
+from shapeio.points import MAX_POINTS
 
 from . import corpus, io
 from .errors import ExecutionError, ParseError, RefactorError
 from .execute import execute
-from .fit import fit
+from .fit import MAX_DECIMALS, MAX_LR, MAX_REG, fit
+from .fit import MAX_STEPS as MAX_FIT_STEPS
 from .gentable import generation_table, train_category_classifier
 from .lang import parse
 from .limits import decode
 from .metrics import adaptive_threshold, chamfer, fscore
+from .picture import MAX_SIZE as MAX_PICTURE_SIZE
 from .picture import render_grid, render_png
 from .pointnet import save_classifier, sha256_file
 from .sampling import sample_surface
+from .silhouettes import MAX_SIZE as SILHOUETTE_MAX_SIZE
 from .silhouettes import build, write
+from .vae.decode import MAX_SAMPLES, MAX_TRIES
 
 
 
@@ -287,13 +293,13 @@ def _inference_files(r, points, src, model, files, args) -> list[tuple[Path, str
                         cols=2, size=args.size)
     out.append((files["png"], png_bytes(sheet, where=files["png"])))
     record = {"input": str(src), "category": args.category if model is None else model.category,
-              "fit": bool(args.fit), "points": int(len(points)), "offset": r.offset.tolist(),
+              "fit": bool(args.fit), "points": int(len(points)), "unit": r.unit, "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
               "before_fit": r.before, "fit_stopped": r.fit_stopped, "search": r.search, "retrieval": r.retrieval,
               "seconds": r.seconds,
               "macro_text": r.macro_text,
-              "note": "the program's executed points p lie on the input at p @ rotation + offset; metrics are in "
-                      "canonical units (bounding-box diagonal 2)"}
+              "note": "the program's executed points p lie on the input at (p * unit) @ rotation + offset; metrics "
+                      "are in canonical units (bounding-box diagonal 2)"}
     out.append((files["json"], json.dumps(record, indent=1) + "\n"))
     return out
 
@@ -317,7 +323,7 @@ def _print_inference(r, files) -> int:
         print(f"fitting: {r.fit_stopped}")
     print(("after fitting:  " if r.before is not None else "") + _fmt_metrics(r.metrics))
     print(f"wrote {files['program']}, {files['mesh']}, {files['png']} and {files['json']} "
-          f"(offset {np.round(r.offset, 4).tolist()})")
+          f"(offset {np.round(r.offset, 4).tolist()}" + ("" if r.unit == 1 else f", unit {r.unit:g}") + ")")
     if "macros" in files and r.macro_text is not None:
         print(f"wrote {files['macros']}: the decoded macro program (library calls; in the decoder's frame, before "
               f"alignment and fitting; {files['program']} is its expansion in the input's frame)")
@@ -392,6 +398,9 @@ def _load_vae(args, category: str | None, macro: bool = False):
     try:
         if args.weights:
             vae = load_model(args.weights, category=args.category)
+            if args.category is None and category is not None and vae.category != category:
+                raise SystemExit(f"error: {args.weights}: a {vae.category} model, but the input is a {category} "
+                                 f"program (give --category {vae.category} to use this model anyway)")
             if isinstance(vae, MacroVAE) and not macro:
                 raise SystemExit(f"error: {args.weights} is a VAE over macro programs (ShapeMOD); this command reads "
                                  f"ShapeAssembly programs: use `sample` or `evaluate-generation` with it")
@@ -406,6 +415,16 @@ def _load_vae(args, category: str | None, macro: bool = False):
 def _planned_files(out: str | None, name: str, n: int) -> list[Path]:
     """The ``.txt`` and ``.obj`` files :func:`_export_decoded` writes into ``out`` for ``n`` programs."""
     return [] if not out else [Path(out) / f"{name.format(i)}{s}" for i in range(n) for s in (".txt", ".obj")]
+
+
+def _check_grid(count: int, cols: int, size: int) -> None:
+    """Stop before any work when a picture grid would exceed :data:`shapeprog.picture.MAX_GRID_PIXELS`."""
+    from .picture import check_grid
+
+    try:
+        check_grid(count, cols, size)
+    except ValueError as e:
+        raise SystemExit(f"error: --png: {e}") from None
 
 
 def _refuse_existing(paths) -> None:
@@ -464,6 +483,8 @@ def _cmd_sample(args) -> int:
     from .vae.macro_model import MacroVAE
 
     _check_outputs(others=[args.png])
+    if args.png:
+        _check_grid(args.n, args.cols, args.size)
     _refuse_existing(_planned_files(args.out, "sample_{:04d}", args.n))
     vae = _load_vae(args, args.category, macro=True)
     t0 = time.perf_counter()
@@ -657,12 +678,49 @@ def _cmd_train_classifier(args) -> int:
     return 0
 
 
-def _int_at_least(low: int):
-    """An argparse type: an int that is at least ``low``."""
+#: The largest value of a count, step or size option that has no maximum of its own.
+MAX_COUNT_OPTION = 10_000_000
+#: The most worker processes of an option ``--workers``.
+MAX_WORKERS = 256
+#: The largest seed (NumPy and torch both take 0 to 2**63 - 1).
+MAX_SEED = 2 ** 63 - 1
+#: The largest time option, in seconds (``--stop-after``, ``--wake-seconds``; minutes options: this / 60).
+MAX_SECONDS_OPTION = 366 * 24 * 3600.0
+#: ``abstract-infer --passes`` at most.
+MAX_PASSES = 100
+
+
+def _int_at_least(low: int, high: int = MAX_COUNT_OPTION):
+    """An argparse type: an int from ``low`` to ``high``."""
     def convert(text: str) -> int:
-        value = int(text)
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer from {low} to {high}, got {text[:20]!r}")
+        return value
+    return convert
+
+
+def _seed(text: str) -> int:
+    """An argparse type: a seed, 0 to :data:`MAX_SEED`."""
+    return _int_at_least(0, MAX_SEED)(text)
+
+
+def _float_in(low: float, high: float, low_open: bool = False, high_open: bool = False):
+    """An argparse type: a finite float in the interval from ``low`` to ``high`` (open at an end when asked)."""
+    import math
+
+    def convert(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        inside = (low < value if low_open else low <= value) and (value < high if high_open else value <= high)
+        if not (math.isfinite(value) and inside):
+            raise argparse.ArgumentTypeError(f"must be a number in {'(' if low_open else '['}{low:g}, {high:g}"
+                                             f"{')' if high_open else ']'}, got {text[:20]!r}")
         return value
     return convert
 
@@ -752,12 +810,12 @@ def _add_egraph_limits(parser) -> None:
     the paper's; checked by :mod:`shapeprog.coder.refactor` before any work), and ``--egraph-values``."""
     from .coder.refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUE_SCHEDULES, VALUES
 
-    parser.add_argument("--iterations", type=int, default=MAX_ITERATIONS,
+    parser.add_argument("--iterations", type=_int_at_least(0, 1000), default=MAX_ITERATIONS,
                         help=f"e-graph iterations per refactor call (paper: {MAX_ITERATIONS})")
-    parser.add_argument("--max-nodes", type=int, default=MAX_ENODES,
+    parser.add_argument("--max-nodes", type=_int_at_least(1, 10_000_000), default=MAX_ENODES,
                         help=f"e-node limit per refactor call (paper: {MAX_ENODES}); larger e-graphs find cheaper "
                              f"programs at more time (docs/shapecoder.md)")
-    parser.add_argument("--time-limit", type=float, default=TIME_LIMIT,
+    parser.add_argument("--time-limit", type=_float_in(0, 3600, low_open=True), default=TIME_LIMIT,
                         help=f"seconds per refactor call (paper: {TIME_LIMIT:g})")
     parser.add_argument("--egraph-values", choices=VALUE_SCHEDULES, default=VALUES,
                         help=f"the e-graph's value table: {VALUES} (default, as the reference: up to date before every "
@@ -1105,7 +1163,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("program", help=program_help)
     r.add_argument("-o", "--output", help="mesh file: .obj (reference layout), .ply or .glb (parts coloured by line)")
     r.add_argument("--png", help="picture file (.png), parts coloured by the program line that created them")
-    r.add_argument("--size", type=_int_at_least(8), default=512, help="picture width and height in pixels (>= 8)")
+    r.add_argument("--size", type=_int_at_least(8, MAX_PICTURE_SIZE), default=512,
+                   help=f"picture width and height in pixels (8 to {MAX_PICTURE_SIZE})")
     r.add_argument("--float64", action="store_true", help="execute in float64 (default float32, the reference)")
     r.set_defaults(func=_cmd_run)
     f = sub.add_parser("fit", help="fit a program's parameters to a point cloud",
@@ -1114,19 +1173,21 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("program", help=program_help)
     f.add_argument("--points", default="example",
                    help="point cloud file (.obj 'v x y z' lines, .ply, .xyz or .npy) or 'example' (the vendored comp_pc.obj)")
-    f.add_argument("--steps", type=_int_at_least(0), default=400, help="optimisation steps")
-    f.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
-    f.add_argument("--reg", type=float, default=1e-3, help="weight of the pull towards the starting numbers")
-    f.add_argument("--decimals", type=_int_at_least(0), default=3, help="decimals of the written numbers (the corpus uses 3)")
-    f.add_argument("--seed", type=int, default=0, help="seed of the surface sampling")
+    f.add_argument("--steps", type=_int_at_least(0, MAX_FIT_STEPS), default=400, help="optimisation steps")
+    f.add_argument("--lr", type=_float_in(0, MAX_LR, low_open=True), default=1e-3,
+                   help=f"Adam learning rate (above 0, at most {MAX_LR:g})")
+    f.add_argument("--reg", type=_float_in(0, MAX_REG), default=1e-3, help="weight of the pull towards the starting numbers")
+    f.add_argument("--decimals", type=_int_at_least(0, MAX_DECIMALS), default=3, help="decimals of the written numbers (the corpus uses 3)")
+    f.add_argument("--seed", type=_seed, default=0, help="seed of the surface sampling")
     f.add_argument("-o", "--output", help="fitted program file (ShapeAssembly text; default: print it)")
     f.add_argument("--mesh", help="also write the fitted shape: .obj, .ply or .glb")
     f.set_defaults(func=_cmd_fit)
     s = sub.add_parser("silhouettes", help="render front and side silhouettes of the corpus to an .npz",
                        description="Render front and side silhouettes of every corpus program (train and val).")
     s.add_argument("--out", required=True, help="output file (.npz, compressed NumPy arrays)")
-    s.add_argument("--size", type=int, default=64, help="image side in pixels")
-    s.add_argument("--margin", type=int, default=4, help="free pixels on each side of the longer extent")
+    s.add_argument("--size", type=_int_at_least(1, SILHOUETTE_MAX_SIZE), default=64,
+                   help=f"image side in pixels (1 to {SILHOUETTE_MAX_SIZE})")
+    s.add_argument("--margin", type=_int_at_least(0, SILHOUETTE_MAX_SIZE), default=4, help="free pixels on each side of the longer extent")
     s.add_argument("--limit", type=_int_at_least(1), help="only the first N shapes per category and split")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_silhouettes)
@@ -1134,7 +1195,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Encode a point cloud (.ply .obj .xyz .npy) or a mesh (.obj .ply .stl .glb, "
                                    "sampled by area) with the trained point-cloud model, decode a program, "
                                    "optionally polish its numbers by fitting (--fit), and write into --out: "
-                                   "<name>.txt (the program at the input's scale), <name>.obj (its cuboids in "
+                                   "<name>.txt (the program at the input's scale, in the power of ten of input units that "
+                                   "keeps its numbers in the corpus's range: the json's unit), <name>.obj (its cuboids in "
                                    "the input's frame), <name>.png (input beside result) and <name>.json "
                                    "(offset, rotation, metrics). Existing files are never overwritten.")
     i.add_argument("file", help="point cloud or mesh file")
@@ -1159,8 +1221,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "sampled from the corpus, about 20 s for chairs)")
     i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x"), help="the input's up axis")
     i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
-    i.add_argument("--size", type=_int_at_least(8), default=256, help="picture cell size in pixels")
-    i.add_argument("--seed", type=int, default=0, help="seed of the point subsets")
+    i.add_argument("--size", type=_int_at_least(8, MAX_PICTURE_SIZE), default=256, help="picture cell size in pixels")
+    i.add_argument("--seed", type=_seed, default=0, help="seed of the point subsets")
     i.add_argument("--out", required=True, help="output folder (created if missing)")
     i.set_defaults(func=_cmd_infer)
     pt = sub.add_parser("pointcloud-tables", help="the papers' point-cloud reconstruction tables on the test split",
@@ -1178,8 +1240,8 @@ def build_parser() -> argparse.ArgumentParser:
     pt.add_argument("--search", action="store_true", help="also measure the latent-search rows (ours, not the papers')")
     pt.add_argument("--augmented", action="store_true",
                     help="also measure the retrieval-augmented decoding rows (ours, not the papers')")
-    pt.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the per-shape work")
-    pt.add_argument("--seed", type=int, default=0, help="seed of the inputs' noise, subsets, scales and positions")
+    pt.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), default=1, help="processes for the per-shape work")
+    pt.add_argument("--seed", type=_seed, default=0, help="seed of the inputs' noise, subsets, scales and positions")
     pt.add_argument("--quiet", action="store_true", help="no progress lines")
     pt.add_argument("--out", required=True, help="Markdown file (e.g. docs/tables/pointcloud_chair.md)")
     pt.set_defaults(func=_cmd_pointcloud_tables, argv=None)
@@ -1191,13 +1253,13 @@ def build_parser() -> argparse.ArgumentParser:
                                    "and skipped.")
     m.add_argument("--category", required=True, choices=corpus.CATEGORIES, help="the corpus category")
     m.add_argument("--out", required=True, help="the cache folder (created if missing)")
-    m.add_argument("--points", type=_int_at_least(1), default=10000, help="points per shape (the papers' 10,000)")
-    m.add_argument("--workers", type=_int_at_least(1), help="processes (default: the CPU count; 1: none)")
-    m.add_argument("--seed", type=int, default=0, help="sampling seed (each shape's seed is a hash of category, "
+    m.add_argument("--points", type=_int_at_least(1, MAX_POINTS), default=10000, help="points per shape (the papers' 10,000)")
+    m.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), help="processes (default: the CPU count; 1: none)")
+    m.add_argument("--seed", type=_seed, default=0, help="sampling seed (each shape's seed is a hash of category, "
                                                        "id and this)")
-    m.add_argument("--val-fraction", type=float, default=0.05, help="share of the corpus train split carved out "
+    m.add_argument("--val-fraction", type=_float_in(0, 1, high_open=True), default=0.05, help="share of the corpus train split carved out "
                                                                     "for validation")
-    m.add_argument("--split-seed", type=int, default=0, help="seed of the validation carve-out")
+    m.add_argument("--split-seed", type=_seed, default=0, help="seed of the validation carve-out")
     m.add_argument("--dtype", choices=("float16", "float32"), default="float16",
                    help="storage type of the points (float16: half the size, within 5e-4)")
     m.add_argument("--limit", type=_int_at_least(1), help="only the first N shapes of the corpus train and val "
@@ -1209,13 +1271,13 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Sample latents from N(0, I) and decode them with semantic validity "
                                    "(rejection sampling); write programs, meshes and a picture grid.")
     g.add_argument("category", nargs="?", choices=corpus.CATEGORIES, help="the shipped model to use")
-    g.add_argument("-n", type=_int_at_least(1), default=16, help="number of samples (>= 1)")
-    g.add_argument("--seed", type=int, default=0, help="seed of the latents (an integer)")
-    g.add_argument("--max-tries", type=_int_at_least(1), default=10, help="draws per sample before giving up rejection")
+    g.add_argument("-n", type=_int_at_least(1, MAX_SAMPLES), default=16, help=f"number of samples (1 to {MAX_SAMPLES})")
+    g.add_argument("--seed", type=_seed, default=0, help="seed of the latents (an integer)")
+    g.add_argument("--max-tries", type=_int_at_least(1, MAX_TRIES), default=10, help="draws per sample before giving up rejection")
     g.add_argument("--out", help="folder for sample_NNNN.txt and sample_NNNN.obj")
     g.add_argument("--png", help="picture grid of the samples (.png)")
     g.add_argument("--cols", type=_int_at_least(1), default=4, help="grid columns")
-    g.add_argument("--size", type=_int_at_least(8), default=192, help="grid cell side in pixels")
+    g.add_argument("--size", type=_int_at_least(8, MAX_PICTURE_SIZE), default=192, help="grid cell side in pixels")
     g.add_argument("--weights", help=weights_help)
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=_cmd_sample)
@@ -1228,7 +1290,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--category", choices=corpus.CATEGORIES, help="model category (default: the first corpus id's)")
     i.add_argument("--out", help="folder for step_NNN.txt and step_NNN.obj")
     i.add_argument("--png", help="picture strip of the steps (.png)")
-    i.add_argument("--size", type=_int_at_least(8), default=160, help="cell side in pixels")
+    i.add_argument("--size", type=_int_at_least(8, MAX_PICTURE_SIZE), default=160, help="cell side in pixels")
     i.add_argument("--weights", help=weights_help)
     i.set_defaults(func=_cmd_interpolate)
     c = sub.add_parser("reconstruct", help="encode a program and decode it back, with the F-score to the input",
@@ -1239,8 +1301,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("-o", "--output", help="reconstructed program file (default: print it)")
     c.add_argument("--mesh", help="also write the reconstructed shape: .obj, .ply or .glb")
     c.add_argument("--png", help="picture of the input beside the reconstruction (.png)")
-    c.add_argument("--size", type=_int_at_least(8), default=256, help="cell side in pixels")
-    c.add_argument("--seed", type=int, default=0, help="seed of the surface samples of the F-score")
+    c.add_argument("--size", type=_int_at_least(8, MAX_PICTURE_SIZE), default=256, help="cell side in pixels")
+    c.add_argument("--seed", type=_seed, default=0, help="seed of the surface samples of the F-score")
     c.add_argument("--weights", help=weights_help)
     c.set_defaults(func=_cmd_reconstruct)
     x = sub.add_parser("export-weights", help="write a VAE or point-cloud training checkpoint as a small weights file",
@@ -1261,7 +1323,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--category", required=True, choices=corpus.CATEGORIES, help="the category the programs belong to")
     e.add_argument("--programs", help="folder of program files (*.txt, one program each); without it, the "
                                       "ground-truth row alone")
-    e.add_argument("-n", type=_int_at_least(1), help="evaluate N samples of the VAE (the shipped model of the "
+    e.add_argument("-n", type=_int_at_least(1, MAX_SAMPLES), help="evaluate N samples of the VAE (the shipped model of the "
                                                     "category, or --weights) instead of a folder")
     e.add_argument("--weights", help=weights_help)
     e.add_argument("--classifier", help="PointNet weights for FD and the features (a train-classifier output; "
@@ -1275,8 +1337,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--fool-points", type=_int_at_least(16), default=512, help="%% fool: points per shape")
     e.add_argument("--candidates", type=_int_at_least(0), default=16,
                    help="shapes measured exactly per nearest-chamfer search (0: every pair)")
-    e.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the per-shape work")
-    e.add_argument("--seed", type=int, default=0, help="seed of the sampling and of the %% fool training")
+    e.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), default=1, help="processes for the per-shape work")
+    e.add_argument("--seed", type=_seed, default=0, help="seed of the sampling and of the %% fool training")
     e.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     e.set_defaults(func=_cmd_evaluate_generation)
     t = sub.add_parser("train-classifier", help="train the PointNet classifier of the generation metrics",
@@ -1287,7 +1349,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--per-class", type=_int_at_least(1), default=500, help="shapes per category and epoch")
     t.add_argument("--points", type=_int_at_least(16), default=512, help="points per shape and visit")
     t.add_argument("--finetune-epochs", type=_int_at_least(0), default=1, help="final epochs on all 2,500 points")
-    t.add_argument("--seed", type=int, default=0, help="seed of the sampling and the training")
+    t.add_argument("--seed", type=_seed, default=0, help="seed of the sampling and the training")
     t.set_defaults(func=_cmd_train_classifier)
     d = sub.add_parser("discover-abstractions", help="ShapeCoder: discover a library of abstractions for a category",
                        description="Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake "
@@ -1302,20 +1364,20 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--shapes", type=_int_at_least(1), default=400, help="the first N discovery shapes (paper: 400)")
     d.add_argument("--proposals", type=_int_at_least(1), default=10000, help="proposals per round (paper: 10,000)")
     d.add_argument("--abstractions", type=_int_at_least(1), default=20, help="candidates tried per round (N_A, 20)")
-    d.add_argument("--seed", type=int, default=42, help="seed of the proposals")
-    d.add_argument("--workers", type=_int_at_least(1), default=2, help="processes for the per-program refactors")
-    d.add_argument("--minutes", type=float, help="start no phase after this many minutes (the run stays resumable)")
+    d.add_argument("--seed", type=_seed, default=42, help="seed of the proposals")
+    d.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), default=2, help="processes for the per-program refactors")
+    d.add_argument("--minutes", type=_float_in(0, MAX_SECONDS_OPTION / 60), help="start no phase after this many minutes (the run stays resumable)")
     d.add_argument("--wake", choices=("refactor", "network"), default="refactor",
                    help="wake search: by refactoring only (default), or with dreams and a recognition network "
                         "(needs torch)")
     d.add_argument("--dreams", type=_int_at_least(1), default=10000,
                    help="network wake: valid dreams per function (N_D, paper: 10,000)")
-    d.add_argument("--train-minutes", type=float, default=200.0,
+    d.add_argument("--train-minutes", type=_float_in(0, MAX_SECONDS_OPTION / 60), default=200.0,
                    help="network wake: training budget per round in minutes (paper: 200)")
     d.add_argument("--train-epochs", type=_int_at_least(1), default=300, help="network wake: epochs at most (300)")
-    d.add_argument("--train-lr", type=float, default=1e-4, help="network wake: Adam learning rate (1e-4)")
-    d.add_argument("--dropout", type=float, default=0.5, help="network wake: the network's dropout (0.5)")
-    d.add_argument("--wake-seconds", type=float, default=1.0,
+    d.add_argument("--train-lr", type=_float_in(0, MAX_LR, low_open=True), default=1e-4, help="network wake: Adam learning rate (1e-4)")
+    d.add_argument("--dropout", type=_float_in(0, 1, high_open=True), default=0.5, help="network wake: the network's dropout (0.5)")
+    d.add_argument("--wake-seconds", type=_float_in(0, MAX_SECONDS_OPTION, low_open=True), default=1.0,
                    help="network wake: seconds of sampling per search step (1)")
     d.add_argument("--device", default="auto", help="network wake: where to train (auto: CUDA when available)")
     d.add_argument("--network-from-round", type=_int_at_least(0), default=0,
@@ -1345,7 +1407,7 @@ def build_parser() -> argparse.ArgumentParser:
                                  "of the vendored data (e.g. chair/401)")
     a.add_argument("--library", required=True, help="a shipped category (chair) or a library.txt file")
     _add_egraph_limits(a)
-    a.add_argument("--passes", type=int, default=3, help="refactor calls at most, each on the previous result")
+    a.add_argument("--passes", type=_int_at_least(1, MAX_PASSES), default=3, help="refactor calls at most, each on the previous result")
     a.add_argument("--network", action="store_true",
                    help="also search with the shipped library's recognition network (the paper's post hoc "
                         "inference; slower)")
@@ -1357,13 +1419,13 @@ def build_parser() -> argparse.ArgumentParser:
                                    "PNG. Runs until interrupted. See docs/editor.md.")
     d.add_argument("program", nargs="?", help=program_help + ", or a macro program file (lines 'def ...')")
     d.add_argument("--sample", choices=corpus.CATEGORIES, help="edit a program generated by the shipped VAE instead")
-    d.add_argument("--seed", type=int, default=0, help="seed of --sample")
+    d.add_argument("--seed", type=_seed, default=0, help="seed of --sample")
     d.add_argument("--library", help="a shipped ShapeMOD library's category (chair) or a macro library file: a "
                                      "ShapeAssembly program (corpus id or corpus-format file) is refactored with it "
                                      "and its macro calls' parameters are edited; a macro program calls it")
     d.add_argument("--target", help="goal-directed mode: a program (corpus id or file) shown as a wireframe, "
                                     "with the live corner distance to it")
-    d.add_argument("--port", type=_int_at_least(1), default=8080, help="port of the page")
+    d.add_argument("--port", type=port_argument, default=8080, help="port of the page (0: a free one)")
     d.add_argument("--host", default="127.0.0.1", help="address to bind (default: this machine only)")
     d.add_argument("--export-dir", default=".", help="the folder exports are written to (never elsewhere)")
     d.add_argument("--no-browser", action="store_true", help="do not open a browser")
@@ -1382,9 +1444,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--search", choices=("beam", "exact"), help="best-program search: beam (reference) or exact")
     d.add_argument("--split", default="all", choices=("train", "val", "all"))
     d.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes")
-    d.add_argument("--seed", type=int, default=0)
-    d.add_argument("--workers", type=_int_at_least(1), default=1, help="processes for the searches (1: none)")
-    d.add_argument("--stop-after", type=float, help="seconds after which no new round starts")
+    d.add_argument("--seed", type=_seed, default=0)
+    d.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), default=1, help="processes for the searches (1: none)")
+    d.add_argument("--stop-after", type=_float_in(0, MAX_SECONDS_OPTION), help="seconds after which no new round starts")
     d.add_argument("--start-from", metavar="LIBRARY",
                    help="continue from a library (a shipped category's or a file) when --out holds no state: "
                         "its macros are L, the rounds its header records count toward --rounds, and the "
@@ -1410,9 +1472,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "FILE.tar.xz archive of the same files")
     rc.add_argument("--split", default="all", choices=("train", "val", "all"))
     rc.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes of the split")
-    rc.add_argument("--seed", type=int, default=0, help="seed of --limit's subset")
+    rc.add_argument("--seed", type=_seed, default=0, help="seed of --limit's subset")
     rc.add_argument("--search", choices=("beam", "exact"), default="beam")
-    rc.add_argument("--workers", type=_int_at_least(1), default=2,
+    rc.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), default=2,
                     help="processes of the pool (default 2; 1: no pool, everything in this process)")
     rc.add_argument("--no-check", action="store_true", help="skip reading back and executing every result")
     rc.set_defaults(func=_cmd_refactor_corpus, argv=None)
@@ -1421,10 +1483,10 @@ def build_parser() -> argparse.ArgumentParser:
                                     "given categories beside the paper's rows.")
     tb.add_argument("--categories", nargs="+", default=["chair"], choices=corpus.CATEGORIES)
     tb.add_argument("--limit", type=_int_at_least(1), help="a random subset of N shapes per category")
-    tb.add_argument("--seed", type=int, default=0)
+    tb.add_argument("--seed", type=_seed, default=0)
     tb.add_argument("--library", action="append", help="CATEGORY=FILE: a library file instead of the shipped one")
     tb.add_argument("--search", choices=("beam", "exact"), default="beam")
-    tb.add_argument("--workers", type=_int_at_least(1), default=1)
+    tb.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), default=1)
     tb.add_argument("--out", help="also write the table (markdown) here")
     tb.add_argument("--quiet", action="store_true")
     tb.set_defaults(func=_cmd_table1)
@@ -1445,7 +1507,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "semantic rewrites: the row beside the paper's ShapeMOD+Wake (ours)")
     t2.add_argument("--train", type=_int_at_least(1), default=100, help="train-PHI: the first N discovery shapes")
     t2.add_argument("--heldout", type=_int_at_least(1), default=100, help="validation-PHI: the first N held-out shapes")
-    t2.add_argument("--workers", type=_int_at_least(1), default=2,
+    t2.add_argument("--workers", type=_int_at_least(1, MAX_WORKERS), default=2,
                     help="processes for the per-shape inference (1: everything in this process)")
     _add_egraph_limits(t2)
     t2.add_argument("--phi-network", action="store_true",

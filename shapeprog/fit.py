@@ -31,7 +31,17 @@ from .lang import Cuboid, Program, replace_numbers, to_text
 from .metrics import chamfer
 from .sampling import sample_surface
 
-__all__ = ["FitResult", "fit"]
+__all__ = ["MAX_DECIMALS", "MAX_LR", "MAX_REG", "MAX_STEPS", "FitResult", "fit"]
+
+#: The largest Adam learning rate :func:`fit` takes (the numbers are lengths of a shape of size about 1; the
+#: default is 1e-3).
+MAX_LR = 1.0
+#: The largest weight of the pull towards the starting numbers.
+MAX_REG = 1e6
+#: The most Adam steps of one :func:`fit` (the default is 400).
+MAX_STEPS = 1_000_000
+#: The most decimals of the written numbers (float64 holds about 16 significant digits).
+MAX_DECIMALS = 12
 
 
 @dataclass
@@ -117,15 +127,22 @@ def fit(
         stops there with the last numbers that executed (:attr:`FitResult.stopped` says where and why).
 
     Raises:
-        ValueError: bad ``points`` or ``steps``.
+        ValueError: bad ``points``, ``steps``, ``lr``, ``reg`` or ``decimals`` (outside ``[0, MAX_STEPS]``,
+            ``(0, MAX_LR]``, ``[0, MAX_REG]``, ``[0, MAX_DECIMALS]``).
         ExecutionError: ``program`` itself does not execute to finite cuboids.
     """
     if not isinstance(points, torch.Tensor):
         points = torch.as_tensor(points)
     if points.dim() != 2 or points.shape[1] != 3 or points.shape[0] < 1:
         raise ValueError(f"`points` must have shape (N, 3), got {tuple(points.shape)}")
-    if steps < 0:
-        raise ValueError(f"`steps` must be >= 0, got {steps}")
+    if isinstance(steps, bool) or not isinstance(steps, int) or not 0 <= steps <= MAX_STEPS:
+        raise ValueError(f"`steps` must be an integer from 0 to {MAX_STEPS} (MAX_STEPS), got {steps!r}")
+    if isinstance(lr, bool) or not isinstance(lr, (int, float)) or not 0 < lr <= MAX_LR:
+        raise ValueError(f"`lr` must be a number in (0, {MAX_LR:g}] (MAX_LR), got {lr!r}")
+    if isinstance(reg, bool) or not isinstance(reg, (int, float)) or not 0 <= reg <= MAX_REG:
+        raise ValueError(f"`reg` must be a number in [0, {MAX_REG:g}] (MAX_REG), got {reg!r}")
+    if isinstance(decimals, bool) or not isinstance(decimals, int) or not 0 <= decimals <= MAX_DECIMALS:
+        raise ValueError(f"`decimals` must be an integer from 0 to {MAX_DECIMALS} (MAX_DECIMALS), got {decimals!r}")
     device = points.device
     target = points.to(dtype)
     full0 = program_parameters(program, dtype, device)

@@ -18,7 +18,7 @@ from shapeio.image import write_png
 from shapeprog.geometry import mesh_arrays
 from shapeprog.geometry import check_corners
 
-__all__ = ["render_png", "render_grid", "part_colors", "camera", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
+__all__ = ["MAX_GRID_PIXELS", "MAX_SIZE", "check_grid", "render_png", "render_grid", "part_colors", "camera", "PALETTE", "VIEW_DIRECTION", "LIGHT_DIRECTION"]
 
 #: Part palette (RGB uint8): colours are assigned by label rank, cycling.
 PALETTE = np.array(
@@ -39,6 +39,31 @@ LIGHT_DIRECTION = np.array([0.4, 1.0, 0.7]) / np.linalg.norm([0.4, 1.0, 0.7])
 _AMBIENT = 0.38
 _EDGE_RGB = np.array([45, 45, 45], dtype=np.float64)
 _SUPERSAMPLE = 2
+#: The largest picture side in pixels (a render holds about 40 bytes per supersampled pixel: 0.7 GB at 2048).
+MAX_SIZE = 2048
+#: The most pixels of a :func:`render_grid` sheet (3 bytes each: 200 MB).
+MAX_GRID_PIXELS = 1 << 26
+
+
+def check_size(size) -> int:
+    """``size`` when it is an int from 8 to :data:`MAX_SIZE`; otherwise ValueError."""
+    if isinstance(size, bool) or not isinstance(size, int) or not 8 <= size <= MAX_SIZE:
+        raise ValueError(f"`size` must be an int from 8 to {MAX_SIZE} (MAX_SIZE), got {size!r}")
+    return size
+
+
+def check_grid(count: int, cols: int, size: int) -> None:
+    """Refuse (ValueError) a :func:`render_grid` of ``count`` shapes, ``cols`` per row, ``size`` pixels per cell
+    whose sheet would exceed :data:`MAX_GRID_PIXELS` (or a bad ``size`` or ``cols``); callers check before
+    their work."""
+    check_size(size)
+    if isinstance(cols, bool) or not isinstance(cols, int) or cols < 1:
+        raise ValueError(f"`cols` must be an int >= 1, got {cols!r}")
+    cols = min(cols, max(count, 1))
+    pixels = -(-count // cols) * cols * size * size
+    if pixels > MAX_GRID_PIXELS:
+        raise ValueError(f"a grid of {count} pictures of {size} pixels has {pixels} pixels; at most {MAX_GRID_PIXELS} "
+                         "(MAX_GRID_PIXELS): use fewer shapes or a smaller size")
 
 
 def part_colors(n: int, labels=None) -> np.ndarray:
@@ -121,8 +146,7 @@ def render_png(
     if isinstance(corners, torch.Tensor):
         corners = corners.detach().cpu().numpy()
     corners = check_corners(np.array(corners, dtype=np.float64), arrays=True)  # a copy: torch.from_numpy below
-    if isinstance(size, bool) or not isinstance(size, int) or size < 8:
-        raise ValueError(f"`size` must be an int >= 8, got {size!r}")
+    check_size(size)
 
     n = corners.shape[0]
     colors = part_colors(n, labels).astype(np.float64)
@@ -185,8 +209,7 @@ def render_grid(
     shapes = list(shapes)
     if not shapes:
         raise ValueError("render_grid needs at least one shape")
-    if isinstance(cols, bool) or not isinstance(cols, int) or cols < 1:
-        raise ValueError(f"`cols` must be an int >= 1, got {cols!r}")
+    check_grid(len(shapes), cols, size)
     cols = min(cols, len(shapes))
     rows = -(-len(shapes) // cols)
     sheet = np.full((rows * size, cols * size, 3), 255, dtype=np.uint8)

@@ -26,3 +26,31 @@ leg0, leg1 = four_legs(0.1, True, 0.2)
 seat = Cuboid(1.2, 0.1, 1.0, True)
 attach(leg0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)
 """
+
+
+def assert_only_this_machines_pages_reach(url: str) -> None:
+    """The editor page at ``url`` (``http://127.0.0.1:PORT``) answers 403 to HTTP with another site's
+    ``Host`` and refuses websockets from another site's page or ``Host``; its own page's websocket gets the
+    program's messages."""
+    import urllib.error
+    import urllib.request
+
+    import pytest
+    import viser
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    ws, protocol = "ws" + url[4:], [f"viser-v{viser.__version__}"]
+    request = urllib.request.Request(url, headers={"Host": "evil.example"})
+    with pytest.raises(urllib.error.HTTPError) as e:
+        urllib.request.urlopen(request, timeout=10)
+    assert e.value.code == 403
+    for headers in ({"origin": "http://evil.example"}, {"origin": "null"},
+                    {"origin": "http://evil.example", "additional_headers": {"Host": "evil.example"}}):
+        with pytest.raises(InvalidStatus) as e:
+            connect(ws, subprotocols=protocol, open_timeout=10, **headers)
+        assert e.value.response.status_code == 403, (headers, e.value.response.status_code, e.value.response.body)
+    with connect(ws, subprotocols=protocol, origin=url, open_timeout=10) as c:
+        assert len(c.recv(timeout=10)) > 0
+    with urllib.request.urlopen(url.replace("127.0.0.1", "localhost"), timeout=10) as r:
+        assert r.status == 200

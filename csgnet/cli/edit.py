@@ -4,6 +4,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from shapeio.editing import port_argument
+
 from ..primitives import primitives
 
 
@@ -47,7 +49,7 @@ def register(sub) -> None:
                                     "See docs/editor.md.")
     ed.add_argument("program", help='program text, e.g. "c(32,32,28)s(32,32,20)-", or a file whose first line is one')
     ed.add_argument("--dim", type=int, choices=(2, 3), default=None, help="2 or 3 (default: guessed from the text)")
-    ed.add_argument("--port", type=int, default=8080, help="port of the page")
+    ed.add_argument("--port", type=port_argument, default=8080, help="port of the page (0: a free one)")
     ed.add_argument("--host", default="127.0.0.1", help="address to bind (default: this machine only)")
     ed.add_argument("--export-dir", default=".", help="the folder exports are written to (never elsewhere)")
     ed.add_argument("--no-browser", action="store_true", help="do not open a browser")

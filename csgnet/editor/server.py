@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shapeio.editing import import_viser
+from shapeio.editing import check_port, import_viser, viser_server
 
 from . import CHOICE, CSGEditSession, Control
 
@@ -36,7 +36,8 @@ class CSGEditorApp:
 
     def __init__(self, session: CSGEditSession, host: str = "127.0.0.1", port: int = 8080, export_dir=".",
                  source_text: str | None = None):
-        viser = import_viser()
+        check_port(port)
+        import_viser()
         self.export_dir = Path(export_dir)
         if not self.export_dir.is_dir():
             raise FileNotFoundError(f"{export_dir}: the export folder does not exist")
@@ -47,7 +48,7 @@ class CSGEditorApp:
         self._handles: dict = {}
         self._names: tuple = ()
         self.state: dict = {"version": 0}
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.server = viser_server(host, port)
         gui = self.server.gui
         gui.add_markdown(f"**CSG program ({session.dim}D)**")
         self.status = gui.add_markdown("")

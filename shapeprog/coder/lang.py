@@ -394,6 +394,8 @@ class Library:
     abstractions: tuple = ()
     _table: dict = field(init=False, repr=False, compare=False, hash=False)
     _depth: dict = field(init=False, repr=False, compare=False, hash=False)  # per abstraction: expanded depth bound
+    # per abstraction: its body's node count with every call expanded, and each parameter's uses in it
+    _nodes: dict = field(init=False, repr=False, compare=False, hash=False)
 
     def __post_init__(self):
         if not isinstance(self.abstractions, tuple):
@@ -401,8 +403,9 @@ class Library:
         table: dict = {}
         object.__setattr__(self, "_table", table)
         object.__setattr__(self, "_depth", {})
+        object.__setattr__(self, "_nodes", {})
         for ab in self.abstractions:
-            self._depth[ab.name] = self._validate(ab)
+            self._depth[ab.name], self._nodes[ab.name] = self._validate(ab)
             table[ab.name] = ab
 
     def expanded_depth(self, expr: Expr) -> int:
@@ -414,8 +417,36 @@ class Library:
         body = self._depth.get(expr.fn)
         return 1 + args if body is None else body + max(args - 1, 0)
 
-    def _validate(self, ab: Abstraction) -> int:
-        """Check ``ab`` against this library; returns its body's expanded depth bound."""
+    def expanded_nodes(self, expr: Expr) -> int:
+        """The node count of ``expr`` with every abstraction call expanded (:func:`expand`'s result), computed
+        in time linear in ``expr`` (the abstractions' counts are kept when they join the library)."""
+        return self._measure(expr)[0]
+
+    def _measure(self, expr: Expr) -> tuple[int, dict]:
+        """``(expanded node count, uses of each variable in the expansion)`` of ``expr``."""
+        if isinstance(expr, Var):
+            return 1, {expr.name: 1}
+        if not isinstance(expr, Call):
+            return 1, {}
+        args = [self._measure(a) for a in expr.args]
+        if expr.fn not in self._nodes:
+            uses: dict = {}
+            for _, u in args:
+                for name, k in u.items():
+                    uses[name] = uses.get(name, 0) + k
+            return 1 + sum(n for n, _ in args), uses
+        nodes, params = self._nodes[expr.fn]  # each use of a parameter is replaced by its argument's expansion
+        total, uses = nodes, {}
+        for p, (n, u) in zip(self._table[expr.fn].params, args):
+            k = params.get(p.name, 0)
+            total += k * (n - 1)
+            for name, m in u.items():
+                uses[name] = uses.get(name, 0) + k * m
+        return total, uses
+
+    def _validate(self, ab: Abstraction) -> tuple[int, tuple[int, dict]]:
+        """Check ``ab`` against this library; returns its body's expanded depth bound and
+        :meth:`_measure`."""
         if not isinstance(ab, Abstraction):
             raise ProgramError(f"not an Abstraction: {type(ab).__name__}")
         if not _NAME.match(ab.name) or ab.name in AXES or ab.name.startswith("INT#"):
@@ -443,7 +474,10 @@ class Library:
         depth = self.expanded_depth(ab.body)
         if depth > limits.MAX_DEPTH:
             raise ProgramError(f"{ab.name}: its body expands to a depth over {limits.MAX_DEPTH} (MAX_DEPTH)")
-        return depth
+        measured = self._measure(ab.body)
+        if measured[0] > limits.MAX_NODES:
+            raise ProgramError(f"{ab.name}: its body expands to more than {limits.MAX_NODES} nodes (MAX_NODES)")
+        return depth, measured
 
     def signature(self, name: str) -> Signature | None:
         """The signature of base function or abstraction ``name``, or None."""
@@ -579,7 +613,8 @@ def expand(expr: Expr, library: Library, names=None) -> Expr:
     lib = _library(library)
     only = None if names is None else frozenset(names)
     cache: dict = {}
-    budget = [limits.MAX_NODES]
+    if lib.expanded_nodes(expr) > limits.MAX_NODES:  # a partial expansion is no larger than the full one
+        raise ProgramError(f"the expansion exceeds {limits.MAX_NODES} nodes (MAX_NODES)")
 
     def go(e):
         if not isinstance(e, Call):
@@ -590,11 +625,8 @@ def expand(expr: Expr, library: Library, names=None) -> Expr:
             if ab.name not in cache:
                 cache[ab.name] = go(ab.body)
             out = substitute(cache[ab.name], {p.name: a for p, a in zip(ab.params, args)})
-            budget[0] -= size(out)
         else:
             out = e if args == e.args else Call(e.fn, args)
-        if budget[0] < 0:
-            raise ProgramError(f"the expansion exceeds {limits.MAX_NODES} nodes (MAX_NODES)")
         return out
 
     return go(expr)

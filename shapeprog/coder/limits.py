@@ -21,7 +21,8 @@ MAX_TEXT_LENGTH = 100_000
 MAX_DEPTH = 256
 #: Abstractions of a library (shipped maximum: 30).
 MAX_ABSTRACTIONS = 256
-#: Nodes of an expression tree, also after expanding abstractions (data maximum: 245).
+#: Nodes of an expression tree, also after expanding abstractions (checked for every abstraction when it joins a
+#: library; data maximum: 245).
 MAX_NODES = 100_000
 #: Magnitude of a number literal (data maximum: 2.06).
 MAX_ABS_NUMBER = 1000.0

@@ -166,18 +166,15 @@ def _bookkeeping(lib: Library) -> list:
               "(rule ((= s (Union a b)) (norot a) (norot b)) ((norot s)) :ruleset rw)",
               "(rule ((= s (SymRef a _)) (norot a)) ((norot s)) :ruleset rw)",
               "(rule ((= s (SymTrans a _ _ _)) (norot a)) ((norot s)) :ruleset rw)"]
+    norot: dict = {}  # per abstraction, in definition order (an abstraction calls only earlier ones)
     for ab in lib.abstractions:
-        if not any(isinstance(n, Call) and (n.fn == "Rotate" or (n.fn in lib and not _norot_ab(lib, n.fn)))
-                   for n in walk(ab.body)):
+        norot[ab.name] = not any(isinstance(n, Call) and (n.fn == "Rotate" or (n.fn in lib and not norot[n.fn]))
+                                 for n in walk(ab.body))
+        if norot[ab.name]:
             pats = " ".join("_" for _ in ab.params)
             rules.append(f"(rule ((= s ({_AB}{ab.name} {pats}))) ((norot s)) :ruleset rw)")
     # the same rules in the ruleset of the eager schedule (VALUES), run to saturation before each iteration
     return rules + [r.replace(":ruleset rw)", ":ruleset facts)") for r in rules]
-
-
-def _norot_ab(lib: Library, name: str) -> bool:
-    return not any(isinstance(n, Call) and (n.fn == "Rotate" or (n.fn in lib and not _norot_ab(lib, n.fn)))
-                   for n in walk(lib[name].body))
 
 
 def semantic_rules(lang: Lang) -> list:

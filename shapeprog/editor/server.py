@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shapeio.editing import import_viser
+from shapeio.editing import check_port, import_viser, viser_server
 
 from ..geometry import CORNER_SIGNS, mesh_arrays
 from ..picture import part_colors
@@ -78,7 +78,8 @@ class EditorApp:
 
     def __init__(self, session: EditSession, host: str = "127.0.0.1", port: int = 8080, export_dir=".",
                  source_text: str | None = None):
-        viser = import_viser()
+        check_port(port)
+        import_viser()
         self.export_dir = Path(export_dir)
         if not self.export_dir.is_dir():
             raise FileNotFoundError(f"{export_dir}: the export folder does not exist")
@@ -93,7 +94,7 @@ class EditorApp:
         self._line_nodes: list = []
         self._layout = None
         self.state: dict = {"version": 0}
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.server = viser_server(host, port)
         self.server.scene.set_up_direction("+y")
         self.server.gui.configure_theme(control_width="large")
         self._build_static()

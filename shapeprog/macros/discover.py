@@ -81,11 +81,26 @@ LIMITS: dict = {
 }
 
 
+#: Bytes of a config file (the shipped ones: under 2 KB); a larger file is refused before it is read.
+MAX_CONFIG_BYTES = 1 << 20
+#: Characters of a value shown in an error (a longer one is cut).
+_SHOWN = 60
+
+
+def _shown(value) -> str:
+    text = repr(value)
+    return text if len(text) <= _SHOWN else f"{text[:_SHOWN]}... ({len(text)} characters)"
+
+
 def load_config(path: str | Path | None = None, **overrides) -> dict:
     """The defaults, updated from a YAML file and then ``overrides``.
 
+    The file may hold at most :data:`MAX_CONFIG_BYTES` and no YAML alias (``*name``), so that what it loads
+    to is no larger than its text.
+
     Raises:
-        ParseError: an unknown key or a value of the wrong type, naming the file and the key.
+        ParseError: an unknown key or a value of the wrong type, naming the file and the key; a file over
+            :data:`MAX_CONFIG_BYTES`, an alias.
     """
     cfg = dict(DEFAULTS)
     items: list[tuple[str, object, str, int, int]] = []  # key, value, file, line, column
@@ -93,9 +108,15 @@ def load_config(path: str | Path | None = None, **overrides) -> dict:
         import yaml
 
         from ..limits import decode
-        text = decode(Path(path).read_bytes(), str(path))
+        with open(path, "rb") as f:
+            raw = f.read(MAX_CONFIG_BYTES + 1)
+        if len(raw) > MAX_CONFIG_BYTES:
+            raise ParseError(f"a config has at most {MAX_CONFIG_BYTES} bytes (MAX_CONFIG_BYTES)", str(path), 1, 1, "")
+        text = decode(raw, str(path))
         try:
-            data = yaml.safe_load(text)
+            alias = next((e for e in yaml.parse(text) if isinstance(e, yaml.AliasEvent)), None)
+            if alias is None:
+                data = yaml.safe_load(text)
             node = yaml.compose(text)
         except yaml.YAMLError as e:
             mark = getattr(e, "problem_mark", None)
@@ -103,6 +124,10 @@ def load_config(path: str | Path | None = None, **overrides) -> dict:
             raise ParseError(f"not YAML: {getattr(e, 'problem', None) or e}", str(path), line, col, "") from None
         except (ValueError, RecursionError) as e:  # an integer of too many digits, nesting too deep
             raise ParseError(f"not a config: {type(e).__name__}: {str(e)[:120]}", str(path), 1, 1, "") from None
+        if alias is not None:  # each alias could repeat a large value: a few lines could load to gigabytes
+            mark = alias.start_mark
+            raise ParseError(f"YAML aliases (*{alias.anchor[:_SHOWN]}) are not allowed in a config", str(path),
+                             mark.line + 1, mark.column + 1, f"*{alias.anchor}"[:_SHOWN])
         if node is None:  # an empty file, or comments only: the defaults
             data, node = {}, yaml.MappingNode("tag:yaml.org,2002:map", [])
         if not isinstance(data, dict) or not isinstance(node, yaml.MappingNode):
@@ -113,14 +138,15 @@ def load_config(path: str | Path | None = None, **overrides) -> dict:
     items += [(k, v, "<overrides>", 1, 1) for k, v in overrides.items() if v is not None]
     for k, v, where, line, col in items:
         if k not in DEFAULTS:
-            raise ParseError(f"unknown setting {k!r}", where, line, col, str(k))
+            raise ParseError(f"unknown setting {_shown(k)}", where, line, col, str(k)[:_SHOWN])
         want = type(DEFAULTS[k])
         if want is float and isinstance(v, int) and not isinstance(v, bool):
             v = float(v)
         if not isinstance(v, want) or isinstance(v, bool) != (want is bool):
-            raise ParseError(f"setting {k!r} must be {want.__name__}, got {v!r}", where, line, col, str(k))
+            raise ParseError(f"setting {_shown(k)} must be {want.__name__}, got {_shown(v)}", where, line, col,
+                             str(k)[:_SHOWN])
         if k in _CHOICES and v not in _CHOICES[k]:
-            raise ParseError(f"setting {k!r} must be one of {_CHOICES[k]}, got {v!r}", where, line, col, str(k))
+            raise ParseError(f"setting {k!r} must be one of {_CHOICES[k]}, got {_shown(v)}", where, line, col, str(k))
         if k in LIMITS and not LIMITS[k][0] <= v <= LIMITS[k][1]:
             raise ParseError(f"setting {k!r} must be in {LIMITS[k][0]}..{LIMITS[k][1]}, got {v!r}", where, line, col,
                              str(k))
@@ -622,7 +648,13 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
         stop_after: seconds after which no new round is started.
         start: the state to continue from when there is no ``state.json`` to resume
             (:meth:`Discovery.from_library`); its orderings are filtered with its library first.
+
+    Raises:
+        ValueError: ``stop_after`` is not a number from 0 to infinity (NaN is refused).
     """
+    if stop_after is not None and (isinstance(stop_after, bool) or not isinstance(stop_after, (int, float))
+                                   or not stop_after >= 0):
+        raise ValueError(f"stop_after must be a number of seconds >= 0, got {stop_after!r}")
     cfg = dict(DEFAULTS if cfg is None else cfg)
     digest = nodes.digest()
     start_digest = None if start is None else start.digest()

@@ -58,6 +58,9 @@ CLOUD_POINTS = 10_000
 TRAIN_POINTS = 2_048
 #: Most points per shape :func:`make_clouds` samples (a bound on the cache's size).
 MAX_CLOUD_POINTS = 100_000
+#: Bytes of each array of a cloud cache other than ``points`` (ids, transforms, failures), as its header
+#: declares them before anything is decompressed.
+MAX_CACHE_TABLE_BYTES = 64 << 20
 #: Share of the corpus's train split carved out for validation.
 VAL_FRACTION = 0.05
 #: Storage types of the cached points.
@@ -378,6 +381,29 @@ def make_clouds(category: str, out: PathLike, n_points: int = CLOUD_POINTS, seed
                             cache_path.stat().st_size)
 
 
+def _check_cache_headers(z, path: Path, category: str) -> None:
+    """Refuse a cache whose arrays, by their ``.npy`` headers, would decompress to more than a cache of
+    ``category`` holds: ``points`` at most (corpus shapes of the category, :data:`MAX_CLOUD_POINTS`, 3), every
+    other array at most :data:`MAX_CACHE_TABLE_BYTES`."""
+    shapes = len(corpus.ids(category, "all"))
+    for name in z.files:
+        with z.zip.open(name + ".npy") as f:
+            try:
+                version = np.lib.format.read_magic(f)
+                read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+                shape, _, dtype = read(f)
+            except ValueError as e:
+                raise InputError(f"{path}: not a cloud cache (array {name!r}: {e})") from None
+        nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        if name == "points":
+            if len(shape) != 3 or shape[0] > shapes or shape[1] > MAX_CLOUD_POINTS or shape[2] != 3:
+                raise InputError(f"{path}: 'points' of shape {shape}; a {category} cache holds at most ({shapes}, "
+                                 f"{MAX_CLOUD_POINTS}, 3) (MAX_CLOUD_POINTS)")
+        elif nbytes > MAX_CACHE_TABLE_BYTES:
+            raise InputError(f"{path}: array {name!r} would take {nbytes} bytes; at most {MAX_CACHE_TABLE_BYTES} "
+                             "(MAX_CACHE_TABLE_BYTES)")
+
+
 def load_cache(root: PathLike, category: str) -> CloudCache:
     """Read ``root/<category>_clouds.npz`` (:func:`make_clouds`).
 
@@ -391,7 +417,10 @@ def load_cache(root: PathLike, category: str) -> CloudCache:
                                 f"`python -m shapeprog make-clouds --category {category} --out {root}`")
     try:
         with np.load(path, allow_pickle=False) as z:
+            _check_cache_headers(z, path, category)  # before anything is decompressed
             d = {k: z[k] for k in z.files}
+    except InputError:
+        raise
     except Exception as e:
         raise InputError(f"{path}: cannot read the cloud cache ({type(e).__name__}: {e})") from None
     need = ("version", "category", "ids", "points", "center", "scale", "n_points", "seed", "failed_ids",

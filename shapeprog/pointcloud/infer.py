@@ -6,7 +6,9 @@ frame the training clouds are in (:func:`~shapeprog.pointcloud.normalize.normali
 (non-rejecting validity decoding, :func:`shapeprog.vae.decode.decode_latent`; several codes at once with
 :func:`~shapeprog.vae.decode.decode_programs`), scales the program uniformly
 so that its executed cuboids span the cloud's bounding box (the decoder works in the corpus frame, whose
-shapes the normalisation scales by 0.85-1.1), and maps the result back into the input's scale and position.
+shapes the normalisation scales by 0.85-1.1), and maps the result back into the input's position, its lengths in
+the power of ten (:func:`text_unit`) that keeps them in the corpus's range, so that the program text parses
+and executes at any input scale.
 With ``fit=True`` the program's continuous numbers are then fitted to the cloud by chamfer through the
 differentiable executor (:func:`shapeprog.fit.fit`), keeping the structure. With ``retrieval=`` (a
 :class:`~shapeprog.pointcloud.retrieval.RetrievalIndex`; ours, not the papers') the decoded program competes
@@ -51,11 +53,15 @@ from .data import TRAIN_POINTS
 from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 
-__all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MIN_POINTS", "PRETRAINED", "RETRIEVAL_CANDIDATES", "CloudModel", "Inference",
-           "align_program", "cloud_corners", "decode_codes", "infer", "load_encoder", "load_model", "load_pretrained", "shape_metrics"]
+__all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MAX_DIAGONAL", "MIN_DIAGONAL", "MIN_POINTS", "PRETRAINED",
+           "RETRIEVAL_CANDIDATES", "CloudModel", "Inference", "align_program", "cloud_corners", "decode_codes", "infer",
+           "load_encoder", "load_model", "load_pretrained", "shape_metrics", "text_unit"]
 
 #: Fewest points :func:`infer` takes.
 MIN_POINTS = 16
+#: Smallest and largest bounding-box diagonal of a cloud :func:`infer` takes (input units): well inside float32's
+#: range (1.2e-38 to 3.4e38), in which clouds are read and shapes executed.
+MIN_DIAGONAL, MAX_DIAGONAL = 1e-32, 1e32
 #: Points of the (normalised) input the encoder sees (the training clouds' count); fewer are drawn with repeats.
 ENCODER_POINTS = TRAIN_POINTS
 #: Adam steps of the polish (``fit=True``).
@@ -242,6 +248,19 @@ def load_pretrained(category: str = "chair") -> CloudModel:
 # ------------------------------------------------------------------------------------------ one cloud
 
 
+def text_unit(diagonal: float) -> float:
+    """The unit of the program text :func:`infer` writes for a cloud of bounding-box ``diagonal`` (input units):
+    the power of ten nearest to ``diagonal / CANONICAL_DIAGONAL`` (1 for diagonals 0.63 to 6.3, 1000 for a chair
+    in millimetres). The text's lengths times the unit are input lengths, so its numbers stay in the corpus's
+    range (far below :data:`shapeprog.limits.MAX_ABS_NUMBER`) with the corpus's 3 decimals of precision.
+
+    Example:
+        >>> text_unit(1.8), text_unit(1774.6), text_unit(0.0018), text_unit(2.5e30)
+        (1.0, 1000.0, 0.001, 1e+30)
+    """
+    return float(f"1e{round(math.log10(diagonal / CANONICAL_DIAGONAL))}")
+
+
 def _corners_of(program: Optional[Program]) -> torch.Tensor:
     if program is None:
         return torch.zeros(0, 8, 3)
@@ -309,10 +328,12 @@ class Inference:
     """What :func:`infer` returns.
 
     Attributes:
-        program: the program at the input's scale (executes y-up, centred near the origin).
-        text: ``to_text(program)`` (3 decimals, the corpus's format).
+        program: the program at the input's scale with lengths in :attr:`unit` (executes y-up, centred near the
+            origin).
+        text: ``to_text(program)`` (3 decimals, the corpus's format); it parses and executes at any input scale.
         offset, rotation: ``(3,)`` and ``(3, 3) float64``: the executed points ``p`` of :attr:`text` lie on the
-            input at ``p @ rotation + offset`` (:meth:`place`); the rotation is the identity for a y-up input.
+            input at ``(p * unit) @ rotation + offset`` (:meth:`place`); the rotation is the identity for a y-up
+            input.
         canonical: the program in the canonical frame (AABB diagonal 2) and ``canonical_offset (3,)``: its
             executed points + that offset lie on the normalised cloud.
         transform: the input -> canonical :class:`Transform` of the cloud.
@@ -334,6 +355,8 @@ class Inference:
         fit_stopped: with ``fit=True``, None when every fitting step ran; else why the fitting stopped early
             (:attr:`shapeprog.fit.FitResult.stopped`: a step would have broken the program's execution, so the
             numbers before it are kept).
+        unit: the input length of one unit of :attr:`text`, a power of ten (:func:`text_unit`; 1 for an input
+            whose bounding-box diagonal is 0.63 to 6.3).
     """
 
     program: Program
@@ -350,10 +373,11 @@ class Inference:
     macro_text: Optional[str] = None
     retrieval: Optional[dict] = None
     fit_stopped: Optional[str] = None
+    unit: float = 1.0
 
     def place(self, points):
         """Points of the executed :attr:`program` ``(..., 3)`` -> the input's frame."""
-        return np.asarray(points, dtype=np.float64) @ self.rotation + self.offset
+        return (np.asarray(points, dtype=np.float64) * self.unit) @ self.rotation + self.offset
 
     def corners(self) -> np.ndarray:
         """The result's leaf cuboids in the input's frame, ``(L, 8, 3) float64``."""
@@ -362,12 +386,15 @@ class Inference:
 
 def _as_cloud(points) -> np.ndarray:
     if isinstance(points, torch.Tensor):
-        points = points.detach().cpu().double().numpy()
+        points = points.detach().cpu().numpy()
     try:
-        x = np.asarray(points, dtype=np.float64)
+        raw = np.asarray(points)
     except (TypeError, ValueError):
-        raise PointCloudError(f"points must be an (N, 3) array of numbers, got {type(points).__name__}",
-                              "points") from None
+        raw = None
+    if raw is None or raw.dtype.kind not in "iuf":  # no strings, objects, booleans or complex numbers
+        kind = type(points).__name__ if raw is None else f"{type(points).__name__} of dtype {raw.dtype}"
+        raise PointCloudError(f"points must be an (N, 3) array of real numbers, got {kind}", "points")
+    x = raw.astype(np.float64)
     if x.ndim != 2 or x.shape[1] != 3:
         raise PointCloudError(f"points must have shape (N, 3), got {x.shape}", "points")
     if len(x) < MIN_POINTS:
@@ -375,6 +402,11 @@ def _as_cloud(points) -> np.ndarray:
     if not np.isfinite(x).all():
         bad = int(np.argwhere(~np.isfinite(x).all(1))[0, 0])
         raise PointCloudError(f"point {bad} has a NaN or infinite coordinate", "points")
+    with np.errstate(over="ignore"):
+        diagonal = float(np.linalg.norm(x.max(0) - x.min(0)))
+    if diagonal > 0 and not MIN_DIAGONAL <= diagonal <= MAX_DIAGONAL:
+        raise PointCloudError(f"the cloud's bounding-box diagonal {diagonal:.3g} is outside [{MIN_DIAGONAL:g}, "
+                              f"{MAX_DIAGONAL:g}] (MIN_DIAGONAL, MAX_DIAGONAL)", "points")
     return x
 
 
@@ -486,12 +518,13 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     metrics = shape_metrics(_corners_of(canon) + torch.from_numpy(off).float(), target, seed=seed,
                             physics=physics, stability=stability)
     seconds["metrics"] = time.perf_counter() - t2
-    program_in = t.program_to_input(canon)
+    length = text_unit(CANONICAL_DIAGONAL / t.scale)  # the text's unit
+    program_in = scale_program(canon, 1.0 / (t.scale * length))
     rotation = t.rotation
-    # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / scale
+    # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / (scale * unit)
     offset = np.asarray(t.center) + (off / t.scale) @ rotation
     return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics, before,
-                     seconds, searched, macro_text, retrieved, fit_stopped)
+                     seconds, searched, macro_text, retrieved, fit_stopped, length)
 
 
 def _check_retrieval(index, k, model) -> None:

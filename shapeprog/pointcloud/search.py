@@ -31,7 +31,7 @@ from ..lang import Program
 from ..metrics import chamfer
 from ..sampling import sample_surface
 
-__all__ = ["FAST_SEARCH_SCHEDULE", "MAX_SEARCH_DECODES", "NAMED_SCHEDULES", "QUICK_SEARCH_SCHEDULE", "SEARCH_POINTS",
+__all__ = ["FAST_SEARCH_SCHEDULE", "MAX_SEARCH_DECODES", "MAX_SIGMA", "NAMED_SCHEDULES", "QUICK_SEARCH_SCHEDULE", "SEARCH_POINTS",
            "SEARCH_SCHEDULE",
            "SearchResult", "aligned_corners", "check_schedule", "latent_search", "parse_schedule", "selection_chamfers",
            "selection_target"]
@@ -60,6 +60,9 @@ NAMED_SCHEDULES = {"default": SEARCH_SCHEDULE, "fast": FAST_SEARCH_SCHEDULE, "qu
 SEARCH_POINTS = 1024
 #: Most decodes one search may ask for (the sum of a schedule's samples).
 MAX_SEARCH_DECODES = 4096
+#: The largest sigma of a search step: latents are drawn from N(0, I), so steps this wide already reach far
+#: outside the prior (the default schedule starts at 0.75).
+MAX_SIGMA = 10.0
 
 
 @dataclass
@@ -88,8 +91,8 @@ def check_schedule(schedule: Sequence) -> tuple:
     """``schedule`` as a tuple of ``(int samples >= 1, float sigma > 0)``.
 
     Raises:
-        ValueError: an empty schedule, a step that is not a pair, a count below 1, a sigma that is not a
-            positive finite number, or more than :data:`MAX_SEARCH_DECODES` samples in all.
+        ValueError: an empty schedule, a step that is not a pair, a count below 1, a sigma outside
+            ``(0, MAX_SIGMA]``, or more than :data:`MAX_SEARCH_DECODES` samples in all.
     """
     steps = []
     for k, step in enumerate(schedule):
@@ -99,8 +102,9 @@ def check_schedule(schedule: Sequence) -> tuple:
             raise ValueError(f"search step {k}: expected (samples, sigma), got {step!r}") from None
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
             raise ValueError(f"search step {k}: samples must be an integer >= 1, got {samples!r}")
-        if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not math.isfinite(sigma) or sigma <= 0:
-            raise ValueError(f"search step {k}: sigma must be a positive finite number, got {sigma!r}")
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not 0 < sigma <= MAX_SIGMA:
+            raise ValueError(f"search step {k}: sigma must be a number in (0, {MAX_SIGMA:g}] (MAX_SIGMA), "
+                             f"got {sigma!r}")
         steps.append((int(samples), float(sigma)))
     if not steps:
         raise ValueError("the search schedule has no step")

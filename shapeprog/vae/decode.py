@@ -44,7 +44,7 @@ from .validity import (ATTACH_CMD, CUBOID, MIN_DIM, REFLECT, SQUEEZE, START, STO
 from .vectors import (ALIGNED, ATTACH, AXIS, COUNT, CUBE1, CUBE2, CUBE3, DIMS, DIST, FACE, LINE_DIM, NUM_SLOTS, UV,
                       program_to_tree)
 
-__all__ = ["DecodeOptions", "Decoded", "InvalidSample", "decode", "decode_latent", "decode_programs", "encode", "interpolate",
+__all__ = ["MAX_SAMPLES", "MAX_TRIES", "DecodeOptions", "Decoded", "InvalidSample", "decode", "decode_latent", "decode_programs", "encode", "interpolate",
            "sample"]
 
 
@@ -482,11 +482,19 @@ def decode_programs(decoder: Decoder, zs: torch.Tensor, **options) -> list[Progr
 # ----------------------------------------------------------------------------- entry points
 
 
-def _check_int(name: str, v, low: int) -> int:
+#: The most programs one :func:`sample` call generates (each one is kept in memory).
+MAX_SAMPLES = 100_000
+#: The most draws per sample.
+MAX_TRIES = 1000
+
+
+def _check_int(name: str, v, low: int, high: int | None = None) -> int:
     if not isinstance(v, (int, np.integer)) or isinstance(v, bool):
         raise ValueError(f"{name} must be an integer, got {v!r} ({type(v).__name__})")
     if v < low:
         raise ValueError(f"{name} must be at least {low}, got {v}")
+    if high is not None and v > high:
+        raise ValueError(f"{name} must be at most {high}, got {v}")
     return int(v)
 
 
@@ -500,20 +508,20 @@ def sample(vae: VAE, n: int, seed: int = 0, max_tries: int = 10, **options) -> l
 
     Args:
         vae: the model (its decoder is used, in eval mode, on its device).
-        n: programs to generate (>= 1).
+        n: programs to generate (1 to :data:`MAX_SAMPLES`).
         seed: the generator's seed (an integer).
-        max_tries: draws per sample (>= 1; the reference's paper reports 10-20% refused draws).
+        max_tries: draws per sample (1 to :data:`MAX_TRIES`; the reference's paper reports 10-20% refused draws).
         **options: :class:`DecodeOptions` fields.
 
     Returns:
         ``n`` :class:`Decoded` programs; the share with ``tries <= max_tries`` is the share valid within
         ``max_tries`` draws, and with ``tries == 1`` the share valid on the first draw.
     """
-    n = _check_int("n", n, 1)
+    n = _check_int("n", n, 1, MAX_SAMPLES)
     seed = _check_int("seed", seed, -(2 ** 63))
     if seed >= 2 ** 64:
         raise ValueError(f"seed must be below 2**64, got {seed}")
-    max_tries = _check_int("max_tries", max_tries, 1)
+    max_tries = _check_int("max_tries", max_tries, 1, MAX_TRIES)
     opts = DecodeOptions(**options)
     dec = vae.decoder
     gen = torch.Generator().manual_seed(seed)

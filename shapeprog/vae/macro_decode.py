@@ -290,9 +290,14 @@ def decode_macro_latent(vae: MacroVAE, z: torch.Tensor, *, reject: bool = False,
 def sample_macro(vae: MacroVAE, n: int, seed: int = 0, max_tries: int = 10, decimals: int = 3) -> list[MacroDecoded]:
     """``n`` programs from latents drawn from N(0, I) (seeded), with rejection: a refused sample draws a new
     latent, up to ``max_tries`` times, then its last latent is decoded without rejection."""
-    if int(n) < 0 or int(max_tries) < 1:
-        raise ValueError(f"n must be >= 0 and max_tries >= 1, got {n!r}, {max_tries!r}")
-    gen = torch.Generator().manual_seed(int(seed))
+    from .decode import MAX_SAMPLES, MAX_TRIES, _check_int
+
+    n = _check_int("n", n, 0, MAX_SAMPLES)
+    max_tries = _check_int("max_tries", max_tries, 1, MAX_TRIES)
+    seed = _check_int("seed", seed, -(2 ** 63))
+    if seed >= 2 ** 64:
+        raise ValueError(f"seed must be below 2**64, got {seed}")
+    gen = torch.Generator().manual_seed(seed)
     H = vae.decoder.hidden_dim
     out = []
     for _ in range(int(n)):

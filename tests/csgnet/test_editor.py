@@ -132,3 +132,33 @@ def test_page(tmp_path):
         assert len(app.export()) == 2
     finally:
         app.stop()
+
+
+def test_defect_editor_accepts_any_web_origin_is_refused(tmp_path):
+    pytest.importorskip("viser", reason="viser is not installed (the 'editor' extra: pip install -e '.[editor]')")
+    from csgnet.editor.server import CSGEditorApp
+    from editor_testutil import assert_only_this_machines_pages_reach
+
+    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=_free_port(), export_dir=tmp_path)
+    try:
+        assert_only_this_machines_pages_reach(app.url)
+    finally:
+        app.stop()
+
+
+def test_defect_edit_port_out_of_range_is_refused(tmp_path):
+    pytest.importorskip("viser", reason="viser is not installed (the 'editor' extra: pip install -e '.[editor]')")
+    from csgnet.editor.server import CSGEditorApp
+
+    with pytest.raises(ValueError, match=r"port 70000 is not a TCP port \(an integer from 0 to 65535\)"):
+        CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=70000, export_dir=tmp_path)
+
+
+def test_defect_edit_port_out_of_range_is_an_argument_error(capsys):
+    from csgnet.__main__ import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["edit", "c(32,32,28)", "--port", "70000", "--no-browser"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        "error: argument --port: port '70000' is not a TCP port (an integer from 0 to 65535)")

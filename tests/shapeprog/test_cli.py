@@ -3,6 +3,7 @@ import subprocess
 import sys
 
 import pytest
+import torch
 
 from shapeprog.__main__ import main
 
@@ -96,3 +97,88 @@ def test_help_lists_every_option_and_format(cmd, options, capsys):
     out = capsys.readouterr().out
     for option in options:
         assert option in out
+
+
+def _argument_error(capsys, argv) -> str:
+    """The last stderr line of an argument error (exit status 2), before any work."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    return capsys.readouterr().err.splitlines()[-1]
+
+
+def test_defect_sizes_without_maximum_are_refused(tmp_path, capsys):
+    from shapeprog.picture import MAX_SIZE, render_grid, render_png
+    from shapeprog.silhouettes import silhouette
+
+    assert _argument_error(capsys, ["silhouettes", "--size", "100000", "--out", str(tmp_path / "s.npz")]).endswith(
+        "argument --size: must be an integer from 1 to 256, got '100000'")
+    assert _argument_error(capsys, ["run", "chair/173", "--png", str(tmp_path / "x.png"), "--size", "20000"]).endswith(
+        "argument --size: must be an integer from 8 to 2048, got '20000'")
+    assert _argument_error(capsys, ["make-clouds", "--category", "chair", "--points", "30000000", "--out",
+                                    str(tmp_path / "c")]).endswith(
+        "argument --points: must be an integer from 1 to 20000000, got '30000000'")
+    assert _argument_error(capsys, ["refactor-corpus", "--category", "chair", "--library", "chair", "--workers",
+                                    "100000", "--out", str(tmp_path / "r")]).endswith(
+        "argument --workers: must be an integer from 1 to 256, got '100000'")
+    with pytest.raises(SystemExit, match=r"error: --png: a grid of 5000 pictures of 192 pixels has 184320000 pixels; "
+                                         r"at most 67108864 \(MAX_GRID_PIXELS\)"):
+        main(["sample", "chair", "-n", "5000", "--png", str(tmp_path / "g.png")])
+    assert list(tmp_path.iterdir()) == []
+    box = torch.tensor([[[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]], dtype=torch.float32)
+    with pytest.raises(ValueError, match=r"`size` must be an int from 8 to 2048 \(MAX_SIZE\), got 2049"):
+        render_png(box, size=MAX_SIZE + 1)
+    with pytest.raises(ValueError, match=r"has 83886080 pixels; at most 67108864 \(MAX_GRID_PIXELS\)"):
+        render_grid([box] * 20, cols=4, size=2048)
+    with pytest.raises(ValueError, match=r"need an int size from 1 to 256 \(MAX_SIZE\), got size=257"):
+        silhouette(box, "front", size=257)
+
+
+def test_defect_sample_ten_million_is_refused_at_once(capsys):
+    from shapeprog.vae import load_pretrained, sample
+
+    assert _argument_error(capsys, ["sample", "chair", "-n", "10000000"]).endswith(
+        "argument -n: must be an integer from 1 to 100000, got '10000000'")
+    with pytest.raises(ValueError, match="n must be at most 100000, got 10000000"):
+        sample(load_pretrained("chair"), 10_000_000)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["fit", "chair/173", "--lr", "nan"], "argument --lr: must be a number in (0, 1], got 'nan'"),
+    (["fit", "chair/173", "--lr", "1e30"], "argument --lr: must be a number in (0, 1], got '1e30'"),
+    (["sample", "chair", "--seed", str(2 ** 77)],
+     "argument --seed: must be an integer from 0 to 9223372036854775807, got '15111572745182864683'"),
+    (["infer", "good.xyz", "--seed", "-1", "--out", "o"],
+     "argument --seed: must be an integer from 0 to 9223372036854775807, got '-1'"),
+    (["abstract-infer", "chair/1", "--library", "chair", "--passes", "0"],
+     "argument --passes: must be an integer from 1 to 100, got '0'"),
+])
+def test_defect_bad_option_values_are_argument_errors_not_tracebacks(capsys, argv, message):
+    assert _argument_error(capsys, argv).endswith(message)
+
+
+def test_defect_bad_option_values_are_refused_by_the_library():
+    from shapeprog import corpus, parse
+    from shapeprog.fit import fit
+
+    program = parse(corpus.read("chair", 173))
+    points = torch.rand(100, 3)
+    for kwargs, match in (({"lr": float("nan")}, r"`lr` must be a number in \(0, 1\] \(MAX_LR\), got nan"),
+                          ({"lr": 1e30}, r"`lr` must be a number in \(0, 1\] \(MAX_LR\), got 1e\+30"),
+                          ({"reg": -1.0}, r"`reg` must be a number in \[0, 1e\+06\] \(MAX_REG\), got -1.0"),
+                          ({"decimals": 400}, r"`decimals` must be an integer from 0 to 12 \(MAX_DECIMALS\), got 400")):
+        with pytest.raises(ValueError, match=match):
+            fit(program, points, steps=1, **kwargs)
+
+
+def test_defect_reconstruct_with_another_categorys_weights_is_refused(tmp_path, capsys):
+    from shapeprog.vae.pretrained import WEIGHTS
+
+    table = WEIGHTS / "vae_table.pt"
+    out = tmp_path / "r.txt"
+    with pytest.raises(SystemExit) as e:
+        main(["reconstruct", "chair/173", "--weights", str(table), "-o", str(out)])
+    assert str(e.value) == (f"error: {table}: a table model, but the input is a chair program (give --category table "
+                            "to use this model anyway)")
+    assert not out.exists()
+    assert main(["reconstruct", "chair/173", "--weights", str(table), "--category", "table", "-o", str(out)]) == 0

@@ -163,6 +163,6 @@ def test_bad_frame_is_refused_before_building(tmp_path):
     with pytest.raises(ValueError, match="got size=64, margin=40"):
         S.build(margin=40, limit=1, progress=False)
     out = tmp_path / "sil.npz"
-    with pytest.raises(SystemExit, match="error: need size >= 1 and 0 <= margin < size / 2"):
+    with pytest.raises(SystemExit, match="error: need an int margin with 0 <= margin < size / 2"):
         main(["silhouettes", "--out", str(out), "--margin", "40", "--limit", "1", "--quiet"])
     assert not out.exists()

@@ -239,3 +239,36 @@ def test_library_limits_hold_after_expansion_and_are_located():
     with pytest.raises(ParseError) as e:
         Library.from_text(many, file="lib.txt")
     assert e.value.line == limits.MAX_ABSTRACTIONS + 1 and "MAX_ABSTRACTIONS" in e.value.reason
+
+
+def _doubling_library(levels: int) -> str:
+    """``A0 = Cuboid(F0, F0, F0)``, ``Ak = Union(A{k-1}(F0), A{k-1}(F0))``: 2.4 KB for 60 levels, 2**k leaves."""
+    lines = ["A0(F0: Float) = Cuboid(F0, F0, F0)"]
+    lines += [f"A{k}(F0: Float) = Union(A{k - 1}(F0), A{k - 1}(F0))" for k in range(1, levels)]
+    return "\n".join(lines) + "\n"
+
+
+def test_defect_exponential_abstraction_library_is_refused_at_load():
+    from shapeprog.coder.lang import expand, size
+
+    with pytest.raises(ParseError) as e:
+        Library.from_text(_doubling_library(60), file="lib.txt")
+    assert str(e.value) == "lib.txt:16:1: A15: its body expands to more than 100000 nodes (MAX_NODES)"
+    lib = Library.from_text(_doubling_library(15))  # Ak expands to 5 * 2**k - 1 nodes
+    assert [lib.expanded_nodes(a.body) for a in lib] == [size(expand(a.body, lib)) for a in lib]
+    assert lib.expanded_nodes(lib["A14"].body) == 81919
+    mixed = Library.from_text("B(F0: Float, F1: Float) = Move(Cuboid(F0, F0, F1), F0, 0.0, F1)\n"
+                              "C(F0: Float) = B(Add(F0, 1.0), Mul(F0, F0))\n")
+    assert [mixed.expanded_nodes(a.body) for a in mixed] == [size(expand(a.body, mixed)) for a in mixed] == [8, 18]
+
+
+def test_defect_exponential_abstraction_library_rules_walk_each_body_once(monkeypatch):
+    import importlib
+
+    refactor = importlib.import_module("shapeprog.coder.refactor")
+    lib = Library.from_text(_doubling_library(15))
+    walked = []
+    real = refactor.walk
+    monkeypatch.setattr(refactor, "walk", lambda e: walked.append(e) or real(e))
+    refactor._bookkeeping(lib)
+    assert walked == [a.body for a in lib]

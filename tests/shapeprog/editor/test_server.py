@@ -454,3 +454,25 @@ def test_an_interrupt_while_the_address_is_printed_stops_the_server_cleanly(monk
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Ctrl-C works again
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+def test_defect_editor_accepts_any_web_origin_is_refused(app):
+    from editor_testutil import assert_only_this_machines_pages_reach
+
+    assert_only_this_machines_pages_reach(app.url)
+
+
+@pytest.mark.parametrize("port", [70000, -1, 65536])
+def test_defect_edit_port_out_of_range_is_refused(tmp_path, port):
+    with pytest.raises(ValueError, match=f"port {port} is not a TCP port \\(an integer from 0 to 65535\\)"):
+        EditorApp(EditSession(CHAIR, "chair/173.txt"), port=port, export_dir=tmp_path)
+
+
+def test_defect_edit_port_out_of_range_is_an_argument_error(capsys):
+    from shapeprog.__main__ import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["edit", "chair/173", "--port", "70000", "--no-browser"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        "error: argument --port: port '70000' is not a TCP port (an integer from 0 to 65535)")

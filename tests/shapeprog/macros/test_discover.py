@@ -136,7 +136,8 @@ def test_config_file_and_errors(tmp_path):
         assert load_config(bad) == DEFAULTS
     for text, match in (("null\n", "a config is a mapping"), ("0\n", "a config is a mapping"),
                         ("prec: " + "1" * 4301 + "\n", "not a config: ValueError"),
-                        ("prec: " + "[" * 2000 + "\n", "not a config: RecursionError")):
+                        ("prec: " + "[" * 2000 + "]" * 2000 + "\n", "not a config: RecursionError"),
+                        ("prec: " + "[" * 2000 + "\n", "not YAML: expected the node content")):
         bad.write_text(text)
         with pytest.raises(ParseError, match=match):
             load_config(bad)
@@ -234,3 +235,40 @@ def test_a_proposal_step_without_a_common_signature_is_counted_as_missed():
     few = [[0] if i < 10 else [] for i in range(len(nodes.lines))]
     assert propose_step(nodes, few, _index(nodes, few), lib, tpls, cfg, rng, missed=missed) == []
     assert missed == [1]
+
+
+def test_defect_yaml_alias_bomb_is_refused(tmp_path):
+    from shapeprog.errors import ParseError
+    from shapeprog.macros.discover import MAX_CONFIG_BYTES
+
+    levels = ["a: &a [x, x, x, x, x, x, x, x, x]"]
+    levels += [f"{c}: &{c} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]"
+               for p, c in zip("abcdefgh", "bcdefghi")]
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text("\n".join(levels) + "\n")  # 9**9 strings when expanded
+    assert bomb.stat().st_size < 400
+    with pytest.raises(ParseError) as e:
+        load_config(bomb)
+    assert str(e.value) == f"{bomb}:2:8: YAML aliases (*a) are not allowed in a config"
+    big = tmp_path / "big.yaml"
+    big.write_text("num_rounds: 5\n" + "#" * MAX_CONFIG_BYTES + "\n")
+    with pytest.raises(ParseError, match=r"big.yaml:1:1: a config has at most 1048576 bytes \(MAX_CONFIG_BYTES\)"):
+        load_config(big)
+    long = tmp_path / "long.yaml"
+    long.write_text("num_rounds: " + "y" * 100_000 + "\n")
+    with pytest.raises(ParseError) as e:
+        load_config(long)
+    assert str(e.value) == (f"{long}:1:1: setting 'num_rounds' must be int, got '{'y' * 59}... "
+                            "(100002 characters)")
+
+
+def test_defect_discover_stop_after_nan_is_refused(capsys):
+    from shapeprog.__main__ import main
+
+    with pytest.raises(ValueError, match="stop_after must be a number of seconds >= 0, got nan"):
+        discover(Nodes([], [], []), stop_after=float("nan"))
+    with pytest.raises(SystemExit) as e:
+        main(["discover-macros", "--category", "chair", "--stop-after", "nan", "--out", "unused"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        "argument --stop-after: must be a number in [0, 3.16224e+07], got 'nan'")

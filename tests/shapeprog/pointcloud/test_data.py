@@ -187,3 +187,35 @@ def test_a_cache_of_any_integer_seed_reads_back(tmp_path):
     make_clouds("storage", tmp_path, n_points=16, workers=1, seed=-1, ids=corpus_splits("storage")["train"][:1])
     c = load_cache(tmp_path, "storage")
     assert c.seed == -1 and read_split(tmp_path, "storage", c)["train"] == c.ids.tolist()
+
+
+def test_defect_unbounded_reads_cloud_cache_bomb_is_refused_before_decompressing(tmp_path):
+    from shapeio import InputError
+    from shapeprog.pointcloud.data import load_cache
+
+    bomb = tmp_path / "chair_clouds.npz"
+    np.savez_compressed(bomb, points=np.zeros((2, 200_000, 3), np.float32), ids=np.zeros(2, np.int64))
+    with pytest.raises(InputError, match=r"'points' of shape \(2, 200000, 3\); a chair cache holds at most "
+                                         r"\(\d+, 100000, 3\) \(MAX_CLOUD_POINTS\)"):
+        load_cache(tmp_path, "chair")
+    np.savez_compressed(bomb, points=np.zeros((2, 10, 3), np.float32), ids=np.zeros(80 << 20 >> 3, np.int64))
+    assert bomb.stat().st_size < 1 << 20
+    with pytest.raises(InputError, match=r"array 'ids' would take 83886080 bytes; at most 67108864 "
+                                         r"\(MAX_CACHE_TABLE_BYTES\)"):
+        load_cache(tmp_path, "chair")
+
+
+def test_defect_unbounded_reads_xyz_line_is_refused(tmp_path):
+    from shapeio import InputError
+    from shapeio.points import read_points
+
+    path = tmp_path / "long.xyz"
+    path.write_text("0 0 0\n" + "1" * 10_000)
+    with pytest.raises(InputError) as e:
+        read_points(path)
+    assert str(e.value) == f"{path}:2: a line longer than MAX_LINE_CHARS = 4096 characters"
+    folder = tmp_path / "cloud.xyz"
+    folder.mkdir()
+    with pytest.raises(InputError) as e:
+        read_points(folder)
+    assert str(e.value) == f"{folder}: a folder, not a point-cloud or mesh file"

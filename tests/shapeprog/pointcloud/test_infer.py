@@ -93,7 +93,9 @@ def test_metrics_of_a_shape_against_its_own_surface():
     (np.zeros((20, 2)), r"shape \(N, 3\)"),
     (np.ones((20, 3)), "one place"),
     (np.where(np.arange(60).reshape(20, 3) == 7, np.nan, 1.0 * np.arange(60).reshape(20, 3)), "point 2"),
-    ("abc", "array of numbers"),
+    ("abc", "array of real numbers, got str of dtype <U3"),
+    (np.arange(60.0).reshape(20, 3) * 1e300, r"diagonal inf is outside \[1e-32, 1e\+32\] \(MIN_DIAGONAL, MAX_DIAGONAL\)"),
+    (np.arange(60.0).reshape(20, 3) * 1e-40, r"diagonal 9.87e-39 is outside \[1e-32, 1e\+32\]"),
 ])
 def test_bad_clouds_are_refused_with_our_error(model, points, match):
     with pytest.raises(PointCloudError, match=match):
@@ -274,3 +276,53 @@ def test_pointcloud_tables_never_write_over_the_weights(tmp_path, weights):
         main(["pointcloud-tables", "--category", "chair", "--clouds", str(tmp_path), "--weights", str(weights),
               "--out", str(weights)])
     assert weights.read_bytes() == before
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3, 1e30])
+def test_defect_infer_writes_programs_its_own_tools_read_at_any_input_scale(tmp_path, weights, scale, capsys):
+    """The program ``infer`` writes parses, runs, fits, refactors and opens in the editor at any input scale, and
+    ``(p * unit) @ rotation + offset`` of its executed points is the mesh written in the input's frame."""
+    from shapeprog.editor.session import EditSession
+
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
+    src = tmp_path / "cloud.npy"
+    np.save(src, (cloud * scale + np.array([1.0, 2.0, 3.0]) * scale).astype(np.float32))
+    out = tmp_path / "out"
+    assert main(["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]) == 0
+    record = json.loads((out / "cloud.json").read_text())
+    assert record["unit"] == {1e-3: 1e-3, 1.0: 1.0, 1e3: 1e3, 1e30: 1e30}[scale]
+    txt = out / "cloud.txt"
+    program = parse(txt.read_text(), file=str(txt))
+    numbers = [abs(v) for b in program.blocks for s in b.statements if type(s).__name__ == "Cuboid"
+               for v in (s.l, s.h, s.w)]
+    assert 0.01 < max(numbers) < 10.0
+    rotation, offset = np.array(record["rotation"]), np.array(record["offset"])
+    placed = (execute(program, dtype=torch.float64).corners.numpy() * record["unit"]) @ rotation + offset
+    mesh = np.array([[float(v) for v in line.split()[1:]] for line in (out / "cloud.obj").read_text().splitlines()
+                     if line.startswith("v ")])
+    assert np.allclose(placed.reshape(-1, 3), mesh, rtol=0, atol=2e-3 * scale)
+    capsys.readouterr()
+    assert main(["run", str(txt), "-o", str(tmp_path / "run.obj")]) == 0
+    assert main(["fit", str(txt), "--points", "example", "--steps", "2", "-o", str(tmp_path / "fit.txt")]) == 0
+    assert main(["refactor", str(txt), "--library", "chair", "-o", str(tmp_path / "macros.txt")]) == 0
+    assert EditSession(txt.read_text(), str(txt)).controls()
+
+
+@pytest.mark.parametrize("points, kind", [
+    ([["1", "2", "3"]] * 20, "list of dtype <U1"),
+    (np.ones((20, 3)) + 1j, "ndarray of dtype complex128"),
+    (np.ones((20, 3), dtype=bool), "ndarray of dtype bool"),
+    (torch.ones(20, 3, dtype=torch.complex64), "ndarray of dtype complex64"),
+])
+def test_defect_infer_accepts_strings_complex_and_bool_clouds_is_refused(model, points, kind):
+    with pytest.raises(PointCloudError) as e:
+        infer(points, model=model)
+    assert str(e.value) == f"`points`: points must be an (N, 3) array of real numbers, got {kind}"
+
+
+def test_defect_search_schedule_sigma_1e308_is_refused(tmp_path, capsys):
+    from shapeprog.pointcloud.search import parse_schedule
+
+    with pytest.raises(ValueError) as e:
+        parse_schedule("16:1e308")
+    assert str(e.value) == "search step 0: sigma must be a number in (0, 10] (MAX_SIGMA), got 1e+308"
