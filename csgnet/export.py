@@ -23,7 +23,8 @@ from . import primitives as P
 from .primitives import SIZE
 from .lang import Draw, Program, parse
 
-__all__ = ["save_png", "voxels_to_mesh", "save_obj", "to_scad", "save_scad", "depth_view", "contact_sheet", "save_sheet"]
+__all__ = ["save_png", "voxels_to_mesh", "save_obj", "to_scad", "save_scad", "depth_view", "contact_sheet", "save_sheet",
+           "LABEL_BAND"]
 
 
 def _to_numpy_bool(a, name: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -200,6 +201,27 @@ def contact_sheet(images, cols: int = 6):
         sheet[r * (h + 2) + 1: r * (h + 2) + 1 + h, c * (w + 2) + 1: c * (w + 2) + 1 + w] = grey
     return sheet
 
-def save_sheet(sheet, path, scale: int = 3) -> Path:
-    """Write a :func:`contact_sheet` as a PNG, each pixel ``scale`` times (atomically)."""
-    return write_png(path, sheet, scale=scale, mkdir=True)
+LABEL_BAND = 14
+"""Height (top) of the band that :func:`save_sheet` writes column labels in, and the left band's width per
+character of the longest row label is ``LABEL_BAND // 2``."""
+
+
+def save_sheet(sheet, path, scale: int = 3, columns=(), rows=()) -> Path:
+    """Write a :func:`contact_sheet` as a PNG, each pixel ``scale`` times (atomically), with ``columns``
+    labels in a band above the columns and ``rows`` labels in a band left of the rows (black on white, the
+    default bitmap font; no band without labels). The sheet itself starts at ``(LABEL_BAND, left band)``."""
+    from PIL import Image, ImageDraw
+
+    big = np.kron(np.asarray(sheet, dtype=np.uint8), np.ones((scale, scale), np.uint8))
+    top = LABEL_BAND if columns else 0
+    left = (LABEL_BAND // 2) * (max(map(len, rows)) + 1) if rows else 0
+    canvas = Image.new("L", (big.shape[1] + left, big.shape[0] + top), 255)
+    canvas.paste(Image.fromarray(big), (left, top))
+    draw = ImageDraw.Draw(canvas)
+    for i, text in enumerate(columns):
+        width = big.shape[1] / max(len(columns), 1)
+        draw.text((left + i * width + 4, 1), str(text), fill=0)
+    for i, text in enumerate(rows):
+        height = big.shape[0] / max(len(rows), 1)
+        draw.text((2, top + i * height + height / 2 - 5), str(text), fill=0)
+    return write_png(path, np.asarray(canvas), mkdir=True)

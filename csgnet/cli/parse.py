@@ -101,12 +101,13 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
     if dim == 2:
         compare = stem.with_name(stem.name + "_compare.png")
         written = [export.save_png(img, named(stem, ".png")), compare]
-        export.save_sheet(export.contact_sheet([shape, img], cols=2), compare)
+        export.save_sheet(export.contact_sheet([shape, img], cols=2), compare, columns=("input", "program"))
     else:
         compare = stem.with_name(stem.name + "_compare.png")
         written = [export.save_obj(img, named(stem, ".obj"), transform=frame), compare]
         export.save_sheet(export.contact_sheet([export.depth_view(shape, a) for a in range(3)]
-                                   + [export.depth_view(img, a) for a in range(3)], cols=3), compare)
+                                               + [export.depth_view(img, a) for a in range(3)], cols=3), compare,
+                          columns=("along x", "along y", "along z"), rows=("input", "program"))
     if program is not None:
         written.append(export.save_scad(program, named(stem, ".scad"), transform=frame))
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))

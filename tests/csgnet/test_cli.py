@@ -155,14 +155,18 @@ def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
     assert f"after: IoU {100 * iou:.2f}%" in out
     assert (tmp_path / "table.obj").exists() and (tmp_path / "table.scad").exists()
     # the comparison sheet: depth views along x, y, z of the input (top row) and of the written program
-    # (bottom row), 64 px + 2 px frame each, scaled x3
+    # (bottom row), 64 px + 2 px frame each, scaled x3, below a band of column labels and right of one of
+    # row labels ("input", "program")
     import numpy as np
     from PIL import Image
 
-    from csgnet.export import depth_view
+    from csgnet.export import LABEL_BAND, depth_view
 
-    sheet = np.asarray(Image.open(tmp_path / "table_compare.png").convert("L"))
-    assert sheet.shape == (2 * 66 * 3, 3 * 66 * 3)
+    page = np.asarray(Image.open(tmp_path / "table_compare.png").convert("L"))
+    left = (LABEL_BAND // 2) * (len("program") + 1)
+    assert page.shape == (LABEL_BAND + 2 * 66 * 3, left + 3 * 66 * 3)
+    assert (page[:LABEL_BAND, left:] < 128).any() and (page[LABEL_BAND:, :left] < 128).any()  # the labels
+    sheet = page[LABEL_BAND:, left:]
     vol = csgnet.render(written, dim=3)[0]
     bottom_z = sheet[66 * 3 + 3::3, 2 * 66 * 3 + 3::3][:64, :64]  # the result's view along z, unscaled
     assert np.array_equal(bottom_z, depth_view(vol, 2))
