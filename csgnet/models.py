@@ -329,15 +329,20 @@ class CSGNet(nn.Module):
     def encode(self, target: torch.Tensor, stack: torch.Tensor | None = None) -> torch.Tensor:
         """Encoder features ``(B, F)`` of targets and, for CSGNetStack, the current stack maps ``(B, K, ...)``."""
         self._check_target(target)
-        x = target[:, None].float()
-        if self.config.stack:
-            if stack is None:
-                raise ValueError("CSGNetStack needs the stack maps")
-            if stack.shape[1] != self.config.stack_k or stack.shape[2:] != target.shape[1:]:
-                raise ValueError(f"stack must be (B, {self.config.stack_k}, {', '.join(map(str, target.shape[1:]))}),"
-                                 f" got {tuple(stack.shape)}")
-            x = torch.cat([x, stack.float()], dim=1)
-        return self.encoder(x)
+        if not self.config.stack:
+            return self.encoder(target[:, None].float())
+        if stack is None:
+            raise ValueError("CSGNetStack needs the stack maps")
+        if stack.shape[1] != self.config.stack_k or stack.shape[2:] != target.shape[1:]:
+            raise ValueError(f"stack must be (B, {self.config.stack_k}, {', '.join(map(str, target.shape[1:]))}),"
+                             f" got {tuple(stack.shape)}")
+        # target and stack maps written once into channels-last memory (what the encoder runs on), instead of
+        # converting, concatenating and reordering them
+        dtype = self.token_bias.dtype
+        x = torch.empty(tuple(target.shape) + (stack.shape[1] + 1,), dtype=dtype, device=target.device)
+        x[..., 0] = target
+        x[..., 1:] = stack.movedim(1, -1)
+        return self.encoder(x.movedim(-1, 1))
 
     def embed(self, tokens: torch.Tensor) -> torch.Tensor:
         return F.relu(self.token_embed(tokens) + self.token_bias)
