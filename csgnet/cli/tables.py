@@ -39,19 +39,21 @@ def cmd_evaluate(args) -> int:
 
             print(f"parsing with refinement ({name}, {args.refined} per length) ...", flush=True)
             rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined))
-    note = f"`{command_line(args)}`; beam mode {args.mode!r}, {decoding(args)}; {measured_on()}."
+    note = "\n\n".join([f"`{command_line(args)}`; beam mode {args.mode!r}, {decoding(args)}; {measured_on()}.",
+                        *args.note])
     if args.out and str(args.out).endswith(".json"):
         from shapeio.results import markdown, write_result
 
         from ..paper.tables import table_result
 
-        result = table_result(rows, args.dim, [f"Beam mode {args.mode!r}, {decoding(args)}; {measured_on()}."],
-                              command_line(args))
+        result = table_result(rows, args.dim, [f"Beam mode {args.mode!r}, {decoding(args)}; {measured_on()}.",
+                                               *args.note], command_line(args))
         print(markdown(result))
         print(f"wrote {write_result(args.out, result)}")
         return 0
     write_table(markdown_tables(rows, args.dim, note), args.out)
     return 0
+
 
 def cmd_export_weights(args) -> int:
     from ..inference import export_weights
@@ -141,6 +143,8 @@ def register(sub) -> None:
     e.add_argument("--refined", type=non_negative, default=0, metavar="N",
                    help="add a row of the whole parse (the widest beam, the closest beam, refinement, the short "
                    "rule: what parse --select match --refine writes) on the first N test programs per length")
+    e.add_argument("--note", action="append", default=[], help="a line written under the table (repeatable), "
+                   "e.g. the paper's figures for comparison")
     e.add_argument("--out", default=None, help="write the table here: FILE.json as a result file (data that "
                    "docs tables are generated from, python -m shapeio.results), any other name as markdown")
     e.set_defaults(func=cmd_evaluate)
