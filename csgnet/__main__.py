@@ -21,6 +21,8 @@ import argparse
 import os
 import sys
 
+from shapeio.files import output_problem
+
 from .cli import edit, parse, programs, tables
 
 COMMAND_MODULES = (programs, parse, tables, edit)
@@ -36,8 +38,21 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+#: Each command's output options and what they name: ``"folder"`` (created with its parents) or ``"file+"`` (a
+#: file, its folder created); :func:`main` checks them with :func:`shapeio.files.output_problem` before the
+#: command's work starts (``render -o`` is a list of files in existing folders, checked by ``render``).
+OUTPUTS = {"generate": "folder", "demo": "folder", "parse": "folder", "evaluate": "file+",
+           "export-weights": "file+", "table4": "file+", "table6": "file+"}
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    kind = OUTPUTS.get(args.cmd)
+    if kind and getattr(args, "out", None):
+        problem = output_problem(args.out, folder=kind == "folder")
+        if problem:
+            print(f"error: --out {args.out}: {problem}", file=sys.stderr)
+            return 2
     args.argv = list(argv) if argv is not None else sys.argv[1:]
     try:
         return args.func(args)

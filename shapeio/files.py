@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Union
 
-__all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "parse_json", "refuse_overwrite", "remove_stale_temps", "write_new",
+__all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "output_problem", "parse_json", "refuse_overwrite", "remove_stale_temps", "write_new",
            "write_new_set", "STALE_TEMP_SECONDS"]
 
 PathLike = Union[str, os.PathLike]
@@ -330,3 +330,38 @@ def refuse_overwrite(outputs: Iterable[PathLike | None], inputs: Iterable[PathLi
     for out in outputs:
         if out is not None and Path(out).resolve() in protected:
             raise FileExistsError(f"{out}: this output would overwrite an input file; choose another name or folder")
+
+
+def output_problem(path: PathLike, folder: bool = False, create: bool = True) -> str | None:
+    """Why ``path`` cannot be written as an output, checked before a command's work starts; None if it can.
+
+    The problems, each one line naming the real path (never a temporary file): a folder where a file goes
+    (or a file where a folder goes), a path component that is a file, a missing folder (only with
+    ``create`` false), a folder this process cannot create files in (probed by creating and removing an
+    empty temporary file in it, so that permissions, read-only file systems and root alike are judged).
+
+    Args:
+        path: the output file, or with ``folder`` the output folder.
+        folder: ``path`` is a folder (created with its missing parents by the command).
+        create: the command creates a missing folder for a file output as well.
+    """
+    p = Path(path)
+    if folder and os.path.lexists(p) and not p.is_dir():
+        return f"{str(p)!r} is a file, not a folder"
+    if not folder and p.is_dir():
+        return f"{str(p)!r} is a folder, not a file"
+    here = p if folder else (p.parent if str(p.parent) else Path("."))
+    probe = here
+    while not os.path.lexists(probe) and probe.parent != probe:
+        probe = probe.parent
+    if os.path.lexists(probe) and not probe.is_dir():
+        return f"{str(probe)!r} is a file, not a folder"
+    if probe != here and not create:
+        return f"folder {str(here)!r} does not exist"
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".write-probe-", suffix=".tmp", dir=probe)
+    except OSError as e:
+        return f"cannot write in folder {str(probe)!r} ({e.strerror or e})"
+    os.close(fd)
+    os.unlink(tmp)
+    return None

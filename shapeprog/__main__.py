@@ -38,7 +38,8 @@ import torch
 
 from shapeio import InputError, atomic_write, refuse_overwrite, write_new
 from shapeio.editing import port_argument
-from shapeio.files import write_new_set
+from shapeio.files import output_problem, write_new_set
+from shapeio.options import float_in, int_in
 from shapeio.mesh import WRITE_SUFFIXES
 from shapeio.points import MAX_POINTS
 
@@ -691,16 +692,8 @@ MAX_PASSES = 100
 
 
 def _int_at_least(low: int, high: int = MAX_COUNT_OPTION):
-    """An argparse type: an int from ``low`` to ``high``."""
-    def convert(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = None
-        if value is None or not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"must be an integer from {low} to {high}, got {text[:20]!r}")
-        return value
-    return convert
+    """An argparse type: an int from ``low`` to ``high`` (:func:`shapeio.options.int_in`)."""
+    return int_in(low, high)
 
 
 def _seed(text: str) -> int:
@@ -708,21 +701,7 @@ def _seed(text: str) -> int:
     return _int_at_least(0, MAX_SEED)(text)
 
 
-def _float_in(low: float, high: float, low_open: bool = False, high_open: bool = False):
-    """An argparse type: a finite float in the interval from ``low`` to ``high`` (open at an end when asked)."""
-    import math
-
-    def convert(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        inside = (low < value if low_open else low <= value) and (value < high if high_open else value <= high)
-        if not (math.isfinite(value) and inside):
-            raise argparse.ArgumentTypeError(f"must be a number in {'(' if low_open else '['}{low:g}, {high:g}"
-                                             f"{')' if high_open else ']'}, got {text[:20]!r}")
-        return value
-    return convert
+_float_in = float_in  # an argparse type: a finite float in an interval
 
 
 def _positive_float(text: str) -> float:
@@ -852,6 +831,10 @@ def _cmd_abstract_infer(args) -> int:
                              f"{len(found)} shape lines (the second at line {found[1][0]}); abstract-infer "
                              "reads one shape (table2-coder evaluates many)"))
         shape = data.parse_record(found[0][1], spec, found[0][0]).prims
+    elif Path(spec).is_dir():
+        raise SystemExit(f"error: {spec}: is a folder, not a shape file")
+    elif "(" not in spec:  # a shape line always has a program: this is a file name
+        raise SystemExit(f"error: {spec}: no such file (nor a PN_<category>.txt line or <category>/<line number>)")
     else:
         shape = spec
     network = None
@@ -1521,8 +1504,35 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+#: Each command's output options and what they name: ``"folder"`` (created with its parents), ``"file"`` (in
+#: an existing folder) or ``"file+"`` (its folder created); :func:`main` checks them with
+#: :func:`shapeio.files.output_problem` before the command's work starts.
+OUTPUTS = {
+    "run": {"output": "file"}, "fit": {"output": "file"}, "reconstruct": {"output": "file"}, "refactor": {"output": "file"},
+    "silhouettes": {"out": "file"}, "infer": {"out": "folder"}, "pointcloud-tables": {"out": "file"},
+    "make-clouds": {"out": "folder"}, "sample": {"out": "folder"}, "interpolate": {"out": "folder"},
+    "export-weights": {"out": "file"}, "evaluate-generation": {"out": "file"}, "train-classifier": {"out": "file+"},
+    "discover-abstractions": {"out": "folder"}, "discover-macros": {"out": "folder"},
+    "refactor-corpus": {"out": "folder"}, "table1": {"out": "file"}, "table2-coder": {"out": "file"},
+}
+
+
+def _output_problem(args) -> str | None:
+    """The first of ``args``' outputs (:data:`OUTPUTS`) that cannot be written, as an error line."""
+    for attr, kind in OUTPUTS.get(args.cmd, {}).items():
+        value = getattr(args, attr, None)
+        if value:
+            problem = output_problem(value, folder=kind == "folder", create=kind != "file")
+            if problem:
+                return f"error: --{attr} {value}: {problem}"
+    return None
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    problem = _output_problem(args)
+    if problem:
+        raise SystemExit(problem)
     if getattr(args, "argv", False) is None:  # commands that record their own command line
         args.argv = list(argv) if argv is not None else None
     try:

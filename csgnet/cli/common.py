@@ -7,11 +7,38 @@ import shlex
 from pathlib import Path
 
 from shapeio import atomic_write, refuse_overwrite
+from shapeio.options import float_in, int_in
 
 from ..lang import ParseError, is_valid, parse
 
 __all__ = ["named", "located", "is_valid_text", "labelled_models", "command_line", "decoding", "measured_on",
-           "refuse_table_over_inputs", "write_table", "beam_width", "non_negative"]
+           "refuse_table_over_inputs", "write_table", "beam_width", "non_negative", "MAX_SCALE", "MAX_WORKERS",
+           "MAX_SEED", "MAX_LENGTH", "MAX_PER_LENGTH", "MAX_NN_TRAIN", "MAX_IMAGES", "MAX_REFINE_ITERS", "scale",
+           "workers", "seed", "length", "per_length", "int_in"]
+
+#: Largest ``--scale`` of generate and demo: the paper's Table 2 split sizes themselves.
+MAX_SCALE = 1.0
+#: Most worker processes of a ``--workers`` option.
+MAX_WORKERS = 256
+#: Largest ``--seed`` (NumPy and torch take 0 to 2**63 - 1).
+MAX_SEED = 2 ** 63 - 1
+#: Longest program length of a ``--lengths`` option (2D programs go to 13 primitives, 3D to 7).
+MAX_LENGTH = 13
+#: Most programs per length of ``--per-length`` (demo, evaluate, table6) and ``evaluate --refined``.
+MAX_PER_LENGTH = 1_000_000
+#: Most training programs of ``evaluate --nn-train`` (-1: all of them).
+MAX_NN_TRAIN = 10_000_000
+#: Most test silhouettes of ``table4 --images`` (0: all of them).
+MAX_IMAGES = 1_000_000
+#: Most Powell iterations of ``parse --refine-iters``.
+MAX_REFINE_ITERS = 100_000
+
+#: argparse types of the shared number options (one line, exit 2, before any work).
+scale = float_in(0.0, MAX_SCALE, low_open=True)
+workers = int_in(1, MAX_WORKERS)
+seed = int_in(0, MAX_SEED)
+length = int_in(1, MAX_LENGTH)
+per_length = int_in(0, MAX_PER_LENGTH)
 
 
 def named(stem: Path, end: str) -> Path:

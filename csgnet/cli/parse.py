@@ -10,8 +10,9 @@ from shapeio import atomic_write, refuse_overwrite
 from shapeio.results import column, make_result, write_result
 
 from .. import export, render
+from . import common
 from ..lang import ParseError
-from .common import beam_width, command_line, is_valid_text, located, named, non_negative
+from .common import beam_width, command_line, is_valid_text, located, named
 
 
 def _output_stems(inputs, out: Path) -> list[Path]:
@@ -204,7 +205,7 @@ def register(sub) -> None:
     p.add_argument("--unconstrained", action="store_true", help="allow invalid programs while decoding")
     p.add_argument("--refine", action="store_true",
                    help="Powell refinement of every valid beam (by chamfer in 2D, by IoU in 3D)")
-    p.add_argument("--refine-iters", type=non_negative, default=None,
+    p.add_argument("--refine-iters", type=common.int_in(0, common.MAX_REFINE_ITERS), default=None,
                    help="Powell iterations, 0 or more (default: to convergence)")
     p.add_argument("--refine-rule", choices=("short", "guarded", "chamfer"), default="short",
                    help="short: among the decoded program and every refined beam, each also pruned, the "

@@ -10,6 +10,7 @@ import numpy as np
 from shapeio import atomic_write
 
 from .. import export, render
+from . import common
 from ..lang import ParseError, parse
 from ..primitives import primitives
 from .common import located
@@ -114,10 +115,10 @@ def register(sub) -> None:
 
     g = sub.add_parser("generate", help="generate a synthetic dataset (train/val/test per length)")
     g.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D programs (default 2)")
-    g.add_argument("--scale", type=float, default=0.001, help="fraction of the paper's Table 2 split sizes")
-    g.add_argument("--seed", type=int, default=0, help="random seed; the files do not depend on --workers")
-    g.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
-    g.add_argument("--lengths", type=int, nargs="*", default=None,
+    g.add_argument("--scale", type=common.scale, default=0.001, help="fraction of the paper's Table 2 split sizes")
+    g.add_argument("--seed", type=common.seed, default=0, help="random seed; the files do not depend on --workers")
+    g.add_argument("--workers", type=common.workers, default=1, help="worker processes (default 1)")
+    g.add_argument("--lengths", type=common.length, nargs="*", default=None,
                    help="program lengths (default: all, 3..13 in 2D, 3..7 in 3D)")
     g.add_argument("--out", required=True, help="dataset folder (the DIMd/ sub-folder is written)")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -125,9 +126,9 @@ def register(sub) -> None:
 
     d = sub.add_parser("demo", help="generate a small 2D and 3D dataset and preview some programs")
     d.add_argument("--out", default="demo_output", help="output folder (default demo_output/)")
-    d.add_argument("--scale", type=float, default=0.0002, help="fraction of the paper's Table 2 split sizes")
-    d.add_argument("--seed", type=int, default=0, help="random seed")
-    d.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
-    d.add_argument("--per-length", type=int, default=2, help="previewed programs per length")
+    d.add_argument("--scale", type=common.scale, default=0.0002, help="fraction of the paper's Table 2 split sizes")
+    d.add_argument("--seed", type=common.seed, default=0, help="random seed")
+    d.add_argument("--workers", type=common.workers, default=2, help="worker processes (default 2)")
+    d.add_argument("--per-length", type=common.per_length, default=2, help="previewed programs per length")
     d.add_argument("--quiet", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_demo)

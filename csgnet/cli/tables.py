@@ -8,9 +8,10 @@ import numpy as np
 
 from shapeio import refuse_overwrite
 
+from . import common
 from ..shapes2d import load_silhouettes
 from ..vocab import vocabulary
-from .common import (beam_width, command_line, decoding, labelled_models, located, measured_on, non_negative,
+from .common import (beam_width, command_line, decoding, labelled_models, located, measured_on,
                      refuse_table_over_inputs, write_table)
 
 
@@ -133,14 +134,14 @@ def register(sub) -> None:
     e.add_argument("--data", required=True, help="dataset folder written by `generate`")
     e.add_argument("--weights", nargs="*", default=None, help="weights files (default: the shipped model)")
     e.add_argument("--beams", type=beam_width, nargs="+", default=[1, 5, 10], help="beam widths (default 1 5 10)")
-    e.add_argument("--lengths", type=int, nargs="*", default=None, help="program lengths (default: all)")
-    e.add_argument("--per-length", type=int, default=None, help="test programs per length (default: all)")
-    e.add_argument("--nn-train", type=int, default=-1, help="training programs for the nearest neighbour "
+    e.add_argument("--lengths", type=common.length, nargs="*", default=None, help="program lengths (default: all)")
+    e.add_argument("--per-length", type=common.per_length, default=None, help="test programs per length (default: all)")
+    e.add_argument("--nn-train", type=common.int_in(-1, common.MAX_NN_TRAIN), default=-1, help="training programs for the nearest neighbour "
                    "(-1: all, 0: skip)")
     e.add_argument("--mode", choices=("improved", "reference"), default="improved",
                    help="beam search: improved, or the published reference behaviour")
     e.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
-    e.add_argument("--refined", type=non_negative, default=0, metavar="N",
+    e.add_argument("--refined", type=common.per_length, default=0, metavar="N",
                    help="add a row of the whole parse (the widest beam, the closest beam, refinement, the short "
                    "rule: what parse --select match --refine writes) on the first N test programs per length")
     e.add_argument("--note", action="append", default=[], help="a line written under the table (repeatable), "
@@ -159,8 +160,8 @@ def register(sub) -> None:
     t4.add_argument("--weights", nargs="*", default=None,
                     help="2D weights files or checkpoints, optionally LABEL=PATH (default: the four shipped "
                     "2D models, supervised and RL-tuned)")
-    t4.add_argument("--images", type=int, default=50, help="test silhouettes evaluated (0: all 1,386)")
-    t4.add_argument("--seed", type=int, default=0, help="seed of the subset")
+    t4.add_argument("--images", type=common.int_in(0, common.MAX_IMAGES), default=50, help="test silhouettes evaluated (0: all 1,386)")
+    t4.add_argument("--seed", type=common.seed, default=0, help="seed of the subset")
     t4.add_argument("--beams", type=beam_width, nargs="+", default=[1, 10], help="beam widths (default 1 10)")
     t4.add_argument("--iterations", nargs="+", default=["0", "1", "2", "4", "10", "inf"],
                     help="refinement iteration limits ('inf': to convergence)")
@@ -174,9 +175,9 @@ def register(sub) -> None:
     t6.add_argument("--weights", default=None, help="2D weights file or checkpoint, optionally LABEL=PATH "
                     "(default: the shipped model)")
     t6.add_argument("--data", default=None, help="dataset folder written by `generate` (default: sample programs)")
-    t6.add_argument("--per-length", type=int, default=100, help="test programs per length")
-    t6.add_argument("--lengths", type=int, nargs="*", default=None, help="program lengths (default 3..13)")
-    t6.add_argument("--seed", type=int, default=0, help="seed for sampled programs")
+    t6.add_argument("--per-length", type=common.per_length, default=100, help="test programs per length")
+    t6.add_argument("--lengths", type=common.length, nargs="*", default=None, help="program lengths (default 3..13)")
+    t6.add_argument("--seed", type=common.seed, default=0, help="seed for sampled programs")
     t6.add_argument("--beams", type=beam_width, nargs="+", default=[10, 40], help="beam widths (default 10 40)")
     t6.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
     t6.add_argument("--out", default=None, help="write the markdown table here")

@@ -311,3 +311,48 @@ def test_framed_mesh_loading_maps_voxel_centres_onto_the_mesh():
         assert np.all(np.abs(centres.max(0) - box.bounds[1]) <= pitch)
     vol, frame = load_shape_framed(EXAMPLES / "house.png")
     assert frame is None and vol.shape == (64, 64)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["generate", "--scale", "2", "--out", "g"], "argument --scale: must be a number in (0, 1], got '2'"),
+    (["generate", "--scale", "nan", "--out", "g"], "argument --scale: must be a number in (0, 1], got 'nan'"),
+    (["generate", "--workers", "100000", "--out", "g"], "argument --workers: must be an integer from 1 to 256, got '100000'"),
+    (["generate", "--lengths", "3", "99", "--out", "g"], "argument --lengths: must be an integer from 1 to 13, got '99'"),
+    (["generate", "--seed", str(2 ** 70), "--out", "g"],
+     "argument --seed: must be an integer from 0 to 9223372036854775807, got '11805916207174113034'"),
+    (["demo", "--scale", "5"], "argument --scale: must be a number in (0, 1], got '5'"),
+    (["demo", "--workers", "0"], "argument --workers: must be an integer from 1 to 256, got '0'"),
+    (["demo", "--per-length", "10000000"], "argument --per-length: must be an integer from 0 to 1000000, got '10000000'"),
+    (["evaluate", "--data", "d", "--per-length", "10000000"],
+     "argument --per-length: must be an integer from 0 to 1000000, got '10000000'"),
+    (["evaluate", "--data", "d", "--nn-train", "-2"], "argument --nn-train: must be an integer from -1 to 10000000, got '-2'"),
+    (["evaluate", "--data", "d", "--refined", "10000000"],
+     "argument --refined: must be an integer from 0 to 1000000, got '10000000'"),
+    (["table4", "--images", "10000000"], "argument --images: must be an integer from 0 to 1000000, got '10000000'"),
+    (["table6", "--per-length", "10000000"], "argument --per-length: must be an integer from 0 to 1000000, got '10000000'"),
+    (["table6", "--lengths", "0"], "argument --lengths: must be an integer from 1 to 13, got '0'"),
+    (["parse", "x.png", "--refine-iters", "100001"],
+     "argument --refine-iters: must be an integer from 0 to 100000, got '100001'"),
+])
+def test_defect_csgnet_number_options_have_a_maximum(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(message)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv", [["parse", "nosuch.png", "--out", "afile"], ["parse", "nosuch.png", "--out", "afile/o"],
+                                  ["generate", "--out", "afile/d"], ["demo", "--out", "afile"],
+                                  ["evaluate", "--data", "nosuch", "--out", "afile/t.json"],
+                                  ["export-weights", "nosuch.ckpt", "--out", "afile/w.pt"],
+                                  ["table4", "--silhouettes", "nosuch.npz", "--out", "afile/t.md"],
+                                  ["table6", "--weights", "nosuch.pt", "--out", "afile/t.md"]])
+def test_defect_csgnet_out_errors_come_first_and_name_the_real_path(tmp_path, monkeypatch, capsys, argv):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("x")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: --out {argv[-1]}: 'afile' is a file, not a folder\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]

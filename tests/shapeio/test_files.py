@@ -109,3 +109,45 @@ def test_write_new_set_writes_all_or_none(tmp_path):
     with pytest.raises(OSError, match="disk full"):
         write_new_set([(tmp_path / "e.txt", "e"), (tmp_path / "f.txt", broken)])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.bin", "d.txt"]  # no temporary left either
+
+
+def test_defect_held_checks_pickles_refused_outputs_never_overwritten_umask_respected(tmp_path):
+    """Issue 50's re-check: every .npy / .npz reader refuses a pickled (object) array without running it; a new
+    file is never written over an existing one; written files follow the umask."""
+    import numpy as np
+
+    from shapeio import InputError
+    from shapeio.arrays import read_grid
+    from shapeio.files import atomic_write, write_new
+    from shapeio.points import read_cloud, read_points
+    from shapeio.silhouettes import read_silhouettes
+
+    ran = tmp_path / "ran"
+
+    class Payload:
+        def __reduce__(self):
+            return (open, (str(ran), "w"))
+
+    obj = np.empty((4, 3), dtype=object)
+    obj[0, 0] = Payload()
+    np.save(tmp_path / "p.npy", obj, allow_pickle=True)
+    np.savez(tmp_path / "p.npz", train_images=obj)
+    for read in (read_grid, read_points, read_cloud):
+        with pytest.raises(InputError, match="p.npy"):
+            read(tmp_path / "p.npy")
+    with pytest.raises(Exception, match="p.npz") as e:
+        read_silhouettes(tmp_path / "p.npz", "train")
+    assert isinstance(e.value, (InputError, ValueError)) and not ran.exists()
+    # outputs never overwritten
+    write_new(tmp_path / "out.txt", "a")
+    with pytest.raises(FileExistsError, match="not replaced"):
+        write_new(tmp_path / "out.txt", "b")
+    assert (tmp_path / "out.txt").read_text() == "a"
+    # the umask
+    old = os.umask(0o027)
+    try:
+        mode_new = os.stat(write_new(tmp_path / "u1.txt", "x")).st_mode & 0o777
+        mode_atomic = os.stat(atomic_write(tmp_path / "u2.txt", "x")).st_mode & 0o777
+    finally:
+        os.umask(old)
+    assert mode_new == mode_atomic == 0o640

@@ -182,3 +182,63 @@ def test_defect_reconstruct_with_another_categorys_weights_is_refused(tmp_path, 
                             "to use this model anyway)")
     assert not out.exists()
     assert main(["reconstruct", "chair/173", "--weights", str(table), "--category", "table", "-o", str(out)]) == 0
+
+
+def test_defect_abstract_infer_names_a_missing_file_or_a_folder(tmp_path, capsys):
+    with pytest.raises(SystemExit, match=r"^error: nosuch\.txt: no such file \(nor a PN_<category>\.txt line or "
+                                         r"<category>/<line number>\)$"):
+        main(["abstract-infer", "nosuch.txt", "--library", "chair"])
+    with pytest.raises(SystemExit, match=r"is a folder, not a shape file$"):
+        main(["abstract-infer", str(tmp_path), "--library", "chair"])
+
+
+# the commands with an output option, their inputs missing: the --out error must come before the work starts
+_OUT_COMMANDS = [
+    (["silhouettes", "--out", "{file}/s.npz"], "file"),
+    (["infer", "nosuch.xyz", "--out", "{file}"], "folder"),
+    (["infer", "nosuch.xyz", "--out", "{file}/sub"], "folder"),
+    (["pointcloud-tables", "--clouds", "nosuch", "--out", "{file}/t.md"], "file"),
+    (["make-clouds", "--category", "chair", "--out", "{file}/c"], "folder"),
+    (["sample", "chair", "--out", "{file}"], "folder"),
+    (["interpolate", "nosuch1.txt", "nosuch2.txt", "--out", "{file}/i"], "folder"),
+    (["export-weights", "nosuch.ckpt", "--out", "{file}/w.pt"], "file"),
+    (["evaluate-generation", "--category", "chair", "--out", "{file}/t.md"], "file"),
+    (["train-classifier", "--out", "{file}/c.pt"], "file"),
+    (["discover-abstractions", "--category", "chair", "--out", "{file}"], "folder"),
+    (["discover-macros", "--category", "chair", "--out", "{file}/m"], "folder"),
+    (["refactor-corpus", "--category", "chair", "--library", "nosuch", "--out", "{file}"], "folder"),
+    (["table1", "--out", "{file}/t.md"], "file"),
+    (["table2-coder", "--out", "{file}/t.md"], "file"),
+    (["run", "nosuch.txt", "-o", "{file}/x.obj"], "file"),
+    (["refactor", "nosuch.txt", "--library", "nosuch", "-o", "{file}/x.txt"], "file"),
+]
+
+
+@pytest.mark.parametrize("argv, kind", _OUT_COMMANDS, ids=[a[0] + "-" + a[-1] for a, _ in _OUT_COMMANDS])
+def test_defect_out_errors_come_first_and_name_the_real_path(tmp_path, capsys, monkeypatch, argv, kind):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("x")
+    argv = [a.format(file="afile") for a in argv]
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = str(e.value.code)
+    assert "\n" not in err and err.startswith(f"error: --{'output' if '-o' in argv else 'out'} afile")
+    assert err.endswith("'afile' is a file, not a folder"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+def test_defect_out_in_an_unwritable_folder_is_named_before_the_work(tmp_path, capsys, monkeypatch):
+    import tempfile
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(kwargs.get("dir")) + "/.x.atomic-1-abc.tmp")
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    with pytest.raises(SystemExit) as e:
+        main(["infer", "nosuch.xyz", "--out", str(tmp_path / "new" / "out")])
+    assert e.value.code == (f"error: --out {tmp_path / 'new' / 'out'}: cannot write in folder {str(tmp_path)!r} "
+                            "(Permission denied)")
+    with pytest.raises(SystemExit) as e:
+        main(["table1", "--out", str(tmp_path / "t.md")])
+    assert e.value.code == f"error: --out {tmp_path / 't.md'}: cannot write in folder {str(tmp_path)!r} (Permission denied)"
+    assert list(tmp_path.iterdir()) == []

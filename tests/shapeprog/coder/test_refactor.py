@@ -285,3 +285,37 @@ def test_guarded_rules_see_the_values_from_the_first_iteration():
     assert refactor(p, iterations=2, values="lagged").expr == one.expr
     with pytest.raises(RefactorError, match="values must be one of eager, lagged"):
         refactor(p, values="soon")
+
+
+def _grid_scene(n):
+    """n equal cuboids on a grid, mirrored in pairs, in a balanced Union: one iteration of the rewrites
+    grows it far beyond 10,000 e-nodes when every match is applied."""
+    parts = [f"Move(Cuboid(0.1,0.1,0.1),{round(0.05 + 0.01 * (i % 20), 2) * (1 if i % 2 else -1)},"
+             f"{round(-0.5 + 0.1 * ((i // 20) % 10), 2)},0.0)" for i in range(n)]
+
+    def balanced(ps):
+        return ps[0] if len(ps) == 1 else f"Union({balanced(ps[:len(ps) // 2])},{balanced(ps[len(ps) // 2:])})"
+
+    return parse(balanced(parts))
+
+
+def test_defect_refactor_limits_hold_inside_an_iteration():
+    from shapeprog.coder.refactor import MATCHES_PER_ENODE, MAX_MATCHES, check_limits
+    scene = _grid_scene(30)
+    # every rule applied in full, the 4th iteration took the e-graph from under 10,000 to 249,772 e-nodes;
+    # a rule with more than max_matches (10 x max_nodes) matches now sits that iteration out
+    r = refactor(scene, max_nodes=10_000)
+    assert MATCHES_PER_ENODE == 10
+    assert r.stop == "nodes" and r.iterations == 4 and r.nodes < 2 * 10_000, r
+    assert _same_geometry(r.expr, scene) and r.cost <= r.input_cost
+    # a smaller budget bounds it further, counted in matches, never in seconds
+    small = refactor(scene, max_nodes=10_000, max_matches=100)
+    assert small.nodes < r.nodes and small.stop == "iterations" and small.iterations == 5, small
+    assert _same_geometry(small.expr, scene)
+    # a skipped rule keeps the run from counting as saturated
+    assert refactor(scene, max_matches=1, iterations=50).stop != "saturated"
+    for bad in (0, -1, 1.5, True, MAX_MATCHES + 1):
+        with pytest.raises(RefactorError, match="max_matches"):
+            refactor(scene, max_matches=bad)
+    with pytest.raises(RefactorError, match="max_matches"):
+        check_limits(5, 10_000, 5.0, 0)
