@@ -425,7 +425,7 @@ def _write_table(text: str, out) -> None:
 
 
 # The shipped CSGNet and small CSGNetStack (csgnetstack2d.pt, the starting point of the RL run), supervised and
-# RL-tuned on the silhouettes (docs/benchmarks.md says how each was trained): Table 4's rows when no --weights
+# RL-tuned on the silhouettes (docs/csgnet.md says how each was trained): Table 4's rows when no --weights
 # are given. The medium CSGNetStack (load_pretrained(2, kind="csgnetstack")) is added with --weights.
 TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2d.pt"),
                  ("CSGNetStack supervised", "csgnetstack2d.pt"), ("CSGNetStack RL", "rl_csgnetstack2d.pt"))
@@ -616,7 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="short: among the decoded program and every refined beam, each also pruned, the "
                    "highest IoU minus a price per primitive (csgnet.rewrite.LENGTH_PENALTY); guarded: the best "
                    "refined beam unless it costs more than 5 IoU points; chamfer: the paper's choice, the "
-                   "lowest chamfer (docs/refinement.md)")
+                   "lowest chamfer (docs/csgnet.md)")
     p.add_argument("--model", choices=("csgnet", "csgnetstack"), default=None,
                    help="the shipped model to use (default: the strongest of each dimension, CSGNetStack in 2D and "
                    "CSGNet in 3D; docs/csgnet.md)")
