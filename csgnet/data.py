@@ -2,7 +2,7 @@
 and a torch ``Dataset`` of token indices (:class:`ProgramDataset`).
 
 The programs come from the sampler of :mod:`csgnet.synth`; the file layout, the split sizes and the
-determinism of generation are described in docs/synthetic_data.md.
+determinism of generation are described in docs/csgnet.md ("Synthetic data").
 """
 
 from __future__ import annotations

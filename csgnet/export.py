@@ -5,7 +5,7 @@ Entry points: :func:`save_png`, :func:`voxels_to_mesh` and :func:`save_obj`, :fu
 OpenSCAD model is mirrored so that the CAD view looks like the PNG, and every model is intersected with
 the canvas. Files are written atomically (a temporary file in the target directory, then ``os.replace``).
 
-See docs/csg.md ("Export") for the coordinates and the OpenSCAD form of each primitive.
+See docs/csgnet.md ("The renderer", "Export") for the coordinates and the OpenSCAD form of each primitive.
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ __all__ = ["InputError", "load_shape", "load_shape_framed", "fit_to_canvas", "re
 WEIGHTS = Path(__file__).parent / "weights"
 KINDS = ("csgnet", "csgnetstack")
 TUNINGS = ("supervised", "reinforce", "selftrain")
-# (dim, kind, tuning) -> the shipped file (docs/benchmarks.md says how each was trained)
+# (dim, kind, tuning) -> the shipped file (docs/csgnet.md says how each was trained)
 SHIPPED = {
     (2, "csgnet", "supervised"): "csgnet2d.pt",
     (3, "csgnet", "supervised"): "csgnet3d.pt",

@@ -17,7 +17,7 @@ its 0-based character position. Whitespace between tokens is ignored, and everyt
 ``$`` is dropped, as for network output. Unlike the reference, positions may be negative integers
 (``c(-4,10,12)``): such shapes are clipped to the canvas. Radii and heights must be non-negative.
 Parameters are ASCII decimal integers of magnitude at most :data:`MAX_PARAM`, and a program has at
-most :data:`MAX_TOKENS` tokens (docs/csg.md, "Limits").
+most :data:`MAX_TOKENS` tokens (docs/csgnet.md, "The language").
 
 This module needs only the standard library and the table of :mod:`csgnet.primitives` (NumPy).
 """

@@ -5,7 +5,7 @@ for pairs with an empty or full image or an empty edge map); :func:`iou` names i
 (``"union"`` or ``"union+1"``); :func:`iou_3d` is the 3D evaluation IoU (``"union+1"``, never NaN);
 :func:`reward` is the RL reward ``clip(1 - CD / (64 sqrt 2), 0, 1) ** gamma``.
 
-See docs/csg.md ("Metrics") for which evaluation uses which IoU and how :func:`chamfer` is fast and
+See docs/csgnet.md ("Metrics") for which evaluation uses which IoU and how :func:`chamfer` is fast and
 still equals the reference's per-pair computation bit for bit.
 """
 

@@ -1,4 +1,4 @@
-"""CSGNet and CSGNetStack as plain PyTorch modules (the spec's section (d), ``docs/csgnet_models.md``).
+"""CSGNet and CSGNetStack as plain PyTorch modules (the spec's section (d), ``docs/csgnet.md``).
 
 One class, :class:`CSGNet`, covers both models: with ``config.stack`` the encoder sees the target
 concatenated with the top-K maps of the execution stack at every step (CSGNetStack); without it the

@@ -7,7 +7,7 @@ reference drawing function, its OpenSCAD form, its drawing weight in synthetic d
 torch rasteriser, named (the name of a function of :mod:`csgnet.renderer.raster`) or given as a
 callable, so that this module stays free of torch. Kind codes, the vocabulary, the renderers, the
 exporter and the synthetic sampler read the table; :func:`register` and :func:`unregister` change it
-at run time and invalidate every table derived from it (see docs/csg.md, "Adding a primitive").
+at run time and invalidate every table derived from it (see docs/csgnet.md, "The language").
 
 The geometry is written with plain arithmetic so that it evaluates identically on Python numbers,
 NumPy arrays (the per-program path, :mod:`csgnet.renderer.reference`) and float64/int64 torch tensors

@@ -8,7 +8,7 @@ image or volume (the spec's section (g)). ``mode="reference"`` is the published 
 ``mode="improved"`` (default) scores every point it evaluates as exactly the program it stands for
 and never returns a worse program; every distinct program is scored once, from primitives drawn by
 the batched renderer. The modes, the search box, invalid programs and the speed are described in
-docs/refinement.md.
+docs/csgnet.md ("Refinement").
 
 Example:
     >>> import csgnet
@@ -52,9 +52,9 @@ TOL = 1e-4
 PREFETCH = 8
 """2D: a missing primitive is drawn together with its axis neighbours up to this many pixels away."""
 PREFETCH_3D = 0
-"""3D: the same; 0, drawing only the missing primitive, is the fastest in 3D (docs/refinement.md)."""
+"""3D: the same; 0, drawing only the missing primitive, is the fastest in 3D (docs/csgnet.md)."""
 RULES = ("short", "guarded", "chamfer")
-"""How :func:`refine_guarded` picks between the refined and the unrefined program (docs/refinement.md)."""
+"""How :func:`refine_guarded` picks between the refined and the unrefined program (docs/csgnet.md)."""
 MAX_IOU_DROP = 0.05
 """The ``"guarded"`` rule keeps the unrefined program when refinement lowers IoU by more than this."""
 

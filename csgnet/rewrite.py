@@ -11,7 +11,7 @@ that raises the same objective, and :func:`extend` searches the whole vocabulary
 highest ``IoU - penalty * primitives`` (ties: the earlier).
 
 The price ``LENGTH_PENALTY`` (IoU per primitive, by dimension) is chosen on the synthetic validation
-split by ``python bench/length_penalty.py`` (docs/refinement.md): the largest price whose chosen
+split by ``python bench/length_penalty.py`` (docs/csgnet.md): the largest price whose chosen
 programs lose at most ``MAX_VAL_IOU_COST`` of mean IoU against choosing by IoU alone.
 
 Example:

@@ -2,8 +2,8 @@
 
 * :func:`load_silhouettes`: front and side silhouettes (64x64) of the PartNet chairs, tables and
   storage furniture of the ShapeAssembly corpus, shipped as ``csgnet/data/silhouettes.npz``
-  (built by ``python -m shapeprog silhouettes``; see ``docs/silhouettes.md``). Splits ``train``,
-  ``val`` and ``test``; this set stands in for the paper's CAD set and is not the same data.
+  (built by ``python -m shapeprog silhouettes``; see ``docs/csgnet.md``, "The PartNet silhouettes").
+  Splits ``train``, ``val`` and ``test``; this set stands in for the paper's CAD set and is not the same data.
 * :func:`load_cad_h5`: the paper's ``cad.h5`` (datasets ``train_images``, ``val_images``,
   ``test_images``, each N x 64 x 64), for users who have that file. Needs ``h5py``, the ``cad``
   extra (``pip install -e '.[cad]'`` in the checkout).

@@ -4,7 +4,7 @@
 checks programs against rules (b) and (c), :class:`Rules` holds every choice the spec leaves open, and
 :func:`sample_chunk` is the seeded unit of work of :func:`csgnet.data.generate_dataset`. The primitive
 types and their default weights are the rows of :mod:`csgnet.primitives`. The reading of each rule
-is written down in docs/synthetic_data.md.
+is written down in docs/csgnet.md ("Synthetic data").
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ _OP_WEIGHTS = {2: (1.0, 5.0, 3.0), 3: (1.0, 8.0, 6.0)}
 
 @dataclass(frozen=True)
 class Rules:
-    """The sampling rules (see docs/synthetic_data.md). Every field is recorded in ``meta.json``.
+    """The sampling rules (see docs/csgnet.md, "Synthetic data"). Every field is recorded in ``meta.json``.
 
     Attributes:
         min_change: rule (b) threshold as a fraction of ``ON(A) + ON(B)``.

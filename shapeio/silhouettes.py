@@ -6,7 +6,8 @@
 * ``size``, ``margin``: ints; ``version``: :data:`FORMAT_VERSION`.
 
 Written by :func:`write_silhouettes` (``python -m shapeprog silhouettes``), read by
-:func:`read_silhouettes` (``csgnet.shapes2d.load_silhouettes``); ``docs/silhouettes.md`` describes the set.
+:func:`read_silhouettes` (``csgnet.shapes2d.load_silhouettes``); ``docs/csgnet.md`` ("The PartNet silhouettes")
+describes the set.
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ exactly (a pixel is on iff its centre lies in a projected cuboid; parts thinner 
 widened to one). Splits: the corpus's train and val lists, with test carved out of val.
 ``python -m shapeprog silhouettes --out PATH`` builds the set shipped as
 ``csgnet/data/silhouettes.npz``; the file layout (a pickle-free ``.npz`` with packed-bit images, ids
-and views per split), the views, fit, rasterisation and splits are in ``docs/silhouettes.md``.
+and views per split), the views, fit, rasterisation and splits are in ``docs/csgnet.md``
+("The PartNet silhouettes").
 
 Example:
     >>> import torch

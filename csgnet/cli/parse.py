@@ -211,7 +211,7 @@ def register(sub) -> None:
                    help="short: among the decoded program and every refined beam, each also pruned, the "
                    "highest IoU minus a price per primitive (csgnet.rewrite.LENGTH_PENALTY); guarded: the best "
                    "refined beam unless it costs more than 5 IoU points; chamfer: the paper's choice, the "
-                   "lowest chamfer (docs/refinement.md)")
+                   "lowest chamfer (docs/csgnet.md)")
     p.add_argument("--no-graft", action="store_true",
                    help="with the short rule, do not try adding other beams' primitives to the chosen program")
     p.add_argument("--no-extend", action="store_true",

@@ -78,7 +78,7 @@ def cmd_export_weights(args) -> int:
     return 0
 
 # The shipped CSGNet and small CSGNetStack (csgnetstack2d.pt, the starting point of the RL run), supervised and
-# RL-tuned on the silhouettes (docs/benchmarks.md says how each was trained): Table 4's rows when no --weights
+# RL-tuned on the silhouettes (docs/compute_plan.md says how each was trained): Table 4's rows when no --weights
 # are given. The medium CSGNetStack (load_pretrained(2, kind="csgnetstack")) is added with --weights.
 TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2d.pt"),
                  ("CSGNetStack supervised", "csgnetstack2d.pt"), ("CSGNetStack RL", "rl_csgnetstack2d.pt"))

@@ -8,7 +8,7 @@ Canvases are bit-packed int64 words; the result is exact to the pixel and voxel 
 per-program NumPy path (:mod:`csgnet.renderer.reference`). Parts outside the canvas are clipped (3D
 never wraps around); invalid programs render all False.
 
-See docs/csg.md ("Rasterisation", "The batched renderer", "Stack semantics and traces") for details.
+See docs/csgnet.md ("The renderer") for details.
 """
 
 from __future__ import annotations

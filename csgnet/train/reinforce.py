@@ -3,8 +3,8 @@
 The pieces of the objective are plain functions (:func:`episode_rewards`, :func:`update_baseline`,
 :func:`policy_loss`); :class:`ReinforceModule` samples programs from the policy, scores them with the
 chamfer reward against a running-average baseline and validates greedily; :class:`TargetDataModule`
-serves the target images (:func:`load_targets`). ``docs/reinforce.md`` describes the procedure step by
-step beside the paper's and the reference's, and how to run it:
+serves the target images (:func:`load_targets`). ``docs/csgnet.md`` ("REINFORCE") describes the procedure
+and how to run it:
 ``python train.py fit --config configs/csgnet/rl_csgnet2d_small.yaml`` (``--ckpt_path last`` resumes).
 """
 from __future__ import annotations

@@ -5,7 +5,7 @@ far by the chamfer distance (:class:`PseudoLabels`, replaced only by a better on
 model supervised on these (target image, program) pairs mixed with synthetic programs
 (:class:`PseudoLabelBatches`). :class:`SelfTrainModule` validates as REINFORCE does, so the curves of the
 two methods compare; :class:`SelfTrainDataModule` serves the targets and owns the label table, which
-travels in the checkpoint. ``docs/selftrain.md`` describes a round and how to run it:
+travels in the checkpoint. ``docs/csgnet.md`` ("Self-training") describes a round and how to run it:
 ``python train.py fit --config configs/csgnet/st_csgnet2d_small.yaml`` (``--ckpt_path last`` resumes).
 """
 from __future__ import annotations

@@ -12,7 +12,7 @@
   targets beside predicted renders in TensorBoard.
 
 The batch stream is :class:`csgnet.train.streams.MixedLengthBatches`. ``python train.py fit --config
-configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI (``docs/csgnet_models.md``).
+configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI (``docs/csgnet.md``, "Training").
 """
 from __future__ import annotations
 
