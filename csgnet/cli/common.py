@@ -46,16 +46,19 @@ def named(stem: Path, end: str) -> Path:
     shape's name)."""
     return stem.with_name(stem.name + end)
 
+
 def located(src, err: Exception) -> str:
     """``FILE: reason`` for an error about ``src`` (messages that already start with a path are kept)."""
     msg = str(err)
     return msg if msg.startswith(str(src)) else f"{src}: {msg}"
+
 
 def is_valid_text(text: str, dim: int = 2) -> bool:
     try:
         return bool(text) and is_valid(parse(text, dim))
     except ParseError:
         return False
+
 
 def labelled_models(specs, dim: int = 2):
     """``(label, model)`` per ``[LABEL=]PATH`` spec; the shipped ``dim``-D model when there is none."""
@@ -74,13 +77,16 @@ def labelled_models(specs, dim: int = 2):
         out.append((label if sep else f"{kind(model)} ({Path(path).name})", model))
     return out
 
+
 def command_line(args) -> str:
     """The command line that ran, for the notes under written tables."""
     return "python -m csgnet " + shlex.join(args.argv)
 
+
 def decoding(args) -> str:
     """How the written tables' programs were decoded, for their notes."""
     return f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
+
 
 def measured_on() -> str:
     """Where and when the written tables' times were measured, for their notes."""
@@ -94,6 +100,7 @@ def measured_on() -> str:
              f"{', CUDA available' if torch.cuda.is_available() else ''}")
     return f"times measured on {where}, {datetime.date.today().isoformat()} (the load of other jobs is not recorded)"
 
+
 def refuse_table_over_inputs(args) -> None:
     """Stop before any work when a table's ``--out`` is one of its input files (weights, silhouettes)."""
     if not getattr(args, "out", None):
@@ -106,11 +113,13 @@ def refuse_table_over_inputs(args) -> None:
     except FileExistsError as e:
         raise SystemExit(f"error: {e}") from None
 
+
 def write_table(text: str, out) -> None:
     print(text)
     if out:
         atomic_write(out, text, mkdir=True)
         print(f"wrote {out}")
+
 
 def beam_width(text: str) -> int:
     from ..decode import check_beam  # csgnet.decode imports torch: loaded only when --beam is given
@@ -123,6 +132,7 @@ def beam_width(text: str) -> int:
         return check_beam(value, "the beam width")
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
+
 
 def non_negative(text: str) -> int:
     try:

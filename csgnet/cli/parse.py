@@ -30,6 +30,7 @@ def _output_stems(inputs, out: Path) -> list[Path]:
         stems.append(out / name)
     return stems
 
+
 def _parse_models(args) -> dict:
     """The models ``parse`` uses, by dimension: a weights file given with ``--weights-2d`` / ``--weights-3d``
     is loaded now, so that a bad one is reported once, before any input; the shipped models (``--model``,
@@ -45,6 +46,7 @@ def _parse_models(args) -> dict:
             models[dim] = model
     return models
 
+
 def _parse_model(models: dict, dim: int, kind: str | None):
     """The ``dim``-D model (a shipped one loaded once; a failure is kept and raised again for every input)."""
     from ..inference import load_pretrained
@@ -58,9 +60,11 @@ def _parse_model(models: dict, dim: int, kind: str | None):
         raise models[dim]
     return models[dim]
 
+
 def _scores_line(iou: float, chamfer: float, program) -> str:
     line = f"IoU {100 * iou:.2f}%" + ("" if np.isnan(chamfer) else f", chamfer {chamfer:.3f} px")
     return line + f", {len(program.draws) if program is not None else 0} primitives"
+
 
 def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> dict:
     """Infer, optionally refine, report and write one input's program (``parse``: one
@@ -114,10 +118,12 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
     print("  wrote " + ", ".join(str(w) for w in written + [txt]))
     return record
 
+
 def _penalty(dim: int) -> float:
     from ..rewrite import LENGTH_PENALTY
 
     return LENGTH_PENALTY[dim]
+
 
 RESULT_COLUMNS = (("input", "input", None, 1.0), ("decoded", "decoded program", None, 1.0),
                   ("iou", "IoU (%)", 1, 100.0), ("chamfer", "chamfer (px)", 3, 1.0), ("primitives", "primitives", None, 1.0),
@@ -141,6 +147,7 @@ def _results_path(out: Path) -> Path:
     while path.exists():
         path, k = out / f"results_{k}.json", k + 1
     return path
+
 
 def cmd_parse(args) -> int:
     """Infer a program for each input shape with a trained model; a bad input is reported and skipped."""

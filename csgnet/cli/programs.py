@@ -33,6 +33,7 @@ def _write_render(program, dim: int, out: Path) -> Path:
         return atomic_write(out, lambda f: np.save(f, img, allow_pickle=False))
     raise SystemExit(f"error: unknown output type {suffix!r} for {out}; use .png, .obj, .npy or .scad")
 
+
 def cmd_render(args) -> int:
     if args.dim is None:
         args.dim = 3 if any(h + "(" in args.program for p in primitives(3) for h in (p.kind, p.long) if h) else 2
@@ -52,6 +53,7 @@ def cmd_render(args) -> int:
         print(f"wrote {path}")
     return 0
 
+
 def cmd_generate(args) -> int:
     from ..data import generate_dataset
 
@@ -63,6 +65,7 @@ def cmd_generate(args) -> int:
                               lengths=args.lengths, progress=not args.quiet)
     print(json.dumps(counts, indent=1, sort_keys=True))
     return 0
+
 
 def cmd_demo(args) -> int:
     """A small synthetic 2D and 3D dataset and previews of some of its programs (PNG, OBJ, OpenSCAD, a TSV)."""

@@ -77,11 +77,13 @@ def cmd_export_weights(args) -> int:
     print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
     return 0
 
+
 # The shipped CSGNet and small CSGNetStack (csgnetstack2d.pt, the starting point of the RL run), supervised and
 # RL-tuned on the silhouettes (docs/compute_plan.md says how each was trained): Table 4's rows when no --weights
 # are given. The medium CSGNetStack (load_pretrained(2, kind="csgnetstack")) is added with --weights.
 TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2d.pt"),
                  ("CSGNetStack supervised", "csgnetstack2d.pt"), ("CSGNetStack RL", "rl_csgnetstack2d.pt"))
+
 
 def cmd_table4(args) -> int:
     from ..inference import WEIGHTS
@@ -99,6 +101,7 @@ def cmd_table4(args) -> int:
             f"(seed {args.seed}); {decoding(args)}; {measured_on()}.")
     write_table(table4_markdown(rows, note, iters), args.out)
     return 0
+
 
 def cmd_table6(args) -> int:
     from ..paper.protocols import table6, table6_markdown
