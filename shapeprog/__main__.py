@@ -112,7 +112,7 @@ def _refuse_overwrite(outputs, inputs) -> None:
 def _write_mesh(path: str, shape) -> None:
     suffix = Path(path).suffix.lower()
     if suffix == ".obj":
-        io.write_obj(path, shape.corners)
+        io.write_obj(path, shape.corners, lines=shape.line)
     elif suffix == ".ply":
         io.write_ply(path, shape.corners, labels=shape.line.numpy())
     else:
@@ -286,7 +286,9 @@ def _inference_files(r, points, src, model, files, args) -> list[tuple[Path, str
     out = [(files["program"], r.text)]
     if "macros" in files and r.macro_text is not None:
         out.append((files["macros"], r.macro_text))
-    out.append((files["mesh"], obj_text(torch.from_numpy(r.corners()))))
+    with torch.no_grad():
+        part_lines = execute(r.program).line
+    out.append((files["mesh"], obj_text(torch.from_numpy(r.corners()), lines=part_lines)))
     unit = r.transform.apply(points)
     canon = execute(r.canonical).corners + torch.from_numpy(r.canonical_offset).float()
     sheet = render_grid([cloud_corners(unit[np.random.default_rng(args.seed).permutation(len(unit))]), canon],
@@ -456,7 +458,7 @@ def _export_decoded(results, out: str | None, name: str, png: str | None, cols: 
             shape = execute(r.program)
         if out:
             write_new(Path(out) / f"{name.format(i)}.txt", r.text)
-            io.write_obj(Path(out) / f"{name.format(i)}.obj", shape.corners)
+            io.write_obj(Path(out) / f"{name.format(i)}.obj", shape.corners, lines=shape.line)
         shapes.append((shape.corners, shape.line.numpy()))
     if out:
         print(f"wrote {len(results)} programs and meshes to {out}/")
