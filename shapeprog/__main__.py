@@ -177,7 +177,7 @@ def _cmd_fit(args) -> int:
     cd0, f0 = score(prog.program)
     res = fit(prog.program, pts, steps=args.steps, lr=args.lr, reg=args.reg, decimals=args.decimals, generator=g)
     cd1, f1 = score(res.program)
-    print(f"{prog.name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score {f0:.1f} -> {f1:.1f}, "
+    print(f"{prog.name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score @{thr:.3g} {f0:.1f} -> {f1:.1f}, "
           f"{len(res.losses)} of {args.steps} steps in {res.seconds:.1f} s")
     if res.stopped is not None:
         print(f"{prog.name}: {res.stopped}")
@@ -204,7 +204,10 @@ def _cmd_silhouettes(args) -> int:
 def _fmt_metrics(m: dict) -> str:
     cd = "n/a" if m["cd"] is None else f"{1000 * m['cd']:.1f}"
     yes = {True: "yes", False: "no", None: "not run"}
-    return f"CD x1000 {cd}, F-score {m['fscore']:.1f}, rooted {yes[m['rooted']]}, stable {yes[m['stable']]}"
+    from .pointcloud.infer import FSCORE_THRESHOLD
+
+    return (f"CD x1000 {cd}, F-score @{FSCORE_THRESHOLD:g} {m['fscore']:.1f}, rooted {yes[m['rooted']]}, "
+            f"stable {yes[m['stable']]}")
 
 
 def _retrieval_index(category: str, clouds):
@@ -534,12 +537,15 @@ def _cmd_reconstruct(args) -> int:
     with torch.no_grad():
         target, shape = prog.execute(), execute(result.program)
         if len(shape) == 0:  # nothing to sample: no point of the input is recovered
-            score = "F-score 0.0 (no leaf cuboid decoded)"
+            y, _ = sample_surface(target.corners, 10000, generator=torch.Generator().manual_seed(args.seed))
+            thr = float(adaptive_threshold(y))
+            score = f"F-score @{thr:.3g} 0.0 (no leaf cuboid decoded)"
         else:
             g = torch.Generator().manual_seed(args.seed)
             x, _ = sample_surface(shape.corners, 10000, generator=g)
             y, _ = sample_surface(target.corners, 10000, generator=g)
-            score = f"F-score {fscore(x, y):.1f}, chamfer {float(chamfer(x, y)):.4f}"
+            thr = float(adaptive_threshold(y))  # fscore's default threshold, printed with the score
+            score = f"F-score @{thr:.3g} {fscore(x, y, threshold=thr):.1f}, chamfer {float(chamfer(x, y)):.4f}"
     print(f"{prog.name}: reconstructed with {len(shape)} leaf cuboids (input {len(target)}), {score}")
     _emit_text(args.output, result.text)
     if args.mesh:

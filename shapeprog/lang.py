@@ -30,6 +30,7 @@ from .errors import ParseError, ParseWarning
 
 __all__ = [
     "AXES",
+    "CORPUS_DECIMALS",
     "FACES",
     "NUM_FIELDS",
     "Attach",
@@ -47,6 +48,9 @@ __all__ = [
     "statement_lines",
     "to_text",
 ]
+
+#: Decimals of the corpus's numbers: programs the package writes (VAE samples, fits) are rounded to them.
+CORPUS_DECIMALS = 3
 
 #: Face names; index k of the local axis they are normal to is FACE_AXIS[face].
 FACES = ("right", "left", "top", "bot", "front", "back")
@@ -602,6 +606,12 @@ def replace_numbers(program: Program, values: Iterator[float]) -> Program:
             stmts.append(s)
         blocks.append(Block(b.name, tuple(stmts)))
     return Program(tuple(blocks), program.flat)
+
+
+def round_numbers(program: Program, decimals: int = CORPUS_DECIMALS) -> Program:
+    """A copy of ``program`` with every continuous number rounded to ``decimals`` (``-0.0`` becomes ``0.0``),
+    so that its text is written as the corpus writes numbers and parses back to the same program."""
+    return replace_numbers(program, (round(v, decimals) + 0.0 for v in numbers(program)))
 
 
 def numbers(program: Program) -> list[float]:
