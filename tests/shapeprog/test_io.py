@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-trimesh = pytest.importorskip("trimesh")
+import trimesh  # noqa: E402  (a core dependency)
 
 import sa_testutil
 from shapeprog import io as sio
