@@ -222,8 +222,20 @@ def _retrieval_index(category: str, clouds):
         except (OSError, ValueError, KeyError) as e:
             raise SystemExit(f"error: {clouds}: {e}") from None
     else:
-        print(f"building the {category} retrieval index from the corpus train split ...", file=sys.stderr, flush=True)
-        index = RetrievalIndex.from_corpus(category)
+        from tqdm import tqdm
+
+        bar = None
+
+        def progress(done, total):  # only called when the index is not in the cache yet
+            nonlocal bar
+            if bar is None:
+                bar = tqdm(total=total, desc=f"{category} retrieval index (cached after this run)", unit="shape",
+                           file=sys.stderr)
+            bar.update(done - bar.n)
+
+        index = RetrievalIndex.from_corpus(category, progress=progress)
+        if bar is not None:
+            bar.close()
     print(f"retrieval index: {len(index)} {category} training shapes ({time.perf_counter() - t0:.0f} s)",
           file=sys.stderr, flush=True)
     return index
