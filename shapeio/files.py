@@ -5,6 +5,7 @@ The permissions and temporary-file names of :func:`atomic_write` are described i
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
 import re
@@ -16,7 +17,8 @@ import time
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Union
 
-__all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "output_problem", "parse_json", "refuse_overwrite", "remove_stale_temps", "write_new",
+__all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "c_output_silenced", "output_problem", "parse_json", "refuse_overwrite",
+           "remove_stale_temps", "write_new",
            "write_new_set", "STALE_TEMP_SECONDS"]
 
 PathLike = Union[str, os.PathLike]
@@ -365,3 +367,36 @@ def output_problem(path: PathLike, folder: bool = False, create: bool = True) ->
     os.close(fd)
     os.unlink(tmp)
     return None
+
+
+@contextlib.contextmanager
+def c_output_silenced():
+    """Send what C code writes to the process's stdout and stderr (file descriptors 1 and 2) to the null device
+    for the duration, e.g. a compiled library's build banner; Python's own streams are flushed first and C's
+    stdio buffers before the descriptors are restored, so nothing written inside comes out later."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, ValueError, OSError):
+            pass
+    try:
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no such descriptors (an embedded interpreter): nothing to silence
+        yield
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        yield
+    finally:
+        try:
+            import ctypes
+
+            ctypes.CDLL(None).fflush(None)  # C stdio buffers go to the null device, not to the restored stdout
+        except (OSError, AttributeError):
+            pass
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved + [null]:
+            os.close(fd)

@@ -72,7 +72,8 @@ def _rgba(colors, n: int, what: str, where) -> np.ndarray | None:
     return c if c.shape[1] == 4 else np.concatenate([c, np.full((n, 1), 255, np.uint8)], axis=1)
 
 
-def obj_text(vertices, faces, vertex_colors=None, comment: str | None = None, digits: int | None = None) -> str:
+def obj_text(vertices, faces, vertex_colors=None, comment: str | None = None, digits: int | None = None,
+             groups: Sequence[tuple[str, int]] | None = None) -> str:
     """Wavefront OBJ text: ``v x y z [r g b]`` lines, then ``f a b c`` lines (1-based), LF line ends.
 
     Args:
@@ -82,11 +83,20 @@ def obj_text(vertices, faces, vertex_colors=None, comment: str | None = None, di
         comment: optional first line, written after ``# ``.
         digits: significant digits of the coordinates (``{x:.6g}`` for 6); None writes Python's
             shortest repr of each value as a double (exact).
+        groups: optional ``(name, face count)`` runs covering the faces in order: a ``g name`` line is
+            written before each run's faces, so that a viewer can select each part. Names are single words.
 
     Returns:
         The file's text.
     """
     v, f = _vertices_faces(vertices, faces, "<obj>")
+    if groups is not None:
+        groups = [(str(name), int(n)) for name, n in groups]
+        if sum(n for _, n in groups) != len(f) or any(n < 0 for _, n in groups):
+            raise ValueError(f"<obj>: the groups cover {sum(n for _, n in groups)} faces, the mesh has {len(f)}")
+        bad = [name for name, _ in groups if not name or any(c.isspace() for c in name)]
+        if bad:
+            raise ValueError(f"<obj>: a group name must be one word without spaces, got {bad[0]!r}")
     rgba = _rgba(vertex_colors, len(v), "vertex_colors", "<obj>")
 
     def num(x) -> str:
@@ -98,12 +108,21 @@ def obj_text(vertices, faces, vertex_colors=None, comment: str | None = None, di
     else:
         lines += [f"v {num(x)} {num(y)} {num(z)} {r / 255:.6g} {g / 255:.6g} {b / 255:.6g}\n"
                   for (x, y, z), (r, g, b, _) in zip(v, rgba.tolist())]
-    lines += [f"f {a} {b} {c}\n" for a, b, c in (f + 1).tolist()]
+    faces_text = [f"f {a} {b} {c}\n" for a, b, c in (f + 1).tolist()]
+    if groups is None:
+        lines += faces_text
+    else:
+        k = 0
+        for name, n in groups:
+            lines.append(f"g {name}\n")
+            lines += faces_text[k:k + n]
+            k += n
     return "".join(lines)
 
 
 def write_mesh(path: PathLike, vertices, faces, face_colors=None, vertex_colors=None, comment: str | None = None,
-               digits: int | None = None, file_type: str | None = None) -> Path:
+               digits: int | None = None, file_type: str | None = None,
+               groups: Sequence[tuple[str, int]] | None = None) -> Path:
     """Write a triangle mesh, atomically; the format follows the suffix (or ``file_type``).
 
     * ``obj``: :func:`obj_text` (per-vertex colours only; ``comment`` and ``digits`` apply).
@@ -116,7 +135,7 @@ def write_mesh(path: PathLike, vertices, faces, face_colors=None, vertex_colors=
         faces: ``(F, 3) int``, 0-based.
         face_colors: optional ``(F, 3|4)`` uint8 or ``[0, 1]`` float (PLY, GLB).
         vertex_colors: optional ``(V, 3|4)`` uint8 or ``[0, 1]`` float.
-        comment, digits: OBJ only, see :func:`obj_text`.
+        comment, digits, groups: OBJ only, see :func:`obj_text`.
         file_type: ``"obj"``, ``"ply"`` or ``"glb"`` (default: the suffix of ``path``).
 
     Returns:
@@ -134,7 +153,7 @@ def write_mesh(path: PathLike, vertices, faces, face_colors=None, vertex_colors=
     if kind == "obj":
         if fc is not None:
             raise ValueError(f"{path}: OBJ files hold no per-face colours; write .ply or .glb")
-        text = obj_text(v, f, vc, comment, digits)
+        text = obj_text(v, f, vc, comment, digits, groups)
         return atomic_write(path, text.encode("ascii"))
     mesh = _trimesh().Trimesh(vertices=v, faces=f, face_colors=fc, vertex_colors=vc, process=False)
     data = mesh.export(file_type=kind)

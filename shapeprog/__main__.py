@@ -113,7 +113,7 @@ def _refuse_overwrite(outputs, inputs) -> None:
 def _write_mesh(path: str, shape) -> None:
     suffix = Path(path).suffix.lower()
     if suffix == ".obj":
-        io.write_obj(path, shape.corners)
+        io.write_obj(path, shape.corners, lines=shape.line)
     elif suffix == ".ply":
         io.write_ply(path, shape.corners, labels=shape.line.numpy())
     else:
@@ -178,7 +178,7 @@ def _cmd_fit(args) -> int:
     cd0, f0 = score(prog.program)
     res = fit(prog.program, pts, steps=args.steps, lr=args.lr, reg=args.reg, decimals=args.decimals, generator=g)
     cd1, f1 = score(res.program)
-    print(f"{prog.name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score {f0:.1f} -> {f1:.1f}, "
+    print(f"{prog.name}: chamfer {cd0:.4f} -> {cd1:.4f}, F-score @{thr:.3g} {f0:.1f} -> {f1:.1f}, "
           f"{len(res.losses)} of {args.steps} steps in {res.seconds:.1f} s")
     if res.stopped is not None:
         print(f"{prog.name}: {res.stopped}")
@@ -205,7 +205,10 @@ def _cmd_silhouettes(args) -> int:
 def _fmt_metrics(m: dict) -> str:
     cd = "n/a" if m["cd"] is None else f"{1000 * m['cd']:.1f}"
     yes = {True: "yes", False: "no", None: "not run"}
-    return f"CD x1000 {cd}, F-score {m['fscore']:.1f}, rooted {yes[m['rooted']]}, stable {yes[m['stable']]}"
+    from .pointcloud.infer import FSCORE_THRESHOLD
+
+    return (f"CD x1000 {cd}, F-score @{FSCORE_THRESHOLD:g} {m['fscore']:.1f}, rooted {yes[m['rooted']]}, "
+            f"stable {yes[m['stable']]}")
 
 
 def _retrieval_index(category: str, clouds):
@@ -220,8 +223,20 @@ def _retrieval_index(category: str, clouds):
         except (OSError, ValueError, KeyError) as e:
             raise SystemExit(f"error: {clouds}: {e}") from None
     else:
-        print(f"building the {category} retrieval index from the corpus train split ...", file=sys.stderr, flush=True)
-        index = RetrievalIndex.from_corpus(category)
+        from tqdm import tqdm
+
+        bar = None
+
+        def progress(done, total):  # only called when the index is not in the cache yet
+            nonlocal bar
+            if bar is None:
+                bar = tqdm(total=total, desc=f"{category} retrieval index (cached after this run)", unit="shape",
+                           file=sys.stderr)
+            bar.update(done - bar.n)
+
+        index = RetrievalIndex.from_corpus(category, progress=progress)
+        if bar is not None:
+            bar.close()
     print(f"retrieval index: {len(index)} {category} training shapes ({time.perf_counter() - t0:.0f} s)",
           file=sys.stderr, flush=True)
     return index
@@ -287,7 +302,9 @@ def _inference_files(r, points, src, model, files, args) -> list[tuple[Path, str
     out = [(files["program"], r.text)]
     if "macros" in files and r.macro_text is not None:
         out.append((files["macros"], r.macro_text))
-    out.append((files["mesh"], obj_text(torch.from_numpy(r.corners()))))
+    with torch.no_grad():
+        part_lines = execute(r.program).line
+    out.append((files["mesh"], obj_text(torch.from_numpy(r.corners()), lines=part_lines)))
     unit = r.transform.apply(points)
     canon = execute(r.canonical).corners + torch.from_numpy(r.canonical_offset).float()
     sheet = render_grid([cloud_corners(unit[np.random.default_rng(args.seed).permutation(len(unit))]), canon],
@@ -457,7 +474,7 @@ def _export_decoded(results, out: str | None, name: str, png: str | None, cols: 
             shape = execute(r.program)
         if out:
             write_new(Path(out) / f"{name.format(i)}.txt", r.text)
-            io.write_obj(Path(out) / f"{name.format(i)}.obj", shape.corners)
+            io.write_obj(Path(out) / f"{name.format(i)}.obj", shape.corners, lines=shape.line)
         shapes.append((shape.corners, shape.line.numpy()))
     if out:
         print(f"wrote {len(results)} programs and meshes to {out}/")
@@ -533,12 +550,15 @@ def _cmd_reconstruct(args) -> int:
     with torch.no_grad():
         target, shape = prog.execute(), execute(result.program)
         if len(shape) == 0:  # nothing to sample: no point of the input is recovered
-            score = "F-score 0.0 (no leaf cuboid decoded)"
+            y, _ = sample_surface(target.corners, 10000, generator=torch.Generator().manual_seed(args.seed))
+            thr = float(adaptive_threshold(y))
+            score = f"F-score @{thr:.3g} 0.0 (no leaf cuboid decoded)"
         else:
             g = torch.Generator().manual_seed(args.seed)
             x, _ = sample_surface(shape.corners, 10000, generator=g)
             y, _ = sample_surface(target.corners, 10000, generator=g)
-            score = f"F-score {fscore(x, y):.1f}, chamfer {float(chamfer(x, y)):.4f}"
+            thr = float(adaptive_threshold(y))  # fscore's default threshold, printed with the score
+            score = f"F-score @{thr:.3g} {fscore(x, y, threshold=thr):.1f}, chamfer {float(chamfer(x, y)):.4f}"
     print(f"{prog.name}: reconstructed with {len(shape)} leaf cuboids (input {len(target)}), {score}")
     _emit_text(args.output, result.text)
     if args.mesh:

@@ -43,6 +43,13 @@ def _data(name: str) -> bytes:
 
 
 @functools.lru_cache(maxsize=None)
+def data_digest() -> str:
+    """SHA-256 of the corpus archive: the key under which results derived from the corpus are cached."""
+    from shapeio.cache import file_digest
+
+    return file_digest(str(resources.files("shapeprog").joinpath("data", "shapeassembly_partnet.tar.xz")))
+
+
 def _archive(name: str) -> dict[str, bytes]:
     with tarfile.open(fileobj=io.BytesIO(lzma.decompress(_data(name))), mode="r:") as tar:
         return {m.name.lstrip("./"): tar.extractfile(m).read() for m in tar.getmembers() if m.isfile()}

@@ -24,7 +24,7 @@ from .attach import point, rule_aligned, rule_first, rule_general, rule_second, 
 from .compile import ALIGNED, FIRST, SECOND, compile_program
 from .errors import ExecutionError
 from .geometry import cuboid_corners, mesh_arrays
-from .lang import NUM_FIELDS, Program, numbers
+from .lang import NUM_FIELDS, Program, as_program, numbers
 from .schedule import GroupPlan, plan_levels, plan_steps
 
 __all__ = ["ExecutedShape", "ExecutionPlan", "execute", "execute_batch", "program_parameters", "parameter_names"]
@@ -64,6 +64,18 @@ class ExecutedShape:
         """(vertices (8L, 3) float, faces (12L, 3) int64), the reference's OBJ layout."""
         return mesh_arrays(self.corners)
 
+    def to_trimesh(self):
+        """The leaf cuboids as one ``trimesh.Trimesh`` (float64 vertices in :meth:`mesh`'s order, no merging);
+        ``face_attributes['part']`` holds each triangle's leaf index and ``metadata['lines']`` each leaf's
+        0-based program line."""
+        import trimesh
+
+        verts, faces = mesh_arrays(self.corners.detach().cpu().double())
+        part = torch.arange(len(self)).repeat_interleave(faces.shape[0] // max(len(self), 1))
+        return trimesh.Trimesh(vertices=verts.numpy(), faces=faces.numpy(), process=False,
+                               face_attributes={"part": part.numpy()},
+                               metadata={"lines": self.line.tolist()})
+
 
 
 # ----------------------------------------------------------------------------- params
@@ -76,14 +88,14 @@ def program_parameters(program: Program, dtype: torch.dtype = torch.float32, dev
     squeeze (u, v), translate (d). Write values back with
     :func:`shapeprog.lang.replace_numbers`.
     """
-    return torch.tensor(numbers(program), dtype=dtype, device=device)
+    return torch.tensor(numbers(as_program(program, "program_parameters")), dtype=dtype, device=device)
 
 
 def parameter_names(program: Program) -> list[str]:
     """A readable name per entry of :func:`program_parameters`, e.g. ``'Program_1:3:attach.y2'``
     (block name, 0-based statement index in the block, statement and field)."""
     out = []
-    for b in program.blocks:
+    for b in as_program(program, "parameter_names").blocks:
         for i, s in enumerate(b.statements):
             for f in NUM_FIELDS[type(s)]:
                 out.append(f"{b.name}:{i}:{type(s).__name__.lower()}.{f}")
@@ -114,9 +126,9 @@ class ExecutionPlan:
     """
 
     def __init__(self, programs: list[Program], dtype: torch.dtype = torch.float32, device=None):
-        if isinstance(programs, Program):
+        if isinstance(programs, (Program, str)):
             raise TypeError("`programs` must be a list of programs; use ExecutionPlan([program])")
-        self.programs = list(programs)
+        self.programs = [as_program(p, "ExecutionPlan") for p in programs]
         self.dtype = dtype
         self.device = torch.device("cpu") if device is None else torch.device(device)
         comps = [compile_program(p) for p in self.programs]
@@ -341,6 +353,9 @@ def execute_batch(programs: list[Program], dtype: torch.dtype = torch.float32, d
     Returns:
         One :class:`ExecutedShape` per program; equal to calling :func:`execute` on each.
     """
+    if isinstance(programs, (Program, str)):
+        raise TypeError("execute_batch takes a list of programs; execute(program) runs one")
+    programs = [as_program(p, "shapeprog.execute_batch") for p in programs]
     if not programs:
         return []
     if device is None and params is not None:
@@ -353,7 +368,7 @@ def execute(program: Program, dtype: torch.dtype = torch.float32, device=None,
     """Execute a ShapeAssembly program (the reference's hierarchical execution).
 
     Args:
-        program: a parsed :class:`~shapeprog.lang.Program`.
+        program: a :class:`~shapeprog.lang.Program` or its text (parsed with :func:`shapeprog.parse`).
         dtype: float32 (the reference precision, default) or float64.
         device: torch device (default: that of ``params``, else CPU).
         params: optional (P,) tensor replacing the program's continuous numbers (text order,
@@ -366,4 +381,5 @@ def execute(program: Program, dtype: torch.dtype = torch.float32, device=None,
         ExecutionError: a cuboid comes out with a non-finite value (e.g. a zero bbox extent, or
             ``params`` out of range); it names the line that created the first such cuboid.
     """
+    program = as_program(program, "shapeprog.execute")
     return execute_batch([program], dtype, device, None if params is None else [params])[0]

@@ -335,6 +335,40 @@ def table_notes(model_meta: dict, sha: Optional[str], fool_epochs: int, fool_ave
     ]
 
 
+#: Bumped when a generation metric changes: cached ground-truth rows of other versions are not read.
+GROUND_TRUTH_CACHE_VERSION = 1
+
+
+def ground_truth_row(refs: References, classifier_sha: Optional[str], **kw) -> GenerationRow:
+    """The ground-truth row (the corpus val split through :func:`evaluate_generation`, no coverage), kept in the
+    on-disk cache (:mod:`shapeio.cache`) keyed by the category, the classifier's SHA-256, the corpus archive's
+    digest, the metric settings in ``kw`` and :data:`GROUND_TRUTH_CACHE_VERSION`; computed (with a progress line
+    through ``kw['log']``) when not there. Not cached for a classifier without a known digest."""
+    import dataclasses
+    import json
+
+    from shapeio.cache import cached
+
+    from .corpus import data_digest
+
+    def compute() -> GenerationRow:
+        say = kw.get("log") or (lambda s: None)
+        say(f"{refs.category}: measuring the ground-truth row ({len(refs.val_programs)} shapes; cached after this "
+            "run)")
+        return evaluate_generation(refs.val_programs, refs, name="ground truth: corpus val", with_coverage=False, **kw)
+
+    if classifier_sha is None:
+        return compute()
+    key = {"category": refs.category, "classifier": classifier_sha, "corpus": data_digest(), "seed": refs.seed,
+           "version": GROUND_TRUTH_CACHE_VERSION,
+           "settings": {k: v for k, v in kw.items() if k not in ("model", "executor", "log")}}
+    got = cached("ground-truth-row", key, lambda: {"row": np.array(json.dumps(dataclasses.asdict(compute())))})
+    data = json.loads(str(got["row"]))
+    detail = data.pop("fool_detail")
+    data["errors"] = [tuple(e) if isinstance(e, list) else e for e in data["errors"]]
+    return GenerationRow(**data, fool_detail=None if detail is None else FoolResult(**detail))
+
+
 def generation_table(
     samples: Sequence,
     category: str,
@@ -378,7 +412,6 @@ def generation_table(
     if samples:
         rows.append(evaluate_generation(samples, refs, name=name, **kw))
     if ground_truth:
-        rows.append(evaluate_generation(refs.val_programs, refs, name="ground truth: corpus val",
-                                        with_coverage=False, **kw))
+        rows.append(ground_truth_row(refs, sha, **kw))
     notes = table_notes(meta, sha, fool_epochs, fool_average_last, fool_points, chamfer_points, candidates, stability)
     return format_table(rows, category, notes)

@@ -3,7 +3,8 @@
 Writers take plain arrays or tensors (``corners: (L, 8, 3) float`` in the spec's corner order), check
 them with errors naming the file, and write atomically through :mod:`shapeio`:
 
-* :func:`write_obj` writes the reference ``writeObj`` layout byte for byte (:func:`shapeio.mesh.write_mesh`).
+* :func:`write_obj` writes the reference ``writeObj`` layout plus one ``g`` group per part
+  (:func:`shapeio.mesh.write_mesh`), named by the program line that made the part (:func:`part_names`).
 * :func:`write_ply`, :func:`write_glb`: triangle meshes via trimesh; per-part colours from ``labels``.
 * :func:`write_points` / :func:`read_points`: point clouds (PLY with normals; OBJ ``v x y z``),
   :mod:`shapeio.points`, read back as tensors.
@@ -29,6 +30,7 @@ from shapeprog.picture import part_colors
 from shapeprog.geometry import check_corners
 
 __all__ = [
+    "part_names",
     "write_obj",
     "obj_text",
     "write_ply",
@@ -52,27 +54,52 @@ def _mesh(arr: np.ndarray, dtype) -> tuple[np.ndarray, np.ndarray]:
     return verts.numpy(), faces.numpy()
 
 
-def obj_text(corners) -> str:
-    """The reference OBJ text of a list of cuboids (see :func:`write_obj`)."""
-    return _mesh_obj_text(*_mesh(_corners_array(corners, "<obj>"), np.float32))
+def part_names(n: int, lines=None) -> list[str]:
+    """One OBJ group name per part: ``line_<n>`` with ``n`` the 1-based program line that made the part
+    (``ExecutedShape.line`` holds the 0-based lines), ``line_<n>.<k>`` for the k-th further part of the same
+    line (translate copies); ``part_<k>`` without ``lines``."""
+    if lines is None:
+        return [f"part_{k}" for k in range(n)]
+    ls = [int(v) for v in as_numpy(lines).reshape(-1).tolist()]
+    if len(ls) != n:
+        raise ValueError(f"{len(ls)} part lines for {n} parts")
+    seen: dict = {}
+    out = []
+    for v in ls:
+        seen[v] = seen.get(v, 0) + 1
+        out.append(f"line_{v + 1}" if seen[v] == 1 else f"line_{v + 1}.{seen[v]}")
+    return out
 
 
-def write_obj(path: PathLike, corners) -> Path:
-    """Write cuboids in the reference OBJ layout.
+def _groups(n: int, lines) -> list[tuple[str, int]]:
+    return [(name, len(CUBOID_TRIANGLES)) for name in part_names(n, lines)]
+
+
+def obj_text(corners, lines=None) -> str:
+    """The OBJ text of a list of cuboids (see :func:`write_obj`)."""
+    arr = _corners_array(corners, "<obj>")
+    return _mesh_obj_text(*_mesh(arr, np.float32), groups=_groups(len(arr), lines))
+
+
+def write_obj(path: PathLike, corners, lines=None) -> Path:
+    """Write cuboids in the reference OBJ layout, with one group per part.
 
     Every vertex first, leaf after leaf with 8 corners each, as ``v {x} {y} {z}`` where each number
-    is Python's ``str`` of the float32 value converted to a double (``0.4424920082092285``); then
-    every triangle as ``f a b c`` with 1-based indices (leaf ``k`` adds ``8 k``) in the spec's
-    triangle order. No header, normals or groups; LF line ends.
+    is Python's ``str`` of the float32 value converted to a double (``0.4424920082092285``); then per
+    leaf a ``g <name>`` line (:func:`part_names`) and its triangles as ``f a b c`` with 1-based indices
+    (leaf ``k`` adds ``8 k``) in the spec's triangle order. No header or normals; LF line ends.
 
     Args:
         path: target file.
         corners: ``(L, 8, 3) float`` array or tensor (converted to float32).
+        lines: optional ``(L,)`` 0-based program line of each leaf (``ExecutedShape.line``), naming the groups
+            ``line_<n>``; without it they are ``part_<k>``.
 
     Returns:
         The path written.
     """
-    return write_mesh(path, *_mesh(_corners_array(corners, path), np.float32), file_type="obj")
+    arr = _corners_array(corners, path)
+    return write_mesh(path, *_mesh(arr, np.float32), file_type="obj", groups=_groups(len(arr), lines))
 
 
 def write_ply(path: PathLike, corners, labels=None) -> Path:

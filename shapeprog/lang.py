@@ -30,6 +30,7 @@ from .errors import ParseError, ParseWarning
 
 __all__ = [
     "AXES",
+    "CORPUS_DECIMALS",
     "FACES",
     "NUM_FIELDS",
     "Attach",
@@ -42,10 +43,14 @@ __all__ = [
     "Squeeze",
     "Statement",
     "Translate",
+    "as_program",
     "parse",
     "statement_lines",
     "to_text",
 ]
+
+#: Decimals of the corpus's numbers: programs the package writes (VAE samples, fits) are rounded to them.
+CORPUS_DECIMALS = 3
 
 #: Face names; index k of the local axis they are normal to is FACE_AXIS[face].
 FACES = ("right", "left", "top", "bot", "front", "back")
@@ -167,6 +172,37 @@ class Program:
         names = {b.name: b for b in self.blocks}
         return [names.get(c.name) if c.name.startswith("Program_") else None for c in block.cuboids()]
 
+    def __repr__(self) -> str:
+        """One line: the blocks, statements and cuboids (``to_text(program)`` prints the program)."""
+        n_stmts = sum(len(b.statements) for b in self.blocks)
+        n_cubes = sum(len(b.cuboids()) - 1 for b in self.blocks)
+        kind = "flat" if self.flat else "corpus"
+        return (f"<Program ({kind} format): {len(self.blocks)} block{'s' * (len(self.blocks) != 1)}, "
+                f"{n_stmts} statements, {n_cubes} cuboids besides the bboxes; print with shapeprog.to_text>")
+
+
+def as_program(program, call: str = "this function") -> Program:
+    """``program`` as a :class:`Program`: a Program as it is, a ``str`` parsed with :func:`parse`.
+
+    Raises:
+        TypeError: anything else, naming ``call`` and the call that makes a program.
+        ParseError: text that is not a ShapeAssembly program.
+    """
+    if isinstance(program, Program):
+        return program
+    if isinstance(program, str):
+        return parse(program)
+    hint = ""
+    name = type(program).__name__
+    if name in ("MacroProgram", "Refactored", "MacroHierarchy"):
+        hint = "; a macro program becomes a ShapeAssembly program with shapeprog.macros.expand(program, library)"
+    elif hasattr(program, "read_text"):
+        hint = "; read the file first (shapeprog.parse(path.read_text(), str(path)))"
+    elif isinstance(program, (bytes, bytearray)):
+        hint = "; decode the bytes first (text.decode('utf-8'))"
+    raise TypeError(f"{call} takes a shapeprog Program or its text, got {name}: make one with "
+                    f"shapeprog.parse(text){hint}")
+
 
 # --------------------------------------------------------------------------- printer
 
@@ -202,6 +238,7 @@ def to_text(program: Program, decimals: int | None = None) -> str:
 
     Numbers are written as ``repr(float)``, so parsed corpus files come back byte for byte.
     """
+    program = as_program(program, "shapeprog.to_text")
     out = []
     if program.flat:
         for s in program.root.statements:
@@ -571,6 +608,13 @@ def replace_numbers(program: Program, values: Iterator[float]) -> Program:
     return Program(tuple(blocks), program.flat)
 
 
+def round_numbers(program: Program, decimals: int = CORPUS_DECIMALS) -> Program:
+    """A copy of ``program`` with every continuous number rounded to ``decimals`` (``-0.0`` becomes ``0.0``),
+    so that its text is written as the corpus writes numbers and parses back to the same program."""
+    return replace_numbers(program, (round(v, decimals) + 0.0 for v in numbers(program)))
+
+
 def numbers(program: Program) -> list[float]:
     """The continuous numbers of ``program`` in the order used by :func:`replace_numbers`."""
+    program = as_program(program, "shapeprog.lang.numbers")
     return [getattr(s, f) for b in program.blocks for s in b.statements for f in NUM_FIELDS[type(s)]]

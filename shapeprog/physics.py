@@ -286,8 +286,11 @@ def stability(
     adj = contact_graph(corners, contact_tolerance, surface)
     if not _rooted(adj).all():
         return False
+    from shapeio.files import c_output_silenced
+
     try:
-        import pybullet as pb  # lazy: only stability() needs the physics engine
+        with c_output_silenced():  # pybullet prints its build banner from C on import and connect
+            import pybullet as pb  # lazy: only stability() needs the physics engine
     except ImportError as err:  # pragma: no cover - pybullet is a core dependency
         raise ImportError("stability() needs pybullet: pip install pybullet") from err
 
@@ -297,7 +300,8 @@ def stability(
     half = np.maximum(half, 1e-4)
     volume = 8.0 * half.prod(-1)
     groups = _groups(adj)
-    client = pb.connect(pb.DIRECT)
+    with c_output_silenced():
+        client = pb.connect(pb.DIRECT)
     try:
         for group in groups:
             pb.resetSimulation(physicsClientId=client)

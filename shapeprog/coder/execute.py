@@ -42,7 +42,7 @@ import numpy as np
 
 from ..errors import ExecutionError as _BaseExecutionError
 from . import limits
-from .lang import AXES, AxisConst, Call, Expr, IntConst, Lang, Library, Num, Type, Var, _library, _short, check
+from .lang import as_expr, AXES, AxisConst, Call, Expr, IntConst, Lang, Library, Num, Type, Var, _library, _short, check
 
 __all__ = [
     "ExecutionError",
@@ -397,7 +397,7 @@ def run(expr: Expr, library: Library | Lang | None = None, env: Mapping | None =
     """Execute a Shape expression.
 
     Args:
-        expr: a well-typed Shape expression of ``library`` (see :func:`~shapeprog.coder.lang.check`).
+        expr: a well-typed Shape expression of ``library`` (see :func:`~shapeprog.coder.lang.check`) or its text.
         library: its functions; :data:`~shapeprog.coder.lang.LANG_3D` by default.
         env: values of the program's variables: floats for Float variables, ``"AX"`` etc. for Axis
             variables, ints for Int variables.
@@ -409,6 +409,7 @@ def run(expr: Expr, library: Library | Lang | None = None, env: Mapping | None =
             listed in :attr:`Execution.hard_errors`.
     """
     lib = _library(library)
+    expr = as_expr(expr, lib, "shapeprog.coder.run")
     check(expr, lib, Type.SHAPE)
     r = _Run(lib)
     parts = r.value(expr, env or {}, Type.SHAPE)
@@ -424,7 +425,7 @@ def execute(expr: Expr, library: Library | Lang | None = None, env: Mapping | No
     Raises:
         ExecutionError: as :func:`run`, and on a hard error when ``strict``.
     """
-    ex = run(expr, library, env)
+    ex = run(as_expr(expr, library, "shapeprog.coder.execute"), library, env)
     if strict and ex.hard_errors:
         raise ExecutionError(ex.hard_errors[0])
     return ex.primitives(prec=prec, orient=orient)

@@ -63,6 +63,7 @@ __all__ = [
     "Signature",
     "Type",
     "Var",
+    "as_expr",
     "check",
     "expand",
     "parse",
@@ -185,6 +186,10 @@ class Call:
             raise ProgramError(f"not a function name: {self.fn!r}")
         if not isinstance(self.args, tuple):
             object.__setattr__(self, "args", tuple(self.args))
+
+    def __repr__(self) -> str:
+        """The program's text, shortened to 80 characters (``to_text`` prints it whole)."""
+        return f"<{_short(self, 80)}>"
 
 
 Expr = Union[Call, Num, Var, AxisConst, IntConst]
@@ -489,6 +494,13 @@ class Library:
     def __contains__(self, name: object) -> bool:
         return name in self._table
 
+    def __repr__(self) -> str:
+        """One line: the domain, the abstraction count and the first names (``to_text()`` prints them)."""
+        names = [ab.name for ab in self.abstractions]
+        shown = ", ".join(names[:8]) + (f", ... ({len(names) - 8} more)" if len(names) > 8 else "")
+        return (f"<shapeprog.coder.Library ({self.lang.name}): {len(names)} abstractions"
+                f"{': ' + shown if names else ''}>")
+
     def __getitem__(self, name: str) -> Abstraction:
         return self._table[name]
 
@@ -545,6 +557,28 @@ def _library(library) -> Library:
     if not isinstance(library, Library):
         raise TypeError(f"expected a Library or a Lang, got {type(library).__name__}")
     return library
+
+
+def as_expr(expr, library: "Library | Lang | None" = None, call: str = "this function") -> Expr:
+    """``expr`` as an expression tree: a tree (:class:`Call`, :class:`Num`, :class:`Var`, :class:`AxisConst`,
+    :class:`IntConst`) as it is, a ``str`` parsed with ``library`` (:func:`parse`).
+
+    Raises:
+        TypeError: anything else, naming ``call`` and the call that makes a program (for an inference result,
+            ``shapeprog.coder.parse(result.text, library)``).
+        ParseError: text that is not a Shape expression of ``library``.
+    """
+    if isinstance(expr, (Call, Num, Var, AxisConst, IntConst)):
+        return expr
+    if isinstance(expr, str):
+        return parse(expr, library)
+    name = type(expr).__name__
+    if hasattr(expr, "text") and hasattr(expr, "expanded"):  # an inference result (shapeprog.coder.Inferred)
+        hint = ("an inference result, not a program: its program is shapeprog.coder.parse(result.text, library) "
+                "(its error is result.error)")
+    else:
+        hint = "make one with shapeprog.coder.parse(text, library)"
+    raise TypeError(f"{call} takes a ShapeCoder program (an expression tree) or its text, got {name}: {hint}")
 
 
 # ----------------------------------------------------------------------------- type checking and expansion
@@ -611,6 +645,7 @@ def expand(expr: Expr, library: Library, names=None) -> Expr:
         ProgramError: the expansion exceeds :data:`~shapeprog.coder.limits.MAX_NODES` nodes.
     """
     lib = _library(library)
+    expr = as_expr(expr, lib, "shapeprog.coder.expand")
     only = None if names is None else frozenset(names)
     cache: dict = {}
     if lib.expanded_nodes(expr) > limits.MAX_NODES:  # a partial expansion is no larger than the full one

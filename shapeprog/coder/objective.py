@@ -36,7 +36,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .execute import corners
-from .lang import (FLOAT_CONSTANTS, FLOAT_FN, Abstraction, AxisConst, Call, Expr, IntConst, Lang, Library, Num, Type,
+from .lang import (as_expr, check, FLOAT_CONSTANTS, FLOAT_FN, Abstraction, AxisConst, Call, Expr, IntConst, Lang, Library, Num, Type,
                    Var, _library, walk)
 
 __all__ = [
@@ -118,8 +118,9 @@ class TokenCounts:
 
 def token_counts(expr: Expr, library: Library | Lang | None = None) -> TokenCounts:
     """Count every token occurrence of ``expr`` by kind (abstraction calls count as ``fn``; the
-    abstraction bodies are not counted: they are paid once, through ω)."""
+    abstraction bodies are not counted: they are paid once, through ω). ``expr`` may be its text."""
     lib = _library(library)
+    expr = as_expr(expr, lib, "shapeprog.coder.objective.token_counts")
     n = {"fn": 0, "float_fn": 0, "float_var": 0, "float_const": 0, "cat": 0}
     for e in walk(expr):
         if isinstance(e, Call):
@@ -233,8 +234,21 @@ def omega(ab: Abstraction | AbstractionStats, library: Library | Lang | None = N
 def objective(programs: Sequence[Expr], library: Library | Lang | None = None,
               errors: Sequence[float] | None = None, weights: TokenWeights = WEIGHTS) -> float:
     """F: the mean :func:`program_cost` of ``programs`` (with their geometric ``errors``, 0 by default)
-    plus the :func:`omega` of every abstraction of ``library``."""
+    plus the :func:`omega` of every abstraction of ``library``.
+
+    Raises:
+        TypeError: ``programs`` is not a list of programs (expression trees or their texts), e.g. inference
+            results (:class:`~shapeprog.coder.infer.Inferred`: pass ``coder.parse(r.text, library)`` and
+            ``errors=[r.error ...]``) or a single program.
+        ProgramError: a program that is not a well-typed Shape expression of ``library``.
+    """
     lib = _library(library)
+    if isinstance(programs, (str, Call, Num, Var, AxisConst, IntConst)) or hasattr(programs, "expanded"):
+        raise TypeError(f"shapeprog.coder.objective takes a list of programs, got one {type(programs).__name__}: "
+                        "pass [program]")
+    programs = [as_expr(p, lib, "shapeprog.coder.objective") for p in programs]
+    for p in programs:
+        check(p, lib, Type.SHAPE)
     if not programs:
         raise ValueError("F needs at least one program")
     if errors is None:

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 from ..errors import RefactorError
-from .lang import (AXES, FLOAT_CONSTANTS, Abstraction, AxisConst, Call, Expr, IntConst, Lang, Library, Num, ProgramError,
+from .lang import (as_expr, AXES, FLOAT_CONSTANTS, Abstraction, AxisConst, Call, Expr, IntConst, Lang, Library, Num, ProgramError,
                    Type, Var, _library, _short, check, substitute, walk)
 
 __all__ = [
@@ -559,7 +559,7 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
     """Refactor one program with the semantic rewrites and the library's abstractions.
 
     Args:
-        expr: a Shape expression of ``library`` (abstraction calls are kept as e-nodes).
+        expr: a Shape expression of ``library`` or its text (abstraction calls are kept as e-nodes).
         library: a :class:`~shapeprog.coder.lang.Library` (or a bare domain); :data:`LANG_3D` by default.
         env: values of the program's Float variables (e.g. a naive program's ``S_i_j_``); Axis and Int
             variables are not allowed.
@@ -588,6 +588,7 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
 
     t0 = time.perf_counter()
     lib = _library(library)
+    expr = as_expr(expr, lib, "shapeprog.coder.refactor")
     check_limits(iterations, max_nodes, time_limit, max_matches)
     if max_matches is None:
         max_matches = min(MATCHES_PER_ENODE * max_nodes, MAX_MATCHES)

@@ -337,7 +337,7 @@ class EditSession(UndoableSession):
             if k == "txt":
                 data[k] = self.text
             elif k == "obj":
-                data[k] = obj_text(self.shape.corners)
+                data[k] = obj_text(self.shape.corners, lines=self.shape.line)
             else:
                 from shapeio.image import png_bytes
 

@@ -20,11 +20,14 @@ from typing import Sequence
 import numpy as np
 
 from ..lang import Program
+from ..lang import parse as parse_program
 from .data import SubProgram, convert_program
 from .discover import Nodes, nodes_from_subprograms
 from .grammar import to_shapeassembly
 from .lang import BASE, BOOL, CUBE, FLOAT, Call, MacroProgram, Name, to_text
-from .library import Library
+from .hierarchy import as_hierarchy, is_hierarchy_text
+from .hierarchy import parse as parse_hierarchy
+from .library import Library, as_macro_program
 from .objective import Result, best_program, templates, to_program
 
 __all__ = ["BlockRefactor", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library",
@@ -56,7 +59,9 @@ def library_text(category: str) -> str:
 
 def program_stats(program: MacroProgram, library: Library) -> dict:
     """Counts of a macro program's calls after the bbox line: ``lines`` (calls), ``float``, ``cube``,
-    ``categorical``, ``bool`` parameters; ``bbox_floats`` / ``bbox_bools`` of its bbox line."""
+    ``categorical``, ``bool`` parameters; ``bbox_floats`` / ``bbox_bools`` of its bbox line. ``program`` may
+    be its text."""
+    program = as_macro_program(program, library, "shapeprog.macros.program_stats")
     lib = library.with_program(program)
     st = {"lines": 0, "float": 0, "cube": 0, "categorical": 0, "bool": 0, "bbox_floats": 3, "bbox_bools": 1}
     for c in program.lines[1:]:
@@ -127,7 +132,7 @@ def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Libr
     orderings (:func:`shapeprog.macros.objective.best_program`).
 
     Args:
-        program: a parsed ShapeAssembly program (converted with
+        program: a ShapeAssembly program or its text (parsed with :func:`shapeprog.parse`; converted with
             :func:`~shapeprog.macros.data.convert_program`), or sub-programs.
         library: the macros.
         mode: ``'beam'`` (the reference's search) or ``'exact'``.
@@ -136,7 +141,14 @@ def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Libr
 
     Raises:
         ValueError: a block of the program cannot be written in the modified grammar.
+        TypeError: ``program`` is none of these (a macro program is already refactored: expand it with
+            :func:`expand` first).
     """
+    if not isinstance(library, Library):
+        raise TypeError(f"shapeprog.macros.refactor takes a shapeprog.macros.Library as `library`, got "
+                        f"{type(library).__name__}: load one with shapeprog.macros.load_library(category)")
+    if isinstance(program, str):
+        program = parse_program(program)
     if isinstance(program, Program):
         conv = convert_program(program, category, shape_id)
         if conv.failures:
@@ -144,8 +156,14 @@ def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Libr
         subs = conv.subprograms
     elif isinstance(program, SubProgram):
         subs = [program]
-    else:
+    elif isinstance(program, (list, tuple)) and all(isinstance(s, SubProgram) for s in program):
         subs = list(program)
+    else:
+        name = type(program).__name__
+        hint = (" (it is written with macros already: shapeprog.macros.expand(program, library) gives its base "
+                "program)" if name in ("MacroProgram", "Refactored", "MacroHierarchy") else "")
+        raise TypeError(f"shapeprog.macros.refactor takes a ShapeAssembly Program, its text or sub-programs, got "
+                        f"{name}{hint}: make a program with shapeprog.parse(text)")
     tpls = templates(library)
     base = Library()
     btpls = templates(base)
@@ -169,9 +187,28 @@ def refactor(program: Program | SubProgram | Sequence[SubProgram], library: Libr
     return Refactored(tuple(blocks), text, stats)
 
 
-def expand(program: MacroProgram, library: Library | None = None) -> Program:
-    """A macro program as a flat base ShapeAssembly program (its own definitions and ``library``'s)."""
+def expand(program, library: Library | None = None) -> Program:
+    """A macro program as a base ShapeAssembly program (its own definitions and ``library``'s).
+
+    Args:
+        program: a :class:`~shapeprog.macros.lang.MacroProgram` or its text: the result is one flat block; a
+            refactored program (:func:`refactor`'s result), a :class:`~shapeprog.macros.hierarchy.MacroHierarchy`
+            or its text: the whole hierarchical program (corpus format, a block per sub-program, cuboids named
+            as the macro program binds them).
+        library: the library its lines call (default: the base functions only).
+
+    Raises:
+        TypeError: ``program`` is none of these (a ShapeAssembly program is already in the base language).
+    """
     lib = Library() if library is None else library
+    h = as_hierarchy(program)
+    if h is None and isinstance(program, str) and is_hierarchy_text(program):
+        h = parse_hierarchy(program, library=lib)
+    if h is not None:
+        from .execute import compile_hierarchy
+
+        return compile_hierarchy(h, lib).program
+    program = as_macro_program(program, lib, "shapeprog.macros.expand")
     return to_shapeassembly(lib.expand(program).lines)
 
 

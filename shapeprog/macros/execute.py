@@ -30,9 +30,9 @@ import torch
 from ..execute import ExecutedShape, ExecutionPlan
 from ..lang import Program
 from .grammar import TranslateLine, to_shapeassembly
-from .hierarchy import rename_block
+from .hierarchy import as_hierarchy, is_hierarchy_text, rename_block
 from .lang import MacroProgram, parameters
-from .library import Expansion, Library
+from .library import Expansion, Library, as_macro_program
 
 __all__ = ["CompiledHierarchy", "CompiledMacroProgram", "MacroPlan", "compile_hierarchy", "compile_program", "execute",
            "execute_batch", "execute_hierarchy", "hierarchy_parameters", "program_parameters"]
@@ -41,6 +41,7 @@ __all__ = ["CompiledHierarchy", "CompiledMacroProgram", "MacroPlan", "compile_hi
 def program_parameters(program: MacroProgram, dtype: torch.dtype = torch.float32, device=None) -> torch.Tensor:
     """The program's free parameters as a (P,) tensor: every number of its lines in text order, the
     bbox dims first (:func:`shapeprog.macros.lang.parameters`)."""
+    program = as_macro_program(program, None, "shapeprog.macros.program_parameters")
     return torch.tensor(parameters(program), dtype=dtype, device=device)
 
 
@@ -72,6 +73,7 @@ class CompiledMacroProgram:
 
 def compile_program(program: MacroProgram, library: Library | None = None) -> CompiledMacroProgram:
     """Expand ``program`` with ``library`` (plus the program's own definitions) for execution."""
+    program = as_macro_program(program, library, "shapeprog.macros.compile_program")
     lib = Library() if library is None else library
     exp = lib.expand(program)
     sa = to_shapeassembly(exp.lines, check=False)
@@ -99,7 +101,7 @@ class MacroPlan:
 
     def __init__(self, programs: list[MacroProgram], library: Library | None = None,
                  dtype: torch.dtype = torch.float32, device=None):
-        if isinstance(programs, MacroProgram):
+        if isinstance(programs, (MacroProgram, str)):
             raise TypeError("`programs` must be a list of programs; use MacroPlan([program])")
         self.compiled = [compile_program(p, library) for p in programs]
         self.plan = ExecutionPlan([c.program for c in self.compiled], dtype, device)
@@ -122,7 +124,11 @@ class MacroPlan:
 def execute_batch(programs: list[MacroProgram], library: Library | None = None,
                   params: list[torch.Tensor | None] | None = None, dtype: torch.dtype = torch.float32,
                   device=None) -> list[ExecutedShape]:
-    """Execute several macro programs together (one :class:`MacroPlan`); equal to :func:`execute` on each."""
+    """Execute several macro programs (or their texts) together (one :class:`MacroPlan`); equal to
+    :func:`execute` on each."""
+    if isinstance(programs, (MacroProgram, str)):
+        raise TypeError("execute_batch takes a list of macro programs; execute(program, library) runs one")
+    programs = [as_macro_program(p, library, "shapeprog.macros.execute_batch") for p in programs]
     if not programs:
         return []
     if device is None and params is not None:
@@ -135,10 +141,12 @@ def execute(program: MacroProgram, library: Library | None = None, params: torch
     """Execute a macro program.
 
     Args:
-        program: a parsed :class:`~shapeprog.macros.lang.MacroProgram`.
+        program: a :class:`~shapeprog.macros.lang.MacroProgram` or its text (parsed with ``library``); a
+            refactored program (:func:`shapeprog.macros.refactor`), a
+            :class:`~shapeprog.macros.hierarchy.MacroHierarchy` or its text runs as :func:`execute_hierarchy`.
         library: the library its lines call (default: the base functions only).
-        params: optional (P,) tensor of free parameters (:func:`program_parameters`) replacing the
-            program's numbers; the result is differentiable in it.
+        params: optional (P,) tensor of free parameters (:func:`program_parameters`, for a hierarchy
+            :func:`hierarchy_parameters`) replacing the program's numbers; the result is differentiable in it.
         dtype, device: execution dtype and device (default: that of ``params``, else CPU).
 
     Returns:
@@ -148,6 +156,14 @@ def execute(program: MacroProgram, library: Library | None = None, params: torch
         MacroError: the program does not expand (see :meth:`Library.expand`).
         ExecutionError: a cuboid comes out non-finite.
     """
+    h = as_hierarchy(program)
+    if h is None and isinstance(program, str) and is_hierarchy_text(program):
+        from .hierarchy import parse as parse_hierarchy
+
+        h = parse_hierarchy(program, library=library)
+    if h is not None:
+        return execute_hierarchy(h, library, params, dtype, device)
+    program = as_macro_program(program, library, "shapeprog.macros.execute")
     return execute_batch([program], library, None if params is None else [params], dtype, device)[0]
 
 

@@ -67,6 +67,20 @@ class MacroHierarchy:
         """The same blocks with new programs."""
         return MacroHierarchy(self.keys, tuple(programs))
 
+    def __repr__(self) -> str:
+        lines = sum(len(p.lines) for p in self.programs)
+        return f"<MacroHierarchy: {len(self.keys)} blocks, {lines} lines; print with shapeprog.macros.hierarchy.to_text>"
+
+
+def as_hierarchy(value) -> MacroHierarchy | None:
+    """``value`` as a :class:`MacroHierarchy` when it is one or a :class:`~shapeprog.macros.api.Refactored` (its
+    blocks); otherwise None (a hierarchy text is read with :func:`parse`)."""
+    if isinstance(value, MacroHierarchy):
+        return value
+    if type(value).__name__ == "Refactored" and hasattr(value, "blocks"):
+        return MacroHierarchy(tuple(b.key for b in value.blocks), tuple(b.program for b in value.blocks))
+    return None
+
 
 def is_hierarchy_text(text: str) -> bool:
     """Whether ``text`` holds block header lines (``# .../Program_k``)."""

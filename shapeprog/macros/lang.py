@@ -239,6 +239,11 @@ class MacroProgram:
     defs: tuple[MacroDef, ...]
     lines: tuple[Call, ...]
 
+    def __repr__(self) -> str:
+        """One line: its definitions and lines (``to_text(program)`` prints it)."""
+        return (f"<MacroProgram: {len(self.lines)} lines, {len(self.defs)} own definitions; "
+                "print with shapeprog.macros.to_text>")
+
 
 @dataclass(frozen=True)
 class FunctionInfo:

@@ -212,7 +212,10 @@ class Library:
         return len(self._functions)
 
     def __repr__(self) -> str:
-        return f"Library({len(self._macros)} macros: {', '.join(m.name for m in self._macros)})"
+        """One line: the macro count and the first names (``to_text()`` prints the definitions)."""
+        names = [m.name for m in self._macros]
+        shown = ", ".join(names[:8]) + (f", ... ({len(names) - 8} more)" if len(names) > 8 else "")
+        return f"Library({len(names)} macros{': ' + shown if names else ''})"
 
     def add(self, *macros: MacroDef) -> "Library":
         """A new library with ``macros`` appended."""
@@ -375,6 +378,34 @@ class Library:
         numbers as :meth:`expand`)."""
         e = self.expand(program)
         return from_lines(e.lines, e.names)
+
+
+def as_macro_program(program, library: Library | None = None, call: str = "this function") -> MacroProgram:
+    """``program`` as a :class:`~shapeprog.macros.lang.MacroProgram`: a MacroProgram as it is, a ``str`` parsed
+    with ``library`` (:meth:`Library.parse`).
+
+    Raises:
+        TypeError: anything else, naming ``call`` and the call to make first (a ShapeAssembly program is
+            refactored with :func:`shapeprog.macros.refactor`; a refactored result is expanded with
+            :func:`shapeprog.macros.expand` or its root block taken as ``result.program``).
+        ParseError: text that is not a macro program of ``library``.
+    """
+    if isinstance(program, MacroProgram):
+        return program
+    if isinstance(program, str):  # it may carry definitions that repeat the library's (a refactored block)
+        from .hierarchy import _parse_block
+
+        return _parse_block(program, "<string>", Library() if library is None else library)[0]
+    name = type(program).__name__
+    if name == "Program":
+        hint = ("a ShapeAssembly program: rewrite it with macros first (shapeprog.macros.refactor(program, library)), "
+                "or run it with shapeprog.execute(program)")
+    elif name in ("Refactored", "MacroHierarchy"):
+        hint = (f"a hierarchical {name}: shapeprog.macros.expand(result, library) gives the whole base program; "
+                "result.program is the root block's macro program")
+    else:
+        hint = "make one with shapeprog.macros.parse(text, library)"
+    raise TypeError(f"{call} takes a MacroProgram or its text, got {name}: {hint}")
 
 
 def parse(text: str, library: Library | None = None, file: str = "<string>") -> MacroProgram:

@@ -41,6 +41,9 @@ __all__ = ["INDEX_CANDIDATES", "INDEX_GRID", "INDEX_POINTS", "Match", "Retrieval
 
 PathLike = Union[str, os.PathLike]
 
+#: Bumped when the sampling of :meth:`RetrievalIndex.from_corpus` changes: cached indexes of other versions are
+#: not read.
+INDEX_CACHE_VERSION = 1
 #: Points kept per reference cloud (the first ones of the cached cloud: an i.i.d. subset).
 INDEX_POINTS = 2048
 #: Lattice vertices per axis of the coarse stage (16^3 fields and splat weights: 16 KB per reference, float16).
@@ -188,7 +191,8 @@ class RetrievalIndex:
 
     @classmethod
     def from_corpus(cls, category: str, points: int = INDEX_POINTS, seed: int = 0, executor=None,
-                    progress=None, ids: Optional[Sequence[int]] = None, **kwargs) -> "RetrievalIndex":
+                    progress=None, ids: Optional[Sequence[int]] = None, cache: bool = True,
+                    **kwargs) -> "RetrievalIndex":
         """The index of the corpus train split of ``category`` without a cache: each program executed and
         ``points`` points sampled from its cuboids (:func:`~shapeprog.pointcloud.data.sample_clouds`, the
         cache's per-shape seeds), normalised. The same shapes as :meth:`from_cache` with the default splits
@@ -196,7 +200,11 @@ class RetrievalIndex:
         surfaces. About 22 s for chairs on one core (``docs/pointcloud.md``); ``executor`` runs the
         per-shape jobs, ``progress(done, total)`` is called after each. Shapes that fail to execute are
         left out (none in the shipped corpus). ``ids`` restricts the index to some of those shapes (a ValueError
-        names an id outside the corpus train split). ``kwargs`` go to the constructor."""
+        names an id outside the corpus train split). ``kwargs`` go to the constructor.
+
+        With ``cache`` the clouds are kept in the on-disk cache (:mod:`shapeio.cache`), keyed by the category,
+        ``points``, ``seed``, the ids, the corpus archive's digest and :data:`INDEX_CACHE_VERSION`: a later call
+        with the same key reads them (well under a second) instead of sampling the corpus again."""
         split = corpus_splits(category)
         train = sorted(split["train"] + split["val"])
         if ids is None:
@@ -208,10 +216,24 @@ class RetrievalIndex:
                 raise ValueError(f"{category}/{bad[0]} is not in the corpus train split; the index holds training "
                                  "shapes only")
             ids = sorted(int(i) for i in ids)
-        cs = sample_clouds(category, ids, n_points=points, seed=seed, executor=executor, progress=progress)
-        centers, scales = cloud_transforms(cs.points)
-        unit = (cs.points.astype(np.float64) - centers[:, None, :]) * scales[:, None, None]
-        return cls(category, cs.ids, torch.from_numpy(unit), centers=centers, scales=scales, **kwargs)
+        def compute() -> dict:
+            cs = sample_clouds(category, ids, n_points=points, seed=seed, executor=executor, progress=progress)
+            centers, scales = cloud_transforms(cs.points)
+            unit = (cs.points.astype(np.float64) - centers[:, None, :]) * scales[:, None, None]
+            return {"ids": np.asarray(cs.ids, dtype=np.int64), "unit": unit, "centers": centers, "scales": scales}
+
+        if cache:
+            from shapeio.cache import cached
+
+            from ..corpus import data_digest
+
+            key = {"category": category, "points": int(points), "seed": int(seed), "ids": [int(i) for i in ids],
+                   "corpus": data_digest(), "version": INDEX_CACHE_VERSION}
+            got = cached("retrieval-index", key, compute)
+        else:
+            got = compute()
+        return cls(category, got["ids"], torch.from_numpy(got["unit"]), centers=got["centers"], scales=got["scales"],
+                   **kwargs)
 
     def __len__(self) -> int:
         return len(self.ids)

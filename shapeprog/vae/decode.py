@@ -35,7 +35,8 @@ import numpy as np
 import torch
 
 from .. import limits
-from ..lang import AXES, FACES, Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, parse, to_text
+from ..lang import (AXES, CORPUS_DECIMALS, FACES, Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, parse,
+                    round_numbers, to_text)
 from .model import VAE, Decoder
 from .validity import (ATTACH_CMD, CUBOID, MIN_DIM, REFLECT, SQUEEZE, START, STOP, TRANSLATE, DecodeOptions,
                        InvalidSample, Line, NodeState, allowed_commands, argmax_allowed, choose_attach, choose_reflect,
@@ -53,7 +54,8 @@ class Decoded:
     """A decoded program.
 
     Attributes:
-        program: the decoded program (corpus format), executable by :func:`shapeprog.execute`.
+        program: the decoded program (corpus format), executable by :func:`shapeprog.execute`; its numbers
+            are rounded to the corpus's :data:`~shapeprog.lang.CORPUS_DECIMALS` (3) decimals.
         text: ``shapeprog.to_text(program)``; ``shapeprog.parse(text) == program``.
         skipped: lines refused and skipped (non-rejecting decoding; 0 with rejection).
         tries: latents drawn for this sample (:func:`sample`); ``max_tries + 1`` marks a sample that
@@ -432,7 +434,7 @@ def _check_latent(z, H: int) -> torch.Tensor:
 
 def _decode_with(net: _Net, z: torch.Tensor, reject: bool, opts: DecodeOptions) -> Decoded:
     root, skipped = _decode_tree(net, z, reject, opts)
-    program = _program(root)
+    program = round_numbers(_program(root), CORPUS_DECIMALS)  # numbers as the corpus writes them
     return Decoded(program, to_text(program), skipped)
 
 
@@ -464,7 +466,9 @@ def decode_latent(decoder: Decoder, z: torch.Tensor, *, reject: bool = False,
 def decode_programs(decoder: Decoder, zs: torch.Tensor, **options) -> list[Program | None]:
     """:func:`decode_latent` without rejection for each latent of ``zs`` ``(B, H)``: the programs, None where a
     latent decodes to no program (``ValueError``). The network is set up once for the batch and no text is
-    written, so this is faster than calling :func:`decode_latent` per latent (the same programs, tested)."""
+    written, so this is faster than calling :func:`decode_latent` per latent (the same programs before
+    :func:`decode_latent` rounds them to the corpus's decimals, tested); the numbers keep the network's precision
+    (point-cloud inference scales and fits them further)."""
     opts = DecodeOptions(**options)
     out: list[Program | None] = []
     with _inference(decoder):

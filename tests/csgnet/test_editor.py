@@ -113,7 +113,6 @@ def _free_port():
 
 
 def test_page(tmp_path):
-    pytest.importorskip("viser", reason="viser is not installed (the 'editor' extra: pip install -e '.[editor]')")
     from csgnet.editor.server import CSGEditorApp
 
     app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=_free_port(), export_dir=tmp_path)
@@ -135,7 +134,6 @@ def test_page(tmp_path):
 
 
 def test_defect_editor_accepts_any_web_origin_is_refused(tmp_path):
-    pytest.importorskip("viser", reason="viser is not installed (the 'editor' extra: pip install -e '.[editor]')")
     from csgnet.editor.server import CSGEditorApp
     from editor_testutil import assert_only_this_machines_pages_reach
 
@@ -147,7 +145,6 @@ def test_defect_editor_accepts_any_web_origin_is_refused(tmp_path):
 
 
 def test_defect_edit_port_out_of_range_is_refused(tmp_path):
-    pytest.importorskip("viser", reason="viser is not installed (the 'editor' extra: pip install -e '.[editor]')")
     from csgnet.editor.server import CSGEditorApp
 
     with pytest.raises(ValueError, match=r"port 70000 is not a TCP port \(an integer from 0 to 65535\)"):

@@ -35,7 +35,7 @@ def test_png_errors(tmp_path):
 
 
 def test_sphere_mesh_is_watertight(tmp_path):
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
     vol = csgnet.render("sp(32,32,32,20)", 3)[0]
     verts, faces = export.voxels_to_mesh(vol)
     # vertex coordinates are in the vol[x, y, z] frame: the sphere is centred at (32, 32, 32)
@@ -48,7 +48,7 @@ def test_sphere_mesh_is_watertight(tmp_path):
 
 
 def test_border_shape_mesh_is_closed():
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
     vol = csgnet.render("cu(4,32,60,12)", 3)[0]  # touches x = 0 and z = 63
     assert vol[0].any() and vol[:, :, 63].any()
     verts, faces = export.voxels_to_mesh(vol)

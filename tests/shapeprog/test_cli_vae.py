@@ -56,7 +56,19 @@ def test_interpolate_and_reconstruct(weights, tmp_path, capsys):
     recon = tmp_path / "recon.txt"
     assert main(["reconstruct", "chair/173", "-o", str(recon), "--weights", weights]) == 0
     report = capsys.readouterr().out
-    assert "chair/173: reconstructed with" in report and "F-score" in report
+    assert "chair/173: reconstructed with" in report
+    # the score names its metric and threshold: fscore's default, the input's adaptive threshold
+    from shapeprog import corpus, execute
+    from shapeprog.metrics import adaptive_threshold
+    from shapeprog.sampling import sample_surface
+
+    target = execute(corpus.read("chair", 173))
+    g = torch.Generator().manual_seed(0)
+    decoded = execute(parse(recon.read_text()))
+    if len(decoded):
+        sample_surface(decoded.corners, 10000, generator=g)  # the report samples the decoded shape first
+    y, _ = sample_surface(target.corners, 10000, generator=g)
+    assert f"F-score @{float(adaptive_threshold(y)):.3g} " in report
     parse(recon.read_text())
     with pytest.raises(SystemExit):
         main(["interpolate", "chair/173", "chair/44017", "--steps", "1", "--weights", weights])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-trimesh = pytest.importorskip("trimesh")
+import trimesh  # noqa: E402  (a core dependency)
 
 import sa_testutil
 from shapeprog import io as sio
@@ -23,6 +23,7 @@ v 0.0 2.0 3.0
 v 0.0 2.0 0.0
 v 0.0 0.0 3.0
 v 0.0 0.0 0.0
+g part_0
 f 1 3 2
 f 2 3 4
 f 1 5 7
@@ -47,11 +48,12 @@ def test_obj_float32_repr_and_leaf_offsets(tmp_path):
     corners = boxes([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]], [[0.2, 0.2, 0.2], [1.0, 1.0, 1.0]])
     text = write_obj(tmp_path / "two.obj", corners).read_text()
     lines = text.splitlines()
-    assert len(lines) == 16 + 24
+    assert len(lines) == 16 + 2 + 24
     # float32(0.1) printed as the double it is
     assert lines[0] == "v 0.10000000149011612 0.10000000149011612 0.10000000149011612"
     assert lines[8] == "v 2.5 0.5 0.5"
-    assert lines[16] == "f 1 3 2" and lines[28] == "f 9 11 10" and lines[-1] == "f 11 16 12"
+    assert lines[16] == "g part_0" and lines[29] == "g part_1"
+    assert lines[17] == "f 1 3 2" and lines[30] == "f 9 11 10" and lines[-1] == "f 11 16 12"
     mesh = trimesh.load(tmp_path / "two.obj", process=False)
     np.testing.assert_allclose(mesh.vertices, corners.reshape(-1, 3).numpy(), atol=0)
     # triangles are CCW from outside: positive volume, watertight per box
@@ -140,3 +142,34 @@ def test_bad_input_names_the_file_and_leaves_nothing(tmp_path):
         write_obj(tmp_path / "nowhere" / "a.obj", boxes([0, 0, 0], [1, 1, 1]))
     assert target.read_text() == "old\n"
     assert sorted(os.listdir(tmp_path)) == ["shape.obj"]
+
+
+def test_obj_groups_are_named_by_program_line(tmp_path):
+    """One ``g`` group per part, named by the 1-based program line that made it; a second part of the same
+    line (a translate copy) gets ``.2``; trimesh still reads the whole mesh."""
+    from shapeprog import execute
+
+    text = ("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = Cuboid(0.2, 0.2, 0.2, True)\n"
+            "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.1, 0.0, 0.5)\ntranslate(cube0, X, 2, 0.5)\n")
+    shape = execute(text)
+    assert shape.line.tolist() == [1, 3, 3]
+    out = write_obj(tmp_path / "parts.obj", shape.corners, lines=shape.line).read_text()
+    groups = [ln for ln in out.splitlines() if ln.startswith("g ")]
+    assert groups == ["g line_2", "g line_4", "g line_4.2"]
+    body = out.splitlines()[24:]
+    assert [body[13 * k] for k in range(3)] == groups and len(body) == 3 * 13
+    mesh = trimesh.load(tmp_path / "parts.obj", process=False, force="mesh")
+    assert mesh.faces.shape == (36, 3)
+
+
+def test_executed_shape_to_trimesh():
+    from shapeprog import corpus, execute
+
+    shape = execute(corpus.read("chair", 173))
+    mesh = shape.to_trimesh()
+    assert isinstance(mesh, trimesh.Trimesh)
+    v, f = shape.mesh()
+    np.testing.assert_array_equal(mesh.vertices, v.double().numpy())
+    np.testing.assert_array_equal(mesh.faces, f.numpy())
+    assert mesh.face_attributes["part"].tolist() == [k for k in range(len(shape)) for _ in range(12)]
+    assert mesh.metadata["lines"] == shape.line.tolist()

@@ -94,7 +94,6 @@ def test_rootedness_accepts_arrays_and_checks_input():
 
 def test_stability(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    pytest.importorskip("pybullet")
     assert stability(boxes([0, 0.5, 0], [1, 1, 1]))
     assert stability(table())
     # a tall thin box standing on a tiny base near its edge: its centre of mass is not supported
@@ -127,3 +126,25 @@ def test_stability_is_deterministic():
     assert runs == {True}  # the upper box overhangs by less than half its width: it stays
     moved = boxes([[0, 0.25, 0], [0.6, 0.75, 0]], [[0.6, 0.5, 0.4], [0.5, 0.5, 0.4]])
     assert {stability(moved, steps=2000) for _ in range(2)} == {False}  # its centre beyond the edge: it falls
+
+
+def test_stability_prints_no_pybullet_banner():
+    """pybullet writes its build banner from C on import and connect; stability() silences both, while the
+    caller's own output (Python and C) before and after is kept, in order."""
+    import subprocess
+    import sys
+
+    code = ("import ctypes, sys\n"
+            "from sa_testutil import boxes\n"
+            "from shapeprog.physics import stability\n"
+            "print('before', flush=True)\n"
+            "print(stability(boxes([0, 0.5, 0], [1, 1, 1])))\n"
+            "print(stability(boxes([0, 0.5, 0], [1, 1, 1])))\n"
+            "print('err', file=sys.stderr)\n"
+            "ctypes.CDLL(None).printf(b'c-after\\n')\n")
+    tests = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([tests, os.environ.get("PYTHONPATH", "")]))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "before\nTrue\nTrue\nc-after\n"
+    assert r.stderr == "err\n"

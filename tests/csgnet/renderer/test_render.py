@@ -17,7 +17,7 @@ from csgnet.data import ProgramDataset
 from csgnet.primitives import GRID, SIZES
 from csgnet.vocab import KIND_CODES, PAD_CODE, vocabulary
 
-skdraw = pytest.importorskip("skimage.draw")
+import skimage.draw as skdraw  # noqa: E402  (scikit-image: a core dependency)
 
 
 # ------------------------------------------------------------------- exact pixels from the spec

@@ -5,7 +5,7 @@ import multiprocessing
 
 import pytest
 
-torch = pytest.importorskip("torch")
+import torch  # noqa: E402
 
 from shapeprog.coder.dream import dream  # noqa: E402
 from shapeprog.coder.execute import execute  # noqa: E402
@@ -199,7 +199,6 @@ def _planted_model():
 
 
 def test_wake_with_a_network_recovers_planted_symref_and_symtrans():
-    pytest.importorskip("egglog")
     from shapeprog.coder.discover import Config, wake, wake_network
     from shapeprog.coder.search import search_shape
 
@@ -243,7 +242,6 @@ def test_store_combines_pieces():
 
 
 def test_discovery_with_the_network_wake_writes_and_reuses_its_checkpoint(tmp_path):
-    pytest.importorskip("egglog")
     import json
 
     from shapeprog.coder.discover import Config, discover
@@ -346,7 +344,6 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
 
 
 def test_network_from_a_later_round_and_repeated_wakes_resume_where_they_stopped(tmp_path):
-    pytest.importorskip("egglog")
     import json
 
     from shapeprog.coder.discover import Config, discover

@@ -14,7 +14,7 @@ from shapeprog.editor import EditSession, apply
 from shapeprog.execute import execute
 from shapeprog.lang import parse
 
-viser = pytest.importorskip("viser", reason="viser is not installed (the 'editor' extra: pip install -e '.[editor]')")
+import viser  # noqa: E402  (the dev extra)
 
 from shapeprog.editor.server import EditorApp, cuboid_edges  # noqa: E402
 
@@ -212,7 +212,7 @@ def test_real_browser_slider_drag_changes_the_geometry(app, tmp_path):
     import json
     import time
 
-    pytest.importorskip("websockets", reason="the websockets package (a viser dependency) drives the browser")
+    import websockets  # noqa: F401  (a viser dependency) drives the browser
     name = "Program_0:1:cuboid.h"
     control = next(c for c in app.session.controls() if c.name == name)
     head, label = control.label.rsplit(" ", 1)  # "line 3 Program_1 = Cuboid", "h"
@@ -358,9 +358,9 @@ def test_a_websocket_client_receives_the_new_geometry(app):
     import asyncio
     import time
 
-    msgspec = pytest.importorskip("msgspec")
-    zstandard = pytest.importorskip("zstandard")
-    websockets = pytest.importorskip("websockets")
+    import msgspec  # viser's dependencies
+    import websockets
+    import zstandard
 
     if not viser.__version__.startswith("1.1."):
         pytest.skip(f"viser {viser.__version__}'s wire format may not be the one this test decodes (viser 1.1's)")

@@ -143,7 +143,7 @@ def test_exports_never_replace(tmp_path):
     assert [p.name for p in paths] == ["chair_173_edit002.txt", "chair_173_edit002.obj", "chair_173_edit002.png"]
     assert (tmp_path / "chair_173_edit001.obj").read_text() == "mine"
     assert parse(paths[0].read_text()) == s.program
-    assert paths[1].read_text() == obj_text(s.shape.corners)
+    assert paths[1].read_text() == obj_text(s.shape.corners, lines=s.shape.line)
     img = np.asarray(Image.open(paths[2]))
     assert img.shape == (512, 512, 3) and (img != 255).any()
     assert [p.name for p in s.export(tmp_path, ["txt"])] == ["chair_173_edit003.txt"]

@@ -87,3 +87,27 @@ def test_shipped_models_sample_valid_programs(category):
     for d in out:
         assert shapeprog.parse(d.text) == d.program
         assert len(shapeprog.execute(d.program)) >= 2  # a trained model writes parts, not a lone bbox
+        assert_corpus_precision(d.text)
+
+
+def assert_corpus_precision(text):
+    """Every number of a program text has at most the corpus's 3 decimals (and no ``-0.0``)."""
+    import re
+
+    from shapeprog.lang import CORPUS_DECIMALS
+
+    nums = re.findall(r"-?\d+\.\d+(?:e-?\d+)?", text)
+    assert nums and CORPUS_DECIMALS == 3
+    assert [n for n in nums if "e" in n or len(n.split(".")[1]) > CORPUS_DECIMALS or n == "-0.0"] == []
+
+
+def test_reconstruct_and_interpolate_write_corpus_precision():
+    import shapeprog
+    from shapeprog import corpus
+    from shapeprog.vae import decode, encode, interpolate
+
+    vae = load_pretrained("chair")
+    a, b = shapeprog.parse(corpus.read("chair", 173)), shapeprog.parse(corpus.read("chair", 44017))
+    for d in [decode(vae, encode(vae, a))] + interpolate(vae, a, b, 3):
+        assert shapeprog.parse(d.text) == d.program and shapeprog.to_text(d.program) == d.text
+        assert_corpus_precision(d.text)
