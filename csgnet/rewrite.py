@@ -35,7 +35,7 @@ from .vocab import vocabulary
 __all__ = ["LENGTH_PENALTY", "MAX_PRUNE_ROUNDS", "MAX_GRAFT_ROUNDS", "MAX_EXTEND_ROUNDS", "MAX_GRAFT_DRAWS",
            "MAX_VAL_IOU_COST", "objective", "removals", "prune", "graft", "extend", "choose"]
 
-LENGTH_PENALTY = {2: 0.02, 3: 0.005}
+LENGTH_PENALTY = {2: 0.02, 3: 0.01}
 """IoU given up per primitive saved (by dimension), chosen on the validation split (module docstring)."""
 MAX_VAL_IOU_COST = 0.005
 """The mean IoU the chosen price may cost on the validation split, against choosing by IoU alone."""

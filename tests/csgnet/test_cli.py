@@ -147,7 +147,7 @@ def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
     assert main(["parse", str(EXAMPLES / "table.obj"), "--beam", "3", "--refine", "--refine-iters", "1",
                  "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "refined (3 beams, by IoU; chosen by IoU - 0.005 per primitive)" in out and "skipped" not in out
+    assert "refined (3 beams, by IoU; chosen by IoU - 0.01 per primitive)" in out and "skipped" not in out
     before, after = (float(v) for v in re.search(r"before: IoU ([\d.]+)%, \d+ primitives; after: IoU ([\d.]+)%", out).groups())
     assert after >= before
     written = csgnet.parse((tmp_path / "table.txt").read_text().strip(), dim=3)
