@@ -15,6 +15,7 @@ MODULES = [
     "fuzz.shapecoder_targets",
     "fuzz.editor_targets",
     "fuzz.file_targets",
+    "fuzz.library_targets",
 ]
 
 
