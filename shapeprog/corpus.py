@@ -50,6 +50,7 @@ def data_digest() -> str:
     return file_digest(str(resources.files("shapeprog").joinpath("data", "shapeassembly_partnet.tar.xz")))
 
 
+@functools.lru_cache(maxsize=None)
 def _archive(name: str) -> dict[str, bytes]:
     with tarfile.open(fileobj=io.BytesIO(lzma.decompress(_data(name))), mode="r:") as tar:
         return {m.name.lstrip("./"): tar.extractfile(m).read() for m in tar.getmembers() if m.isfile()}
