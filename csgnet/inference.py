@@ -325,6 +325,7 @@ class Parsed:
         shape: the ``(64, 64)`` image or ``(64, 64, 64)`` volume that was parsed.
         frame: for a mesh file, the 4x4 affine from the volume's voxel coordinates to the mesh's units
             (:func:`load_shape_framed`); else ``None``.
+        refined_beams: the valid beams that were refined (0 without refinement).
     """
 
     program: Program | None
@@ -332,6 +333,7 @@ class Parsed:
     refined: object | None
     shape: np.ndarray
     frame: np.ndarray | None = None
+    refined_beams: int = 0
 
     @property
     def text(self) -> str:
@@ -389,4 +391,4 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
         refined = refine_guarded(program, beams, shape, rule=rule, maxiter=refine_iters, use_graft=graft,
                                  use_extend=extend)
         program = refined.program
-    return Parsed(program, decoded, refined, shape, frame)
+    return Parsed(program, decoded, refined, shape, frame, len(beams) if refined is not None else 0)

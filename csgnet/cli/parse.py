@@ -12,7 +12,7 @@ from shapeio.results import column, make_result, write_result
 from .. import export, render
 from . import common
 from ..lang import ParseError
-from .common import beam_width, command_line, is_valid_text, located, named
+from .common import beam_width, command_line, located, named
 
 
 def _output_stems(inputs, out: Path) -> list[Path]:
@@ -90,8 +90,7 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
 
         (i0, c0), (i1, c1) = ref.before, ref.after
         what = {"short": "IoU - %g per primitive" % _penalty(dim), "guarded": "guarded", "chamfer": "chamfer"}
-        n = sum(is_valid_text(b, dim) for b in res.beams)
-        print(f"  refined ({n} beams, by {'IoU' if dim == 3 else 'chamfer'}; chosen by "
+        print(f"  refined ({parsed.refined_beams} beams, by {'IoU' if dim == 3 else 'chamfer'}; chosen by "
               f"{what[ref.rule]}): {program.text()}\n"
               f"  before: {_scores_line(i0, c0, res.program)}; "
               f"after: {_scores_line(i1, c1, program)}")
