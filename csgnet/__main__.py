@@ -9,6 +9,8 @@
     python -m csgnet export-weights runs/x/checkpoints/best-012.ckpt --out runs_in_progress/x.pt
     python -m csgnet table4 --weights "CSGNet RL=runs/rl.pt" csgnet/weights/csgnet2d.pt --images 50 --out table4.md
     python -m csgnet table6 --data data/synthetic --weights csgnet/weights/csgnet2d.pt --out table6.md
+    python -m csgnet table1 --steps 900 --out table1.json          (the reward-shaping sweep)
+    python -m csgnet paper --list                                   (the paper's experiments; paper run ID)
     python -m csgnet edit "c(32,32,28)s(32,32,20)-" --port 8081 --no-browser
 
 Each module of :mod:`csgnet.cli` registers its subcommands (``register(sub)``); the modules that import torch
@@ -21,9 +23,11 @@ import argparse
 import os
 import sys
 
+from shapeio import experiments
 from shapeio.files import output_problem
 
 from .cli import edit, parse, programs, tables
+from .paper.experiments import EXPERIMENTS
 
 COMMAND_MODULES = (programs, parse, tables, edit)
 
@@ -35,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     for module in COMMAND_MODULES:
         module.register(sub)
+    experiments.register(sub, EXPERIMENTS, main, "python -m csgnet")
     return ap
 
 
@@ -42,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
 #: file, its folder created); :func:`main` checks them with :func:`shapeio.files.output_problem` before the
 #: command's work starts (``render -o`` is a list of files in existing folders, checked by ``render``).
 OUTPUTS = {"generate": "folder", "demo": "folder", "parse": "folder", "evaluate": "file+",
-           "export-weights": "file+", "table4": "file+", "table6": "file+"}
+           "export-weights": "file+", "table1": "file+", "table4": "file+", "table6": "file+"}
 
 
 def main(argv=None) -> int:

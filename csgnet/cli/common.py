@@ -107,7 +107,7 @@ def refuse_table_over_inputs(args) -> None:
         return
     weights = getattr(args, "weights", None) or []
     inputs = [w.rpartition("=")[2] for w in ([weights] if isinstance(weights, str) else weights)]
-    inputs += [getattr(args, "silhouettes", None)]
+    inputs += [getattr(args, "silhouettes", None), getattr(args, "cad", None), getattr(args, "init", None)]
     try:
         refuse_overwrite([args.out], [p for p in inputs if p and Path(p).is_file()])
     except FileExistsError as e:

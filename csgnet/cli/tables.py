@@ -17,7 +17,7 @@ from .common import (beam_width, command_line, decoding, labelled_models, locate
 
 def cmd_evaluate(args) -> int:
     from ..data import load_dataset
-    from ..paper.tables import evaluate_model, markdown_tables, nearest_neighbour
+    from ..paper.tables import evaluate_model, markdown_tables, nearest_neighbour, table_result
 
     refuse_table_over_inputs(args)
     tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
@@ -42,18 +42,24 @@ def cmd_evaluate(args) -> int:
             rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined))
     note = "\n\n".join([f"`{command_line(args)}`; beam mode {args.mode!r}, {decoding(args)}; {measured_on()}.",
                         *args.note])
-    if args.out and str(args.out).endswith(".json"):
-        from shapeio.results import markdown, write_result
-
-        from ..paper.tables import table_result
-
-        result = table_result(rows, args.dim, [f"Beam mode {args.mode!r}, {decoding(args)}; {measured_on()}.",
-                                               *args.note], command_line(args))
-        print(markdown(result))
-        print(f"wrote {write_result(args.out, result)}")
+    if write_result_file(args, lambda notes: table_result(rows, args.dim, notes, command_line(args)),
+                         [f"Beam mode {args.mode!r}, {decoding(args)}; {measured_on()}.", *args.note]):
         return 0
     write_table(markdown_tables(rows, args.dim, note), args.out)
     return 0
+
+
+def write_result_file(args, make, notes) -> bool:
+    """With ``--out X.json``: write the result ``make(notes)`` there (a result file, :mod:`shapeio.results`),
+    print it as markdown and return True; otherwise False (the command writes markdown)."""
+    if not (args.out and str(args.out).endswith(".json")):
+        return False
+    from shapeio.results import markdown, write_result
+
+    result = make(notes)
+    print(markdown(result))
+    print(f"wrote {write_result(args.out, result)}")
+    return True
 
 
 def cmd_export_weights(args) -> int:
@@ -78,6 +84,10 @@ def cmd_export_weights(args) -> int:
     return 0
 
 
+#: Most batches of one ``table1`` run (csgnet.train.sweep.MAX_SWEEP_STEPS, repeated here so that ``--help``
+#: does not import Lightning).
+MAX_SWEEP_STEPS_CLI = 100_000
+
 # The shipped CSGNet and small CSGNetStack (csgnetstack2d.pt, the starting point of the RL run), supervised and
 # RL-tuned on the silhouettes (docs/compute_plan.md says how each was trained): Table 4's rows when no --weights
 # are given. The medium CSGNetStack (load_pretrained(2, kind="csgnetstack")) is added with --weights.
@@ -87,24 +97,60 @@ TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2
 
 def cmd_table4(args) -> int:
     from ..inference import WEIGHTS
-    from ..paper.protocols import subset, table4, table4_markdown
+    from ..paper.protocols import subset, table4, table4_markdown, table4_result
 
     refuse_table_over_inputs(args)
-    test = load_silhouettes("test", args.silhouettes)
+    if args.cad:
+        from ..shapes2d import load_cad_h5
+
+        test, source = load_cad_h5(args.cad, "test"), f"test images of {args.cad} (the paper's CAD set)"
+        train = None if args.no_nn else load_cad_h5(args.cad, "train")
+    else:
+        test, source = load_silhouettes("test", args.silhouettes), "test silhouettes"
+        train = None if args.no_nn else load_silhouettes("train", args.silhouettes)
     idx = subset(len(test), None if args.images <= 0 else args.images, args.seed)
-    train = None if args.no_nn else load_silhouettes("train", args.silhouettes)
     iters = [None if i in ("inf", "none") else int(i) for i in args.iterations]
     specs = args.weights or [f"{label}={WEIGHTS / name}" for label, name in TABLE4_MODELS]
     rows = table4(labelled_models(specs), test[idx], train, tuple(args.beams), iters,
                   constrained=args.constrained, progress=lambda s: print(s, flush=True))
-    note = (f"`{command_line(args)}`; {len(idx)} of {len(test)} test silhouettes "
+    note = (f"`{command_line(args)}`; {len(idx)} of {len(test)} {source} "
             f"(seed {args.seed}); {decoding(args)}; {measured_on()}.")
+    if write_result_file(args, lambda notes: table4_result(rows, iters, notes, command_line(args)),
+                         [f"{len(idx)} of {len(test)} {source} (seed {args.seed}); {decoding(args)}; "
+                          f"{measured_on()}."]):
+        return 0
     write_table(table4_markdown(rows, note, iters), args.out)
     return 0
 
 
+def cmd_table1(args) -> int:
+    from ..inference import WEIGHTS
+    from ..paper.protocols import subset, table4, table4_markdown, table4_result
+    from ..train.sweep import reward_sweep
+
+    refuse_table_over_inputs(args)
+    init = args.init or str(WEIGHTS / "csgnet2d.pt")
+    train = load_silhouettes("train", args.silhouettes)
+    train = train[subset(len(train), min(args.train_images, len(train)), args.seed)]
+    test = load_silhouettes("test", args.silhouettes)
+    idx = subset(len(test), None if args.images <= 0 else args.images, args.seed)
+    models = reward_sweep(init, args.gammas, args.steps, train, args.batch, args.lr, args.seed, args.accumulate,
+                          progress=lambda s: print(s, flush=True))
+    rows = table4(models, test[idx], None, tuple(args.beams), (0,), progress=lambda s: print(s, flush=True))
+    setup = (f"REINFORCE from {init}, {args.steps} batches of {args.batch} silhouettes, one SGD update per "
+             f"{args.accumulate} (lr {args.lr}, momentum 0.9, gradient norm clipped at 10, the same batches for every gamma, seed {args.seed}, {len(train)} training "
+             f"silhouettes); scored on {len(idx)} of {len(test)} test silhouettes; {measured_on()}.")
+    paper = ("The paper's Table 1 sweeps gamma on its CAD set, which is not available here (csg-t4-cad), over "
+             "full-length runs; this sweep is scaled to the CPU, so compare the rows with each other, not with "
+             "the paper's figures.")
+    if write_result_file(args, lambda notes: table4_result(rows, (0,), notes, command_line(args), "Table 1 layout (reward shaping: REINFORCE per gamma, PartNet silhouettes, test split)", paper=False), [setup, paper]):
+        return 0
+    write_table(table4_markdown(rows, f"`{command_line(args)}`; {setup} {paper}", (0,)), args.out)
+    return 0
+
+
 def cmd_table6(args) -> int:
-    from ..paper.protocols import table6, table6_markdown
+    from ..paper.protocols import table6, table6_markdown, table6_result
 
     refuse_table_over_inputs(args)
     lengths = args.lengths or [3, 5, 7, 9, 11, 13]
@@ -121,12 +167,16 @@ def cmd_table6(args) -> int:
         vocab = vocabulary(2)
         programs = [vocab.decode(r) for L in lengths for r in sample_programs(2, L, args.per_length, rng)]
         source = f"sampled with seed {args.seed}, {args.per_length} per length"
-    (label, model), = labelled_models([args.weights] if args.weights else [])
-    rows = table6(model, programs, tuple(args.beams), constrained=args.constrained,
-                  progress=lambda s: print(s, flush=True))
-    note = (f"`{command_line(args)}`; {label}; targets: {source}, lengths "
-            f"{', '.join(map(str, lengths))}; {decoding(args)}; {measured_on()}.")
-    write_table(table6_markdown(rows, note), args.out)
+    labelled = []
+    for label, model in labelled_models(args.weights or []):
+        print(f"detection with {label} ...", flush=True)
+        labelled.append((label, table6(model, programs, tuple(args.beams), constrained=args.constrained,
+                                       progress=lambda s: print(s, flush=True))))
+    setup = (f"targets: {source}, lengths {', '.join(map(str, lengths))}; {decoding(args)}; {measured_on()}.")
+    if write_result_file(args, lambda notes: table6_result(labelled, notes, command_line(args)), [setup]):
+        return 0
+    write_table("\n".join(table6_markdown(rows, f"`{command_line(args)}`; {label}; {setup}")
+                          for label, rows in labelled), args.out)
     return 0
 
 
@@ -169,19 +219,46 @@ def register(sub) -> None:
     t4.add_argument("--iterations", nargs="+", default=["0", "1", "2", "4", "10", "inf"],
                     help="refinement iteration limits ('inf': to convergence)")
     t4.add_argument("--silhouettes", default=None, help="a silhouette file (default: the shipped set)")
+    t4.add_argument("--cad", default=None, metavar="CAD_H5", help="read the paper's CAD set (cad.h5 of its code "
+                    "release; needs the 'cad' extra) instead of the silhouettes")
     t4.add_argument("--no-nn", action="store_true", help="skip the nearest-neighbour row")
     t4.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
-    t4.add_argument("--out", default=None, help="write the markdown table here")
+    t4.add_argument("--out", default=None, help="write the table here: FILE.json as a result file, any other "
+                    "name as markdown")
     t4.set_defaults(func=cmd_table4)
 
+    t1 = sub.add_parser("table1", help="Table 1 protocol: the reward-shaping sweep (REINFORCE per gamma), "
+                        "scored on the test silhouettes")
+    t1.add_argument("--init", default=None, help="supervised 2D weights to start every run from (default: the "
+                    "shipped csgnet2d.pt)")
+    t1.add_argument("--gammas", type=common.float_in(0.0, 1000.0, low_open=True), nargs="+", default=[1, 5, 10, 20],
+                    help="reward exponents (default 1 5 10 20; the paper uses 20)")
+    t1.add_argument("--steps", type=common.int_in(1, MAX_SWEEP_STEPS_CLI), default=900,
+                    help="batches per run (the budget is counted in batches, not seconds)")
+    t1.add_argument("--accumulate", type=common.int_in(1, 1000), default=3,
+                    help="batches per SGD update (the shipped REINFORCE configs: 3)")
+    t1.add_argument("--batch", type=common.int_in(1, 10_000), default=100, help="silhouettes per batch")
+    t1.add_argument("--lr", type=common.float_in(0.0, 1.0, low_open=True), default=0.01, help="SGD learning rate")
+    t1.add_argument("--train-images", type=common.int_in(1, common.MAX_IMAGES), default=2000,
+                    help="training silhouettes drawn (with --seed) for the runs")
+    t1.add_argument("--images", type=common.int_in(0, common.MAX_IMAGES), default=200,
+                    help="test silhouettes scored (0: all)")
+    t1.add_argument("--beams", type=beam_width, nargs="+", default=[1, 10], help="beam widths (default 1 10)")
+    t1.add_argument("--seed", type=common.seed, default=0, help="seed of the runs and subsets")
+    t1.add_argument("--silhouettes", default=None, help="a silhouette file (default: the shipped set)")
+    t1.add_argument("--out", default=None, help="write the table here: FILE.json as a result file, any other "
+                    "name as markdown")
+    t1.set_defaults(func=cmd_table1)
+
     t6 = sub.add_parser("table6", help="Table 6 protocol: primitive detection AP on synthetic 2D programs")
-    t6.add_argument("--weights", default=None, help="2D weights file or checkpoint, optionally LABEL=PATH "
-                    "(default: the shipped model)")
+    t6.add_argument("--weights", nargs="*", default=None, help="2D weights files or checkpoints, optionally "
+                    "LABEL=PATH (default: the shipped model)")
     t6.add_argument("--data", default=None, help="dataset folder written by `generate` (default: sample programs)")
     t6.add_argument("--per-length", type=common.per_length, default=100, help="test programs per length")
     t6.add_argument("--lengths", type=common.length, nargs="*", default=None, help="program lengths (default 3..13)")
     t6.add_argument("--seed", type=common.seed, default=0, help="seed for sampled programs")
     t6.add_argument("--beams", type=beam_width, nargs="+", default=[10, 40], help="beam widths (default 10 40)")
     t6.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
-    t6.add_argument("--out", default=None, help="write the markdown table here")
+    t6.add_argument("--out", default=None, help="write the table here: FILE.json as a result file, any other "
+                    "name as markdown")
     t6.set_defaults(func=cmd_table6)

@@ -197,6 +197,32 @@ def table4_markdown(rows: Sequence[Table4Row], note: str = "", iterations: Seque
     return out
 
 
+def table4_result(rows: Sequence[Table4Row], iterations: Sequence = ITERATIONS, notes=(),
+                  command: str | None = None, title: str = "Table 4 layout (2D real shapes: PartNet silhouettes, "
+                  "test split)", paper: bool = True) -> dict:
+    """Table 4 as a result file's content (:func:`shapeio.results.make_result`): CD after each refinement
+    iteration limit, IoU before refinement, decoding milliseconds per image."""
+    from shapeio.results import column, make_result
+
+    its = [0] + [i for i in iterations if i != 0]
+    cols = [column("method", "method"), column("protocol", "protocol")]
+    cols += [column(f"cd_{_it_name(i)}", f"CD {_it_name(i)} it.", 3) for i in its]
+    cols += [column("iou", "IoU % (0 it.)", 2, 100.0), column("ms", "decode ms / image", 1)]
+    data = []
+    for r in rows:
+        d = {"method": r.method, "protocol": r.protocol, "iou": r.iou, "ms": 1000 * r.decode_seconds}
+        d.update({f"cd_{_it_name(i)}": r.chamfer.get(i) for i in its})
+        data.append(d)
+    n = len(next(iter(rows[0].per_image.values()))) if rows else 0
+    head = [f"{n} test images. CD: chamfer distance in pixels (lower is better)"
+            + (" after 0, 1, 2, ... Powell refinement iterations of every beam (best kept)." if len(its) > 1 else ".")]
+    if paper:
+        quoted = "; ".join(f"{k}: {v:.2f}" for k, v in PAPER_TABLE4.items())
+        head.append(f"The paper's Table 4 is measured on its CAD set, another image set, so its figures are not "
+                    f"comparable number for number: {quoted}.")
+    return make_result(title, cols, data, [*head, *notes], command)
+
+
 # ---------------------------------------------------------------------------------------------
 # Table 6
 
@@ -380,3 +406,25 @@ def table6_markdown(rows: Sequence[Table6Row], note: str = "") -> str:
     if note:
         out += "\n" + note.strip() + "\n"
     return out
+
+
+def table6_result(labelled: Sequence[tuple[str, Sequence[Table6Row]]], notes=(), command: str | None = None) -> dict:
+    """Table 6 as a result file's content, one block of rows per ``(label, rows)`` model: AP per primitive
+    type, mAP, the paper's mAP, images per second."""
+    from shapeio.results import column, make_result
+
+    names = list(detection_classes().values())
+    cols = [column("method", "method"), column("k", "k")] + [column(f"ap_{n}", f"AP {n} %", 1, 100.0) for n in names]
+    cols += [column("map", "mAP %", 1, 100.0), column("paper_map", "paper mAP %", 1),
+             column("images_per_second", "images/s", 1)]
+    data = []
+    for label, rows in labelled:
+        for r in rows:
+            d = {"method": label, "k": r.k, "map": r.map, "paper_map": PAPER_TABLE6.get(r.k),
+                 "images_per_second": r.images_per_second}
+            d.update({f"ap_{n}": r.ap[n] for n in names})
+            data.append(d)
+    n = labelled[0][1][0].images if labelled and labelled[0][1] else 0
+    return make_result("Table 6 layout (primitive detection, 2D synthetic test programs)", cols, data,
+                       [f"{n} target programs; a primitive's score is the fraction of the k beam programs containing "
+                        f"it; AP at box IoU 0.5.", *notes], command)

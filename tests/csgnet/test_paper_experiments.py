@@ -1,0 +1,119 @@
+"""The paper's experiment list (`python -m csgnet paper`), the result files of table1/table4/table6, the sweep."""
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from csgnet.__main__ import main
+from csgnet.cli.tables import MAX_SWEEP_STEPS_CLI
+from csgnet.paper.experiments import EXPERIMENTS
+from csgnet.train.sweep import MAX_SWEEP_STEPS, reward_sweep
+from shapeio.experiments import STATUSES, Experiment, Step, check_experiments, listing
+from shapeio.results import read_result
+
+IDS = ["csg-t1", "csg-t3", "csg-t4", "csg-t4-cad", "csg-t5", "csg-t6", "csg-f6"]
+
+
+def test_the_list_holds_every_paper_experiment_once(capsys):
+    assert [e.id for e in EXPERIMENTS] == IDS
+    assert main(["paper", "--list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines] == IDS
+    for ln, e in zip(lines, EXPERIMENTS):
+        assert ln.split()[1] == e.status in STATUSES
+    status = {e.id: e.status for e in EXPERIMENTS}
+    assert status["csg-t4-cad"] in ("done", "impossible")
+    assert all(status[i] == "done" for i in ("csg-t1", "csg-t3", "csg-t4", "csg-t5", "csg-t6"))
+
+
+def test_every_runnable_experiment_names_a_result_file_the_docs_show():
+    from pathlib import Path
+
+    docs = "\n".join(p.read_text() for p in Path("docs").glob("*.md"))
+    for e in EXPERIMENTS:
+        if e.status == "done":
+            assert Path(e.result).is_file(), e.id
+            assert f"<!-- result: {e.result} -->" in docs, e.id
+            assert read_result(e.result)["command"].startswith("python -m csgnet "), e.id
+
+
+def test_check_experiments_refuses_malformed_lists():
+    ok = Experiment("a", "done", "x", result="r.json", steps=(Step(("demo",)),), quick=(Step(("demo",)),))
+    check_experiments([ok])
+    with pytest.raises(ValueError, match="listed twice"):
+        check_experiments([ok, ok])
+    with pytest.raises(ValueError, match="unknown status 'finished'"):
+        check_experiments([Experiment("b", "finished", "x", why="y")])
+    with pytest.raises(ValueError, match="needs a reason"):
+        check_experiments([Experiment("b", "impossible", "x")])
+    with pytest.raises(ValueError, match="needs steps"):
+        check_experiments([Experiment("b", "done", "x")])
+    text = listing([ok, Experiment("b", "impossible", "y", why="no data")])
+    assert text.splitlines() == ["a  done        x", "b  impossible  y -- no data"]
+
+
+def test_paper_run_quick_writes_its_result_file(tmp_path, capsys):
+    out = tmp_path / "t6.json"
+    assert main(["paper", "run", "csg-t6", "--quick", "--out", str(out)]) == 0
+    result = read_result(out)
+    assert [r["k"] for r in result["rows"]] == [10]
+    assert result["command"] == f"python -m csgnet table6 --data data/synthetic2d --per-length 3 --beams 10 --out {out}"
+    assert 0.0 <= result["rows"][0]["map"] <= 1.0
+
+
+def test_paper_run_refuses_what_cannot_run(capsys):
+    assert main(["paper", "run", "csg-t4-cad"]) == 2
+    assert "csg-t4-cad is impossible: the paper's CAD images" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["paper", "run", "csg-t99"])
+    assert e.value.code == 2
+    assert "unknown experiment 'csg-t99'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["paper", "run"])
+
+
+def test_dry_run_prints_the_commands_and_runs_nothing(tmp_path, capsys):
+    out = tmp_path / "t1.json"
+    assert main(["paper", "run", "csg-t1", "--dry-run", "--out", str(out)]) == 0
+    assert f"$ python -m csgnet table1 --out {out}" in capsys.readouterr().out
+    assert not out.exists()
+
+
+def test_the_sweep_limit_is_the_same_in_the_command_line():
+    assert MAX_SWEEP_STEPS_CLI == MAX_SWEEP_STEPS
+
+
+def _silhouettes(n=24, seed=0):
+    from csgnet.shapes2d import load_silhouettes
+
+    s = load_silhouettes("train")
+    return s[np.random.default_rng(seed).choice(len(s), n, replace=False)]
+
+
+def test_reward_sweep_runs_differ_only_in_gamma():
+    from csgnet.inference import WEIGHTS
+
+    train = _silhouettes()
+    a = reward_sweep(str(WEIGHTS / "csgnet2d.pt"), [1.0, 20.0, 1.0], 2, train, batch_size=8, seed=3)
+    assert [label for label, _ in a] == ["supervised start (no REINFORCE)", "REINFORCE, gamma = 1",
+                                         "REINFORCE, gamma = 20", "REINFORCE, gamma = 1"]
+    sd = [dict(m.state_dict()) for _, m in a]
+    # the same gamma on the same batches gives the same weights; another gamma or no tuning does not
+    assert all(torch.equal(sd[1][k], sd[3][k]) for k in sd[1])
+    assert any(not torch.equal(sd[1][k], sd[2][k]) for k in sd[1])
+    assert any(not torch.equal(sd[0][k], sd[1][k]) for k in sd[1])
+    with pytest.raises(ValueError, match="gamma must be a positive number"):
+        reward_sweep(str(WEIGHTS / "csgnet2d.pt"), [0.0], 2, train)
+    with pytest.raises(ValueError, match="steps must lie in"):
+        reward_sweep(str(WEIGHTS / "csgnet2d.pt"), [1.0], 0, train)
+
+
+def test_table1_writes_a_result_with_the_start_and_one_block_per_gamma(tmp_path, capsys):
+    out = tmp_path / "t1.json"
+    assert main(["table1", "--steps", "1", "--batch", "4", "--accumulate", "1", "--train-images", "8", "--images",
+                 "3", "--beams", "1", "--gammas", "2", "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert [r["method"] for r in result["rows"]] == ["supervised start (no REINFORCE)", "REINFORCE, gamma = 2"]
+    assert result["title"].startswith("Table 1 layout")
+    assert all(r["cd_0"] >= 0 for r in result["rows"])
