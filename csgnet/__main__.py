@@ -47,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
 #: file, its folder created); :func:`main` checks them with :func:`shapeio.files.output_problem` before the
 #: command's work starts (``render -o`` is a list of files in existing folders, checked by ``render``).
 OUTPUTS = {"generate": "folder", "demo": "folder", "parse": "folder", "evaluate": "file+",
-           "export-weights": "file+", "table1": "file+", "table4": "file+", "table6": "file+"}
+           "export-weights": "file+", "table1": "file+", "datasize": "file+", "table4": "file+", "table6": "file+"}
 
 
 def main(argv=None) -> int:

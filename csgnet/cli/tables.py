@@ -84,8 +84,8 @@ def cmd_export_weights(args) -> int:
     return 0
 
 
-#: Most batches of one ``table1`` run (csgnet.train.sweep.MAX_SWEEP_STEPS, repeated here so that ``--help``
-#: does not import Lightning).
+#: Most batches of one ``table1`` or ``datasize`` run (csgnet.train.sweep.MAX_SWEEP_STEPS and
+#: csgnet.train.datasize.MAX_DATASIZE_STEPS, repeated here so that ``--help`` does not import Lightning).
 MAX_SWEEP_STEPS_CLI = 100_000
 
 # The shipped CSGNet and small CSGNetStack (csgnetstack2d.pt, the starting point of the RL run), supervised and
@@ -146,6 +146,30 @@ def cmd_table1(args) -> int:
     if write_result_file(args, lambda notes: table4_result(rows, (0,), notes, command_line(args), "Table 1 layout (reward shaping: REINFORCE per gamma, PartNet silhouettes, test split)", paper=False), [setup, paper]):
         return 0
     write_table(table4_markdown(rows, f"`{command_line(args)}`; {setup} {paper}", (0,)), args.out)
+    return 0
+
+
+def cmd_datasize(args) -> int:
+    from ..data import load_dataset
+    from ..paper.tables import evaluate_model, markdown_tables, table_result
+    from ..train.datasize import data_size_runs
+
+    refuse_table_over_inputs(args)
+    tests = load_dataset(args.data, 2, "test", None, errors="raise")
+    tests = {L: p[: args.per_length] for L, p in tests.items()}
+    runs = data_size_runs(args.data, args.fractions, args.steps, stack=args.stack, size=args.size,
+                          batch_size=args.batch, seed=args.seed, progress=lambda s: print(s, flush=True))
+    rows = []
+    for f, n, model in runs:
+        rows += evaluate_model(model, tests, tuple(args.beams), name=f"{n} training programs ({100 * f:g} %)")
+    setup = (f"One {'CSGNetStack' if args.stack else 'CSGNet'} {args.size} run per share of the training programs "
+             f"of {args.data}: {args.steps} batches of {args.batch} from seed {args.seed}, the same for every "
+             f"share; scored on {args.per_length} test programs per length; {measured_on()}.")
+    paper = ("The paper's Figures 6 and 9 plot accuracy against training set size over full-length runs; this "
+             "study is scaled to the CPU, so compare its rows with each other.")
+    if write_result_file(args, lambda notes: table_result(rows, 2, notes, command_line(args)), [setup, paper]):
+        return 0
+    write_table(markdown_tables(rows, 2, f"`{command_line(args)}`; {setup} {paper}"), args.out)
     return 0
 
 
@@ -249,6 +273,23 @@ def register(sub) -> None:
     t1.add_argument("--out", default=None, help="write the table here: FILE.json as a result file, any other "
                     "name as markdown")
     t1.set_defaults(func=cmd_table1)
+
+    ds = sub.add_parser("datasize", help="Figures 6 and 9 protocol: the same supervised run on growing shares of "
+                        "a 2D training set, scored on its test split")
+    ds.add_argument("--data", required=True, help="2D dataset folder written by `generate`")
+    ds.add_argument("--fractions", type=common.float_in(0.0, 1.0, low_open=True), nargs="+",
+                    default=[0.0625, 0.25, 1.0], help="shares of each length's training programs")
+    ds.add_argument("--steps", type=common.int_in(1, MAX_SWEEP_STEPS_CLI), default=3000,
+                    help="training batches per run (the budget is counted in batches, not seconds)")
+    ds.add_argument("--batch", type=common.int_in(1, 10_000), default=100, help="programs per batch")
+    ds.add_argument("--size", choices=("small", "paper"), default="small", help="model preset")
+    ds.add_argument("--stack", action="store_true", help="CSGNetStack instead of CSGNet")
+    ds.add_argument("--per-length", type=common.per_length, default=50, help="test programs per length")
+    ds.add_argument("--beams", type=beam_width, nargs="+", default=[1, 10], help="beam widths (default 1 10)")
+    ds.add_argument("--seed", type=common.seed, default=0, help="seed of the runs")
+    ds.add_argument("--out", default=None, help="write the table here: FILE.json as a result file, any other "
+                    "name as markdown")
+    ds.set_defaults(func=cmd_datasize)
 
     t6 = sub.add_parser("table6", help="Table 6 protocol: primitive detection AP on synthetic 2D programs")
     t6.add_argument("--weights", nargs="*", default=None, help="2D weights files or checkpoints, optionally "

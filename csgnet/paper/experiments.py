@@ -70,6 +70,12 @@ EXPERIMENTS: tuple[Experiment, ...] = (
                               "--out", "{out}"))),
         scale="50 test programs per length (the paper: its test split)"),
     Experiment(
-        "csg-f6", "not-built", "Figures 6 and 9: accuracy against the amount of synthetic training data",
-        why="needs one supervised training run per data size; no command trains and scores the series yet"),
+        "csg-f6", "partial", "Figures 6 and 9: accuracy against the amount of synthetic training data",
+        result="docs/results/csgnet/datasize_2d.json",
+        steps=(_GEN_2D, Step(("datasize", "--data", DATA_2D, "--out", "{out}"))),
+        quick=(_GEN_2D, Step(("datasize", "--data", DATA_2D, "--steps", "100", "--fractions", "0.25", "1",
+                              "--per-length", "5", "--beams", "1", "--out", "{out}"))),
+        why="scaled to the CPU: small CSGNet only, shares of the scale-0.01 set (768 to 12,250 programs) with "
+            "3,000 batches per run, where the paper trains its models to convergence on sets of up to 1.4 M",
+        scale="3 shares x 3,000 batches of 100"),
 )

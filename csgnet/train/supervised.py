@@ -16,6 +16,7 @@ configs/csgnet/csgnetstack2d_small.yaml`` runs it through LightningCLI (``docs/c
 """
 from __future__ import annotations
 
+import math
 from functools import partial
 from pathlib import Path
 
@@ -138,15 +139,22 @@ class CSGDataModule(L.LightningDataModule):
             another set's test split; in 3D their mirror images (:func:`csgnet.train.augment.symmetry_tables`)
             are removed too, so that the ``mirror`` augmentation cannot draw them. The programs removed are
             counted in ``excluded``.
+        train_fraction: the share of each length's training programs used (the first ones, at least one),
+            for data-size studies (``python -m csgnet datasize``).
     """
 
     def __init__(self, dim: int = 2, data_dir: str | None = "data/synthetic", lengths: list[int] | None = None,
                  batch_size: int = 100, steps_per_epoch: int | None = None, val_per_length: int = 200,
                  num_workers: int = 0, seed: int = 0, render_in_workers: bool = False,
-                 exclude: list[str] | None = None):
+                 exclude: list[str] | None = None, train_fraction: float = 1.0):
         super().__init__()
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+        if not 0.0 < float(train_fraction) <= 1.0:
+            raise ValueError(f"train_fraction must lie in (0, 1], got {train_fraction!r}")
+        if train_fraction != 1.0 and data_dir is None:
+            raise ValueError("train_fraction needs a data_dir (programs sampled on the fly are unlimited)")
+        self.train_fraction = float(train_fraction)
         self.dim, self.data_dir = dim, data_dir
         self.lengths = sorted(lengths or DEFAULT_LENGTHS[dim])
         self.max_len = max(self.lengths)
@@ -183,6 +191,8 @@ class CSGDataModule(L.LightningDataModule):
         for n, ps in progs.items():
             if not ps:
                 raise ValueError(f"the {split} split of {self.data_dir!r} has no {self.dim}D programs of length {n}")
+            if split == "train" and self.train_fraction < 1.0:
+                ps = ps[: max(1, math.ceil(self.train_fraction * len(ps)))]
             tokens = ProgramDataset(ps, self.dim, max_len=self.max_len).tokens
             if held:
                 keep = torch.tensor([tuple(r) not in held for r in tokens.tolist()], dtype=torch.bool)

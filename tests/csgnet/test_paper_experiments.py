@@ -117,3 +117,32 @@ def test_table1_writes_a_result_with_the_start_and_one_block_per_gamma(tmp_path,
     assert [r["method"] for r in result["rows"]] == ["supervised start (no REINFORCE)", "REINFORCE, gamma = 2"]
     assert result["title"].startswith("Table 1 layout")
     assert all(r["cd_0"] >= 0 for r in result["rows"])
+
+
+def test_train_fraction_keeps_the_first_share_of_each_length():
+    from csgnet.train.supervised import CSGDataModule
+
+    full = CSGDataModule(dim=2, data_dir="data/synthetic2d", batch_size=12)
+    part = CSGDataModule(dim=2, data_dir="data/synthetic2d", batch_size=12, train_fraction=0.1)
+    full.setup("fit")
+    part.setup("fit")
+    for n, t in full.train_tables.items():
+        k = -(-len(t) // 10)
+        assert torch.equal(part.train_tables[n], t[:k])
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="train_fraction must lie in"):
+            CSGDataModule(dim=2, data_dir="data/synthetic2d", train_fraction=bad)
+    with pytest.raises(ValueError, match="train_fraction needs a data_dir"):
+        CSGDataModule(dim=2, data_dir=None, train_fraction=0.5)
+
+
+def test_datasize_writes_one_block_per_share(tmp_path):
+    from csgnet.train.datasize import MAX_DATASIZE_STEPS
+
+    assert MAX_DATASIZE_STEPS == MAX_SWEEP_STEPS_CLI
+    out = tmp_path / "ds.json"
+    assert main(["datasize", "--data", "data/synthetic2d", "--steps", "2", "--batch", "12", "--fractions", "0.1",
+                 "1", "--per-length", "1", "--beams", "1", "--out", str(out)]) == 0
+    rows = read_result(out)["rows"]
+    assert [r["method"] for r in rows] == ["1225 training programs (10 %) k=1 top-1",
+                                           "12250 training programs (100 %) k=1 top-1"]
