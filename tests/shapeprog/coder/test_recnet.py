@@ -331,15 +331,15 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     assert "the search's budget 2 s / 20 batches of 64 per step: ours, not the paper's 1 s" in text
     assert "the wake's" in tables.format_tables(run, tables.table2(run), [row], network=True)
     # the commands pass it on, and refuse it without the network
-    assert main(["abstract-infer", "chair/402", "--library", "chair", "--network", "--search-seconds", "2.5",
+    assert main(["coder", "infer", "coder-chair:402", "--library", "chair", "--network", "--search-seconds", "2.5",
                  "--search-batches", "8"]) == 0
     assert seen[-1] == {"batch": WAKE_BATCH, "batches": 8, "seconds": 2.5}
     with pytest.raises(SystemExit, match="need --network"):
-        main(["abstract-infer", "chair/402", "--library", "chair", "--search-seconds", "2"])
+        main(["coder", "infer", "coder-chair:402", "--library", "chair", "--search-seconds", "2"])
     with pytest.raises(SystemExit, match="need --phi-network"):
-        main(["table2-coder", "--categories", "chair", "--phi-search-batches", "4", "--train", "1", "--heldout", "1"])
+        main(["coder", "tables", "--category", "chair", "--phi-search-batches", "4", "--train", "1", "--heldout", "1"])
     with pytest.raises(SystemExit):
-        main(["abstract-infer", "chair/402", "--library", "chair", "--network", "--search-seconds", "-1"])
+        main(["coder", "infer", "coder-chair:402", "--library", "chair", "--network", "--search-seconds", "-1"])
     capsys.readouterr()
 
 
