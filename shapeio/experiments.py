@@ -137,5 +137,5 @@ def register(sub, experiments: Sequence[Experiment], main: Callable[[list[str]],
             print(f"[{e.id}] wrote {out}")
         return 0
 
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, parser=p)
 

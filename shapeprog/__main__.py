@@ -37,7 +37,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from shapeio import InputError
+from shapeio import InputError, experiments
 from shapeio.files import output_problem
 
 from .errors import ExecutionError, ParseError, RefactorError
@@ -153,6 +153,10 @@ def build_parser(systems=None) -> argparse.ArgumentParser:
         commands = sp.add_subparsers(dest="command", required=True, metavar="COMMAND")
         if systems is None or name in systems:
             importlib.import_module(module).register(commands)
+    if systems is None or "paper" in systems:
+        from .paper import EXPERIMENTS  # the three systems' lists: only when `paper` (or the full help) is asked for
+
+        experiments.register(sub, EXPERIMENTS, main, "python -m shapeprog")
     return ap
 
 
@@ -169,7 +173,7 @@ def _output_problem(args) -> str | None:
 
 def main(argv=None) -> int:
     argv = resolve_alias(list(sys.argv[1:] if argv is None else argv))
-    args, extra = build_parser([argv[0]] if argv and argv[0] in SYSTEMS else ()).parse_known_args(argv)
+    args, extra = build_parser([argv[0]] if argv and argv[0] in (*SYSTEMS, "paper") else ()).parse_known_args(argv)
     if extra:  # named by the command's own parser, with its usage
         args.parser.error(f"unrecognized arguments: {' '.join(extra)}")
     problem = _output_problem(args)
