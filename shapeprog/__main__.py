@@ -37,7 +37,7 @@ from pathlib import Path
 import torch
 
 from shapeio import InputError, atomic_write, refuse_overwrite, write_new
-from shapeio.editing import port_argument
+from shapeedit import port_argument
 from shapeio.files import output_problem, write_new_set
 from shapeio.options import float_in, int_in
 from shapeio.mesh import WRITE_SUFFIXES
@@ -923,7 +923,7 @@ def _open_for_edit(args):
 
 
 def _cmd_edit(args) -> int:
-    from shapeio.editing import editor_preflight, serve_until_interrupted
+    from shapeedit import editor_preflight, serve_until_interrupted
 
     problem = editor_preflight(args.export_dir)
     if problem:

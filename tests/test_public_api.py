@@ -20,7 +20,7 @@ import shapeprog
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 PACKAGES = ["csgnet", "csgnet.renderer", "csgnet.editor", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
-            "shapeprog.coder", "shapeprog.editor", "envs", "shapeio"]
+            "shapeprog.coder", "shapeprog.editor", "envs", "shapeio", "shapeedit"]
 
 
 def _public_modules() -> list[str]:
@@ -82,6 +82,9 @@ PUBLIC = {
                          "corner_distance", "load_program"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new"},
+    "shapeedit": {"EDITOR_EXTRA", "MAX_HISTORY", "MAX_PORT", "History", "UndoableSession", "check_port",
+                  "editor_preflight", "import_viser", "port_argument", "refused_request", "serve_until_interrupted",
+                  "viser_server"},
 }
 
 

@@ -34,8 +34,8 @@ from typing import Mapping, Union
 
 import numpy as np
 
+from shapeedit import History, UndoableSession
 from shapeio.files import write_new_set
-from shapeio.editing import History, UndoableSession
 
 from .. import primitives as P
 from ..lang import OPERATORS, Draw, Op, ParseError, Program, parse

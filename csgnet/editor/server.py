@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shapeio.editing import check_port, import_viser, viser_server
+from shapeedit import check_port, import_viser, viser_server
 
 from . import CHOICE, CSGEditSession, Control
 

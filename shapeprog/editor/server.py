@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shapeio.editing import check_port, import_viser, viser_server
+from shapeedit import check_port, import_viser, viser_server
 
 from ..geometry import CORNER_SIGNS, mesh_arrays
 from ..picture import part_colors

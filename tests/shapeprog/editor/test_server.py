@@ -433,7 +433,7 @@ def test_refactored_chair_page_moves_every_leg_and_expands(tmp_path):
 def test_an_interrupt_while_the_address_is_printed_stops_the_server_cleanly(monkeypatch, tmp_path):
     import builtins
 
-    from shapeio.editing import serve_until_interrupted
+    from shapeedit import serve_until_interrupted
 
     class App:
         url, stopped = "http://127.0.0.1:1", False
