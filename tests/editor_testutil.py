@@ -54,3 +54,23 @@ def assert_only_this_machines_pages_reach(url: str) -> None:
         assert len(c.recv(timeout=10)) > 0
     with urllib.request.urlopen(url.replace("127.0.0.1", "localhost"), timeout=10) as r:
         assert r.status == 200
+
+
+def view_fill(pose, points) -> float:
+    """How much of the view the points fill: the largest of their offsets from the view's centre, across or
+    up, over the half-height of the view at their depth (1: a point on the edge of the vertical field of
+    view; above 1: outside it)."""
+    import math
+
+    import numpy as np
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    back = (pose.position - pose.look_at) / np.linalg.norm(pose.position - pose.look_at)
+    right = np.cross(pose.up, back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    rel = points - pose.position
+    depth = -(rel @ back)
+    assert (depth > 0).all(), "a point behind the camera"
+    offset = np.maximum(np.abs(rel @ right), np.abs(rel @ up))
+    return float((offset / (depth * math.tan(pose.fov / 2))).max())

@@ -82,9 +82,9 @@ PUBLIC = {
                          "corner_distance", "load_program"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new"},
-    "shapeedit": {"EDITOR_EXTRA", "MAX_HISTORY", "MAX_PORT", "History", "UndoableSession", "check_port",
-                  "editor_preflight", "import_viser", "port_argument", "refused_request", "serve_until_interrupted",
-                  "viser_server"},
+    "shapeedit": {"EDITOR_EXTRA", "MAX_HISTORY", "MAX_PORT", "CameraPose", "History", "UndoableSession",
+                  "check_port", "editor_preflight", "frame_box", "import_viser", "port_argument", "refused_request",
+                  "serve_until_interrupted", "show_pose", "viser_server"},
 }
 
 

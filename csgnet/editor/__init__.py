@@ -8,8 +8,9 @@ operator):
 * one int per primitive parameter: a position in [0, 63] (the canvas), a radius or height in [0, 64];
   both widened to hold the current value (the language allows positions down to -1000 and anything up
   to :data:`csgnet.lang.MAX_PARAM`);
-* one choice per draw among the primitives of its dimension with as many parameters (circle, square,
-  triangle in 2D; sphere, cube in 3D; cylinder alone);
+* one choice per draw among the primitives of its dimension with as many parameters, by their names in
+  the table of primitives (circle, square, triangle in 2D; sphere, cube in 3D; cylinder alone); the
+  vocabulary letters (``c``, ``p``, ``u``, ``y``) stay inside the language;
 * one choice per operator: ``+``, ``*``, ``-``.
 
 :func:`apply` prints the edited program and parses it back with :func:`csgnet.lang.parse`, and the
@@ -22,6 +23,8 @@ Example:
 '1:square.r', '0:op']
     >>> apply(p, {"1:square.r": 12, "0:op": "+"}).text()
     'c(32,32,28)s(32,32,12)+'
+    >>> apply(p, {"0:circle.kind": "triangle"}).text()
+    't(32,32,28)s(32,32,20)-'
 """
 from __future__ import annotations
 
@@ -72,7 +75,7 @@ class Control:
     Attributes:
         name: ``'1:square.r'`` (draw index, primitive, parameter), ``'1:square.kind'``, ``'0:op'``.
         kind: ``'int'`` or ``'choice'``.
-        value: the current value (an int, a primitive's vocabulary letter, or an operator).
+        value: the current value (an int, a primitive's name such as ``'sphere'``, or an operator).
         low, high: the range of an int (both included).
         choices: the values of a choice.
         label: a short description for people.
@@ -120,9 +123,9 @@ def _specs(program: Program) -> list[Control]:
             oi += 1
             continue
         row = P.primitive(t.kind)
-        same = tuple(r.kind for r in P.primitives(program.dim) if len(r.params) == len(row.params))
+        same = tuple(r.name for r in P.primitives(program.dim) if len(r.params) == len(row.params))
         head = f"{di}:{row.name}"
-        draws.append(Control(f"{head}.kind", CHOICE, t.kind, choices=same, label=f"{row.name} {di + 1}: primitive",
+        draws.append(Control(f"{head}.kind", CHOICE, row.name, choices=same, label=f"{row.name} {di + 1}: primitive",
                              position=start, token=ti))
         offs = [m.start() + 1 for m in re.finditer(r"[(,]", piece)]
         for k, (pname, v) in enumerate(zip(row.params, t.params)):
@@ -153,6 +156,7 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
         raise TypeError(f"`values` must be a mapping of control names to values, got {type(values).__name__}")
     text = program.text()
     specs = {c.name: c for c in controls(program)}
+    kinds = {r.name: r.kind for r in P.primitives(program.dim)}
     toks = list(program.tokens)
     for name, v in values.items():
         c = specs.get(name)
@@ -164,7 +168,7 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
         if isinstance(t, Op):
             toks[c.token] = Op(v)
         elif name.endswith(".kind"):
-            toks[c.token] = Draw(v, t.params)
+            toks[c.token] = Draw(kinds[v], t.params)
         else:
             k = P.primitive(t.kind).params.index(name.rsplit(".", 1)[1])
             toks[c.token] = Draw(t.kind, t.params[:k] + (v,) + t.params[k + 1:])

@@ -109,6 +109,36 @@ def test_a_program_that_does_not_parse_opens_with_its_error(tmp_path):
         a.stop()
 
 
+def test_the_view_frames_the_shape_on_open_after_run_text_and_on_reset(app):
+    """The camera looks at the shape and the target from the PNG pictures' direction, close enough that their
+    bounding box reaches the frame margin (the shape no longer fills a tenth of the view); an edit leaves the
+    view alone, a new program and Reset frame it again."""
+    from editor_testutil import view_fill
+    from shapeprog.picture import VIEW_DIRECTION
+    from shapeedit.camera import FRAME_MARGIN
+
+    def framed(pose, *shapes):
+        points = np.concatenate([x.corners.detach().reshape(-1, 3).numpy() for x in shapes])
+        lo, hi = points.min(0), points.max(0)
+        box = [(x, y, z) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        back = (pose.position - pose.look_at) / np.linalg.norm(pose.position - pose.look_at)
+        return (np.allclose(pose.look_at, (lo + hi) / 2) and np.allclose(back, VIEW_DIRECTION)
+                and abs(view_fill(pose, box) - 1 / FRAME_MARGIN) < 1e-6 and view_fill(pose, points) > 0.5)
+
+    s = app.session
+    pose = app.state["camera"]
+    assert framed(pose, s.shape, s.target) and np.array_equal(pose.up, [0, 1, 0])
+    assert np.allclose(app.server.initial_camera.position, pose.position) and app.server.initial_camera.fov == pose.fov
+    app.handle("Program_0:1:cuboid.h").value = 0.5
+    assert app.state["camera"] is pose
+    small = "bbox = Cuboid(0.1, 0.1, 0.1, True)\ncube0 = Cuboid(0.05, 0.02, 0.05, True)\n" \
+            "attach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n"
+    assert app.run_text(small)
+    assert framed(app.state["camera"], s.shape, s.target)
+    assert app.reset() and framed(app.state["camera"], s.shape, s.target)
+    assert np.allclose(app.state["camera"].position, pose.position)
+
+
 def test_cuboid_edges():
     corners = execute(parse(CHAIR)).corners
     e = cuboid_edges(corners)
@@ -205,7 +235,8 @@ _THUMBS = """JSON.stringify([...document.querySelectorAll('[role=slider]')].map(
 @pytest.mark.skipif(not BROWSERS, reason="no headless browser: install Debian's 'chromium' package to run the "
                                          "real-browser test")
 def test_real_browser_slider_drag_changes_the_geometry(app, tmp_path):
-    """Headless Chromium, driven over the DevTools protocol, opens the page and draws the chair in the 3D view;
+    """Headless Chromium, driven over the DevTools protocol, opens the page and draws the chair in the 3D view,
+    framed (taller than 40 % of the view);
     a mouse drag on the slider of the base's height (``Program_0:1:cuboid.h``: ``Program_1``, the legs' box, on
     line 3) reaches the server, which applies the value the page shows (the geometry equals the edited
     program's), and the 3D view draws the new chair."""
@@ -247,6 +278,8 @@ def test_real_browser_slider_drag_changes_the_geometry(app, tmp_path):
             time.sleep(0.5)
             before, parts_before = coloured()
         assert parts_before.sum() > 2000, "the 3D view is blank"
+        rows, cols = np.nonzero(parts_before)  # framed: the chair is not a speck in the middle of the view
+        assert rows.max() - rows.min() > 0.4 * parts_before.shape[0], (rows.min(), rows.max(), parts_before.shape)
         corners, version = app.state["corners"].copy(), app.state["version"]
 
         # the drag: press on the thumb, move it 60 px to the right in steps, release
