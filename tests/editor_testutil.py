@@ -1,4 +1,5 @@
-"""Shared programs for the editor tests."""
+"""What the editor tests of both systems share: programs, a free port, the checks of which pages may reach an
+editor and of the ``--port`` argument, and how much of a view a framed shape fills."""
 
 # one statement of every kind
 EVERY = """bbox = Cuboid(1.0, 1.0, 1.0, True)
@@ -26,6 +27,27 @@ leg0, leg1 = four_legs(0.1, True, 0.2)
 seat = Cuboid(1.2, 0.1, 1.0, True)
 attach(leg0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)
 """
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that no socket holds now."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def assert_port_argument_error(main, argv: list[str], capsys) -> None:
+    """``main(argv + ["--port", "70000"])`` (an ``edit`` command's entry point) stops with argparse's exit status
+    2 and a last line of usage error that names the port."""
+    import pytest
+
+    with pytest.raises(SystemExit) as e:
+        main([*argv, "--port", "70000", "--no-browser"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        "error: argument --port: port '70000' is not a TCP port (an integer from 0 to 65535)")
 
 
 def assert_only_this_machines_pages_reach(url: str) -> None:

@@ -1,7 +1,6 @@
 """csgnet.editor: controls of CSG programs, edits equal to text edits, fuzzed values, the session (undo /
 redo, exports) and the page (viser; skipped without it)."""
 import random
-import socket
 import urllib.request
 
 import numpy as np
@@ -11,6 +10,7 @@ import csgnet
 from csgnet.editor import CHOICE, INT, CSGEditError, CSGEditSession, apply, controls
 from csgnet.lang import ParseError, parse
 from csgnet.primitives import primitives
+from editor_testutil import assert_port_argument_error, free_port
 
 PROGRAMS = ["c(32,32,28)s(32,32,20)-", "c(16,24,8)t(40,40,12)+s(32,32,16)*",
             "sp(32,32,32,20)cu(32,32,32,28)*", "cy(32,32,32,12,24)sp(40,32,32,8)-"]
@@ -117,16 +117,10 @@ def test_session(tmp_path):
     assert bad.set_text("c(32,32,28)") and bad.canvas.any()
 
 
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_page(tmp_path):
     from csgnet.editor.server import CSGEditorApp
 
-    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=_free_port(), export_dir=tmp_path)
+    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=free_port(), export_dir=tmp_path)
     try:
         with urllib.request.urlopen(app.url, timeout=10) as r:
             assert r.status == 200
@@ -151,7 +145,7 @@ def test_the_2d_page_shows_the_render_in_the_main_view_framed(tmp_path):
     from editor_testutil import view_fill
     from shapeedit.camera import FRAME_MARGIN
 
-    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=_free_port(), export_dir=tmp_path)
+    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=free_port(), export_dir=tmp_path)
     try:
         import viser
 
@@ -183,7 +177,7 @@ def test_the_3d_page_names_its_primitives_and_frames_the_shape(tmp_path):
         lo, hi = (filled.min(0) - 0.5 - VOXEL_CENTRE) / VOXEL_HALF, (filled.max(0) + 0.5 - VOXEL_CENTRE) / VOXEL_HALF
         return [(x, y, z) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], (lo + hi) / 2
 
-    app = CSGEditorApp(CSGEditSession("cy(32,32,32,12,24)sp(40,32,32,8)-"), port=_free_port(), export_dir=tmp_path)
+    app = CSGEditorApp(CSGEditSession("cy(32,32,32,12,24)sp(40,32,32,8)-"), port=free_port(), export_dir=tmp_path)
     try:
         assert app.handle("0:cylinder.kind").options == ("cylinder",)
         assert app.handle("1:sphere.kind").options == ("sphere", "cube") and app.handle("1:sphere.kind").value == "sphere"
@@ -207,7 +201,7 @@ def test_defect_editor_accepts_any_web_origin_is_refused(tmp_path):
     from csgnet.editor.server import CSGEditorApp
     from editor_testutil import assert_only_this_machines_pages_reach
 
-    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=_free_port(), export_dir=tmp_path)
+    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=free_port(), export_dir=tmp_path)
     try:
         assert_only_this_machines_pages_reach(app.url)
     finally:
@@ -224,8 +218,4 @@ def test_defect_edit_port_out_of_range_is_refused(tmp_path):
 def test_defect_edit_port_out_of_range_is_an_argument_error(capsys):
     from csgnet.__main__ import main
 
-    with pytest.raises(SystemExit) as e:
-        main(["edit", "c(32,32,28)", "--port", "70000", "--no-browser"])
-    assert e.value.code == 2
-    assert capsys.readouterr().err.splitlines()[-1].endswith(
-        "error: argument --port: port '70000' is not a TCP port (an integer from 0 to 65535)")
+    assert_port_argument_error(main, ["edit", "c(32,32,28)"], capsys)

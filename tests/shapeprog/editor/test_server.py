@@ -2,13 +2,13 @@
 edits and parse errors show in the page, undo / redo / reset / export. Skipped without viser (the
 ``editor`` extra); the real-browser test (a slider dragged in headless Chromium) is skipped without Chromium."""
 import shutil
-import socket
 import urllib.request
 
 import numpy as np
 import pytest
 import torch
 
+from editor_testutil import assert_port_argument_error, free_port
 from shapeprog import corpus
 from shapeprog.editor import EditSession, apply
 from shapeprog.execute import execute
@@ -21,17 +21,11 @@ from shapeprog.editor.server import EditorApp, cuboid_edges  # noqa: E402
 CHAIR = corpus.read("chair", 173)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture
 def app(tmp_path):
     s = EditSession(CHAIR, "chair/173.txt")
     s.set_target(corpus.read("chair", 42220))
-    a = EditorApp(s, port=_free_port(), export_dir=tmp_path)
+    a = EditorApp(s, port=free_port(), export_dir=tmp_path)
     yield a
     a.stop()
 
@@ -99,7 +93,7 @@ def test_exports_go_to_the_export_folder(app, tmp_path):
 
 def test_a_program_that_does_not_parse_opens_with_its_error(tmp_path):
     bad = CHAIR.replace("attach(", "attach(nothing, ", 1)
-    a = EditorApp(EditSession(bad, "bad.txt"), port=_free_port(), export_dir=tmp_path, source_text=bad)
+    a = EditorApp(EditSession(bad, "bad.txt"), port=free_port(), export_dir=tmp_path, source_text=bad)
     try:
         assert a.state["error"].startswith("bad.txt:") and a.text_box.value == bad
         with urllib.request.urlopen(a.url, timeout=10) as r:
@@ -332,7 +326,7 @@ def test_the_edit_command_serves_until_interrupted(argv, tmp_path):
     import time
     from pathlib import Path
 
-    port = _free_port()
+    port = free_port()
     root = Path(__file__).resolve().parents[3]
     proc = subprocess.Popen([sys.executable, "-m", *argv, "--port", str(port), "--no-browser", "--export-dir",
                              str(tmp_path)], cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -370,7 +364,7 @@ def test_the_edit_command_refuses_bad_arguments(tmp_path, capsys):
 def test_macro_program_page_and_expanded_toggle(tmp_path):
     from editor_testutil import MACROS
 
-    a = EditorApp(EditSession(MACROS, "m.txt"), port=_free_port(), export_dir=tmp_path)
+    a = EditorApp(EditSession(MACROS, "m.txt"), port=free_port(), export_dir=tmp_path)
     try:
         n_macro = len(a._handles)
         a.handle("1:four_legs.s").value = 0.15
@@ -444,7 +438,7 @@ def test_refactored_chair_page_moves_every_leg_and_expands(tmp_path):
 
     lib = load_library("chair")
     text = refactor(parse(corpus.read("chair", 173)), lib, category="chair", shape_id=173).text
-    a = EditorApp(EditSession(text, "chair/173_macros.txt", library=lib), port=_free_port(), export_dir=tmp_path)
+    a = EditorApp(EditSession(text, "chair/173_macros.txt", library=lib), port=free_port(), export_dir=tmp_path)
     try:
         assert len(a._handles) == 14
         name = next(n for n in a._handles if n.startswith("Program_1:1:") and n.endswith(".x0"))  # the legs' width
@@ -504,8 +498,4 @@ def test_defect_edit_port_out_of_range_is_refused(tmp_path, port):
 def test_defect_edit_port_out_of_range_is_an_argument_error(capsys):
     from shapeprog.__main__ import main
 
-    with pytest.raises(SystemExit) as e:
-        main(["edit", "chair/173", "--port", "70000", "--no-browser"])
-    assert e.value.code == 2
-    assert capsys.readouterr().err.splitlines()[-1].endswith(
-        "error: argument --port: port '70000' is not a TCP port (an integer from 0 to 65535)")
+    assert_port_argument_error(main, ["edit", "chair/173"], capsys)
