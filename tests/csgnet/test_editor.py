@@ -79,8 +79,8 @@ def test_bad_values_and_fuzz():
         cs = controls(p)
         vals = {}
         for c in rng.sample(cs, rng.randint(1, 3)):
-            vals[c.name] = rng.choice([rng.randint(-5, 70), 2.5, float("nan"), True, None, "c", "+", "u", "cube", "circle",
-                                       c.value, c.low if c.low is not None else 0,
+            vals[c.name] = rng.choice([rng.randint(-5, 70), 2.5, float("nan"), True, None, "c", "+", "u", "cube",
+                                       "circle", c.value, c.low if c.low is not None else 0,
                                        rng.choice(c.choices) if c.kind == CHOICE else rng.randint(c.low, c.high)])
         try:
             q = apply(p, vals)
@@ -180,7 +180,8 @@ def test_the_3d_page_names_its_primitives_and_frames_the_shape(tmp_path):
     app = CSGEditorApp(CSGEditSession("cy(32,32,32,12,24)sp(40,32,32,8)-"), port=free_port(), export_dir=tmp_path)
     try:
         assert app.handle("0:cylinder.kind").options == ("cylinder",)
-        assert app.handle("1:sphere.kind").options == ("sphere", "cube") and app.handle("1:sphere.kind").value == "sphere"
+        kind = app.handle("1:sphere.kind")
+        assert kind.options == ("sphere", "cube") and kind.value == "sphere"
         app.handle("1:sphere.kind").value = "cube"
         assert app.state["text"] == "cy(32,32,32,12,24)cu(40,32,32,8)-" and app.state["error"] is None
         assert app.handle("1:cube.kind").options == ("sphere", "cube")
