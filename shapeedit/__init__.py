@@ -12,9 +12,9 @@ Importing this package imports neither ``viser`` nor ``websockets``; the page co
 """
 from .camera import CameraPose, frame_box, show_pose
 from .history import MAX_HISTORY, History, UndoableSession
-from .server import (EDITOR_EXTRA, MAX_PORT, check_port, editor_preflight, import_viser, port_argument,
-                     refused_request, serve_until_interrupted, viser_server)
+from .server import (EDITOR_EXTRA, MAX_PORT, check_port, editor_preflight, export_stem, import_viser,
+                     port_argument, refused_request, serve_until_interrupted, viser_server)
 
 __all__ = ["EDITOR_EXTRA", "MAX_HISTORY", "MAX_PORT", "CameraPose", "History", "UndoableSession", "check_port",
-           "editor_preflight", "frame_box", "import_viser", "port_argument",
+           "editor_preflight", "export_stem", "frame_box", "import_viser", "port_argument",
            "refused_request", "serve_until_interrupted", "show_pose", "viser_server"]

@@ -8,14 +8,15 @@ from __future__ import annotations
 import argparse
 import http
 import ipaddress
+import re
 import signal
 import threading
 import time
 import webbrowser
 from pathlib import Path
 
-__all__ = ["EDITOR_EXTRA", "MAX_PORT", "check_port", "editor_preflight", "import_viser", "port_argument",
-           "refused_request", "serve_until_interrupted", "viser_server"]
+__all__ = ["EDITOR_EXTRA", "MAX_PORT", "MAX_STEM_CHARS", "check_port", "editor_preflight", "export_stem",
+           "import_viser", "port_argument", "refused_request", "serve_until_interrupted", "viser_server"]
 
 #: The optional extra that installs the editors' browser library.
 EDITOR_EXTRA = "editor"
@@ -141,6 +142,22 @@ def viser_server(host: str, port: int):
         raise RuntimeError("this viser version does not serve through websockets.asyncio.server.serve; the "
                            "editor cannot check the requests' origin and does not start")
     return server
+
+
+#: Characters an export's file stem keeps (a file name holds 255 bytes; ``_edit001.txt`` and the like follow).
+MAX_STEM_CHARS = 100
+
+
+def export_stem(name: str, default: str) -> str:
+    """The stem of an editor's exported files from a name: runs of characters other than ASCII letters,
+    digits, ``_``, ``.`` and ``-`` become ``_``, at most :data:`MAX_STEM_CHARS` are kept, and ``default``
+    stands in for an empty result.
+
+    Example:
+        >>> export_stem("chair/173 (copy)", "program"), export_stem("", "csg"), len(export_stem("x" * 999, "p"))
+        ('chair_173_copy_', 'csg', 100)
+    """
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))[:MAX_STEM_CHARS] or default
 
 
 def editor_preflight(export_dir) -> str | None:

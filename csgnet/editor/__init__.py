@@ -37,13 +37,14 @@ from typing import Mapping, Union
 
 import numpy as np
 
-from shapeedit import History, UndoableSession
+from shapeedit import History, UndoableSession, export_stem
 from shapeio.files import write_new_set
 
 from .. import primitives as P
 from ..lang import OPERATORS, Draw, Op, ParseError, Program, parse
 
-__all__ = ["CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls", "render_png_bytes"]
+__all__ = ["CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls", "page_value",
+           "render_png_bytes"]
 
 INT, CHOICE = "int", "choice"
 #: Side of exported PNGs: the 64-pixel canvas upscaled by this factor.
@@ -181,6 +182,23 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
         raise CSGEditError(str(e), text, 0, "") from None
 
 
+def page_value(control: "Control | None", value):
+    """A value as a page's widget sent it, made what :meth:`Control.check` takes: an int slider's finite number
+    rounded to the nearest integer. Anything else (a drop-down's choice, another type, a non-finite number, a
+    control the page does not know) is passed on unchanged, for the check to refuse with its located
+    :class:`CSGEditError`.
+
+    Example:
+        >>> c = Control("1:square.r", INT, 20, low=0, high=64)
+        >>> page_value(c, 12.4), page_value(c, "12")
+        (12, '12')
+    """
+    if (control is None or control.kind != INT or isinstance(value, bool) or not isinstance(value, (int, float))
+            or not math.isfinite(value)):
+        return value
+    return int(round(value))
+
+
 def render_png_bytes(canvas: np.ndarray, scale: int = PNG_SCALE) -> bytes:
     """A ``(64, 64) bool`` canvas as PNG bytes, black on white, upscaled by nearest neighbour."""
     from PIL import Image
@@ -208,7 +226,7 @@ class CSGEditSession(UndoableSession):
 
     def __init__(self, text: str, dim: int | None = None, name: str = "csg"):
         self.dim = dim if dim is not None else self._guess_dim(text)
-        self.name = re.sub(r"[^A-Za-z0-9_.-]+", "_", name) or "csg"
+        self.name = export_stem(name, "csg")
         self.error: Exception | None = None
         self.history: History | None = None
         self.program = self.canvas = None

@@ -17,7 +17,7 @@ import numpy as np
 
 from shapeedit import check_port, frame_box, import_viser, show_pose, viser_server
 
-from . import CHOICE, CSGEditSession, Control
+from . import CHOICE, CSGEditSession, Control, page_value
 
 __all__ = ["CSGEditorApp"]
 
@@ -128,9 +128,8 @@ class CSGEditorApp:
             return
         with self.lock:
             t0 = time.perf_counter()
-            if not isinstance(value, str):
-                value = int(round(value))
-            ok = self.session.set({name: value})
+            control = next((c for c in self.session.controls() if c.name == name), None)
+            ok = self.session.set({name: page_value(control, value)})  # NaN is left for the control's check
             self._sync()
             self._draw(t0 if ok else None)
 

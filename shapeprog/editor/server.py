@@ -31,7 +31,7 @@ from shapeedit import check_port, frame_box, import_viser, show_pose, viser_serv
 
 from ..geometry import CORNER_SIGNS, mesh_arrays
 from ..picture import VIEW_DIRECTION, part_colors
-from .controls import BOOL, CHOICE, FLOAT, INT, Control
+from .controls import BOOL, FLOAT, INT, Control, page_value
 from .session import EditSession
 
 __all__ = ["EditorApp", "cuboid_edges"]
@@ -204,10 +204,7 @@ class EditorApp:
         with self.lock:
             t0 = time.perf_counter()
             c = self._controls.get(name)
-            if c is not None and c.kind == FLOAT:
-                value = round(float(value), 9)  # a browser slider's 0.30000000000000004
-            elif c is not None and c.kind == INT:
-                value = int(round(value))
+            value = page_value(c, value)  # a browser slider's 0.30000000000000004; NaN is left for the check
             ok = self.session.set({name: value})
             if not ok:
                 self._sync_values()

@@ -26,7 +26,7 @@ from typing import Mapping
 
 import torch
 
-from shapeedit import History, UndoableSession
+from shapeedit import History, UndoableSession, export_stem
 from shapeio.files import write_new_set
 
 from .. import corpus
@@ -148,7 +148,7 @@ class EditSession(UndoableSession):
 
     def __init__(self, text: str, file: str = "<string>", library=None, name: str | None = None):
         self.file, self.library = file, library
-        self.name = re.sub(r"[^A-Za-z0-9_.-]+", "_", name or str(Path(file).with_suffix("")).strip("/")) or "program"
+        self.name = export_stem(name or str(Path(file).with_suffix("")).strip("/"), "program")
         self.error: Exception | None = None
         self.target: ExecutedShape | None = None
         self._controls: dict = {}

@@ -198,6 +198,24 @@ def test_the_3d_page_names_its_primitives_and_frames_the_shape(tmp_path):
         app.stop()
 
 
+def test_defect_a_non_finite_slider_value_is_shown_not_raised(tmp_path):
+    """A slider message of NaN or infinity (the page's websocket carries msgpack floats) is refused by the
+    control's check and shown; it used to raise in the server's handler thread."""
+    from csgnet.editor.server import CSGEditorApp
+
+    app = CSGEditorApp(CSGEditSession("c(32,32,28)s(32,32,20)-"), port=free_port(), export_dir=tmp_path)
+    try:
+        for bad in (float("nan"), float("inf"), "12"):
+            app._changed("1:square.r", bad)
+            assert app.state["error"].startswith(f"at character 19: control '1:square.r': expected an integer, got "
+                                                 f"{type(bad).__name__} {bad!r} (token '20')")
+            assert app.state["text"] == "c(32,32,28)s(32,32,20)-" and app.handle("1:square.r").value == 20
+        app._changed("1:square.r", 12.4)  # a slider's float, rounded as before
+        assert app.state["error"] is None and app.state["text"] == "c(32,32,28)s(32,32,12)-"
+    finally:
+        app.stop()
+
+
 def test_defect_editor_accepts_any_web_origin_is_refused(tmp_path):
     from csgnet.editor.server import CSGEditorApp
     from editor_testutil import assert_only_this_machines_pages_reach

@@ -7,7 +7,6 @@ import urllib.request
 
 import numpy as np
 import pytest
-import torch
 
 from editor_testutil import assert_port_argument_error, free_port
 from shapeprog import corpus
@@ -432,6 +431,17 @@ def test_an_interrupt_while_the_address_is_printed_stops_the_server_cleanly(monk
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Ctrl-C works again
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+def test_defect_a_slider_value_that_is_not_a_number_is_shown_not_raised(app):
+    """A float slider's message of text or NaN is refused by the control's check and shown, the geometry
+    kept; text used to raise in the server's handler thread (``float('abc')``)."""
+    corners = app.state["corners"].copy()
+    for bad in ("abc", float("nan")):
+        app._changed("Program_0:1:cuboid.h", bad)
+        assert "control 'Program_0:1:cuboid.h'" in app.state["error"] and np.array_equal(app.state["corners"], corners)
+    app._changed("Program_0:1:cuboid.h", 0.30000000000000004)  # a browser's float, rounded as before
+    assert app.state["error"] is None and ", 0.3, " in app.state["text"].split("\n")[2]
 
 
 def test_defect_editor_accepts_any_web_origin_is_refused(app):
