@@ -4,8 +4,6 @@ One module per format family, NumPy-level (no torch needed); see ``docs/shapeio.
 
 * :mod:`shapeio.files`: :func:`atomic_write`, :func:`write_new`, :func:`refuse_overwrite`,
   :func:`remove_stale_temps`, :class:`InputError`.
-* :mod:`shapeio.editing`: what the program editors share: the undo / redo :class:`~shapeio.editing.History`,
-  the lazy import of the browser library.
 * :mod:`shapeio.image`: the PNG writer, users' images as bool masks, folders of target images.
 * :mod:`shapeio.mesh`: the mesh writer (OBJ, PLY, GLB) and users' meshes.
 * :mod:`shapeio.points`: point clouds (binary PLY, OBJ ``v`` lines).

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from shapeio.editing import port_argument
+from shapeedit import port_argument
 from shapeio.results import column, make_result
 
 from . import corpus
@@ -158,7 +158,7 @@ def open_for_edit(args):
 
 
 def cmd_edit(args) -> int:
-    from shapeio.editing import editor_preflight, serve_until_interrupted
+    from shapeedit import editor_preflight, serve_until_interrupted
 
     problem = editor_preflight(args.export_dir)
     if problem:

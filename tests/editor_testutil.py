@@ -1,4 +1,5 @@
-"""Shared programs for the editor tests."""
+"""What the editor tests of both systems share: programs, a free port, the checks of which pages may reach an
+editor and of the ``--port`` argument, and how much of a view a framed shape fills."""
 
 # one statement of every kind
 EVERY = """bbox = Cuboid(1.0, 1.0, 1.0, True)
@@ -28,6 +29,27 @@ attach(leg0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)
 """
 
 
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that no socket holds now."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def assert_port_argument_error(main, argv: list[str], capsys) -> None:
+    """``main(argv + ["--port", "70000"])`` (an ``edit`` command's entry point) stops with argparse's exit status
+    2 and a last line of usage error that names the port."""
+    import pytest
+
+    with pytest.raises(SystemExit) as e:
+        main([*argv, "--port", "70000", "--no-browser"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].endswith(
+        "error: argument --port: port '70000' is not a TCP port (an integer from 0 to 65535)")
+
+
 def assert_only_this_machines_pages_reach(url: str) -> None:
     """The editor page at ``url`` (``http://127.0.0.1:PORT``) answers 403 to HTTP with another site's
     ``Host`` and refuses websockets from another site's page or ``Host``; its own page's websocket gets the
@@ -54,3 +76,23 @@ def assert_only_this_machines_pages_reach(url: str) -> None:
         assert len(c.recv(timeout=10)) > 0
     with urllib.request.urlopen(url.replace("127.0.0.1", "localhost"), timeout=10) as r:
         assert r.status == 200
+
+
+def view_fill(pose, points) -> float:
+    """How much of the view the points fill: the largest of their offsets from the view's centre, across or
+    up, over the half-height of the view at their depth (1: a point on the edge of the vertical field of
+    view; above 1: outside it)."""
+    import math
+
+    import numpy as np
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    back = (pose.position - pose.look_at) / np.linalg.norm(pose.position - pose.look_at)
+    right = np.cross(pose.up, back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    rel = points - pose.position
+    depth = -(rel @ back)
+    assert (depth > 0).all(), "a point behind the camera"
+    offset = np.maximum(np.abs(rel @ right), np.abs(rel @ up))
+    return float((offset / (depth * math.tan(pose.fov / 2))).max())

@@ -21,7 +21,7 @@ import shapeprog
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 PACKAGES = ["csgnet", "csgnet.renderer", "csgnet.editor", "shapeprog", "shapeprog.vae", "shapeprog.pointcloud", "shapeprog.macros",
-            "shapeprog.coder", "shapeprog.editor", "envs", "shapeio"]
+            "shapeprog.coder", "shapeprog.editor", "envs", "shapeio", "shapeedit"]
 
 
 def _public_modules() -> list[str]:
@@ -75,7 +75,7 @@ PUBLIC = {
                         "encode_programs", "encode_programs_ids", "encode_tokens", "execute", "pack", "popcount",
                         "primitive_cache", "render_programs", "render_tokens", "stack_trace", "unpack"},
     "csgnet.editor": {"CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls",
-                      "render_png_bytes"},
+                      "page_value", "render_png_bytes"},
     "shapeprog": {"ExecutionError", "ParseError", "corpus", "execute", "execute_batch", "fit", "parse",
                   "print_program", "to_text"},
     "shapeprog.vae": {"LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch",
@@ -102,9 +102,12 @@ PUBLIC = {
                         "DiscoveryResult", "Inferred", "RefactorError", "Refactored", "Summary", "discover", "infer",
                         "load_library", "refactor", "summarize"},
     "shapeprog.editor": {"BOOL", "CHOICE", "FLOAT", "INT", "Control", "EditSession", "apply", "controls",
-                         "corner_distance", "load_program"},
+                         "corner_distance", "load_program", "page_value"},
     "envs": set(),
     "shapeio": {"InputError", "atomic_write", "refuse_overwrite", "remove_stale_temps", "write_new"},
+    "shapeedit": {"EDITOR_EXTRA", "MAX_HISTORY", "MAX_PORT", "CameraPose", "History", "UndoableSession",
+                  "check_port", "editor_preflight", "export_stem", "frame_box", "import_viser", "port_argument", "refused_request",
+                  "serve_until_interrupted", "show_pose", "viser_server"},
 }
 
 

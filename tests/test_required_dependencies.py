@@ -15,6 +15,7 @@ def test_the_required_dependencies_import():
     import egglog  # noqa: F401
     import h5py  # noqa: F401
     import msgspec  # noqa: F401
+    import playwright.sync_api  # noqa: F401  (drives the real-browser editor test)
     import pybullet  # noqa: F401
     import skimage.draw  # noqa: F401
     import trimesh  # noqa: F401

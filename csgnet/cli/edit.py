@@ -4,14 +4,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from shapeio.editing import port_argument
+from shapeedit import editor_preflight, port_argument, serve_until_interrupted
 
 from ..primitives import primitives
 
 
 def cmd_edit(args) -> int:
-    from shapeio.editing import editor_preflight, serve_until_interrupted
-
     from ..editor import CSGEditSession
 
     problem = editor_preflight(args.export_dir)

@@ -8,8 +8,9 @@ operator):
 * one int per primitive parameter: a position in [0, 63] (the canvas), a radius or height in [0, 64];
   both widened to hold the current value (the language allows positions down to -1000 and anything up
   to :data:`csgnet.lang.MAX_PARAM`);
-* one choice per draw among the primitives of its dimension with as many parameters (circle, square,
-  triangle in 2D; sphere, cube in 3D; cylinder alone);
+* one choice per draw among the primitives of its dimension with as many parameters, by their names in
+  the table of primitives (circle, square, triangle in 2D; sphere, cube in 3D; cylinder alone); the
+  vocabulary letters (``c``, ``p``, ``u``, ``y``) stay inside the language;
 * one choice per operator: ``+``, ``*``, ``-``.
 
 :func:`apply` prints the edited program and parses it back with :func:`csgnet.lang.parse`, and the
@@ -22,6 +23,8 @@ Example:
 '1:square.r', '0:op']
     >>> apply(p, {"1:square.r": 12, "0:op": "+"}).text()
     'c(32,32,28)s(32,32,12)+'
+    >>> apply(p, {"0:circle.kind": "triangle"}).text()
+    't(32,32,28)s(32,32,20)-'
 """
 from __future__ import annotations
 
@@ -34,13 +37,14 @@ from typing import Mapping, Union
 
 import numpy as np
 
+from shapeedit import History, UndoableSession, export_stem
 from shapeio.files import write_new_set
-from shapeio.editing import History, UndoableSession
 
 from .. import primitives as P
 from ..lang import OPERATORS, Draw, Op, ParseError, Program, parse
 
-__all__ = ["CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls", "render_png_bytes"]
+__all__ = ["CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls", "page_value",
+           "render_png_bytes"]
 
 INT, CHOICE = "int", "choice"
 #: Side of exported PNGs: the 64-pixel canvas upscaled by this factor.
@@ -72,7 +76,7 @@ class Control:
     Attributes:
         name: ``'1:square.r'`` (draw index, primitive, parameter), ``'1:square.kind'``, ``'0:op'``.
         kind: ``'int'`` or ``'choice'``.
-        value: the current value (an int, a primitive's vocabulary letter, or an operator).
+        value: the current value (an int, a primitive's name such as ``'sphere'``, or an operator).
         low, high: the range of an int (both included).
         choices: the values of a choice.
         label: a short description for people.
@@ -120,9 +124,9 @@ def _specs(program: Program) -> list[Control]:
             oi += 1
             continue
         row = P.primitive(t.kind)
-        same = tuple(r.kind for r in P.primitives(program.dim) if len(r.params) == len(row.params))
+        same = tuple(r.name for r in P.primitives(program.dim) if len(r.params) == len(row.params))
         head = f"{di}:{row.name}"
-        draws.append(Control(f"{head}.kind", CHOICE, t.kind, choices=same, label=f"{row.name} {di + 1}: primitive",
+        draws.append(Control(f"{head}.kind", CHOICE, row.name, choices=same, label=f"{row.name} {di + 1}: primitive",
                              position=start, token=ti))
         offs = [m.start() + 1 for m in re.finditer(r"[(,]", piece)]
         for k, (pname, v) in enumerate(zip(row.params, t.params)):
@@ -153,6 +157,7 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
         raise TypeError(f"`values` must be a mapping of control names to values, got {type(values).__name__}")
     text = program.text()
     specs = {c.name: c for c in controls(program)}
+    kinds = {r.name: r.kind for r in P.primitives(program.dim)}
     toks = list(program.tokens)
     for name, v in values.items():
         c = specs.get(name)
@@ -164,7 +169,7 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
         if isinstance(t, Op):
             toks[c.token] = Op(v)
         elif name.endswith(".kind"):
-            toks[c.token] = Draw(v, t.params)
+            toks[c.token] = Draw(kinds[v], t.params)
         else:
             k = P.primitive(t.kind).params.index(name.rsplit(".", 1)[1])
             toks[c.token] = Draw(t.kind, t.params[:k] + (v,) + t.params[k + 1:])
@@ -175,6 +180,23 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
         raise CSGEditError(e.reason, e.program, e.position, e.token) from None
     except ValueError as e:
         raise CSGEditError(str(e), text, 0, "") from None
+
+
+def page_value(control: "Control | None", value):
+    """A value as a page's widget sent it, made what :meth:`Control.check` takes: an int slider's finite number
+    rounded to the nearest integer. Anything else (a drop-down's choice, another type, a non-finite number, a
+    control the page does not know) is passed on unchanged, for the check to refuse with its located
+    :class:`CSGEditError`.
+
+    Example:
+        >>> c = Control("1:square.r", INT, 20, low=0, high=64)
+        >>> page_value(c, 12.4), page_value(c, "12")
+        (12, '12')
+    """
+    if (control is None or control.kind != INT or isinstance(value, bool) or not isinstance(value, (int, float))
+            or not math.isfinite(value)):
+        return value
+    return int(round(value))
 
 
 def render_png_bytes(canvas: np.ndarray, scale: int = PNG_SCALE) -> bytes:
@@ -204,7 +226,7 @@ class CSGEditSession(UndoableSession):
 
     def __init__(self, text: str, dim: int | None = None, name: str = "csg"):
         self.dim = dim if dim is not None else self._guess_dim(text)
-        self.name = re.sub(r"[^A-Za-z0-9_.-]+", "_", name) or "csg"
+        self.name = export_stem(name, "csg")
         self.error: Exception | None = None
         self.history: History | None = None
         self.program = self.canvas = None

@@ -1,9 +1,10 @@
 """The CSG editor's browser page: a ``viser`` server over a :class:`~csgnet.editor.CSGEditSession`.
 
-``viser`` (the ``editor`` extra) is imported when a :class:`CSGEditorApp` is made. The page shows the live
-render (2D: the 64x64 canvas as an image, upscaled; 3D: the voxel volume's marching-cubes mesh in the 3D
-view), one slider per primitive parameter and a drop-down per primitive kind and operator, the program
-text (editable, "Run text"), the last error, and undo / redo / reset / export buttons.
+``viser`` (the ``editor`` extra) is imported when a :class:`CSGEditorApp` is made. The page's main view shows
+the live render, framed by the camera when the page opens, after "Run text" and on reset (2D: the 64x64
+canvas as an image plane facing the camera, upscaled; 3D: the voxel volume's marching-cubes mesh). The side
+panel holds one slider per primitive parameter and a drop-down per primitive (by name) and operator, the
+program text (editable, "Run text"), the last error, and undo / redo / reset / export buttons.
 :attr:`CSGEditorApp.state` holds what the page shows.
 """
 from __future__ import annotations
@@ -14,14 +15,20 @@ from pathlib import Path
 
 import numpy as np
 
-from shapeio.editing import check_port, import_viser, viser_server
+from shapeedit import check_port, frame_box, import_viser, show_pose, viser_server
 
-from . import CHOICE, CSGEditSession, Control
+from . import CHOICE, CSGEditSession, Control, page_value
 
 __all__ = ["CSGEditorApp"]
 
 #: Pixels per canvas pixel in the page's 2D image.
 IMAGE_SCALE = 6
+#: Side of the 2D image plane in scene units (the plane is centred on the origin, facing the camera at -z).
+PLANE_SIZE = 1.0
+#: From the shape towards the camera in the 3D view (three-quarter view, z up as viser's scene).
+VIEW_DIRECTION_3D = (1.0, -1.2, 0.9)
+#: The 3D mesh's coordinates: voxel index v maps to (v - VOXEL_CENTRE) / VOXEL_HALF, so the canvas is [-1, 1]^3.
+VOXEL_CENTRE, VOXEL_HALF = 31.5, 32.0
 
 
 class CSGEditorApp:
@@ -49,13 +56,16 @@ class CSGEditorApp:
         self._names: tuple = ()
         self.state: dict = {"version": 0}
         self.server = viser_server(host, port)
+        if session.dim == 2:  # viser draws an image with its top row towards -y (OpenCV's camera frame)
+            self.server.scene.set_up_direction("-y")
         gui = self.server.gui
         gui.add_markdown(f"**CSG program ({session.dim}D)**")
         self.status = gui.add_markdown("")
         self.error_md = gui.add_markdown("")
         self.image = None
         if session.dim == 2:
-            self.image = gui.add_image(self._picture(), label="render (64 x 64)", format="png")
+            self.image = self.server.scene.add_image("/render", self._picture(), PLANE_SIZE, PLANE_SIZE, format="png",
+                                                     cast_shadow=False, receive_shadow=False)
         row = gui.add_button_group("Edit", ("Undo", "Redo", "Reset"))
         row.on_click(lambda e: {"Undo": self.undo, "Redo": self.redo, "Reset": self.reset}[e.target.value]())
         gui.add_button("Export text and render", hint=f"into {self.export_dir}").on_click(lambda _: self.export())
@@ -65,6 +75,7 @@ class CSGEditorApp:
         with self.lock:
             self._rebuild()
             self._draw()
+            self.frame()
 
     def _picture(self) -> np.ndarray:
         c = self.session.canvas
@@ -117,9 +128,8 @@ class CSGEditorApp:
             return
         with self.lock:
             t0 = time.perf_counter()
-            if not isinstance(value, str):
-                value = int(round(value))
-            ok = self.session.set({name: value})
+            control = next((c for c in self.session.controls() if c.name == name), None)
+            ok = self.session.set({name: page_value(control, value)})  # NaN is left for the control's check
             self._sync()
             self._draw(t0 if ok else None)
 
@@ -137,7 +147,28 @@ class CSGEditorApp:
         return self._step(self.session.redo)
 
     def reset(self) -> bool:
-        return self._step(self.session.reset)
+        with self.lock:
+            done = self._step(self.session.reset)
+            self.frame()
+            return done
+
+    def frame(self) -> None:
+        """Point the view at the render (2D: the image plane, straight on; 3D: the shape's bounding box, or
+        the whole canvas when it is empty) for new pages, "Reset View" and the pages open now."""
+        s = self.session
+        if s.dim == 2:
+            half = PLANE_SIZE / 2
+            pose = frame_box((-half, -half, 0.0), (half, half, 0.0), direction=(0, 0, -1), up=(0, -1, 0))
+        else:
+            filled = np.argwhere(np.asarray(s.canvas)) if s.canvas is not None else np.zeros((0, 3))
+            if len(filled):  # voxel i spans [i - 0.5, i + 0.5]
+                low, high = filled.min(0) - 0.5, filled.max(0) + 0.5
+            else:
+                low, high = np.full(3, -0.5), np.full(3, 63.5)
+            pose = frame_box((low - VOXEL_CENTRE) / VOXEL_HALF, (high - VOXEL_CENTRE) / VOXEL_HALF,
+                             direction=VIEW_DIRECTION_3D, up=(0, 0, 1))
+        show_pose(self.server, pose)
+        self.state["camera"] = pose
 
     def export(self) -> list[Path]:
         with self.lock:
@@ -159,6 +190,8 @@ class CSGEditorApp:
             if ok:
                 self._rebuild()
             self._draw()
+            if ok:
+                self.frame()
             return ok
 
     def _draw(self, t0: float | None = None) -> None:
@@ -171,8 +204,8 @@ class CSGEditorApp:
 
                 v, f = voxels_to_mesh(s.canvas)
                 if len(f):
-                    self.server.scene.add_mesh_simple("/shape", (v - 31.5) / 32.0, f, color=(90, 160, 230),
-                                                      flat_shading=True)
+                    self.server.scene.add_mesh_simple("/shape", (v - VOXEL_CENTRE) / VOXEL_HALF, f,
+                                                      color=(90, 160, 230), flat_shading=True)
                 else:
                     self.server.scene.remove_by_name("/shape")
             if s.program is not None and self.text_box.value != s.text:

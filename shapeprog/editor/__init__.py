@@ -14,8 +14,8 @@ The page and its use: ``docs/editor.md``.
 """
 from __future__ import annotations
 
-from .controls import BOOL, CHOICE, FLOAT, INT, Control, apply, controls
+from .controls import BOOL, CHOICE, FLOAT, INT, Control, apply, controls, page_value
 from .session import EditSession, corner_distance, load_program
 
 __all__ = ["BOOL", "CHOICE", "FLOAT", "INT", "Control", "EditSession", "apply", "controls", "corner_distance",
-           "load_program"]
+           "load_program", "page_value"]

@@ -64,7 +64,8 @@ from ..errors import EditError, ExecutionError, ParseError
 from ..lang import AXES, FACES, Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, parse, statement_lines
 from ..lang import statement_text, to_text
 
-__all__ = ["BOOL", "CHOICE", "FLOAT", "INT", "KINDS", "MAX_DIM", "MIN_DIM", "Control", "apply", "controls"]
+__all__ = ["BOOL", "CHOICE", "FLOAT", "INT", "KINDS", "MAX_DIM", "MIN_DIM", "PAGE_DECIMALS", "Control", "apply",
+           "controls", "page_value"]
 
 FLOAT, INT, BOOL, CHOICE = "float", "int", "bool", "choice"
 #: The kinds of control.
@@ -135,6 +136,30 @@ class Control:
         if not isinstance(value, str) or value not in self.choices:
             raise bad(f"{value!r} is not one of {', '.join(map(str, self.choices))}")
         return value
+
+
+#: Decimals a float slider's value keeps (a browser's 0.30000000000000004 arrives as 0.3).
+PAGE_DECIMALS = 9
+
+
+def page_value(control: "Control | None", value):
+    """A value as a page's widget sent it, made what :meth:`Control.check` takes: a float slider's number rounded
+    to :data:`PAGE_DECIMALS` decimals, an int slider's to the nearest integer. Anything else (another type, a
+    non-finite number, a control the page does not know) is passed on unchanged, for the check to refuse with
+    its located :class:`EditError`.
+
+    Example:
+        >>> c = Control("Program_0:1:cuboid.h", FLOAT, 0.5, low=0.01, high=4.0)
+        >>> page_value(c, 0.30000000000000004), page_value(c, float("nan")) != page_value(c, float("nan"))
+        (0.3, True)
+    """
+    if control is None or isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return value
+    if control.kind == FLOAT:
+        return round(float(value), PAGE_DECIMALS)
+    if control.kind == INT:
+        return int(round(value))
+    return value
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,8 @@
 imported. The page shows:
 
 * the executed shape in 3D (one mesh per program line, coloured by line as in the PNG pictures; orbit and
-  zoom), y up;
+  zoom), y up, framed by the camera when the page opens, after "Run text" and on reset (seen from the PNG
+  pictures' direction, the target included);
 * a target shape as a grey wireframe with the live corner distance to it (goal-directed mode);
 * one GUI control per free parameter (sliders for floats and counts, checkboxes, drop-downs), grouped by
   program line; moving one re-executes the program and replaces the geometry;
@@ -26,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from shapeio.editing import check_port, import_viser, viser_server
+from shapeedit import check_port, frame_box, import_viser, show_pose, viser_server
 
 from ..geometry import CORNER_SIGNS, mesh_arrays
-from ..picture import part_colors
-from .controls import BOOL, CHOICE, FLOAT, INT, Control
+from ..picture import VIEW_DIRECTION, part_colors
+from .controls import BOOL, FLOAT, INT, Control, page_value
 from .session import EditSession
 
 __all__ = ["EditorApp", "cuboid_edges"]
@@ -101,6 +102,7 @@ class EditorApp:
         with self.lock:
             self._rebuild_controls()
             self._draw(highlight=())
+            self.frame()
 
     # -- page parts that never change
     def _build_static(self) -> None:
@@ -202,10 +204,7 @@ class EditorApp:
         with self.lock:
             t0 = time.perf_counter()
             c = self._controls.get(name)
-            if c is not None and c.kind == FLOAT:
-                value = round(float(value), 9)  # a browser slider's 0.30000000000000004
-            elif c is not None and c.kind == INT:
-                value = int(round(value))
+            value = page_value(c, value)  # a browser slider's 0.30000000000000004; NaN is left for the check
             ok = self.session.set({name: value})
             if not ok:
                 self._sync_values()
@@ -238,8 +237,26 @@ class EditorApp:
         return self._step(self.session.redo)
 
     def reset(self) -> bool:
-        """The Reset button: back to the program as opened (undoable)."""
-        return self._step(self.session.reset)
+        """The Reset button: back to the program as opened (undoable), framed again."""
+        with self.lock:
+            done = self._step(self.session.reset)
+            self.frame()
+            return done
+
+    def frame(self) -> None:
+        """Point the view at the shape and the target (their cuboids' bounding box; a unit box when there is
+        no geometry), from the PNG pictures' direction, for new pages, "Reset View" and the pages open now."""
+        s = self.session
+        corners = [x.corners.detach().reshape(-1, 3).numpy() for x in (s.shape, s.target)
+                   if x is not None and len(x)]
+        if corners:
+            points = np.concatenate(corners)
+            low, high = points.min(0), points.max(0)
+        else:
+            low, high = np.full(3, -0.5), np.full(3, 0.5)
+        pose = frame_box(low, high, direction=VIEW_DIRECTION, up=(0, 1, 0))
+        show_pose(self.server, pose)
+        self.state["camera"] = pose
 
     def export(self) -> list[Path]:
         """The Export button: text, OBJ and PNG as new files in the export folder (the page shows their names
@@ -266,6 +283,7 @@ class EditorApp:
             if self.session.set_text(self.text_box.value):
                 self._rebuild_controls()
                 self._draw(highlight=())
+                self.frame()
                 return True
             self._show()
             return False

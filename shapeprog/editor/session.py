@@ -26,8 +26,8 @@ from typing import Mapping
 
 import torch
 
+from shapeedit import History, UndoableSession, export_stem
 from shapeio.files import write_new_set
-from shapeio.editing import History, UndoableSession
 
 from .. import corpus
 from ..errors import EditError, ExecutionError, ParseError
@@ -143,12 +143,12 @@ class EditSession(UndoableSession):
         shape: the current geometry (:class:`~shapeprog.execute.ExecutedShape`; None without a program).
         error: the error of the last operation (None when it succeeded); the page shows it.
         target: the target geometry of goal-directed editing (None without one).
-        history: the undo / redo :class:`~shapeio.editing.History` of states.
+        history: the undo / redo :class:`~shapeedit.History` of states.
     """
 
     def __init__(self, text: str, file: str = "<string>", library=None, name: str | None = None):
         self.file, self.library = file, library
-        self.name = re.sub(r"[^A-Za-z0-9_.-]+", "_", name or str(Path(file).with_suffix("")).strip("/")) or "program"
+        self.name = export_stem(name or str(Path(file).with_suffix("")).strip("/"), "program")
         self.error: Exception | None = None
         self.target: ExecutedShape | None = None
         self._controls: dict = {}

@@ -14,6 +14,7 @@ MODULES = [
     "fuzz.pointcloud_targets",
     "fuzz.shapecoder_targets",
     "fuzz.editor_targets",
+    "fuzz.editor_message_targets",
     "fuzz.file_targets",
     "fuzz.library_targets",
 ]

@@ -2,7 +2,7 @@ import os
 
 import pytest
 
-from shapeio import atomic_write
+from shapeio import atomic_write, write_new
 
 
 def test_write_is_atomic_on_failure(tmp_path):
@@ -151,3 +151,21 @@ def test_defect_held_checks_pickles_refused_outputs_never_overwritten_umask_resp
     finally:
         os.umask(old)
     assert mode_new == mode_atomic == 0o640
+
+
+def test_write_new(tmp_path):
+    p = write_new(tmp_path / "a.txt", "one\n")
+    assert p.read_text() == "one\n" and sorted(os.listdir(tmp_path)) == ["a.txt"]
+    with pytest.raises(FileExistsError, match="a.txt: the file exists"):
+        write_new(tmp_path / "a.txt", "two\n")
+    assert p.read_text() == "one\n" and sorted(os.listdir(tmp_path)) == ["a.txt"]  # no temporary file left
+    write_new(tmp_path / "b.bin", lambda f: f.write(b"\x00\x01"))
+    assert (tmp_path / "b.bin").read_bytes() == b"\x00\x01"
+    (tmp_path / "link").symlink_to(tmp_path / "missing")
+    with pytest.raises(FileExistsError):  # a dangling link is a file name in use
+        write_new(tmp_path / "link", "x")
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        write_new(tmp_path / "no" / "c.txt", "x")
+    with pytest.raises(RuntimeError):
+        write_new(tmp_path / "d.txt", lambda f: (_ for _ in ()).throw(RuntimeError("writer failed")))
+    assert not (tmp_path / "d.txt").exists() and not [n for n in os.listdir(tmp_path) if n.endswith(".tmp")]

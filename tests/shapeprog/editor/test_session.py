@@ -1,4 +1,4 @@
-"""shapeprog.editor.session and shapeio.editing: undo / redo invariants, failed edits keeping the last good
+"""shapeprog.editor.session and shapeedit: undo / redo invariants, failed edits keeping the last good
 geometry, parse errors at open, plan reuse equal to fresh execution, target distance, exports."""
 import random
 
@@ -8,7 +8,7 @@ import torch
 from PIL import Image
 
 from shapeio import write_new
-from shapeio.editing import History
+from shapeedit import History
 from shapeprog import corpus
 from shapeprog.editor import EditSession, apply, controls, corner_distance
 from shapeprog.editor.controls import FLOAT
@@ -181,7 +181,7 @@ def test_importing_the_editor_does_not_import_viser():
     import subprocess
     import sys
 
-    code = ("import sys, shapeprog, shapeprog.editor, shapeprog.editor.server, shapeio.editing; "
+    code = ("import sys, shapeprog, shapeprog.editor, shapeprog.editor.server, shapeedit, csgnet.editor, csgnet.editor.server; "
             "assert 'viser' not in sys.modules, 'viser imported'")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr

@@ -1,27 +1,22 @@
-"""What the two program editors (``shapeprog.editor``, ``csgnet.editor``) share: an undo / redo history
-of immutable states, and the lazy import of the browser library. Standard library only.
+"""The editors' web server: the lazy import of ``viser`` (the ``editor`` extra), the port check, a server
+that answers only this machine's pages (:func:`refused_request`), and the command's start and stop.
 
-Example:
-    >>> h = History("a")
-    >>> h.push("b"); h.push("c")
-    >>> h.undo(), h.undo(), h.can_undo
-    ('b', 'a', False)
-    >>> h.redo(), h.current
-    ('b', 'b')
-    >>> h.push("d"); h.can_redo   # a new state drops the redo branch
-    False
+Importing this module imports neither ``viser`` nor ``websockets``.
 """
 from __future__ import annotations
 
+import argparse
+import http
 import ipaddress
+import re
+import signal
 import threading
+import time
+import webbrowser
 from pathlib import Path
-from typing import Generic, TypeVar
 
-__all__ = ["EDITOR_EXTRA", "History", "MAX_HISTORY", "MAX_PORT", "UndoableSession", "check_port", "editor_preflight",
+__all__ = ["EDITOR_EXTRA", "MAX_PORT", "MAX_STEM_CHARS", "check_port", "editor_preflight", "export_stem",
            "import_viser", "port_argument", "refused_request", "serve_until_interrupted", "viser_server"]
-
-T = TypeVar("T")
 
 #: The optional extra that installs the editors' browser library.
 EDITOR_EXTRA = "editor"
@@ -54,8 +49,6 @@ def check_port(port) -> int:
 
 def port_argument(text: str) -> int:
     """An argparse type: a TCP port (:func:`check_port`)."""
-    import argparse
-
     try:
         return check_port(int(text))
     except ValueError:
@@ -105,8 +98,6 @@ def refused_request(host: str | None, origin: str | None) -> str | None:
 def _guarded(process_request):
     """A websockets ``process_request`` that answers 403 to a request :func:`refused_request` refuses, else
     hands it to ``process_request``."""
-    import http
-
     def one(request, name: str) -> str | None:  # a repeated header counts as a wrong one
         values = request.headers.get_all(name)
         return values[0] if len(values) == 1 else None if not values else "repeated"
@@ -153,119 +144,20 @@ def viser_server(host: str, port: int):
     return server
 
 
-#: States kept; the oldest are dropped beyond it (a slider drag pushes one state per move).
-MAX_HISTORY = 2000
+#: Characters an export's file stem keeps (a file name holds 255 bytes; ``_edit001.txt`` and the like follow).
+MAX_STEM_CHARS = 100
 
 
-class History(Generic[T]):
-    """A line of states with a cursor: :meth:`push` adds a state after the cursor (dropping the states
-    that :meth:`redo` could have brought back), :meth:`undo` and :meth:`redo` move the cursor.
+def export_stem(name: str, default: str) -> str:
+    """The stem of an editor's exported files from a name: runs of characters other than ASCII letters,
+    digits, ``_``, ``.`` and ``-`` become ``_``, at most :data:`MAX_STEM_CHARS` are kept, and ``default``
+    stands in for an empty result.
 
-    Invariants: ``current`` is always a pushed state (or the initial one); ``undo`` then ``redo`` returns
-    to the same state; at most ``limit`` states are kept.
-
-    Args:
-        initial: the first state.
-        limit: states kept (at least 1).
+    Example:
+        >>> export_stem("chair/173 (copy)", "program"), export_stem("", "csg"), len(export_stem("x" * 999, "p"))
+        ('chair_173_copy_', 'csg', 100)
     """
-
-    def __init__(self, initial: T, limit: int = MAX_HISTORY):
-        if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
-            raise ValueError(f"`limit` must be an int >= 1, got {limit!r}")
-        self._states: list[T] = [initial]
-        self._i = 0
-        self.limit = limit
-
-    @property
-    def current(self) -> T:
-        return self._states[self._i]
-
-    @property
-    def initial(self) -> T:
-        """The oldest state kept (the first one unless ``limit`` dropped it)."""
-        return self._states[0]
-
-    @property
-    def can_undo(self) -> bool:
-        return self._i > 0
-
-    @property
-    def can_redo(self) -> bool:
-        return self._i < len(self._states) - 1
-
-    def __len__(self) -> int:
-        return len(self._states)
-
-    def push(self, state: T) -> None:
-        """Make ``state`` the current state; the redo branch is dropped."""
-        del self._states[self._i + 1:]
-        self._states.append(state)
-        if len(self._states) > self.limit:
-            del self._states[: len(self._states) - self.limit]
-        self._i = len(self._states) - 1
-
-    def undo(self) -> T:
-        """Step back; returns the new current state. IndexError when there is nothing to undo."""
-        if not self.can_undo:
-            raise IndexError("nothing to undo")
-        self._i -= 1
-        return self.current
-
-    def redo(self) -> T:
-        """Step forward again; returns the new current state. IndexError when there is nothing to redo."""
-        if not self.can_redo:
-            raise IndexError("nothing to redo")
-        self._i += 1
-        return self.current
-
-
-class UndoableSession:
-    """Undo / redo / reset of an edit session over a :class:`History` of states.
-
-    A subclass keeps ``self.history`` (None while nothing valid was loaded) and ``self.error``, and defines
-    ``_sync()``, which sets its attributes from ``self.history.current``. Each move returns False when it
-    cannot be made; a move that is made clears ``error`` (the last operation succeeded).
-    """
-
-    history: "History | None"
-    error: "Exception | None"
-
-    def _sync(self) -> None:  # pragma: no cover - every subclass defines it
-        raise NotImplementedError
-
-    def _record(self, state) -> None:
-        """Make ``state`` current: the first state of a new history, or pushed onto the existing one."""
-        if self.history is None:
-            self.history = History(state)
-        else:
-            self.history.push(state)
-        self._sync()
-
-    def _moved(self) -> bool:
-        self._sync()
-        self.error = None
-        return True
-
-    def undo(self) -> bool:
-        """Step back (False when there is nothing to undo)."""
-        if self.history is None or not self.history.can_undo:
-            return False
-        self.history.undo()
-        return self._moved()
-
-    def redo(self) -> bool:
-        """Step forward again (False when there is nothing to redo)."""
-        if self.history is None or not self.history.can_redo:
-            return False
-        self.history.redo()
-        return self._moved()
-
-    def reset(self) -> bool:
-        """Back to the first state (an undoable step). False when already there."""
-        if self.history is None or self.history.current is self.history.initial:
-            return False
-        self.history.push(self.history.initial)
-        return self._moved()
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))[:MAX_STEM_CHARS] or default
 
 
 def editor_preflight(export_dir) -> str | None:
@@ -282,10 +174,6 @@ def editor_preflight(export_dir) -> str | None:
 def serve_until_interrupted(app, what: str, export_dir, open_browser: bool) -> int:
     """Print where the editor page of ``what`` is served, optionally open it in a browser, and keep it
     served until Ctrl-C; returns the exit status 0."""
-    import signal
-    import threading
-    import time
-
     if threading.current_thread() is threading.main_thread():
         # A parent process can hand SIGINT down ignored (SIG_IGN survives exec) or blocked (so does the signal
         # mask); Ctrl-C must stop the editor either way.
@@ -295,8 +183,6 @@ def serve_until_interrupted(app, what: str, export_dir, open_browser: bool) -> i
     try:  # an interrupt that comes while the address is still being printed ends it cleanly too
         print(f"editing {what} at {app.url} (exports go to {Path(export_dir).resolve()}); Ctrl-C stops", flush=True)
         if open_browser:
-            import webbrowser
-
             webbrowser.open(app.url)
         while True:
             time.sleep(3600)
