@@ -143,12 +143,10 @@ def test_a_fit_that_stops_early_is_reported_by_infer_and_the_cli(tmp_path, weigh
 
     fit_module = importlib.import_module("shapeprog.fit")  # the package's name `fit` is the function
 
-    class Breaking(fit_module.ExecutionPlan):
-        calls = 0
-
+    class Breaking(fit_module.ExecutionPlan):  # every fit's third execution fails (the default's polish too)
         def run(self, params):
-            Breaking.calls += 1
-            if Breaking.calls == 3:
+            self.calls = getattr(self, "calls", 0) + 1
+            if self.calls == 3:
                 raise ExecutionError("execution gives a non-finite cuboid (created by this line)", 10)
             return super().run(params)
 
@@ -158,7 +156,6 @@ def test_a_fit_that_stops_early_is_reported_by_infer_and_the_cli(tmp_path, weigh
     r = infer(pts, model=model, fit=True, fit_steps=5, stability=False, method="decode")
     assert r.fit_stopped.startswith(stop) and r.before is not None
     assert infer(pts, model=model, stability=False, method="decode").fit_stopped is None
-    Breaking.calls = 0
     src = tmp_path / "comp_pc.npy"
     np.save(src, pts)
     out = tmp_path / "out"
