@@ -42,9 +42,10 @@ def main(argv=None) -> int:
     for i in corpus.ids("chair", "val")[: args.shapes]:
         c = corpus_cloud("chair", i, 2048).astype(np.float64)
         clouds.append((c + rng.normal(0, 0.005, c.shape)) * 3.7 + np.array([1.0, -2.0, 0.5]))
-    infer(clouds[0], model=model, physics=False)  # warm-up
-    modes = {"decode": dict(physics=False), "+ metrics": dict(physics=True, stability=False),
-             "--fit": dict(fit=True, fit_steps=args.fit_steps, physics=True, stability=False),
+    infer(clouds[0], model=model, physics=False, method="decode")  # warm-up
+    modes = {"decode": dict(method="decode", physics=False),
+             "+ metrics": dict(method="decode", physics=True, stability=False),
+             "--fit": dict(method="decode", fit=True, fit_steps=args.fit_steps, physics=True, stability=False),
              "--search": dict(search=True, physics=False),
              "--search --fit": dict(search=True, fit=True, fit_steps=args.fit_steps, physics=True, stability=False)}
     print(f"# {platform.processor() or platform.machine()}, torch {torch.__version__}, {args.threads} thread(s), "

@@ -77,7 +77,8 @@ def main(argv=None) -> int:
                 target = torch.from_numpy(clean)
                 c0 = time.process_time()
                 try:
-                    r = infer(x, model=model, physics=False, seed=args.seed, search=schedule is not None,
+                    r = infer(x, model=model, physics=False, seed=args.seed, method="decode",
+                              search=schedule is not None,
                               search_schedule=schedule, retrieval=index if k > 0 else None,
                               retrieval_candidates=max(k, 1))
                 except ValueError:

@@ -32,6 +32,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
@@ -53,9 +54,11 @@ from .data import TRAIN_POINTS
 from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
 
-__all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MAX_DIAGONAL", "MIN_DIAGONAL", "MIN_POINTS", "PRETRAINED",
-           "RETRIEVAL_CANDIDATES", "CloudModel", "Inference", "align_program", "cloud_corners", "decode_codes", "infer",
-           "load_encoder", "load_model", "load_pretrained", "shape_metrics", "text_unit"]
+__all__ = ["DEFAULT_METHOD", "ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MAX_DIAGONAL", "METHODS", "MIN_DIAGONAL",
+           "MIN_POINTS", "POLISH_STEPS", "PRETRAINED", "RETRIEVAL_CANDIDATES", "ROBUST_CANDIDATES", "ROBUST_SUBSETS",
+           "SELECT_POINTS", "UP_CANDIDATES", "UP_RATIO", "CloudModel", "Inference", "UpAxisWarning", "align_program", "cloud_corners", "decode_codes",
+           "default_index", "infer", "load_encoder", "load_model", "load_pretrained", "orientation_scores", "selection_scores",
+           "shape_metrics", "text_unit"]
 
 #: Fewest points :func:`infer` takes.
 MIN_POINTS = 16
@@ -76,6 +79,34 @@ FSCORE_THRESHOLD = 0.03
 RETRIEVAL_CANDIDATES = 16
 #: Surface samples of the result for the metrics.
 METRIC_POINTS = 10_000
+#: What :func:`infer` does: ``"robust"`` (candidates from several encoder subsets and the retrieval index, the one
+#: closest to the input kept, then a short polish) or ``"decode"`` (the papers' single decode of one subset's code,
+#: the protocol of the tables; ``search=`` and ``retrieval=`` extend it).
+METHODS = ("robust", "decode")
+#: The method of a call that names none (and asks for neither ``search`` nor ``retrieval``).
+DEFAULT_METHOD = "robust"
+#: Encoder subsets of ``ENCODER_POINTS`` points each, drawn and decoded by the robust method (one batch).
+ROBUST_SUBSETS = 4
+#: Training programs nearest to the cloud (the index's coarse stage) that compete in the robust method.
+ROBUST_CANDIDATES = 16
+#: Points of the input, and surface samples of each candidate, in the robust method's selection score.
+SELECT_POINTS = 2048
+#: Fitting steps of the robust method's final polish (kept only when it improves the selection score), and the
+#: surface samples and input points of each step.
+POLISH_STEPS, POLISH_SAMPLES = 10, 1024
+#: Up axes :func:`orientation_scores` compares (``up="auto"`` chooses among them).
+UP_CANDIDATES = ("y", "z", "x")
+#: Training programs per orientation in :func:`orientation_scores`.
+UP_SHORTLIST = 4
+#: :func:`infer` warns when another orientation's chamfer distance to its nearest training shapes is below this
+#: share of the kept program's chamfer distance to the cloud. On the first 8 test chairs the right orientation's
+#: nearest training cloud was at most 0.61 times as far as either wrong one's (chamfer 58-124 x1000 against
+#: 173-243); a z-up box chair read y-up: 0.32.
+UP_RATIO = 0.7
+
+
+class UpAxisWarning(UserWarning):
+    """The cloud matches the category's shapes clearly better with another up axis than the one given."""
 #: The weights files shipped under ``shapeprog/weights`` (docs/benchmarks.md names the command of each).
 PRETRAINED = {"chair": "pointcloud_e2e_chair.pt", "table": "pointcloud_e2e_table.pt",
               "storage": "pointcloud_e2e_storage.pt"}
@@ -357,6 +388,13 @@ class Inference:
             numbers before it are kept).
         unit: the input length of one unit of :attr:`text`, a power of ten (:func:`text_unit`; 1 for an input
             whose bounding-box diagonal is 0.63 to 6.3).
+        robust: with the robust method: ``decoded`` (candidates decoded from the subsets' codes, and the search's),
+            ``retrieved`` (training programs), ``scores`` (each candidate's ``[fscore, cd]`` against the selection
+            points, decoded ones first), ``chosen`` (the kept training program's corpus name, or None for a decoded
+            one), ``score`` (the kept candidate's) and ``polished`` (the score after the polish when it was kept,
+            else None); else None.
+        up_scores: ``{up: chamfer distance}`` of :func:`orientation_scores` when the up axis was checked or chosen
+            (``up="auto"``); else None. :attr:`transform` names the up axis used.
     """
 
     program: Program
@@ -374,6 +412,8 @@ class Inference:
     retrieval: Optional[dict] = None
     fit_stopped: Optional[str] = None
     unit: float = 1.0
+    robust: Optional[dict] = None
+    up_scores: Optional[dict] = None
 
     def place(self, points):
         """Points of the executed :attr:`program` ``(..., 3)`` -> the input's frame."""
@@ -413,7 +453,9 @@ def _as_cloud(points) -> np.ndarray:
 def infer(points, category: str = "chair", fit: bool = False, model: Optional[CloudModel] = None, up: str = "y",
           fit_steps: int = FIT_STEPS, fit_lr: float = 5e-3, physics: bool = True, stability: bool = True,
           seed: int = 0, search: bool = False, search_schedule=None, retrieval=None,
-          retrieval_candidates: int = RETRIEVAL_CANDIDATES) -> Inference:
+          retrieval_candidates: Optional[int] = None, method: Optional[str] = None,
+          subsets: int = ROBUST_SUBSETS, polish_steps: int = POLISH_STEPS, select: str = "fscore",
+          check_up: bool = True) -> Inference:
     """A ShapeAssembly program for a point cloud.
 
     Args:
@@ -421,7 +463,9 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         category: the shipped model to use (``model`` overrides it).
         fit: polish the decoded program's continuous numbers against the cloud (the structure is kept).
         model: a :class:`CloudModel` (default: :func:`load_pretrained` of ``category``).
-        up: the input's up axis (:data:`shapeprog.pointcloud.normalize.UP_AXES`).
+        up: the input's up axis (:data:`shapeprog.pointcloud.normalize.UP_AXES`), or ``"auto"``: the axis of
+            :data:`UP_CANDIDATES` whose orientation matches the category's training shapes best
+            (:func:`orientation_scores`).
         fit_steps, fit_lr: Adam steps and learning rate of the polish.
         physics: compute ``rooted`` (and ``stable``) of the result; ``stability``: also the stability test
             (about 0.5 s).
@@ -438,7 +482,23 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
             stage compete with the decoded (or searched) program, and the one of lowest selection chamfer to
             the input is kept (:func:`~shapeprog.pointcloud.search.selection_chamfers`; the decoded program wins
             ties). Ours, not the papers'; default None (no retrieval).
-        retrieval_candidates: training programs scored with ``retrieval`` (at least 1).
+        retrieval_candidates: training programs scored with ``retrieval`` (at least 1; default
+            :data:`RETRIEVAL_CANDIDATES`, or :data:`ROBUST_CANDIDATES` with the robust method).
+        method: ``"robust"`` or ``"decode"`` (:data:`METHODS`). None: ``"decode"`` when ``search`` or
+            ``retrieval`` is given, else :data:`DEFAULT_METHOD`. The robust method encodes ``subsets`` random
+            subsets of the cloud, decodes their codes, lets them compete with the ``retrieval_candidates`` (default
+            :data:`ROBUST_CANDIDATES`) training programs nearest to the cloud (``retrieval``, default
+            :func:`default_index` of the model's category; 0: none) by :func:`selection_scores` against
+            :data:`SELECT_POINTS` points of the input (``select``: ``"fscore"``, chamfer breaking ties, or
+            ``"chamfer"``), and polishes the kept program with ``polish_steps`` fitting steps, kept only when
+            they improve its score (``search=True`` adds the latent search around the best decoded code).
+            ``.robust`` records the candidates' scores and what was kept.
+        subsets, polish_steps, select: the robust method's settings (above).
+        check_up: with the robust method and a given ``up``, score the other orientations of
+            :data:`UP_CANDIDATES` too (:func:`orientation_scores`) and warn (:class:`UpAxisWarning`, one line
+            naming ``up=`` and the CLI's ``--up``) when one matches the training shapes by more than
+            the factor :data:`UP_RATIO` nearer in chamfer distance than the kept program is to the cloud;
+            ``.up_scores`` records the chamfer distances.
 
     Returns:
         An :class:`Inference`.
@@ -451,12 +511,31 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     """
     if search_schedule is not None and not search:
         raise ValueError("search_schedule is given but search is False: pass search=True to use it")
+    if method is None:
+        method = "decode" if (search or retrieval is not None) else DEFAULT_METHOD
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
     x = _as_cloud(points)
+    model = load_pretrained(category) if model is None else model
+    up_scores = None
+    if up == "auto":
+        index = retrieval if retrieval is not None else default_index(model.category)
+        up_scores = orientation_scores(x, index, seed)
+        up = min(UP_CANDIDATES, key=lambda u: (up_scores[u], UP_CANDIDATES.index(u)))
     try:
         unit, t = normalize(x, up=up)
     except ValueError as e:
         raise PointCloudError(str(e), "points") from None
-    model = load_pretrained(category) if model is None else model
+    if method == "robust":
+        k = ROBUST_CANDIDATES if retrieval_candidates is None else retrieval_candidates
+        r = _robust(x, unit, t, model, fit, fit_steps, fit_lr, physics, stability, seed, search, search_schedule,
+                    retrieval, k, subsets, polish_steps, select)
+        if up_scores is None and check_up:
+            up_scores = _check_up(x, r, up, retrieval if retrieval is not None else default_index(model.category),
+                                  seed)
+        r.up_scores = up_scores
+        return r
+    retrieval_candidates = RETRIEVAL_CANDIDATES if retrieval_candidates is None else retrieval_candidates
     if retrieval is not None:
         _check_retrieval(retrieval, retrieval_candidates, model)
     rng = np.random.default_rng(int(seed))
@@ -514,6 +593,53 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
                         generator=g)
         canon, fit_stopped = r.program, r.stopped
         seconds["fit"] = time.perf_counter() - t1
+    return _finish(canon, off, t, target, seed, physics, stability, seconds, before=before, search=searched,
+                   macro_text=macro_text, retrieval=retrieved, fit_stopped=fit_stopped, up_scores=up_scores)
+
+
+def _check_up(x: np.ndarray, r: Inference, up: str, index, seed: int) -> dict:
+    """Warn (:class:`UpAxisWarning`) when another orientation of :data:`UP_CANDIDATES` brings the cloud nearer to
+    the training shapes than the robust method's kept program is with ``up``, by the factor :data:`UP_RATIO` in
+    chamfer distance; the chamfer distances, ``up``'s being the kept program's."""
+    others = tuple(u for u in UP_CANDIDATES if u != up)
+    scores = orientation_scores(x, index, seed, others)
+    scores[up] = (r.robust["polished"] or r.robust["score"])[1]
+    best = min(scores, key=lambda u: scores[u])
+    if scores[best] < UP_RATIO * scores[up]:
+        warnings.warn(f"the cloud matches the training shapes far better with up={best!r} than with up={up!r} "
+                      f"(chamfer x1000 {1000 * scores[best]:.0f} against {1000 * scores[up]:.0f}): pass up={best!r} "
+                      f"(command line: --up {best})", UpAxisWarning, stacklevel=3)
+    return scores
+
+
+def orientation_scores(points, index, seed: int = 0, ups=UP_CANDIDATES) -> dict:
+    """How well a cloud matches a category's training shapes with each up axis of :data:`UP_CANDIDATES`:
+    ``{up: chamfer}`` for each of ``ups``, the smallest :func:`selection_scores` chamfer distance of the
+    :data:`UP_SHORTLIST` training clouds of
+    ``index`` that its coarse stage puts nearest to the cloud normalised with that ``up`` (:data:`SELECT_POINTS`
+    points drawn with ``seed``). A chair lying on its back matches no training chair well; standing, it matches
+    some closely.
+
+    Args:
+        points: ``(N, 3)`` float, the cloud in its own frame.
+        index: a :class:`~shapeprog.pointcloud.retrieval.RetrievalIndex`.
+        seed: the draw of the points.
+    """
+    x = np.asarray(points, dtype=np.float64)
+    pick = np.random.default_rng(int(seed)).permutation(len(x))[:SELECT_POINTS]
+    out = {}
+    for up in ups:
+        unit, _ = normalize(x[pick], up=up)
+        target = torch.from_numpy(unit)
+        refs = [index.reference_cloud(m.id)[:SELECT_POINTS] for m in index.shortlist(target, UP_SHORTLIST)]
+        out[up] = min(cd for _, cd in selection_scores(refs, target))
+    return out
+
+
+def _finish(canon: Program, off: np.ndarray, t: Transform, target: torch.Tensor, seed: int, physics: bool,
+            stability: bool, seconds: dict, **fields) -> Inference:
+    """The :class:`Inference` of the kept program ``canon`` (canonical frame, executed points + ``off`` on the
+    normalised cloud ``target``): its metrics, and the program mapped back to the input's scale and frame."""
     t2 = time.perf_counter()
     metrics = shape_metrics(_corners_of(canon) + torch.from_numpy(off).float(), target, seed=seed,
                             physics=physics, stability=stability)
@@ -523,8 +649,143 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     rotation = t.rotation
     # canonical p -> input: (p / scale) @ rotation + center; the text's points are p_text = p_canon_exec / (scale * unit)
     offset = np.asarray(t.center) + (off / t.scale) @ rotation
-    return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics, before,
-                     seconds, searched, macro_text, retrieved, fit_stopped, length)
+    return Inference(program_in, to_text(program_in, decimals=3), offset, rotation, canon, off, t, metrics,
+                     seconds=seconds, unit=length, **fields)
+
+
+@functools.lru_cache(maxsize=3)
+def default_index(category: str):
+    """The retrieval index of the robust method for ``category``: the corpus train split's programs, sampled once
+    and kept in the on-disk cache (:meth:`~shapeprog.pointcloud.retrieval.RetrievalIndex.from_corpus`; the first
+    call per machine takes about a minute for chairs, later processes read it in about half a second), one per
+    process."""
+    from .retrieval import RetrievalIndex
+
+    return RetrievalIndex.from_corpus(category)
+
+
+def selection_scores(clouds, target: torch.Tensor, threshold: float = FSCORE_THRESHOLD) -> list:
+    """``[fscore, cd]`` of each candidate cloud ``(M_i, 3)`` (None: no shape, scored ``[0, inf]``) against
+    ``target`` ``(N, 3)``: the F-score at ``threshold`` (0-100) and the chamfer distance (unsquared, both
+    directions, as :func:`shapeprog.metrics.chamfer` with ``eps = 0``), by k-d trees in float64."""
+    from scipy.spatial import cKDTree
+
+    tgt = np.asarray(torch.as_tensor(target, dtype=torch.float64))
+    tree = cKDTree(tgt)
+    out = []
+    for c in clouds:
+        if c is None or len(c) == 0:
+            out.append([0.0, math.inf])
+            continue
+        p = np.asarray(torch.as_tensor(c, dtype=torch.float64))
+        d_pt = tree.query(p, k=1)[0]
+        d_tp = cKDTree(p).query(tgt, k=1)[0]
+        prec, rec = 100.0 * float(np.mean(d_pt < threshold)), 100.0 * float(np.mean(d_tp < threshold))
+        f = 2 * prec * rec / (prec + rec + 1e-8)
+        out.append([f, float(d_pt.mean() + d_tp.mean())])
+    return out
+
+
+def _robust(x, unit, t, model, fit, fit_steps, fit_lr, physics, stability, seed, search, search_schedule, index, k,
+            subsets, polish_steps, select) -> Inference:
+    """:func:`infer`'s robust method (see there)."""
+    from .search import aligned_corners
+
+    if isinstance(subsets, bool) or not isinstance(subsets, int) or subsets < 1:
+        raise ValueError(f"subsets must be an integer >= 1, got {subsets!r}")
+    if isinstance(polish_steps, bool) or not isinstance(polish_steps, int) or polish_steps < 0:
+        raise ValueError(f"polish_steps must be an integer >= 0, got {polish_steps!r}")
+    if select not in ("fscore", "chamfer"):
+        raise ValueError(f"select must be 'fscore' or 'chamfer', got {select!r}")
+    t0 = time.perf_counter()
+    if k != 0:  # 0: no training program competes
+        index = default_index(model.category) if index is None else index
+        _check_retrieval(index, k, model)
+    rng = np.random.default_rng(int(seed))
+    replace = len(unit) < ENCODER_POINTS
+    picks = [np.sort(rng.choice(len(unit), size=ENCODER_POINTS, replace=replace)) for _ in range(subsets)]
+    clouds = torch.from_numpy(np.stack([unit[p] for p in picks]).astype(np.float32))
+    codes = model.codes(clouds)
+    g = torch.Generator().manual_seed(int(seed))
+    target = torch.from_numpy(unit)
+    if len(unit) > SELECT_POINTS:
+        target = target[torch.randperm(len(unit), generator=g)[:SELECT_POINTS]]
+
+    def sampled(programs):
+        out = []
+        for corners in aligned_corners(programs):
+            if corners is None:
+                out.append(None)
+                continue
+            with torch.no_grad():
+                out.append(sample_surface(corners, SELECT_POINTS, generator=torch.Generator().manual_seed(int(seed)))[0])
+        return out
+
+    key = (lambda s: (-s[0], s[1])) if select == "fscore" else (lambda s: (s[1], -s[0]))
+    programs = model.decode(codes)
+    all_codes = list(codes)
+    scores = selection_scores(sampled(programs), target)
+    if search:
+        from .search import SEARCH_SCHEDULE, check_schedule, parse_schedule
+
+        schedule = SEARCH_SCHEDULE if search_schedule is None else (
+            parse_schedule(search_schedule) if isinstance(search_schedule, str) else check_schedule(search_schedule))
+        best = min(range(len(scores)), key=lambda i: (key(scores[i]), i))
+        centre = codes[best]
+        for samples, sigma in schedule:
+            drawn = centre[None] + sigma * torch.randn(samples, centre.numel(), generator=g)
+            found = model.decode(drawn)
+            got = selection_scores(sampled(found), target)
+            programs += found
+            scores += got
+            all_codes += list(drawn)
+            best = min(range(len(scores)), key=lambda i: (key(scores[i]), i))
+            centre = all_codes[best] if best < len(all_codes) else centre
+    decoded = len(programs)
+    matches = index.shortlist(target, k) if k else []
+    scores += selection_scores([index.reference_cloud(m.id)[:SELECT_POINTS] for m in matches], target)
+    best = min(range(len(scores)), key=lambda i: (key(scores[i]), i))  # decoded programs first: they win ties
+    if not math.isfinite(scores[best][1]):
+        raise PointCloudError(f"the {model.category} model decoded no shape for this cloud and no training program "
+                              "was found", "points")
+    macro_text = None
+    if best < decoded:
+        program, chosen = programs[best], None
+        if model.layout is not None:
+            macro = model.decode_macros(all_codes[best][None])[0]
+            macro_text = None if macro is None else macro.text
+    else:
+        program, chosen = matches[best - decoded].program(), matches[best - decoded].name
+    canon, off = align_program(program)
+    record = {"decoded": decoded, "retrieved": len(matches), "scores": scores, "chosen": chosen,
+              "score": scores[best], "polished": None}
+    seconds = {"select": time.perf_counter() - t0}
+    tf = torch.from_numpy(off).float()
+    if polish_steps > 0:
+        t1 = time.perf_counter()
+        r = fit_program(canon, target.float() - tf, steps=polish_steps, lr=fit_lr, samples=POLISH_SAMPLES,
+                        target_samples=POLISH_SAMPLES, generator=torch.Generator().manual_seed(int(seed)))
+        corners = _corners_of(r.program)
+        polished = [0.0, math.inf]
+        if len(corners):
+            with torch.no_grad():
+                pts = sample_surface(corners.double() + torch.from_numpy(off), SELECT_POINTS,
+                                     generator=torch.Generator().manual_seed(int(seed)))[0]
+            polished = selection_scores([pts], target)[0]
+        if key(polished) < key(scores[best]):  # in the same frame (+ off) as the candidates were scored
+            canon, record["polished"] = r.program, polished
+        seconds["polish"] = time.perf_counter() - t1
+    full = torch.from_numpy(unit)
+    before = fit_stopped = None
+    if fit:
+        t1 = time.perf_counter()
+        before = shape_metrics(_corners_of(canon) + tf, full, seed=seed, physics=physics, stability=stability)
+        r = fit_program(canon, full.float() - tf, steps=fit_steps, lr=fit_lr,
+                        generator=torch.Generator().manual_seed(int(seed)))
+        canon, fit_stopped = r.program, r.stopped
+        seconds["fit"] = time.perf_counter() - t1
+    return _finish(canon, off, t, full, seed, physics, stability, seconds, before=before, macro_text=macro_text,
+                   fit_stopped=fit_stopped, robust=record)
 
 
 def _check_retrieval(index, k, model) -> None:

@@ -141,14 +141,15 @@ def _shape_job(job) -> dict:
             errors[name] = str(e)
 
     try:
-        plain = infer(x, model=model, physics=False, seed=seed)
+        plain = infer(x, model=model, physics=False, seed=seed, method="decode")  # the papers' single decode
     except ValueError as e:  # no shape decoded: every row that starts from the decoded program fails for this shape
         plain = None
         out.update({r: empty() for r in ("model", "opt_program", "opt_cuboids")})
         errors.update({r: str(e) for r in ("model", "opt_program", "opt_cuboids")})
     if plain is not None:
         out["model"] = shape_metrics(back(plain.corners()), target, seed=seed, stability=stability)
-        row("opt_program", lambda: infer(x, model=model, fit=True, fit_steps=steps, physics=False, seed=seed).corners())
+        row("opt_program", lambda: infer(x, model=model, fit=True, fit_steps=steps, physics=False, seed=seed,
+                                         method="decode").corners())
 
         def free_cuboids():
             unit = torch.from_numpy(plain.transform.apply(x))

@@ -67,7 +67,7 @@ def test_the_shortlist_is_ordered_by_the_coarse_estimate_and_starts_with_the_sha
 def test_the_kept_program_is_the_candidate_closest_to_the_input(model, index):
     shape = TRAIN[4]
     cloud = corpus_cloud("chair", shape, n_points=3000).astype(np.float64)
-    plain = infer(cloud, model=model, physics=False)
+    plain = infer(cloud, model=model, physics=False, method="decode")
     r = infer(cloud, model=model, physics=False, retrieval=index, retrieval_candidates=3)
     v = r.retrieval
     assert plain.retrieval is None and v["candidates"] == 3 and "retrieval" in r.seconds
@@ -109,7 +109,7 @@ def test_a_decoded_program_that_is_closer_is_kept(model, monkeypatch):
     monkeypatch.setattr(model, "decode", lambda codes: [own for _ in range(len(codes))])
     r = infer(cloud, model=model, physics=False, retrieval=others, retrieval_candidates=9)
     assert r.retrieval["chosen"] is None and r.retrieval["cd"] == r.retrieval["decoded_cd"]
-    assert to_text(r.canonical) == to_text(infer(cloud, model=model, physics=False).canonical)
+    assert to_text(r.canonical) == to_text(infer(cloud, model=model, physics=False, method="decode").canonical)
 
 
 def test_an_index_that_does_not_fit_the_model_is_refused(model, index):

@@ -42,8 +42,8 @@ def test_the_package_name_is_the_function():
 def test_a_moved_and_scaled_cloud_gives_the_same_program_mapped_back(model):
     cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
     k, b = 7.5, np.array([10.0, -3.0, 0.5])
-    r1 = infer(cloud, model=model, physics=False)
-    r2 = infer(torch.from_numpy(cloud * k + b), model=model, physics=False)
+    r1 = infer(cloud, model=model, physics=False, method="decode")
+    r2 = infer(torch.from_numpy(cloud * k + b), model=model, physics=False, method="decode")
     assert to_text(r1.canonical) == to_text(r2.canonical)
     # the text is at the input's scale, the offset puts it in place
     assert np.allclose(r2.corners(), r1.corners() * k + b, atol=1e-3 * k)
@@ -55,7 +55,7 @@ def test_a_moved_and_scaled_cloud_gives_the_same_program_mapped_back(model):
 
 def test_the_result_spans_the_clouds_bounding_box(model):
     cloud = corpus_cloud("chair", CHAIR, n_points=3000) * 3.0
-    r = infer(cloud, model=model, physics=False)
+    r = infer(cloud, model=model, physics=False, method="decode")
     c = r.corners().reshape(-1, 3)
     lo, hi = cloud.min(0), cloud.max(0)
     assert np.linalg.norm(c.max(0) - c.min(0)) == pytest.approx(np.linalg.norm(hi - lo), rel=1e-3)
@@ -72,9 +72,9 @@ def test_align_program_scales_to_the_diagonal():
 
 def test_fitting_improves_the_chamfer_distance_and_keeps_the_structure(model):
     cloud = corpus_cloud("chair", CHAIR, n_points=3000)
-    r = infer(cloud, model=model, fit=True, fit_steps=30, physics=False)
+    r = infer(cloud, model=model, fit=True, fit_steps=30, physics=False, method="decode")
     assert r.before is not None and r.metrics["cd"] < r.before["cd"]
-    plain = infer(cloud, model=model, physics=False)
+    plain = infer(cloud, model=model, physics=False, method="decode")
     strip = lambda p: [type(s).__name__ for b in p.blocks for s in b.statements]  # noqa: E731
     assert strip(r.program) == strip(plain.program)
 
@@ -143,22 +143,19 @@ def test_a_fit_that_stops_early_is_reported_by_infer_and_the_cli(tmp_path, weigh
 
     fit_module = importlib.import_module("shapeprog.fit")  # the package's name `fit` is the function
 
-    class Breaking(fit_module.ExecutionPlan):
-        calls = 0
-
+    class Breaking(fit_module.ExecutionPlan):  # every fit's third execution fails (the default's polish too)
         def run(self, params):
-            Breaking.calls += 1
-            if Breaking.calls == 3:
+            self.calls = getattr(self, "calls", 0) + 1
+            if self.calls == 3:
                 raise ExecutionError("execution gives a non-finite cuboid (created by this line)", 10)
             return super().run(params)
 
     monkeypatch.setattr(fit_module, "ExecutionPlan", Breaking)
     stop = "step 2 of 5 undone and the fit stopped: line 10: execution gives a non-finite cuboid"
     pts = corpus.example_points("comp_pc.obj")
-    r = infer(pts, model=model, fit=True, fit_steps=5, stability=False)
+    r = infer(pts, model=model, fit=True, fit_steps=5, stability=False, method="decode")
     assert r.fit_stopped.startswith(stop) and r.before is not None
-    assert infer(pts, model=model, stability=False).fit_stopped is None
-    Breaking.calls = 0
+    assert infer(pts, model=model, stability=False, method="decode").fit_stopped is None
     src = tmp_path / "comp_pc.npy"
     np.save(src, pts)
     out = tmp_path / "out"
@@ -193,7 +190,7 @@ def test_the_shipped_models_on_the_real_clouds_at_any_scale_and_position():
     2026-11-27) and the table model the real table (83.8); a regression below 75 fails."""
     for name, category in (("simp_pc.obj", "chair"), ("comp_pc.obj", "table")):
         x = torch.from_numpy(corpus.example_points(name)).double()
-        r = infer(x, category=category, physics=False)
+        r = infer(x, category=category, physics=False, method="decode")
         assert r.metrics["fscore"] > 75, (name, r.metrics)
         moved = infer(7.5 * x + torch.tensor([3.0, -2.0, 0.5], dtype=torch.float64), category=category,
                       physics=False)
@@ -231,7 +228,7 @@ def test_each_shipped_model_loads_safely_and_infers(name):
     assert ("decoder" in payload) == (recipe == "e2e")
     shape = CHAIR if category == "chair" else corpus.ids(category, "val")[0]
     model = load_model(WEIGHTS / name, category)
-    r = infer(corpus_cloud(category, shape, n_points=3000), category, model=model, physics=False)
+    r = infer(corpus_cloud(category, shape, n_points=3000), category, model=model, physics=False, method="decode")
     assert r.text.startswith("Assembly Program_0 {") and 0.0 <= r.metrics["fscore"] <= 100.0
     assert (r.macro_text is not None) == macros
     if macros:  # the shipped macro model writes calls of the shipped ShapeMOD library of its category
@@ -257,8 +254,8 @@ def test_a_z_up_cloud_gives_the_same_program_in_its_own_frame(model):
     from shapeprog.pointcloud.normalize import Transform
     cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
     rot = Transform((0.0, 0.0, 0.0), 1.0, "z").rotation  # canonical = rot @ input
-    r_y = infer(cloud, model=model, physics=False)
-    r_z = infer(cloud @ rot, model=model, up="z", physics=False)
+    r_y = infer(cloud, model=model, physics=False, method="decode")
+    r_z = infer(cloud @ rot, model=model, up="z", physics=False, method="decode")
     assert to_text(r_y.canonical) == to_text(r_z.canonical)
     assert np.allclose(r_z.corners(), r_y.corners() @ rot, atol=1e-3)
 
@@ -267,7 +264,7 @@ def test_a_code_that_decodes_to_nothing_is_a_clear_error_naming_the_search(model
     cloud = corpus_cloud("chair", CHAIR, n_points=3000)
     monkeypatch.setattr(model, "decode", lambda codes: [None] * len(codes))
     with pytest.raises(ValueError, match="decoded no shape for this cloud; the latent search"):
-        infer(cloud, model=model, physics=False)
+        infer(cloud, model=model, physics=False, method="decode")
 
 
 def test_pointcloud_tables_never_write_over_the_weights(tmp_path, weights):

@@ -152,7 +152,7 @@ def test_schedules_parse_from_text():
 def test_infer_with_search_reports_it_and_keeps_the_frame(model):
     cloud = corpus_cloud("chair", CHAIR, n_points=3000).astype(np.float64)
     k, b = 4.0, np.array([1.0, 2.0, -3.0])
-    plain = infer(cloud, model=model, physics=False)
+    plain = infer(cloud, model=model, physics=False, method="decode")
     r = infer(cloud, model=model, physics=False, search=True, search_schedule=SHORT)
     moved = infer(cloud * k + b, model=model, physics=False, search=True, search_schedule=SHORT)
     assert r.search["decodes"] == 9 and r.search["cd"] <= r.search["start_cd"]
