@@ -6,6 +6,7 @@ import json
 import multiprocessing
 import sys
 import time
+import warnings
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -30,7 +31,8 @@ from ..picture import MAX_SIZE as MAX_PICTURE_SIZE
 from ..picture import render_grid
 from .data import cache_paths
 from .data import make_clouds
-from .infer import FSCORE_THRESHOLD, RETRIEVAL_CANDIDATES, cloud_corners, infer, load_model
+from .infer import (DEFAULT_METHOD, FSCORE_THRESHOLD, METHODS, POLISH_STEPS, RETRIEVAL_CANDIDATES, ROBUST_CANDIDATES,
+                    ROBUST_SUBSETS, SELECT_POINTS, UpAxisWarning, cloud_corners, infer, load_model)
 from .retrieval import RetrievalIndex
 from .search import parse_schedule
 from .tables import evaluate, write_tables
@@ -86,17 +88,30 @@ def cmd_infer(args) -> int:
     refuse_inputs(list(files.values()), [args.file])
     refuse_existing(files.values(), args.overwrite)
     points = read_cloud(src)
+    search = args.search or bool(args.search_schedule)
+    method = args.method or ("decode" if search or args.retrieval is not None else DEFAULT_METHOD)
     index = None
-    if args.retrieval is not None:
+    if args.retrieval is not None or (method == "robust" and args.clouds):
         index = retrieval_index(args.category if model is None else model.category, args.clouds)
     elif args.clouds:
-        raise SystemExit("error: --clouds is only used with --retrieval")
+        raise SystemExit("error: --clouds is only used with --retrieval or the robust method")
+    if method == "robust":
+        candidates = args.candidates if args.candidates is not None else (args.retrieval or ROBUST_CANDIDATES)
+    else:
+        candidates = args.retrieval or RETRIEVAL_CANDIDATES
     try:
         schedule = parse_schedule(args.search_schedule) if args.search_schedule else None
-        r = infer(points, args.category, fit=args.fit, model=model, up=args.up, fit_steps=args.steps,
-                  stability=not args.no_stability, seed=args.seed, search=args.search or schedule is not None,
-                  search_schedule=schedule, retrieval=index,
-                  retrieval_candidates=args.retrieval or RETRIEVAL_CANDIDATES)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UpAxisWarning)
+            r = infer(points, args.category, fit=args.fit, model=model, up=args.up, fit_steps=args.steps,
+                      stability=not args.no_stability, seed=args.seed, search=search, search_schedule=schedule,
+                      retrieval=index, retrieval_candidates=candidates, method=method, subsets=args.subsets,
+                      polish_steps=args.polish_steps, select=args.select, check_up=not args.no_up_check)
+        for w in caught:  # the up-axis hint as one line; other warnings as they came
+            if issubclass(w.category, UpAxisWarning):
+                print(f"warning: {src}: {w.message}", file=sys.stderr)
+            else:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     except PointCloudError as e:
         raise SystemExit(f"error: {src}: {e}") from None
     except ValueError as e:
@@ -128,6 +143,7 @@ def inference_files(r, points, src, model, files, args) -> list[tuple[Path, str 
               "fit": bool(args.fit), "points": int(len(points)), "unit": r.unit, "offset": r.offset.tolist(),
               "rotation": r.rotation.tolist(), "transform": r.transform.to_dict(), "metrics": r.metrics,
               "before_fit": r.before, "fit_stopped": r.fit_stopped, "search": r.search, "retrieval": r.retrieval,
+              "method": "robust" if r.robust is not None else "decode", "robust": r.robust, "up_scores": r.up_scores,
               "seconds": r.seconds,
               "macro_text": r.macro_text,
               "note": "the program's executed points p lie on the input at (p * unit) @ rotation + offset; metrics "
@@ -137,6 +153,12 @@ def inference_files(r, points, src, model, files, args) -> list[tuple[Path, str 
 
 
 def print_inference(r, files) -> int:
+    if r.robust is not None:
+        b = r.robust
+        kept = f"the training program {b['chosen']}" if b.get("chosen") else "a decoded program"
+        polish = "" if b.get("polished") is None else f", polished to F {b['polished'][0]:.1f}"
+        print(f"robust: {b['decoded']} decoded and {b['retrieved']} retrieved candidates; kept {kept} "
+              f"(F@{FSCORE_THRESHOLD:g} {b['score'][0]:.1f} against {SELECT_POINTS} input points{polish})")
     if r.search is not None:
         s = r.search
         start = "none" if s["start_cd"] is None else f"{1000 * s['start_cd']:.1f}"
@@ -259,7 +281,24 @@ def register(sub) -> None:
     i.add_argument("--clouds", metavar="DIR",
                    help="with --retrieval: a make-clouds folder whose training clouds make the index (else it is "
                         "sampled from the corpus, about 20 s for chairs)")
-    i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x"), help="the input's up axis")
+    i.add_argument("--method", choices=METHODS, default=None,
+                   help=f"robust (the default): {ROBUST_SUBSETS} encoder subsets decoded and the training programs "
+                        f"nearest to the cloud compete, the best against the input is kept and polished; decode: the "
+                        f"papers' single decode (the default when --search or --retrieval is given)")
+    i.add_argument("--subsets", type=int_at_least(1, 64), default=ROBUST_SUBSETS,
+                   help="robust method: encoder subsets decoded")
+    i.add_argument("--candidates", type=int_at_least(0, 1000), default=None,
+                   help=f"robust method: training programs that compete (0: none; default {ROBUST_CANDIDATES}; the "
+                        f"index is built from the corpus on the first run of a machine, then cached)")
+    i.add_argument("--polish-steps", type=int_at_least(0, 10_000), default=POLISH_STEPS,
+                   help="robust method: fitting steps of the final polish (kept only when it helps)")
+    i.add_argument("--select", choices=("fscore", "chamfer"), default="fscore",
+                   help="robust method: how candidates are compared with the input")
+    i.add_argument("--up", default="y", choices=("y", "z", "x", "-y", "-z", "-x", "auto"),
+                   help="the input's up axis; auto: the orientation closest to the category's training shapes")
+    i.add_argument("--no-up-check", action="store_true",
+                   help="robust method: do not compare the other up axes (a warning names --up when one fits "
+                        "clearly better)")
     i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
     i.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=256, help="picture cell size in pixels")
     i.add_argument("--seed", type=seed, default=0, help="seed of the point subsets")

@@ -137,8 +137,9 @@ def test_cli_retrieval_from_a_cache_prints_and_records_it(tmp_path, model, capsy
     assert "retrieval index: 5 chair training shapes" in out.err
     record = json.loads((tmp_path / "o" / "q.json").read_text())
     assert record["retrieval"]["candidates"] == 2 and record["retrieval"]["chosen"] == f"chair/{TRAIN[2]}"
-    with pytest.raises(SystemExit, match="--clouds is only used with --retrieval"):
-        main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--clouds", str(tmp_path / "c"), "--out", str(tmp_path / "p")])
+    with pytest.raises(SystemExit, match="--clouds is only used with --retrieval or the robust method"):
+        main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--method", "decode", "--clouds",
+              str(tmp_path / "c"), "--out", str(tmp_path / "p")])
     with pytest.raises(SystemExit, match="nowhere"):
         main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--retrieval", "--clouds", str(tmp_path / "nowhere"),
               "--out", str(tmp_path / "p")])

@@ -118,7 +118,7 @@ def test_cli_on_the_vendored_real_cloud_writes_four_files_and_never_overwrites(t
     src = tmp_path / "comp_pc.npy"
     np.save(src, corpus.example_points("comp_pc.obj"))
     out = tmp_path / "out"
-    args = ["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]
+    args = ["pointcloud", "infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]
     assert main(args + ["--fit", "--steps", "5"]) == 0
     printed = capsys.readouterr().out
     assert "before fitting: CD x1000" in printed and "after fitting:  CD x1000" in printed
@@ -129,7 +129,7 @@ def test_cli_on_the_vendored_real_cloud_writes_four_files_and_never_overwrites(t
     assert record["fit_stopped"] is None and "undone" not in printed
     parse((out / "comp_pc.txt").read_text())
     before = (out / "comp_pc.txt").read_bytes()
-    with pytest.raises(SystemExit, match=r"comp_pc.txt: exists \(4 of the outputs do\); the command never overwrites"):
+    with pytest.raises(SystemExit, match=r"comp_pc.txt: exists \(4 of the outputs do\); give --overwrite to replace them"):
         main(args)
     assert (out / "comp_pc.txt").read_bytes() == before
 

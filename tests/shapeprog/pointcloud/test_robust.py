@@ -151,3 +151,28 @@ def test_a_z_up_chair_is_detected_or_named_in_a_warning(model):
         right = infer(pts, model=model, physics=False)
     assert right.metrics["fscore"] > wrong.metrics["fscore"] + 15
     assert auto.metrics["fscore"] == pytest.approx(right.metrics["fscore"], abs=5)
+
+
+def test_the_command_line_runs_the_robust_method_and_prints_the_up_hint_on_one_line(tmp_path, capsys):
+    import json
+
+    import trimesh
+
+    from shapeprog.__main__ import main
+
+    pts, _ = trimesh.sample.sample_surface(box_chair(), 5000, seed=np.random.default_rng(0))
+    src = tmp_path / "zchair.npy"
+    np.save(src, pts @ Transform((0.0, 0.0, 0.0), 1.0, "z").rotation)
+    assert main(["pointcloud", "infer", str(src), "--no-stability", "--polish-steps", "0", "--out",
+                 str(tmp_path / "o")]) == 0
+    out, err = capsys.readouterr()
+    assert [ln for ln in err.splitlines() if ln.startswith("warning:")] == [
+        ln for ln in err.splitlines() if "--up z" in ln]
+    assert sum("--up z" in ln for ln in err.splitlines()) == 1
+    assert "robust: 4 decoded and " in out and "against 2048 input points" in out
+    record = json.loads((tmp_path / "o" / "zchair.json").read_text())
+    assert record["method"] == "robust" and record["robust"]["decoded"] == 4 and set(record["up_scores"]) >= {"y", "z"}
+    assert main(["pointcloud", "infer", str(src), "--up", "auto", "--method", "decode", "--no-stability", "--out",
+                 str(tmp_path / "d")]) == 0
+    record = json.loads((tmp_path / "d" / "zchair.json").read_text())
+    assert record["method"] == "decode" and record["robust"] is None and record["transform"]["up"] == "z"
