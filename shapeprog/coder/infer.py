@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass
 from importlib import resources
 from . import data
-from .discover import evaluate
+from .wake import evaluate
 from .execute import order
 from .lang import LANG_3D, Library, Num, expand, substitute, to_text
 from .objective import naive_program
@@ -78,7 +78,7 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
         passes: refactor calls at most, each on the previous one's program (each call is limited by
             ``iterations``, ``max_nodes``, ``time_limit``); stops at the first that does not lower the cost.
         network: a recognition network for ``library`` (:func:`load_network`, a ``(model, vocab)`` pair, or
-            a payload of :func:`shapeprog.coder.discover.network_payload`): the refactored program is then a
+            a payload of :func:`shapeprog.coder.wake.network_payload`): the refactored program is then a
             candidate of the network wake's search for the shape (the paper's post hoc inference), and the
             cheaper program is kept. seed: seeds that search.
         search_seconds, search_batches: the network search's budget per step: no new batch of
@@ -115,7 +115,7 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
             break
         best = (r.expr, got)
     if network is not None:
-        from .discover import network_best, network_payload
+        from .wake import network_best, network_payload
 
         payload = network if len(network) == 4 else network_payload(*network)
         limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values}

@@ -17,7 +17,7 @@ expressions that combines what every round found.
 rounds. :meth:`Store.replace` swaps a program's pieces for cheaper stored ones that cover the same
 primitives (the paper's combine variant iii) and :meth:`Store.rebuild` builds a program greedily from
 the stored expressions, cheapest per covered primitive first, without overlaps, the rest naive (variant
-iv). The discovery (:func:`shapeprog.coder.discover.wake` with a network) refactors these candidates with
+iv). The discovery (:func:`shapeprog.coder.wake.wake` with a network) refactors these candidates with
 the e-graph and keeps the cheapest.
 
 Example:

@@ -35,7 +35,8 @@ from shapeio.files import parse_json
 from ..errors import ParseError
 from ..limits import decode
 from . import data
-from .discover import Summary, evaluate, summarize
+from .discover import Summary, summarize
+from .wake import evaluate
 from .infer import PASSES, check_search_budget, infer, shipped_libraries
 from .lang import LANG_3D, Call, Library, parse, walk
 from .objective import naive_summary, omega
@@ -278,7 +279,7 @@ def phi(split: str, records: Sequence, library: Library, *, executor=None, itera
         raise ValueError(f"{split}: no shape with at most {library.lang.max_prims} primitives")
     payload = None
     if network is not None:
-        from .discover import network_payload
+        from .wake import network_payload
 
         payload = network_payload(*network)
     tasks = [(r.prims, library.to_text(), limits, payload, k, budget) for k, r in enumerate(kept)]

@@ -12,7 +12,8 @@ import egglog  # noqa: E402,F401  (a core dependency: a broken install fails her
 
 from shapeprog.errors import ParseError
 from shapeprog.coder import data
-from shapeprog.coder.discover import Config, discover, evaluate, start_from, summarize
+from shapeprog.coder.discover import Config, discover, start_from, summarize
+from shapeprog.coder.wake import evaluate
 from shapeprog.coder.execute import execute
 from shapeprog.coder.infer import infer, load_library, shipped_libraries
 from shapeprog.coder.lang import Call, Library, parse, parse_abstraction, to_text, walk

@@ -11,8 +11,8 @@ from shapeprog.coder.dream import dream  # noqa: E402
 from shapeprog.coder.execute import execute  # noqa: E402
 from shapeprog.coder.objective import match  # noqa: E402
 from shapeprog.coder.lang import Call, Library, ProgramError, parse, parse_abstraction, to_text, walk  # noqa: E402
-from shapeprog.coder.recnet import (MAX_TOKENS, NetConfig, RecognitionNet, Vocab, decode_tokens,  # noqa: E402
-                                    encode_scene, encode_target, load_checkpoint, sample, save_checkpoint)
+from shapeprog.coder.recnet import NetConfig, RecognitionNet, load_checkpoint, sample, save_checkpoint  # noqa: E402
+from shapeprog.coder.vocab import MAX_TOKENS, Vocab, decode_tokens, encode_scene, encode_target  # noqa: E402
 from shapeprog.coder.train import BUCKET_GROUP, TrainConfig, batch_loss, batches, tensorize, train  # noqa: E402
 
 LEGS = "SymRef(Move(Cuboid(0.06,0.5,0.06),-0.3,-0.25,-0.3),AX)"
@@ -199,7 +199,8 @@ def _planted_model():
 
 
 def test_wake_with_a_network_recovers_planted_symref_and_symtrans():
-    from shapeprog.coder.discover import Config, wake, wake_network
+    from shapeprog.coder.discover import Config
+    from shapeprog.coder.wake import wake, wake_network
     from shapeprog.coder.search import search_shape
 
     model, vocab, scene = _planted_model()
@@ -277,7 +278,7 @@ def test_discovery_defaults_train_with_the_papers_settings():
 
 def test_post_hoc_inference_with_the_shipped_network_is_never_dearer_and_re_covers_the_shape():
     from shapeprog.coder import data, tables
-    from shapeprog.coder.discover import evaluate
+    from shapeprog.coder.wake import evaluate
     from shapeprog.coder.infer import infer, load_library, load_network, shipped_networks
 
     assert "chair" in shipped_networks()
@@ -304,15 +305,15 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     from shapeprog.coder.infer import infer, load_library, load_network
     from shapeprog.coder.search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
-    discover = importlib.import_module("shapeprog.coder.discover")
+    wake = importlib.import_module("shapeprog.coder.wake")
     seen = []
-    real = discover.network_best
+    real = wake.network_best
 
     def spy(current, library, prims, payload, limits, search=None, seed=0):
         seen.append(dict(search))
         return real(current, library, prims, payload, limits, search={**search, "batches": 1}, seed=seed)
 
-    monkeypatch.setattr(discover, "network_best", spy)
+    monkeypatch.setattr(wake, "network_best", spy)
     lib, net = load_library("chair"), load_network("chair")
     rec = data.load("chair", "heldout")[1]
     infer(rec.prims, lib, network=net)
@@ -379,7 +380,7 @@ def test_targets_left_out_of_training_are_counted_by_kind():
     import pickle
     from collections import Counter
 
-    from shapeprog.coder.recnet import TargetError
+    from shapeprog.coder.vocab import TargetError
 
     vocab = Vocab.of(Library())
     prims = [(1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
