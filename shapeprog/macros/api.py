@@ -21,7 +21,8 @@ import numpy as np
 
 from ..lang import Program
 from ..lang import parse as parse_program
-from .data import SubProgram, convert_program
+from .data import convert_program
+from .subprogram import SubProgram
 from .discover import Nodes, nodes_from_subprograms
 from .grammar import to_shapeassembly
 from .lang import BASE, BOOL, CUBE, FLOAT, Call, MacroProgram, Name, to_text

@@ -170,7 +170,7 @@ class Nodes:
 
 
 def nodes_from_subprograms(subs, max_orders: int = 1000) -> Nodes:
-    """:class:`Nodes` from :class:`~shapeprog.macros.data.SubProgram` s (their first ``max_orders``
+    """:class:`Nodes` from :class:`~shapeprog.macros.subprogram.SubProgram` s (their first ``max_orders``
     orderings)."""
     keys, lines, sigs = [], [], []
     for s in subs:
