@@ -60,7 +60,7 @@ from .. import limits
 from ..errors import ParseError
 from ..lang import AXES, FACES
 from .grammar import BBOX, AttachLine, CuboidLine, Line, ReflectLine, SqueezeLine, TranslateLine
-from .nodes import (
+from .syntax import (
     AXIS, Arg, BASE, BB_DIMS, BOOL, CUBE, Call, FACE, FLOAT, FunctionInfo, INDENT, Linear, Literal,
     MAX_EXPANDED_LINES, MacroDef, MacroError, MacroProgram, Name, Param, TYPES, _check_calls, _check_name,
     check_def, check_program, def_text, to_text,
