@@ -23,7 +23,7 @@ from ..lang import Program
 from ..lang import parse as parse_program
 from .data import convert_program
 from .subprogram import SubProgram
-from .discover import Nodes, nodes_from_subprograms
+from .state import Nodes, nodes_from_subprograms
 from .grammar import to_shapeassembly
 from .lang import BASE, BOOL, CUBE, FLOAT, Call, MacroProgram, Name, to_text
 from .hierarchy import as_hierarchy, is_hierarchy_text
@@ -215,7 +215,7 @@ def expand(program, library: Library | None = None) -> Program:
 
 def collection(category: str, split: str = "all", limit: int | None = None, seed: int = 0,
                executor: Executor | None = None, max_orders: int = 1000) -> tuple[Nodes, list[int]]:
-    """The sub-programs of a corpus category as discovery :class:`~shapeprog.macros.discover.Nodes`.
+    """The sub-programs of a corpus category as discovery :class:`~shapeprog.macros.state.Nodes`.
 
     Args:
         category, split: the corpus programs.
