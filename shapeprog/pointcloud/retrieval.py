@@ -34,7 +34,8 @@ from .. import corpus
 from ..genmetrics import coarse_fields
 from ..lang import Program, parse
 from ..metrics import chamfer
-from .data import cloud_transforms, corpus_splits, load_cache, read_split, sample_clouds
+from .data import cloud_transforms, corpus_splits, sample_clouds
+from .dataset import load_cache, read_split
 from .normalize import CANONICAL_DIAGONAL, Transform, scale_program
 
 __all__ = ["INDEX_CANDIDATES", "INDEX_GRID", "INDEX_POINTS", "Match", "RetrievalIndex"]

@@ -40,7 +40,7 @@ from shapeio import atomic_write
 from ..geometry import CORNER_SIGNS
 from ..metrics import chamfer
 from ..sampling import sample_surface
-from .data import load_cache, read_split
+from .dataset import load_cache, read_split
 from .infer import FIT_STEPS, _corners_of, infer, load_model, shape_metrics
 from .retrieval import RetrievalIndex
 from .search import QUICK_SEARCH_SCHEDULE

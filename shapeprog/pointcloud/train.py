@@ -55,7 +55,8 @@ from ..vae.pretrained import load_model, load_pretrained
 from ..vae.train import (_corners, _read_macro_programs, check_data_category, load_macro_library, load_macro_trees,
                          load_trees, reconstruction_fscores, target_surfaces)
 from ..vae.vectors import VectorNode
-from .data import TRAIN_POINTS, CloudDataset, collate_clouds, read_split
+from .data import TRAIN_POINTS
+from .dataset import CloudDataset, collate_clouds, read_split
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
 from .infer import cloud_corners, decode_codes, load_encoder, load_model as load_cloud_model
 
