@@ -26,7 +26,7 @@ split; the cache's ``test`` split, the corpus's val split, is never read here). 
 programs' line-vector trees (:class:`~shapeprog.vae.batch.TreeBatch`) beside the clouds.
 
 Every ``recon_every_n_epochs`` epochs the validation logs ``val/fscore`` (decoded programs against the target
-programs, :func:`shapeprog.vae.train.reconstruction_fscores`) and an image grid ``val/clouds`` (each input
+programs, :func:`shapeprog.vae.reconstruct.reconstruction_fscores`) and an image grid ``val/clouds`` (each input
 cloud drawn as small cubes beside its decoded shape). ``python train.py fit --config
 configs/pointcloud/latent_chair.yaml`` runs it; ``--ckpt_path last`` resumes. :func:`export_weights` writes
 the small weights file :mod:`shapeprog.pointcloud.infer` loads.
@@ -45,15 +45,16 @@ from torch.utils.data import DataLoader, Dataset
 from shapeio import atomic_write
 
 from ..picture import render_grid
-from ..vae.batch import (BatchOutput, MacroTreeBatch, TreeBatch, batch_loss, decode_batch, encode_batch,
-                         macro_batch_loss)
+from ..vae.batch import BatchOutput, TreeBatch, batch_loss, decode_batch, encode_batch
+from ..vae.macro_batch import MacroTreeBatch, macro_batch_loss
 from ..vae.layout import LineLayout
 from ..vae.losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
 from ..vae.macro_model import MacroVAE
 from ..vae.model import VAE
 from ..vae.pretrained import load_model, load_pretrained
-from ..vae.train import (_corners, _read_macro_programs, check_data_category, load_macro_library, load_macro_trees,
-                         load_trees, reconstruction_fscores, target_surfaces)
+from ..vae.train import check_data_category
+from ..vae.reconstruct import _corners, reconstruction_fscores, target_surfaces
+from ..vae.data import _read_macro_programs, load_macro_library, load_macro_trees, load_trees
 from ..vae.vectors import VectorNode
 from .data import TRAIN_POINTS
 from .dataset import CloudDataset, collate_clouds, read_split
@@ -122,7 +123,7 @@ class CloudDataModule(L.LightningDataModule):
         max_val_shapes: the first N validation clouds only.
         seed: the subsets' and the noise's draws.
         library: serve macro programs calling this ShapeMOD library (a shipped category's name or a library
-            file, :func:`shapeprog.vae.train.load_macro_library`); it must be the decoder's. None: the
+            file, :func:`shapeprog.vae.data.load_macro_library`); it must be the decoder's. None: the
             corpus's ShapeAssembly programs.
         programs: with ``library``, the macro-refactored corpus to read (a folder or ``.tar.xz`` of
             :func:`shapeprog.macros.write_refactored`); None: the shipped one of the category.
@@ -488,7 +489,7 @@ class EndToEndModule(_CloudModule):
         return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
 
     def _macro_losses(self, z: torch.Tensor, trees: MacroTreeBatch) -> tuple[torch.Tensor, dict]:
-        """:func:`~shapeprog.vae.batch.macro_batch_loss` (no KL) of the trees decoded teacher-forced from their
+        """:func:`~shapeprog.vae.macro_batch.macro_batch_loss` (no KL) of the trees decoded teacher-forced from their
         clouds' codes, averaged over the batch (the level-by-level batched pass)."""
         total, terms = macro_batch_loss(self.vae, trees, weights=self.weights, kl=False, codes=z)
         return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
