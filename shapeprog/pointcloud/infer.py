@@ -40,7 +40,6 @@ import numpy as np
 import torch
 
 from ..errors import PointCloudError
-from ..execute import execute
 from ..geometry import CORNER_SIGNS
 from ..fit import fit as fit_program
 from ..lang import Program, to_text
@@ -51,11 +50,30 @@ from ..vae.model import VAE
 from ..vae.pretrained import load_pretrained as load_vae
 from .data import TRAIN_POINTS
 from .encoder import PointNet2SSG
-from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
+from .normalize import CANONICAL_DIAGONAL, Transform, _corners_of, align_program, normalize, scale_program
+from .search import (SEARCH_POINTS, SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule, selection_chamfers,
+                     selection_target)
 
-__all__ = ["ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MAX_DIAGONAL", "MIN_DIAGONAL", "MIN_POINTS", "PRETRAINED",
-           "RETRIEVAL_CANDIDATES", "CloudModel", "Inference", "align_program", "cloud_corners", "decode_codes", "infer",
-           "load_encoder", "load_model", "load_pretrained", "shape_metrics", "text_unit"]
+__all__ = [
+    "ENCODER_POINTS",
+    "FIT_STEPS",
+    "FSCORE_THRESHOLD",
+    "MAX_DIAGONAL",
+    "MIN_DIAGONAL",
+    "MIN_POINTS",
+    "PRETRAINED",
+    "RETRIEVAL_CANDIDATES",
+    "CloudModel",
+    "Inference",
+    "cloud_corners",
+    "decode_codes",
+    "infer",
+    "load_encoder",
+    "load_model",
+    "load_pretrained",
+    "shape_metrics",
+    "text_unit",
+]
 
 #: Fewest points :func:`infer` takes.
 MIN_POINTS = 16
@@ -102,7 +120,6 @@ def cloud_corners(points, count: int = _PICTURE_POINTS, side: float = _PICTURE_C
     p = torch.as_tensor(points, dtype=torch.float32)[:count]
     signs = torch.as_tensor(CORNER_SIGNS, dtype=torch.float32)
     return p[:, None, :] + (side / 2) * signs[None]
-
 
 
 def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
@@ -259,41 +276,6 @@ def text_unit(diagonal: float) -> float:
         (1.0, 1000.0, 0.001, 1e+30)
     """
     return float(f"1e{round(math.log10(diagonal / CANONICAL_DIAGONAL))}")
-
-
-def _corners_of(program: Optional[Program]) -> torch.Tensor:
-    if program is None:
-        return torch.zeros(0, 8, 3)
-    try:
-        with torch.no_grad():
-            return execute(program).corners
-    except ValueError:
-        return torch.zeros(0, 8, 3)
-
-
-def align_program(program: Program, diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
-    """Scale ``program`` uniformly so that its executed cuboids' bounding box has ``diagonal``, and the offset
-    ``(3,) float64`` that moves that box's centre to the origin (executed points + offset = aligned shape).
-
-    Raises:
-        ValueError: the program executes to no cuboid.
-    """
-    return _align_executed(program, _corners_of(program), diagonal)
-
-
-def _align_executed(program: Program, corners: torch.Tensor,
-                    diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
-    """:func:`align_program` given the program's executed corners ``(L, 8, 3)``."""
-    c = corners.double()
-    if len(c) == 0:
-        raise ValueError("the program executes to no cuboid")
-    flat = c.reshape(-1, 3)
-    lo, hi = flat.min(0).values, flat.max(0).values
-    diag = float((hi - lo).norm())
-    if not diag > 0:
-        raise ValueError("the program's cuboids have no extent")
-    k = diagonal / diag
-    return scale_program(program, k), (-(lo + hi) / 2 * k).numpy()
 
 
 def shape_metrics(corners: torch.Tensor, target: torch.Tensor, points: int = METRIC_POINTS, seed: int = 0,
@@ -466,7 +448,6 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     code = model.codes(cloud[None])[0]
     searched = None
     if search:
-        from .search import SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule
 
         if search_schedule is None:
             schedule = SEARCH_SCHEDULE
@@ -531,7 +512,6 @@ def _check_retrieval(index, k, model) -> None:
     """Refuse a bad candidate count, an index of another category than ``model``'s, or one whose clouds have
     fewer points than the selection chamfer uses (a training shape would then be scored with fewer points
     than the decoded program, which biases the choice against it)."""
-    from .search import SEARCH_POINTS
 
     if isinstance(k, bool) or not isinstance(k, int) or k < 1:
         raise ValueError(f"retrieval_candidates must be an integer >= 1, got {k!r}")
@@ -552,7 +532,6 @@ def _retrieve(index, k, program: Optional[Program], cloud: torch.Tensor, unit: n
     the search has scored it already), a training program's from the first that many points of its reference
     cloud in the index (samples of the same cuboid surfaces in the same frame, so no program is executed until
     one is kept)."""
-    from .search import SEARCH_POINTS, selection_chamfers, selection_target
 
     matches = index.shortlist(cloud.double(), k)
     target = selection_target(unit, SEARCH_POINTS, torch.Generator().manual_seed(int(seed)))

@@ -41,7 +41,8 @@ from ..geometry import CORNER_SIGNS
 from ..metrics import chamfer
 from ..sampling import sample_surface
 from .dataset import load_cache, read_split
-from .infer import FIT_STEPS, _corners_of, infer, load_model, shape_metrics
+from .infer import FIT_STEPS, infer, load_model, shape_metrics
+from .normalize import _corners_of
 from .retrieval import RetrievalIndex
 from .search import QUICK_SEARCH_SCHEDULE
 
