@@ -48,13 +48,13 @@ from .errors import ExecutionError, ParseError, RefactorError
 from .execute import execute
 from .fit import MAX_DECIMALS, MAX_LR, MAX_REG, fit
 from .fit import MAX_STEPS as MAX_FIT_STEPS
-from .gentable import generation_table, train_category_classifier
+from .vae.gentable import generation_table, train_category_classifier
 from .lang import parse
 from .limits import decode
 from .metrics import adaptive_threshold, chamfer, fscore
 from .picture import MAX_SIZE as MAX_PICTURE_SIZE
 from .picture import render_grid, render_png
-from .pointnet import save_classifier, sha256_file
+from .vae.pointnet import save_classifier, sha256_file
 from .sampling import sample_surface
 from .silhouettes import MAX_SIZE as SILHOUETTE_MAX_SIZE
 from .silhouettes import build, write
@@ -648,7 +648,7 @@ def _cmd_evaluate_generation(args) -> int:
         raise SystemExit("error: give either --programs DIR or -n N (samples of the VAE), not both")
     model = None
     if args.classifier:
-        from .pointnet import load_classifier
+        from .vae.pointnet import load_classifier
 
         try:
             model = load_classifier(args.classifier)[0]

@@ -6,9 +6,9 @@ A :class:`RetrievalIndex` holds the normalised clouds of a category's training s
 chamfer distance (:func:`shapeprog.metrics.chamfer` with ``eps = 0``: mean nearest-point distance,
 both directions summed, in canonical units).
 
-The search has two stages, as :func:`shapeprog.genmetrics.nearest_chamfer`: a coarse estimate of the
+The search has two stages, as :func:`shapeprog.vae.genmetrics.nearest_chamfer`: a coarse estimate of the
 query against every reference from distance fields on a ``grid^3`` lattice (the references' fields are
-computed once, when the index is built; :func:`shapeprog.genmetrics.coarse_fields`), then exact
+computed once, when the index is built; :func:`shapeprog.vae.genmetrics.coarse_fields`), then exact
 chamfer distances (k-d trees, float64) to the ``candidates`` best estimates. With
 ``candidates=None`` every reference is measured exactly. How often the two agree and the timings:
 ``docs/pointcloud.md`` (Retrieval).
@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from .. import corpus
-from ..genmetrics import coarse_fields
+from ..vae.genmetrics import coarse_fields
 from ..lang import Program, parse
 from ..metrics import chamfer
 from .data import cloud_transforms, corpus_splits, sample_clouds

@@ -1,7 +1,7 @@
 """The ShapeAssembly paper's generation tables for a set of generated programs, and the classifier they use.
 
 :func:`generation_table` measures generated programs of one category with every metric of
-:mod:`shapeprog.genmetrics` (the paper's Table 2: % rooted, % stable, % fool, FD; Table 5: leaf parts;
+:mod:`shapeprog.vae.genmetrics` (the paper's Table 2: % rooted, % stable, % fool, FD; Table 5: leaf parts;
 Table 4: generalization, coverage, variety; and % novel programs) against the corpus train split, adds a
 ground-truth row (the corpus val split through the same metrics) and the paper's figures, and returns
 a markdown table. :func:`evaluate_generation` gives one row as numbers. :func:`train_category_classifier`
@@ -21,7 +21,7 @@ import torch
 from .genmetrics import (CHAMFER_POINTS, CLASSIFIER_POINTS, FoolResult, chamfer_clouds, classifier_clouds,
                          classifier_features, coverage, execute_samples, frechet_distance, gaussian_fit,
                          generalization, leaf_parts, novelty, percent_fool, variety)
-from .lang import Program
+from ..lang import Program
 
 __all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_table",
            "table_notes", "train_category_classifier"]
@@ -48,7 +48,7 @@ _DIGITS = {"rooted": 1, "stable": 1, "fool": 2, "fd": 2, "leaf_parts": 2, "gener
 
 
 def _corpus(category: str, split: str) -> tuple[list[Program], list[torch.Tensor]]:
-    from . import corpus  # lazy: the corpus archive is read on first use
+    from .. import corpus  # lazy: the corpus archive is read on first use
 
     programs = [p for _, p in corpus.load(category, split)]
     corners, errors = execute_samples(programs)
@@ -72,8 +72,8 @@ def train_category_classifier(
 ) -> tuple:
     """Train the PointNet category classifier on the corpus train split; measure it on the val split.
 
-    Every executed train shape gives one :func:`~shapeprog.genmetrics.classifier_clouds` cloud of 2,500
-    points (seed ``seed``); :func:`shapeprog.pointnet.fit_classifier` draws ``per_class`` shapes of each
+    Every executed train shape gives one :func:`~shapeprog.vae.genmetrics.classifier_clouds` cloud of 2,500
+    points (seed ``seed``); :func:`shapeprog.vae.pointnet.fit_classifier` draws ``per_class`` shapes of each
     category per epoch and a random ``points``-point subset of each cloud per visit (cheap), then
     ``finetune_epochs`` more epochs at learning rate ``finetune_lr`` use all 2,500 points, so that the
     head and its batch norms see the max pool of the clouds the metrics use. The accuracy is measured on
@@ -129,10 +129,10 @@ class References:
         category: ``"chair"``, ``"table"`` or ``"storage"``.
         train_programs, val_programs: the corpus splits' programs.
         train_corners, val_corners: their leaf corners ``(L, 8, 3)``.
-        train_clouds: :func:`~shapeprog.genmetrics.classifier_clouds` of the train shapes (the real
+        train_clouds: :func:`~shapeprog.vae.genmetrics.classifier_clouds` of the train shapes (the real
             shapes of % fool), ``(T, 2500, 3)``.
         train_fit: Gaussian fit ``(mu, cov)`` of the train shapes' classifier features (FD).
-        train_chamfer, val_chamfer: :func:`~shapeprog.genmetrics.chamfer_clouds` of both splits.
+        train_chamfer, val_chamfer: :func:`~shapeprog.vae.genmetrics.chamfer_clouds` of both splits.
         seed: the sampling seed (train clouds use ``seed``, val ``seed + 1``).
     """
 
@@ -196,7 +196,7 @@ class GenerationRow:
 
 
 def _physics_job(job) -> tuple[bool, Optional[bool]]:
-    from .physics import rootedness, stability
+    from ..physics import rootedness, stability
 
     corners, stable = job
     rooted = rootedness(corners)
@@ -238,9 +238,9 @@ def evaluate_generation(
             runs everything here.
         stability: run the pybullet stability test (about 0.5 s per shape); False leaves it None.
         fool: train the % fool classifier; ``fool_epochs``, ``fool_average_last`` and ``fool_points``
-            are its budget (:func:`~shapeprog.genmetrics.percent_fool`).
+            are its budget (:func:`~shapeprog.vae.genmetrics.percent_fool`).
         with_coverage: measure coverage of the val split (False for the val split itself).
-        candidates: exact chamfer candidates per shape (:func:`~shapeprog.genmetrics.nearest_chamfer`).
+        candidates: exact chamfer candidates per shape (:func:`~shapeprog.vae.genmetrics.nearest_chamfer`).
         chamfer_points: surface points per shape of the chamfer metrics.
         seed: sampling and training seed (samples use ``seed + 2``, their chamfer clouds ``seed + 3``).
         log: a function taking a line of progress text.
@@ -349,7 +349,7 @@ def ground_truth_row(refs: References, classifier_sha: Optional[str], **kw) -> G
 
     from shapeio.cache import cached
 
-    from .corpus import data_digest
+    from ..corpus import data_digest
 
     def compute() -> GenerationRow:
         say = kw.get("log") or (lambda s: None)

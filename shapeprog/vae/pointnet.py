@@ -5,7 +5,7 @@
 1024, batch norm, ReLU after the first two), a max pool over the points giving the **global feature**
 ``(B, 1024)``, and a head 1024 -> 512 -> 256 -> k (batch norm, ReLU, dropout 0.3 before the second batch
 norm). The input transform (``STN3d``) is optional (``stn=True``); the classifier shipped with the package
-is trained without it (half the compute on CPU). The generation metrics (:mod:`shapeprog.genmetrics`) use
+is trained without it (half the compute on CPU). The generation metrics (:mod:`shapeprog.vae.genmetrics`) use
 the global feature for the Fréchet distance and train fresh binary classifiers for the "% fool" metric.
 
 Clouds are batch first, ``(B, N, 3) float``. Training (:func:`fit_classifier`) and inference touch no
@@ -36,7 +36,7 @@ __all__ = ["PRETRAINED", "PRETRAINED_SHA256", "PointNetCls", "STN3d", "accuracy"
            "load_classifier", "predict", "save_classifier", "sha256_file"]
 
 #: The shipped chair / table / storage classifier (``shapeprog/weights``).
-PRETRAINED = Path(__file__).resolve().parent / "weights" / "pointnet_cls.pt"
+PRETRAINED = Path(__file__).resolve().parent.parent / "weights" / "pointnet_cls.pt"
 #: SHA-256 of :data:`PRETRAINED`; :func:`load_classifier` refuses a file that does not match.
 PRETRAINED_SHA256 = "c7a967bb1e291e89f700b2192dda74294221037ab109f36a600e7860bc634385"
 
