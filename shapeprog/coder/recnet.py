@@ -28,16 +28,23 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from shapeio.weights import read_weights, write_weights
+
 from .lang import Library, Type
 from .vocab import MAX_FLOAT_TERMS, MAX_TOKENS, Vocab, decode_tokens, encode_scene
 
 __all__ = [
+    "FORMAT",
+    "VERSION",
     "NetConfig",
     "RecognitionNet",
     "load_checkpoint",
     "sample",
     "save_checkpoint",
 ]
+
+#: The weights-file family of a recognition network and its version.
+FORMAT, VERSION = "shapeprog-coder-recnet", 1
 
 
 # ----------------------------------------------------------------------------- the model
@@ -236,26 +243,21 @@ def var_mask(n_values: torch.Tensor, inputs: int) -> torch.Tensor:
 
 
 def save_checkpoint(path, model: RecognitionNet, vocab: Vocab, extra: dict | None = None) -> None:
-    """Write the model's ``state_dict``, its :class:`NetConfig` and the vocabulary atomically."""
-    import io
-
-    from shapeio import atomic_write
-
-    buf = io.BytesIO()
-    torch.save({"format": "shapeprog-coder-recnet", "version": 1, "config": asdict(model.cfg),
-                "vocab": list(vocab.tokens), "state_dict": model.state_dict(), "extra": extra or {}}, buf)
-    atomic_write(path, buf.getvalue(), mkdir=True)
+    """Write the model's ``state_dict``, its :class:`NetConfig` and the vocabulary atomically (a weights file
+    of :mod:`shapeio.weights`, family :data:`FORMAT`, version :data:`VERSION`)."""
+    write_weights(path, FORMAT, VERSION, {"config": asdict(model.cfg), "vocab": list(vocab.tokens),
+                                          "state_dict": model.state_dict(), "extra": extra or {}})
 
 
-def load_checkpoint(path, library: Library, map_location="cpu") -> tuple:
-    """``(model, vocab, extra)`` from :func:`save_checkpoint`; the vocabulary must be the library's.
+def load_checkpoint(path, library: Library) -> tuple:
+    """``(model, vocab, extra)`` from :func:`save_checkpoint`, on the CPU; the vocabulary must be the
+    library's.
 
     Raises:
-        ValueError: not such a checkpoint, or written for another library.
+        FileNotFoundError: no such file.
+        ValueError: naming the file: not such a checkpoint, another version, or written for another library.
     """
-    ck = torch.load(path, map_location=map_location, weights_only=True)
-    if not isinstance(ck, dict) or ck.get("format") != "shapeprog-coder-recnet":
-        raise ValueError(f"{path}: not a recognition network checkpoint")
+    ck = read_weights(path, FORMAT, VERSION, what="recognition network checkpoint")
     vocab = Vocab.of(library)
     if tuple(ck["vocab"]) != vocab.tokens:
         raise ValueError(f"{path}: the checkpoint's vocabulary is not the library's")

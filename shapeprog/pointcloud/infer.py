@@ -39,6 +39,8 @@ from typing import Optional
 import numpy as np
 import torch
 
+from shapeio.weights import read_weights
+
 from ..errors import PointCloudError
 from ..geometry import CORNER_SIGNS
 from ..fit import fit as fit_program
@@ -190,17 +192,7 @@ class CloudModel(torch.nn.Module):
 
 def _read_weights(path, category: Optional[str] = None) -> tuple[dict, PointNet2SSG]:
     """The checked payload of a weights file and its encoder (float32, its recorded sizes)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such weights file")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:
-        raise ValueError(f"{path}: not a point-cloud model weights file (unreadable: {type(e).__name__})") from None
-    if not isinstance(payload, dict) or payload.get("format") != _FORMAT:
-        raise ValueError(f"{path}: not a point-cloud model weights file (format {_FORMAT!r})")
-    if int(payload.get("version", -1)) != _VERSION:
-        raise ValueError(f"{path}: weights file version {payload.get('version')!r}; this version reads {_VERSION}")
+    payload = read_weights(path, _FORMAT, _VERSION, what="point-cloud model weights file")
     cat = payload["category"]
     if category is not None and cat != category:
         raise ValueError(f"{path}: a model of category {cat!r}, not {category!r}")

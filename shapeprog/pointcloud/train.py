@@ -42,7 +42,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from shapeio import atomic_write
+from shapeio.weights import load_payload, write_weights
 
 from ..picture import render_grid
 from ..vae.batch import BatchOutput, TreeBatch, batch_loss, decode_batch, encode_batch
@@ -506,13 +506,8 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
     model decodes with the shipped VAE of its category). ``meta`` records epoch, step and what the caller adds.
     The file is written atomically; an existing ``out`` is replaced (it is the caller's to name).
     """
-    try:
-        payload = torch.load(checkpoint, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{checkpoint}: no such checkpoint") from None
-    except Exception as e:
-        raise ValueError(f"{checkpoint}: not a readable checkpoint ({type(e).__name__})") from None
-    info = payload.get("shapeprog_pointcloud") if isinstance(payload, dict) else None
+    payload = load_payload(checkpoint, "readable checkpoint", missing="checkpoint")
+    info = payload.get("shapeprog_pointcloud")
     if info is None:
         raise ValueError(f"{checkpoint}: not a checkpoint of a shapeprog.pointcloud.train module")
     state = payload["state_dict"]
@@ -521,7 +516,7 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
         return {k[len(prefix):]: (v.half() if half and v.is_floating_point() else v)
                 for k, v in state.items() if k.startswith(prefix)}
 
-    body = {"format": WEIGHTS_FORMAT, "version": CHECKPOINT_FORMAT, "recipe": info["recipe"],
+    body = {"recipe": info["recipe"],
             "category": info["category"], "config": info["encoder"], "hidden_dim": info["hidden_dim"],
             "encoder": part("encoder."),
             "meta": {"epoch": int(payload.get("epoch", -1)), "global_step": int(payload.get("global_step", -1)),
@@ -530,7 +525,7 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
         body["decoder"] = part("vae.decoder.")
     if info.get("library") is not None:
         body["library"] = info["library"]
-    return atomic_write(out, lambda f: torch.save(body, f), mkdir=True)
+    return write_weights(out, WEIGHTS_FORMAT, CHECKPOINT_FORMAT, body)
 
 
 if __name__ == "__main__":  # pragma: no cover

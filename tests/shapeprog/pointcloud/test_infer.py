@@ -108,8 +108,11 @@ def test_weights_files_are_checked(tmp_path, weights):
         load_model(weights, "table")
     bad = tmp_path / "bad.pt"
     torch.save({"format": "other"}, bad)
-    with pytest.raises(ValueError, match="bad.pt: not a point-cloud model"):
+    with pytest.raises(ValueError, match=r"bad\.pt: a 'other' weights file, not a 'shapeprog-pointcloud' one$"):
         load_model(bad)
+    (tmp_path / "junk.pt").write_bytes(b"junk")
+    with pytest.raises(ValueError, match=r"junk\.pt: not a point-cloud model weights file \(unreadable"):
+        load_model(tmp_path / "junk.pt")
     with pytest.raises(FileNotFoundError, match="missing.pt"):
         load_model(tmp_path / "missing.pt")
 
