@@ -1,4 +1,5 @@
-"""Atomic writes, the guard that keeps outputs off inputs, and the error for unreadable user files.
+"""Atomic writes, the guard that keeps outputs off inputs, the error for unreadable user files, and the one
+rule for an argument that is a shipped name or a file (:func:`resolve_shipped`: an existing file wins).
 
 The permissions and temporary-file names of :func:`atomic_write` are described in ``docs/shapeio.md``.
 """
@@ -15,9 +16,9 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import BinaryIO, Callable, Iterable, Union
+from typing import BinaryIO, Callable, Iterable, Mapping, Union
 
-__all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "c_output_silenced", "output_problem", "parse_json", "refuse_overwrite",
+__all__ = ["InputError", "MAX_JSON_DEPTH", "NotShippedError", "resolve_shipped", "atomic_write", "c_output_silenced", "output_problem", "parse_json", "refuse_overwrite",
            "remove_stale_temps", "write_new",
            "write_new_set", "STALE_TEMP_SECONDS"]
 
@@ -32,6 +33,11 @@ _UMASK_LOCK = threading.Lock()
 
 class InputError(ValueError):
     """A user's file that cannot be read as asked; the message starts with the file's path."""
+
+
+class NotShippedError(FileNotFoundError, ValueError):
+    """An argument that is neither an existing file nor a shipped name (:func:`resolve_shipped`); caught as
+    either a missing file or a bad value."""
 
 
 MAX_JSON_DEPTH = 64
@@ -400,3 +406,25 @@ def c_output_silenced():
         os.dup2(saved[1], 2)
         for fd in saved + [null]:
             os.close(fd)
+
+
+def resolve_shipped(name: Union[str, PathLike], shipped: Mapping[str, PathLike], what: str) -> Path:
+    """The file an argument names, by the one rule for "a shipped name or a file": ``name`` itself when a
+    file of that path exists (an existing file wins), else the shipped file of that name.
+
+    Args:
+        name: a path or a shipped name (``"chair"``).
+        shipped: shipped name -> its file.
+        what: what is looked for, for the error (``"ShapeMOD library"``).
+
+    Raises:
+        NotShippedError: neither a file nor a shipped name (a ``FileNotFoundError`` and a ``ValueError``);
+            the message names both readings and the shipped names.
+    """
+    path = Path(name)
+    if path.is_file():
+        return path
+    if str(name) in shipped:
+        return Path(shipped[str(name)])
+    names = ", ".join(sorted(shipped)) or "none"
+    raise NotShippedError(f"{name}: neither a {what} file nor a shipped {what} (shipped: {names})")

@@ -1,5 +1,5 @@
 """Weights files of every model family: one versioned payload, written atomically and read with
-``torch.load(weights_only=True)``; and the one rule that turns "a shipped name or a file" into a path.
+``torch.load(weights_only=True)``.
 
 A weights file holds one dict ``{"format": family, "version": n, ...}``. :func:`write_weights` writes it (a
 temporary file, then ``os.replace``); :func:`read_weights` reads it and checks its family and version, and
@@ -11,9 +11,6 @@ Files written before the payload carried ``format`` (the shipped csgnet models a
 classifier, whose SHA-256 the generation metrics pin) are read as version 0 of their family: a family
 names the keys of its old layout (``legacy=("config", "state_dict")``), and a payload without ``format``
 that holds them is accepted as that version.
-
-:func:`resolve_shipped` is the rule for an argument that is a shipped name or a file: **an existing file
-wins**; otherwise the name must be one of the shipped ones; otherwise the error names both readings.
 
 torch is imported when a file is read or written (``import shapeio`` stays NumPy-level).
 
@@ -34,11 +31,11 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
-from typing import Iterable, Mapping, Optional, Union
+from typing import Iterable, Mapping, Optional
 
 from .files import PathLike, atomic_write
 
-__all__ = ["LEGACY_VERSION", "check_weights", "load_payload", "read_weights", "resolve_shipped", "write_weights"]
+__all__ = ["LEGACY_VERSION", "check_weights", "load_payload", "read_weights", "write_weights"]
 
 #: The version a payload of a family's old layout (no ``format`` field) is read as.
 LEGACY_VERSION = 0
@@ -123,25 +120,3 @@ def write_weights(path: PathLike, family: str, version: int, fields: Mapping) ->
     buf = io.BytesIO()
     torch.save(payload, buf)
     return Path(atomic_write(path, buf.getvalue(), mkdir=True))
-
-
-def resolve_shipped(name: Union[str, PathLike], shipped: Mapping[str, PathLike], what: str) -> Path:
-    """The file an argument names: ``name`` itself when a file of that path exists, else the shipped file of
-    that name.
-
-    Args:
-        name: a path or a shipped name (``"chair"``).
-        shipped: shipped name -> its file.
-        what: what is looked for, for the error (``"ShapeMOD library"``).
-
-    Raises:
-        FileNotFoundError: neither a file nor a shipped name; the message names both readings and the
-            shipped names.
-    """
-    path = Path(name)
-    if path.is_file():
-        return path
-    if str(name) in shipped:
-        return Path(shipped[str(name)])
-    names = ", ".join(sorted(shipped)) or "none"
-    raise FileNotFoundError(f"{name}: neither a {what} file nor a shipped {what} (shipped: {names})")

@@ -19,6 +19,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
+
+from shapeio.files import resolve_shipped
+
+from ..limits import decode
 from . import data
 from .wake import evaluate
 from .execute import order
@@ -169,17 +174,19 @@ def shipped_libraries() -> tuple:
                         and p.name.endswith(".txt")))
 
 
-def load_library(category: str) -> Library:
-    """The shipped library of ``category`` (``shapeprog/data/coder_libraries/<category>.txt``, one
-    abstraction per line; see docs/shapecoder.md for how it was discovered).
+def load_library(name: str) -> Library:
+    """A ShapeCoder library: the library file ``name`` when one exists at that path, else the shipped library
+    of category ``name`` (``shapeprog/data/coder_libraries/<category>.txt``, one abstraction per line; see
+    docs/shapecoder.md for how it was discovered); the rule of :func:`shapeio.files.resolve_shipped`: an
+    existing file wins.
 
     Raises:
-        ValueError: no library is shipped for ``category`` (the message lists those that are).
+        NotShippedError: neither a file nor a shipped category (a ``ValueError``; the message names both and
+            lists the shipped categories).
         ParseError: a malformed library file (file, line, column).
     """
-    names = shipped_libraries()
-    if category not in names:
-        raise ValueError(f"no shipped library for {category!r}; shipped: {', '.join(names) or 'none'}")
-    name = f"{category}.txt"
-    text = resources.files("shapeprog").joinpath(*_DIR, name).read_text(encoding="utf-8")
-    return Library.from_text(text, LANG_3D, file=name)
+    folder = resources.files("shapeprog").joinpath(*_DIR)
+    shipped = {c: Path(str(folder.joinpath(f"{c}.txt"))) for c in shipped_libraries()}
+    path = resolve_shipped(name, shipped, "ShapeCoder library")
+    label = path.name if shipped.get(name) == path else str(path)
+    return Library.from_text(decode(path.read_bytes(), label), LANG_3D, file=label)

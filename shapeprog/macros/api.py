@@ -15,11 +15,15 @@ from __future__ import annotations
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from shapeio.files import resolve_shipped
+
 from ..lang import Program
+from ..limits import decode
 from ..lang import parse as parse_program
 from .data import convert_program
 from .subprogram import SubProgram
@@ -31,20 +35,26 @@ from .hierarchy import parse as parse_hierarchy
 from .library import Library, as_macro_program
 from .objective import Result, best_program, templates, to_program
 
-__all__ = ["BlockRefactor", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library",
+__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library",
            "refactor", "program_stats"]
 
 #: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
 LIBRARY_CATEGORIES = ("chair", "table", "storage")
+#: The shipped libraries: category -> file.
+LIBRARIES = {c: Path(__file__).resolve().parent / "libs" / f"{c}.txt" for c in LIBRARY_CATEGORIES}
 
 
-def load_library(category: str) -> Library:
-    """The shipped discovered library of ``category`` (see ``shapeprog/macros/libs/README.md``).
+def load_library(name: str) -> Library:
+    """A ShapeMOD library: the library file ``name`` when one exists at that path, else the shipped library of
+    category ``name`` (:data:`LIBRARIES`; the rule of :func:`shapeio.files.resolve_shipped`: an existing file
+    wins; see ``shapeprog/macros/libs/README.md`` for the shipped ones).
 
     Raises:
-        ValueError: no library is shipped for ``category``.
+        NotShippedError: neither a file nor a shipped category (a ``ValueError``; the message names both).
+        ParseError: the file is not a library (file, line and column).
     """
-    return Library.from_text(library_text(category), f"shapeprog/macros/libs/{category}.txt")
+    path = resolve_shipped(name, LIBRARIES, "ShapeMOD library")
+    return Library.from_text(decode(path.read_bytes(), str(path)), str(path))
 
 
 def library_text(category: str) -> str:

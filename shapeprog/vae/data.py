@@ -6,7 +6,6 @@ macro-refactored programs with their library (:func:`load_macro_trees`, :func:`l
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -14,6 +13,7 @@ import torch
 from .. import corpus
 from ..errors import ParseError
 from ..lang import parse
+from ..macros.api import load_library
 from .layout import LineLayout, MacroNode, macro_program_to_tree
 from .vectors import VectorNode, program_to_tree
 
@@ -91,23 +91,14 @@ def load_trees(keys: list[str], dtype: torch.dtype = torch.float32) -> tuple[lis
 
 
 def load_macro_library(library: str):
-    """The macro library a run trains with: a shipped category's (``"chair"``, :func:`shapeprog.macros.load_library`)
-    or a library file (definitions only, :meth:`shapeprog.macros.Library.from_text`).
+    """The macro library a run trains with: :func:`shapeprog.macros.load_library` (a library file when one
+    exists at that path, else a shipped category's, e.g. ``"chair"``).
 
     Raises:
-        FileNotFoundError: neither a shipped library nor a file.
+        NotShippedError: neither a file nor a shipped library (a ``FileNotFoundError``).
         ParseError: the file does not parse (named, with line and column).
     """
-    from ..macros import Library, load_library
-    from ..macros.api import LIBRARY_CATEGORIES
-
-    if library in LIBRARY_CATEGORIES:
-        return load_library(library)
-    path = Path(library)
-    if not path.is_file():
-        raise FileNotFoundError(f"{library}: neither a shipped macro library ({', '.join(LIBRARY_CATEGORIES)}) nor "
-                                f"a library file")
-    return Library.from_text(path.read_text(encoding="utf-8"), str(path))
+    return load_library(library)
 
 
 def load_macro_trees(keys: list[str], layout: LineLayout, programs: dict,

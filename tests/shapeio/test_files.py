@@ -1,8 +1,10 @@
 import os
+from pathlib import Path
 
 import pytest
 
 from shapeio import atomic_write
+from shapeio.files import NotShippedError, resolve_shipped
 
 
 def test_write_is_atomic_on_failure(tmp_path):
@@ -151,3 +153,15 @@ def test_defect_held_checks_pickles_refused_outputs_never_overwritten_umask_resp
     finally:
         os.umask(old)
     assert mode_new == mode_atomic == 0o640
+
+
+def test_an_existing_file_wins_over_a_shipped_name(tmp_path, monkeypatch):
+    shipped = {"chair": tmp_path / "shipped_chair.txt"}
+    assert resolve_shipped("chair", shipped, "library") == shipped["chair"]
+    monkeypatch.chdir(tmp_path)
+    Path("chair").write_text("mine")
+    assert resolve_shipped("chair", shipped, "library") == Path("chair")
+    with pytest.raises(NotShippedError, match=r"^lamp: neither a library file nor a shipped library "
+                                              r"\(shipped: chair\)$") as e:
+        resolve_shipped("lamp", shipped, "library")
+    assert isinstance(e.value, FileNotFoundError) and isinstance(e.value, ValueError)

@@ -1,11 +1,11 @@
-"""The one weights reader and writer, the shipped-name-or-file rule, and every shipped weights file."""
+"""The one weights reader and writer, and every shipped weights file."""
 import json
 from pathlib import Path
 
 import pytest
 import torch
 
-from shapeio.weights import LEGACY_VERSION, check_weights, load_payload, read_weights, resolve_shipped, write_weights
+from shapeio.weights import LEGACY_VERSION, check_weights, load_payload, read_weights, write_weights
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -47,17 +47,6 @@ def test_a_legacy_layout_reads_as_version_0(tmp_path):
     assert payload == {"config": {"k": 1}, "state_dict": {}, "format": "demo", "version": LEGACY_VERSION}
     with pytest.raises(ValueError, match="no 'format' field"):
         check_weights({"config": {}}, "p.pt", "demo", 1, legacy=("config", "state_dict"))
-
-
-def test_an_existing_file_wins_over_a_shipped_name(tmp_path, monkeypatch):
-    shipped = {"chair": tmp_path / "shipped_chair.txt"}
-    assert resolve_shipped("chair", shipped, "library") == shipped["chair"]
-    monkeypatch.chdir(tmp_path)
-    Path("chair").write_text("mine")
-    assert resolve_shipped("chair", shipped, "library") == Path("chair")
-    with pytest.raises(FileNotFoundError, match=r"^lamp: neither a library file nor a shipped library "
-                                                r"\(shipped: chair\)$"):
-        resolve_shipped("lamp", shipped, "library")
 
 
 def test_every_shipped_weights_file_loads():

@@ -201,7 +201,7 @@ def test_propose_ranks_candidates_and_respects_frequency():
     assert propose(progs, n_proposals=30, rng=random.Random(0), min_freq=1.1) == []
 
 
-def test_infer_uses_the_library_and_reports_bad_input():
+def test_infer_uses_the_library_and_reports_bad_input(tmp_path):
     lib = Library().add(parse_abstraction(
         "Legs(w: Float, h: Float, x: Float, y: Float, z: Float) = SymRef(Move(Cuboid(w,h,w),x,y,z),AX)"))
     shape = _chairs(1, seed=3)[0]
@@ -219,8 +219,12 @@ def test_infer_uses_the_library_and_reports_bad_input():
         infer("172_0_0 Union(", lib)
     with pytest.raises(ParseError, match="^<shape>:1:15: unexpected end of the text"):
         infer("172_0_0:Union(", lib)
-    with pytest.raises(ValueError, match="no shipped library"):
+    with pytest.raises(ValueError, match=r"^sofa: neither a ShapeCoder library file nor a shipped ShapeCoder library "
+                                         r"\(shipped: chair, storage, table\)$"):
         load_library("sofa")
+    mine = tmp_path / "lib.txt"
+    mine.write_text("Leg(w: Float) = Cuboid(w,0.5,w)\n", encoding="utf-8")
+    assert [a.name for a in load_library(str(mine))] == ["Leg"]
     assert set(shipped_libraries()) == {"chair", "table", "storage"}
     for cat in shipped_libraries():
         assert len(load_library(cat)) >= 1
