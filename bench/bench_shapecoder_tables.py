@@ -1,6 +1,6 @@
-"""ShapeCoder Tables 2 and 3 from a discovery run's folder (``python -m shapeprog discover-abstractions``).
+"""ShapeCoder Tables 2 and 3 from a discovery run's folder (``python -m shapeprog coder discover``).
 
-The tables are :mod:`shapeprog.coder.tables` (``python -m shapeprog table2-coder --library CAT=RUN_DIR`` writes
+The tables are :mod:`shapeprog.coder.tables` (``python -m shapeprog coder tables --library CAT=RUN_DIR`` writes
 the same); this script adds the machine's description to the output.
 
 Table 2 (discovery): the "Input Prims" row (naive programs of the run's shapes) and the run's final row

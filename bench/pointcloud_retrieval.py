@@ -8,7 +8,7 @@ how many of those queries found the exact nearest shape and the mean excess dist
 
 Usage::
 
-    python -m shapeprog make-clouds --category chair --out clouds
+    python -m shapeprog pointcloud make-clouds --category chair --out clouds
     python bench/pointcloud_retrieval.py --clouds clouds --category chair --queries 100 --exhaustive 8 --workers 2
 """
 from __future__ import annotations

@@ -3,7 +3,7 @@
 For the first ``--limit`` shapes of a make-clouds cache's test split (``--split val``: its validation
 carve-out, on which a schedule should be chosen), each schedule's inference
 (``infer(x, search=True, search_schedule=...)``; ``none`` is the papers' single decode) runs on the same
-noisy, subsampled, scaled and moved input as ``python -m shapeprog pointcloud-tables`` builds
+noisy, subsampled, scaled and moved input as ``python -m shapeprog pointcloud tables`` builds
 (``shapeprog.pointcloud.tables``), and the result is scored the way the tables score it (F-score at 0.03
 against the clean cloud, canonical units). The script prints, per schedule, the mean F-score, the mean
 chamfer x1000, the share of rooted results, the decodes, and the median and 90th-percentile CPU seconds of

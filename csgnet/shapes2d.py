@@ -2,7 +2,7 @@
 
 * :func:`load_silhouettes`: front and side silhouettes (64x64) of the PartNet chairs, tables and
   storage furniture of the ShapeAssembly corpus, shipped as ``csgnet/data/silhouettes.npz``
-  (built by ``python -m shapeprog silhouettes``; see ``docs/csgnet.md``, "The PartNet silhouettes").
+  (built by ``python -m shapeprog assembly silhouettes``; see ``docs/csgnet.md``, "The PartNet silhouettes").
   Splits ``train``, ``val`` and ``test``; this set stands in for the paper's CAD set and is not the same data.
 * :func:`load_cad_h5`: the paper's ``cad.h5`` (datasets ``train_images``, ``val_images``,
   ``test_images``, each N x 64 x 64), for users who have that file. Needs ``h5py``, the ``cad``
@@ -38,7 +38,7 @@ def load_silhouettes(split: str = "train", path: str | os.PathLike | None = None
 
     Args:
         split: ``"train"``, ``"val"`` or ``"test"``.
-        path: a file written by ``python -m shapeprog silhouettes --out PATH`` (default: the
+        path: a file written by ``python -m shapeprog assembly silhouettes --out PATH`` (default: the
             shipped ``csgnet/data/silhouettes.npz``).
         with_ids: also return the shape id and view of each image.
 
@@ -53,7 +53,7 @@ def load_silhouettes(split: str = "train", path: str | os.PathLike | None = None
     p = Path(path) if path is not None else silhouettes_path()
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no silhouette file; build one with "
-                                f"'python -m shapeprog silhouettes --out {p}'")
+                                f"'python -m shapeprog assembly silhouettes --out {p}'")
     data = read_silhouettes(p, split)
     return data if with_ids else data.images
 

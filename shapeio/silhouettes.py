@@ -5,7 +5,7 @@
 * ``{split}_ids``: ``(N,)`` str, ``"category/id"``; ``{split}_views``: ``(N,)`` str, ``"front"`` / ``"side"``;
 * ``size``, ``margin``: ints; ``version``: :data:`FORMAT_VERSION`.
 
-Written by :func:`write_silhouettes` (``python -m shapeprog silhouettes``), read by
+Written by :func:`write_silhouettes` (``python -m shapeprog assembly silhouettes``), read by
 :func:`read_silhouettes` (``csgnet.shapes2d.load_silhouettes``); ``docs/csgnet.md`` ("The PartNet silhouettes")
 describes the set.
 """

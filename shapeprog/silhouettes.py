@@ -5,7 +5,7 @@ in the ShapeAssembly frame: ``front`` is seen from +z, ``side`` from +x; images 
 ``img[row, col]`` with rows growing downward. Each image is fitted to the canvas and rasterised
 exactly (a pixel is on iff its centre lies in a projected cuboid; parts thinner than a pixel are
 widened to one). Splits: the corpus's train and val lists, with test carved out of val.
-``python -m shapeprog silhouettes --out PATH`` builds the set shipped as
+``python -m shapeprog assembly silhouettes --out PATH`` builds the set shipped as
 ``csgnet/data/silhouettes.npz``; the file layout (a pickle-free ``.npz`` with packed-bit images, ids
 and views per split), the views, fit, rasterisation and splits are in ``docs/csgnet.md``
 ("The PartNet silhouettes").

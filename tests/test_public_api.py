@@ -2,7 +2,8 @@
 
 Packages and their public submodules (names without a leading underscore) are found by walking the
 package folders, so a new module is checked without a new test. The README's
-``python -m csgnet ...`` / ``python -m shapeprog ...`` subcommands are read from README.md itself.
+``python -m csgnet COMMAND`` / ``python -m shapeprog SYSTEM COMMAND`` commands are read from README.md itself, and
+the shapeprog command line's systems, commands and earlier one-word names are pinned here.
 """
 import importlib
 import re
@@ -39,8 +40,30 @@ def _public_modules() -> list[str]:
 
 
 MODULES = _public_modules()
-# `python -m <package> <subcommand>` as the README writes it
-COMMANDS = sorted(set(re.findall(r"python -m (csgnet|shapeprog) ([a-z][\w-]*)", README)))
+# `python -m csgnet COMMAND` and `python -m shapeprog SYSTEM COMMAND` as the README writes them
+COMMANDS = sorted(set(re.findall(r"python -m (csgnet) ([a-z][\w-]*)", README))
+                  | {("shapeprog", f"{system} {command}")
+                     for system, command in re.findall(r"python -m shapeprog ([a-z]+) ([a-z][\w-]*)", README)})
+
+# The shapeprog command line: each system's commands, and the earlier one-word names that still work (each prints
+# one line naming its new form). A change here is a change of the command line: make it on purpose.
+SHAPEPROG_COMMANDS = {
+    "assembly": {"run", "fit", "silhouettes", "edit"},
+    "vae": {"sample", "interpolate", "reconstruct", "evaluate", "train-classifier", "export-weights"},
+    "pointcloud": {"infer", "tables", "make-clouds", "export-weights"},
+    "macros": {"discover", "refactor", "refactor-corpus", "tables"},
+    "coder": {"discover", "infer", "tables"},
+}
+SHAPEPROG_ALIASES = {
+    "run": "assembly run", "fit": "assembly fit", "silhouettes": "assembly silhouettes", "edit": "assembly edit",
+    "sample": "vae sample", "interpolate": "vae interpolate", "reconstruct": "vae reconstruct",
+    "evaluate-generation": "vae evaluate", "train-classifier": "vae train-classifier",
+    "export-weights": "None export-weights",  # vae or pointcloud, after the checkpoint
+    "infer": "pointcloud infer", "pointcloud-tables": "pointcloud tables", "make-clouds": "pointcloud make-clouds",
+    "discover-macros": "macros discover", "refactor": "macros refactor", "refactor-corpus": "macros refactor-corpus",
+    "table1": "macros tables", "discover-abstractions": "coder discover", "abstract-infer": "coder infer",
+    "table2-coder": "coder tables",
+}
 
 
 # The packages' public names. A change here is a change of the public API: make it on purpose (and say so
@@ -133,16 +156,33 @@ def test_the_readme_python_entry_points():
 
 
 def test_the_readme_names_its_commands():
-    assert ("csgnet", "parse") in COMMANDS and ("shapeprog", "run") in COMMANDS
+    assert ("csgnet", "parse") in COMMANDS and ("shapeprog", "assembly run") in COMMANDS
+
+
+def test_shapeprog_systems_commands_and_aliases():
+    import argparse
+
+    from shapeprog.__main__ import ALIASES, SYSTEMS, build_parser
+
+    def choices(parser):
+        return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+    systems = choices(build_parser())
+    assert list(SYSTEMS) == list(systems) == list(SHAPEPROG_COMMANDS)
+    assert {name: set(choices(sp)) for name, sp in systems.items()} == SHAPEPROG_COMMANDS
+    assert {old: f"{system} {command}" for old, (system, command, _) in ALIASES.items()} == SHAPEPROG_ALIASES
+    for name, (module, summary) in SYSTEMS.items():  # the summary names the commands its module registers
+        assert module.startswith("shapeprog.") and module.endswith("commands")
+        assert set(summary.split(": ", 1)[1].split(", ")) == SHAPEPROG_COMMANDS[name]
 
 
 @pytest.mark.parametrize("package, command", COMMANDS)
 def test_readme_subcommand_help(package, command, capsys):
     main = importlib.import_module(f"{package}.__main__").main
     with pytest.raises(SystemExit) as exit_:
-        main([command, "--help"])
+        main([*command.split(), "--help"])
     assert exit_.value.code == 0
-    assert command in capsys.readouterr().out
+    assert f"python -m {package} {command}" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("package", ["csgnet", "shapeprog"])
@@ -152,4 +192,4 @@ def test_python_m_help(package):
     assert out.returncode == 0, out.stderr
     for p, command in COMMANDS:
         if p == package:
-            assert command in out.stdout
+            assert command.split()[0] in out.stdout

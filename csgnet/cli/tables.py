@@ -137,7 +137,7 @@ def cmd_table1(args) -> int:
     models = reward_sweep(init, args.gammas, args.steps, train, args.batch, args.lr, args.seed, args.accumulate,
                           progress=lambda s: print(s, flush=True))
     rows = table4(models, test[idx], None, tuple(args.beams), (0,), progress=lambda s: print(s, flush=True))
-    setup = (f"REINFORCE from {init}, {args.steps} batches of {args.batch} silhouettes, one SGD update per "
+    setup = (f"REINFORCE from {args.init or 'the shipped csgnet2d.pt'}, {args.steps} batches of {args.batch} silhouettes, one SGD update per "
              f"{args.accumulate} (lr {args.lr}, momentum 0.9, gradient norm clipped at 10, the same batches for every gamma, seed {args.seed}, {len(train)} training "
              f"silhouettes); scored on {len(idx)} of {len(test)} test silhouettes; {measured_on()}.")
     paper = ("The paper's Table 1 sweeps gamma on its CAD set, which is not available here (csg-t4-cad), over "

@@ -346,7 +346,7 @@ def load_targets(source: str, split: str, path=None) -> np.ndarray:
 
     Sources:
         * ``"silhouettes"``: the shipped PartNet silhouettes (or a file written by
-          ``python -m shapeprog silhouettes`` at ``path``);
+          ``python -m shapeprog assembly silhouettes`` at ``path``);
         * ``"cad"``: the paper's ``cad.h5`` at ``path`` (needs h5py, the ``cad`` extra);
         * ``"folder"``: image files under ``path/<split>/`` (PNG, JPG, ...; each binarised by Otsu's rule and
           fitted into 64x64, :func:`shapeio.image.read_image_folder`), in sorted name order;

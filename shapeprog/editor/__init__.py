@@ -8,7 +8,7 @@ The core (this package without :mod:`~shapeprog.editor.server`) needs no browser
 * :mod:`~shapeprog.editor.session`: :class:`EditSession`, a program being edited: execution, the last
   good geometry, errors, undo / redo, a goal-directed target and exports (text, OBJ, PNG).
 * :mod:`~shapeprog.editor.server`: the browser page (``viser``, the ``editor`` extra:
-  ``pip install -e '.[editor]'``), imported only by ``python -m shapeprog edit``.
+  ``pip install -e '.[editor]'``), imported only by ``python -m shapeprog assembly edit``.
 
 The page and its use: ``docs/editor.md``.
 """

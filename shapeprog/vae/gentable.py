@@ -5,7 +5,7 @@
 Table 4: generalization, coverage, variety; and % novel programs) against the corpus train split, adds a
 ground-truth row (the corpus val split through the same metrics) and the paper's figures, and returns
 a markdown table. :func:`evaluate_generation` gives one row as numbers. :func:`train_category_classifier`
-trains the PointNet whose features the Fréchet distance uses (``python -m shapeprog train-classifier``).
+trains the PointNet whose features the Fréchet distance uses (``python -m shapeprog vae train-classifier``).
 Definitions and decisions: ``docs/generation_metrics.md``.
 """
 from __future__ import annotations

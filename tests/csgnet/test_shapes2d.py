@@ -79,7 +79,7 @@ def test_shipped_silhouettes():
 
 
 def test_silhouette_file_errors(tmp_path):
-    with pytest.raises(FileNotFoundError, match="python -m shapeprog silhouettes --out"):
+    with pytest.raises(FileNotFoundError, match="python -m shapeprog assembly silhouettes --out"):
         shapes2d.load_silhouettes("train", path=tmp_path / "none.npz")
     with pytest.raises(ValueError, match="unknown split 'all'"):
         shapes2d.load_silhouettes("all")

@@ -120,7 +120,7 @@ def test_build_is_deterministic_and_matches_single_shapes():
 
 def test_cli_writes_what_the_loader_reads(tmp_path, capsys):
     out = tmp_path / "sil.npz"
-    assert main(["silhouettes", "--out", str(out), "--limit", "1", "--quiet"]) == 0
+    assert main(["assembly", "silhouettes", "--out", str(out), "--limit", "1", "--quiet"]) == 0
     assert "train 6, val 6, test 6 images" in capsys.readouterr().out
     built = S.build(limit=1, progress=False)
     for split in S.SPLITS:
@@ -164,5 +164,5 @@ def test_bad_frame_is_refused_before_building(tmp_path):
         S.build(margin=40, limit=1, progress=False)
     out = tmp_path / "sil.npz"
     with pytest.raises(SystemExit, match="error: need an int margin with 0 <= margin < size / 2"):
-        main(["silhouettes", "--out", str(out), "--margin", "40", "--limit", "1", "--quiet"])
+        main(["assembly", "silhouettes", "--out", str(out), "--margin", "40", "--limit", "1", "--quiet"])
     assert not out.exists()

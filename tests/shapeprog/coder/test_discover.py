@@ -12,7 +12,8 @@ import egglog  # noqa: E402,F401  (a core dependency: a broken install fails her
 
 from shapeprog.errors import ParseError
 from shapeprog.coder import data
-from shapeprog.coder.discover import Config, discover, start_from, summarize
+from shapeprog.coder.discover import discover, start_from, summarize
+from shapeprog.coder.config import Config
 from shapeprog.coder.wake import evaluate
 from shapeprog.coder.execute import execute
 from shapeprog.coder.infer import infer, load_library, shipped_libraries
@@ -128,7 +129,7 @@ def test_a_run_starts_from_an_earlier_library_and_its_programs(tmp_path, capsys)
 
     out = tmp_path / "cli"
     # (one worker: a process forked after this process ran egglog can hang)
-    assert main(["discover-abstractions", "chair", "--start-from", "chair", "--shapes", "3", "--workers", "1",
+    assert main(["coder", "discover", "--category", "chair", "--start-from", "chair", "--shapes", "3", "--workers", "1",
                  "--out", str(out), "--quiet"]) == 0
     log = json.loads((out / "log.json").read_text())["log"]
     shipped_log = json.loads(resources.files("shapeprog").joinpath("data", "coder_libraries", "chair_log.json")
@@ -151,12 +152,12 @@ def test_a_run_starts_from_an_earlier_library_and_its_programs(tmp_path, capsys)
     (out / "programs.txt").write_text(text)
     capsys.readouterr()
     with pytest.raises(SystemExit, match="--start-round needs --start-from"):
-        main(["discover-abstractions", "chair", "--start-round", "2", "--out", str(tmp_path / "y"), "--quiet"])
-    assert main(["discover-abstractions", "chair", "--start-from", "chair", "--shapes", "3", "--out", str(out),
+        main(["coder", "discover", "--category", "chair", "--start-round", "2", "--out", str(tmp_path / "y"), "--quiet"])
+    assert main(["coder", "discover", "--category", "chair", "--start-from", "chair", "--shapes", "3", "--out", str(out),
                  "--quiet"]) == 1
     assert "state.json exists" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="no shipped library for 'sofa'"):
-        main(["discover-abstractions", "chair", "--start-from", "sofa", "--out", str(tmp_path / "z"), "--quiet"])
+        main(["coder", "discover", "--category", "chair", "--start-from", "sofa", "--out", str(tmp_path / "z"), "--quiet"])
 
 
 def test_a_damaged_state_is_refused_naming_the_file(tmp_path):
@@ -242,51 +243,51 @@ def test_cli_infer_and_discover_refusal(tmp_path, capsys):
 
     lib = tmp_path / "lib.txt"
     lib.write_text("Legs(w: Float, h: Float, x: Float, y: Float, z: Float) = SymRef(Move(Cuboid(w,h,w),x,y,z),AX)\n")
-    assert main(["abstract-infer", "chair/401", "--library", str(lib)]) == 0
+    assert main(["coder", "infer", "coder-chair:401", "--library", str(lib)]) == 0
     out = capsys.readouterr().out
     assert out.startswith("program:") and "expanded:" in out and "cost:" in out
     cost = lambda text: float(text.split("cost: ")[1].split()[0])  # noqa: E731
     # larger e-graph limits (ours) grow the same e-graph further; on this shape the program is no dearer
-    assert main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "8", "--max-nodes",
+    assert main(["coder", "infer", "coder-chair:401", "--library", str(lib), "--iterations", "8", "--max-nodes",
                  "40000", "--time-limit", "30"]) == 0
     assert cost(capsys.readouterr().out) <= cost(out) + 1e-9
     # the earlier e-graph value schedule, named: on this shape the same program (bench_shapecoder_values.py)
-    assert main(["abstract-infer", "chair/401", "--library", str(lib), "--egraph-values", "lagged"]) == 0
+    assert main(["coder", "infer", "coder-chair:401", "--library", str(lib), "--egraph-values", "lagged"]) == 0
     assert capsys.readouterr().out == out
     with pytest.raises(SystemExit):
-        main(["abstract-infer", "chair/401", "--library", str(lib), "--egraph-values", "soon"])
+        main(["coder", "infer", "coder-chair:401", "--library", str(lib), "--egraph-values", "soon"])
     assert "invalid choice: 'soon'" in capsys.readouterr().err
     with pytest.raises(SystemExit) as e:
-        main(["abstract-infer", "chair/401", "--library", str(lib), "--iterations", "-1"])
+        main(["coder", "infer", "coder-chair:401", "--library", str(lib), "--iterations", "-1"])
     assert e.value.code == 2
     assert "argument --iterations: must be an integer from 0 to 1000, got '-1'" in capsys.readouterr().err
     with pytest.raises(SystemExit) as e:
-        main(["discover-abstractions", "chair", "--out", str(tmp_path / "neg"), "--iterations", "-3", "--quiet"])
+        main(["coder", "discover", "--category", "chair", "--out", str(tmp_path / "neg"), "--iterations", "-3", "--quiet"])
     assert e.value.code == 2 and "must be an integer from 0 to 1000, got '-3'" in capsys.readouterr().err
     assert not (tmp_path / "neg").exists()
     with pytest.raises(SystemExit, match="--network needs a shipped library"):
-        main(["abstract-infer", "chair/401", "--library", str(lib), "--network"])
+        main(["coder", "infer", "coder-chair:401", "--library", str(lib), "--network"])
     bad = tmp_path / "bad.txt"
     bad.write_text("Legs(w: Float) = Cubiod(w,w,w)\n")
-    assert main(["abstract-infer", "chair/401", "--library", str(bad)]) == 2
+    assert main(["coder", "infer", "coder-chair:401", "--library", str(bad)]) == 2
     assert "bad.txt:1:" in capsys.readouterr().err
     # a shape given as a file: its one non-blank line, errors at that line; more than one shape is refused
     shape = tmp_path / "shape.txt"
     shape.write_text("\n\n" + data.read_lines("chair")[400] + "\n")
-    assert main(["abstract-infer", str(shape), "--library", str(lib)]) == 0
+    assert main(["coder", "infer", str(shape), "--library", str(lib)]) == 0
     assert capsys.readouterr().out.startswith("program:")
     shape.write_text("\n\nkey_0_1:Cuboid(0.1,0.2)\n")
-    assert main(["abstract-infer", str(shape), "--library", str(lib)]) == 2
+    assert main(["coder", "infer", str(shape), "--library", str(lib)]) == 2
     assert "shape.txt:3:" in capsys.readouterr().err
     shape.write_text(data.read_lines("chair")[400] + "\n\n" + data.read_lines("chair")[401] + "\n")
     with pytest.raises(SystemExit, match="2 shape lines .the second at line 3."):
-        main(["abstract-infer", str(shape), "--library", str(lib)])
+        main(["coder", "infer", str(shape), "--library", str(lib)])
     shape.write_text("\n \n")
     with pytest.raises(SystemExit, match="shape.txt: no shape line"):
-        main(["abstract-infer", str(shape), "--library", str(lib)])
+        main(["coder", "infer", str(shape), "--library", str(lib)])
     (tmp_path / "run").mkdir()
     (tmp_path / "run" / "library.txt").write_text("# mine\n")
-    assert main(["discover-abstractions", "chair", "--out", str(tmp_path / "run"), "--shapes", "2", "--quiet"]) == 1
+    assert main(["coder", "discover", "--category", "chair", "--out", str(tmp_path / "run"), "--shapes", "2", "--quiet"]) == 1
     assert (tmp_path / "run" / "library.txt").read_text() == "# mine\n"
 
 
@@ -306,13 +307,13 @@ def test_cli_no_semantic_rewrites_is_the_structure_only_run(tmp_path):
     from shapeprog.__main__ import main
 
     out = tmp_path / "base"
-    assert main(["discover-abstractions", "chair", "--shapes", "3", "--rounds", "0", "--workers", "1",
+    assert main(["coder", "discover", "--category", "chair", "--shapes", "3", "--rounds", "0", "--workers", "1",
                  "--no-semantic-rewrites", "--out", str(out), "--quiet"]) == 0
     header = (out / "library.txt").read_text().splitlines()[0]
     assert "semantic rewrites off (abstraction rules only)" in header
     assert json.loads((out / "state.json").read_text())["config"]["semantic_rewrites"] is False
     programs = [parse(line.split(":", 1)[1]) for line in (out / "programs.txt").read_text().splitlines()]
     assert len(programs) == 3 and not any(n.fn == "SymRef" for p in programs for n in walk(p) if isinstance(n, Call))
-    assert main(["discover-abstractions", "chair", "--shapes", "3", "--rounds", "0", "--workers", "1",
+    assert main(["coder", "discover", "--category", "chair", "--shapes", "3", "--rounds", "0", "--workers", "1",
                  "--out", str(tmp_path / "full"), "--quiet"]) == 0
     assert "semantic rewrites off" not in (tmp_path / "full" / "library.txt").read_text()

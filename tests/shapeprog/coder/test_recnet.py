@@ -199,7 +199,7 @@ def _planted_model():
 
 
 def test_wake_with_a_network_recovers_planted_symref_and_symtrans():
-    from shapeprog.coder.discover import Config
+    from shapeprog.coder.config import Config
     from shapeprog.coder.wake import wake, wake_network
     from shapeprog.coder.search import search_shape
 
@@ -245,7 +245,8 @@ def test_store_combines_pieces():
 def test_discovery_with_the_network_wake_writes_and_reuses_its_checkpoint(tmp_path):
     import json
 
-    from shapeprog.coder.discover import Config, discover
+    from shapeprog.coder.discover import discover
+    from shapeprog.coder.config import Config
 
     shapes = [execute(parse(f"Union({LEGS},{SLATS})")), execute(parse(LEGS))]
     cfg = Config(rounds=0, wake="network", n_dreams=8, train_epochs=1, wake_batch=8, wake_batches=1,
@@ -270,7 +271,7 @@ def test_discovery_with_the_network_wake_writes_and_reuses_its_checkpoint(tmp_pa
 
 def test_discovery_defaults_train_with_the_papers_settings():
     # discover.Config keeps torch-free copies of TrainConfig's defaults; they must stay the paper's
-    from shapeprog.coder.discover import Config
+    from shapeprog.coder.config import Config
     from shapeprog.coder.train import PAPER
 
     assert Config().train_config() == PAPER
@@ -332,22 +333,23 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     assert "the search's budget 2 s / 20 batches of 64 per step: ours, not the paper's 1 s" in text
     assert "the wake's" in tables.format_tables(run, tables.table2(run), [row], network=True)
     # the commands pass it on, and refuse it without the network
-    assert main(["abstract-infer", "chair/402", "--library", "chair", "--network", "--search-seconds", "2.5",
+    assert main(["coder", "infer", "coder-chair:402", "--library", "chair", "--network", "--search-seconds", "2.5",
                  "--search-batches", "8"]) == 0
     assert seen[-1] == {"batch": WAKE_BATCH, "batches": 8, "seconds": 2.5}
     with pytest.raises(SystemExit, match="need --network"):
-        main(["abstract-infer", "chair/402", "--library", "chair", "--search-seconds", "2"])
+        main(["coder", "infer", "coder-chair:402", "--library", "chair", "--search-seconds", "2"])
     with pytest.raises(SystemExit, match="need --phi-network"):
-        main(["table2-coder", "--categories", "chair", "--phi-search-batches", "4", "--train", "1", "--heldout", "1"])
+        main(["coder", "tables", "--category", "chair", "--phi-search-batches", "4", "--train", "1", "--heldout", "1"])
     with pytest.raises(SystemExit):
-        main(["abstract-infer", "chair/402", "--library", "chair", "--network", "--search-seconds", "-1"])
+        main(["coder", "infer", "coder-chair:402", "--library", "chair", "--network", "--search-seconds", "-1"])
     capsys.readouterr()
 
 
 def test_network_from_a_later_round_and_repeated_wakes_resume_where_they_stopped(tmp_path):
     import json
 
-    from shapeprog.coder.discover import Config, discover
+    from shapeprog.coder.discover import discover
+    from shapeprog.coder.config import Config
 
     shapes = [execute(parse(f"Union({LEGS},{SLATS})")), execute(parse(LEGS))]
     cfg = Config(rounds=1, n_proposals=50, n_abstractions=2, wake="network", network_from=1, wake_repeats=2,

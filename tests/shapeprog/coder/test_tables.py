@@ -139,20 +139,20 @@ def test_cli_table2_coder(tmp_path, capsys):
     run.mkdir()
     _run_folder(run, n=2)
     out = tmp_path / "t.md"
-    assert main(["table2-coder", "--categories", "chair", "--library", f"chair={run}", "--train", "2",
+    assert main(["coder", "tables", "--category", "chair", "--library", f"chair={run}", "--train", "2",
                  "--heldout", "2", "--workers", "1", "--quiet", "--out", str(out)]) == 0
     text = out.read_text()
-    assert "# command: python -m shapeprog table2-coder" in text
+    assert "# command: python -m shapeprog coder tables" in text
     assert "| ShapeCoder (paper, 400 shapes) | 63.6 |" in text and "| validation-PHI | 2 |" in text
     assert "| train (discovery programs) | 2 |" in text
     assert "e-graph limits 5 iterations / 10000 e-nodes / 5 s: the paper's" in text
-    with pytest.raises(SystemExit, match="table is not among --categories"):
-        main(["table2-coder", "--categories", "chair", "--library", f"table={run}"])
+    with pytest.raises(SystemExit, match="table is not among --category"):
+        main(["coder", "tables", "--category", "chair", "--library", f"table={run}"])
     with pytest.raises(SystemExit, match="expected CATEGORY=FOLDER"):
-        main(["table2-coder", "--library", str(run)])
+        main(["coder", "tables", "--library", str(run)])
     with pytest.raises(SystemExit, match="does not exist"):
-        main(["table2-coder", "--out", str(tmp_path / "missing" / "t.md")])
-    assert main(["table2-coder", "--library", f"chair={tmp_path / 'none'}", "--quiet"]) == 1
+        main(["coder", "tables", "--out", str(tmp_path / "missing" / "t.md")])
+    assert main(["coder", "tables", "--library", f"chair={tmp_path / 'none'}", "--quiet"]) == 1
     assert "library.txt: not found" in capsys.readouterr().err
 
 
@@ -165,7 +165,7 @@ def test_cli_table2_coder_structure_only_baseline_row(tmp_path):
     _run_folder(run, n=2)
     _naive_folder(base, n=2)  # no abstraction: the naive programs
     out = tmp_path / "t.md"
-    assert main(["table2-coder", "--categories", "chair", "--library", f"chair={run}", "--baseline-input", f"chair={base}",
+    assert main(["coder", "tables", "--category", "chair", "--library", f"chair={run}", "--baseline-input", f"chair={base}",
                  "--baseline-wake", f"chair={base}", "--train", "1", "--heldout", "1", "--workers", "1", "--quiet", "--out", str(out)]) == 0
     lines = out.read_text().splitlines()
     row = next(x for x in lines if x.startswith("| Structure only, from the naive programs (ours"))
@@ -179,8 +179,8 @@ def test_cli_table2_coder_structure_only_baseline_row(tmp_path):
     # a baseline of other shapes is refused, naming it
     _naive_folder(base, n=3)
     with pytest.raises(SystemExit, match="the baseline's 3 shapes are not the 2 shapes"):
-        main(["table2-coder", "--library", f"chair={run}", "--baseline-wake", f"chair={base}", "--quiet"])
-    with pytest.raises(SystemExit, match="--baseline-input table=...: table is not among --categories"):
-        main(["table2-coder", "--baseline-input", f"table={base}"])
+        main(["coder", "tables", "--library", f"chair={run}", "--baseline-wake", f"chair={base}", "--quiet"])
+    with pytest.raises(SystemExit, match="--baseline-input table=...: table is not among --category"):
+        main(["coder", "tables", "--baseline-input", f"table={base}"])
     with pytest.raises(SystemExit, match="--baseline-wake .*expected CATEGORY=FOLDER"):
-        main(["table2-coder", "--baseline-wake", str(base)])
+        main(["coder", "tables", "--baseline-wake", str(base)])

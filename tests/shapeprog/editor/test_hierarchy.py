@@ -91,11 +91,12 @@ def test_session_reads_the_refactor_file_and_expands(programs, tmp_path):
 
 
 def test_edit_command_refactors_a_corpus_program_with_a_shipped_library():
-    from shapeprog.__main__ import _open_for_edit
+    from shapeprog.commands import open_for_edit
 
-    args = argparse.Namespace(library="chair", sample=None, program="chair/173", target=None, seed=0)
-    s, text, file = _open_for_edit(args)
+    args = argparse.Namespace(library="chair", sample=False, program="chair/173", target=None, seed=0)
+    s, text, file = open_for_edit(args)
     assert s.error is None and file == "chair/173_macros.txt" and text.startswith("# chair/173/Program_0\n")
     assert len(s.controls(cuboids=False)) == 14
-    with pytest.raises(SystemExit, match=r"sofa: neither a ShapeMOD library file nor a shipped ShapeMOD library \(shipped: chair, storage, table\)"):
-        _open_for_edit(argparse.Namespace(library="sofa", sample=None, program="chair/173", target=None, seed=0))
+    with pytest.raises(SystemExit, match=r"sofa: neither a ShapeMOD library file nor a shipped ShapeMOD library "
+                                         r"\(shipped: chair, storage, table\)"):
+        open_for_edit(argparse.Namespace(library="sofa", sample=False, program="chair/173", target=None, seed=0))

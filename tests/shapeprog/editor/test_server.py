@@ -327,11 +327,11 @@ def test_the_edit_command_refuses_bad_arguments(tmp_path, capsys):
     from shapeprog.__main__ import main
 
     with pytest.raises(SystemExit, match="neither a file nor a corpus id"):
-        main(["edit", "chair/x", "--no-browser", "--export-dir", str(tmp_path)])
+        main(["assembly", "edit", "chair/x", "--no-browser", "--export-dir", str(tmp_path)])
     with pytest.raises(SystemExit, match="export folder does not exist"):
-        main(["edit", "chair/173", "--no-browser", "--export-dir", str(tmp_path / "missing")])
+        main(["assembly", "edit", "chair/173", "--no-browser", "--export-dir", str(tmp_path / "missing")])
     with pytest.raises(SystemExit, match="no program chair/1 in the corpus"):
-        main(["edit", "chair/1", "--no-browser", "--export-dir", str(tmp_path)])
+        main(["assembly", "edit", "chair/1", "--no-browser", "--export-dir", str(tmp_path)])
 
 
 def test_macro_program_page_and_expanded_toggle(tmp_path):
@@ -472,7 +472,7 @@ def test_defect_edit_port_out_of_range_is_an_argument_error(capsys):
     from shapeprog.__main__ import main
 
     with pytest.raises(SystemExit) as e:
-        main(["edit", "chair/173", "--port", "70000", "--no-browser"])
+        main(["assembly", "edit", "chair/173", "--port", "70000", "--no-browser"])
     assert e.value.code == 2
     assert capsys.readouterr().err.splitlines()[-1].endswith(
         "error: argument --port: port '70000' is not a TCP port (an integer from 0 to 65535)")

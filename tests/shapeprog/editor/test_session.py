@@ -190,26 +190,26 @@ def test_importing_the_editor_does_not_import_viser():
 def _edit_args(**kw):
     import argparse
 
-    base = dict(program=None, sample=None, seed=0, library=None, target=None)
+    base = dict(program=None, sample=False, category="chair", seed=0, library=None, target=None)
     base.update(kw)
     return argparse.Namespace(**base)
 
 
 def test_the_edit_command_opens_samples_macro_files_and_targets(tmp_path):
-    from shapeprog.__main__ import _open_for_edit
+    from shapeprog.commands import open_for_edit
 
     from editor_testutil import MACROS
 
-    s, text, file = _open_for_edit(_edit_args(sample="chair", seed=1))
+    s, text, file = open_for_edit(_edit_args(sample=True, category="chair", seed=1))
     assert s.error is None and s.program is not None and file == "chair_sample_seed1.txt" and s.text == text
     lib = tmp_path / "lib.txt"
     lib.write_text(MACROS.split("\nbbox")[0])
     prog = tmp_path / "legs.txt"
     prog.write_text("bbox" + MACROS.split("\nbbox", 1)[1])
-    s, _, _ = _open_for_edit(_edit_args(program=str(prog), library=str(lib), target="chair/173"))
+    s, _, _ = open_for_edit(_edit_args(program=str(prog), library=str(lib), target="chair/173"))
     assert s.is_macro and s.error is None and s.distance() > 0
     assert [c.name for c in s.controls()][3:6] == ["1:four_legs.s", "1:four_legs.b", "1:four_legs.t"]
     with pytest.raises(SystemExit, match="--target"):
-        _open_for_edit(_edit_args(program="chair/173", target="chair/1"))
+        open_for_edit(_edit_args(program="chair/173", target="chair/1"))
     with pytest.raises(SystemExit, match="not both"):
-        _open_for_edit(_edit_args(program="chair/173", sample="chair"))
+        open_for_edit(_edit_args(program="chair/173", sample=True))

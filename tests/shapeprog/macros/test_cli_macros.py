@@ -7,11 +7,11 @@ from shapeprog.macros import Library
 
 def test_discover_macros_writes_a_library_and_resumes(tmp_path, capsys):
     out = tmp_path / "run"
-    argv = ["discover-macros", "--category", "chair", "--limit", "15", "--rounds", "1", "--proposal-steps", "5",
+    argv = ["macros", "discover", "--category", "chair", "--limit", "15", "--rounds", "1", "--proposal-steps", "5",
             "--subsample", "30", "--out", str(out), "--quiet"]
     assert main(argv) == 0
     text = (out / "library.txt").read_text()
-    assert "# command: python -m shapeprog discover-macros --category chair --limit 15" in text
+    assert "# command: python -m shapeprog macros discover --category chair --limit 15" in text
     Library.from_text(text)
     assert (out / "state.json").exists()
     argv[argv.index("--rounds") + 1] = "1"
@@ -23,7 +23,7 @@ def test_refactor_command(tmp_path, capsys):
     lib = tmp_path / "lib.txt"
     lib.write_text("def slab(h: float):\n    c = Cuboid(bb_x, h, bb_z, True)\n"
                    "    attach(bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\n")
-    assert main(["refactor", "chair/173", "--library", str(lib), "-o", str(tmp_path / "out.txt")]) == 0
+    assert main(["macros", "refactor", "chair/173", "--library", str(lib), "-o", str(tmp_path / "out.txt")]) == 0
     out = capsys.readouterr().out
     assert "# chair/173/Program_0: f " in out and "total: f " in out
     assert (tmp_path / "out.txt").read_text().startswith("# chair/173/Program_0\n")
@@ -32,7 +32,7 @@ def test_refactor_command(tmp_path, capsys):
 def test_refactor_bad_library_file(tmp_path, capsys):
     lib = tmp_path / "lib.txt"
     lib.write_text("def slab(h: float):\n    c = Cubiod(bb_x, h, bb_z, True)\n")
-    assert main(["refactor", "chair/173", "--library", str(lib)]) == 2
+    assert main(["macros", "refactor", "chair/173", "--library", str(lib)]) == 2
     err = capsys.readouterr().err
     assert f"{lib}:2:" in err and "unknown function 'Cubiod'" in err
 
@@ -41,7 +41,7 @@ def test_table1_library_option_form(tmp_path):
     import pytest
 
     with pytest.raises(SystemExit, match=r"--library 'lib.txt': expected CATEGORY=FILE"):
-        main(["table1", "--categories", "chair", "--limit", "2", "--library", "lib.txt", "--quiet"])
+        main(["macros", "tables", "--category", "chair", "--limit", "2", "--library", "lib.txt", "--quiet"])
 
 
 def test_discover_macros_continues_from_a_library(tmp_path, capsys):

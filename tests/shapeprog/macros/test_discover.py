@@ -270,7 +270,7 @@ def test_defect_discover_stop_after_nan_is_refused(capsys):
     with pytest.raises(ValueError, match="stop_after must be a number of seconds >= 0, got nan"):
         discover(Nodes([], [], []), stop_after=float("nan"))
     with pytest.raises(SystemExit) as e:
-        main(["discover-macros", "--category", "chair", "--stop-after", "nan", "--out", "unused"])
+        main(["macros", "discover", "--category", "chair", "--stop-after", "nan", "--out", "unused"])
     assert e.value.code == 2
     assert capsys.readouterr().err.splitlines()[-1].endswith(
         "argument --stop-after: must be a number in [0, 3.16224e+07], got 'nan'")

@@ -151,7 +151,7 @@ def test_read_refactored_names_a_bad_file(tmp_path, monkeypatch):
 
 def test_refactor_corpus_command(tmp_path, capsys):
     out = tmp_path / "c"
-    argv = ["refactor-corpus", "--category", "chair", "--library", "chair", "--limit", "3", "--split", "val",
+    argv = ["macros", "refactor-corpus", "--category", "chair", "--library", "chair", "--limit", "3", "--split", "val",
             "--workers", "1", "--out", str(out)]
     assert main(argv) == 0
     printed = capsys.readouterr().out

@@ -130,7 +130,7 @@ def test_cli_retrieval_from_a_cache_prints_and_records_it(tmp_path, model, capsy
                 "meta": {}}, path)
     cloud = tmp_path / "q.npy"
     np.save(cloud, corpus_cloud("chair", TRAIN[2], n_points=2000))
-    assert main(["infer", str(cloud), "--weights", str(path), "--retrieval", "2", "--clouds", str(tmp_path / "c"),
+    assert main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--retrieval", "2", "--clouds", str(tmp_path / "c"),
                  "--no-stability", "--out", str(tmp_path / "o")]) == 0
     out = capsys.readouterr()
     assert "retrieval: 2 training programs against the decoded one" in out.out
@@ -138,9 +138,9 @@ def test_cli_retrieval_from_a_cache_prints_and_records_it(tmp_path, model, capsy
     record = json.loads((tmp_path / "o" / "q.json").read_text())
     assert record["retrieval"]["candidates"] == 2 and record["retrieval"]["chosen"] == f"chair/{TRAIN[2]}"
     with pytest.raises(SystemExit, match="--clouds is only used with --retrieval"):
-        main(["infer", str(cloud), "--weights", str(path), "--clouds", str(tmp_path / "c"), "--out", str(tmp_path / "p")])
+        main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--clouds", str(tmp_path / "c"), "--out", str(tmp_path / "p")])
     with pytest.raises(SystemExit, match="nowhere"):
-        main(["infer", str(cloud), "--weights", str(path), "--retrieval", "--clouds", str(tmp_path / "nowhere"),
+        main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--retrieval", "--clouds", str(tmp_path / "nowhere"),
               "--out", str(tmp_path / "p")])
 
 

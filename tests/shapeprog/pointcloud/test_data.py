@@ -162,7 +162,7 @@ def test_dataset_items(cache):
 
 
 def test_make_clouds_command(tmp_path, capsys):
-    assert main(["make-clouds", "--category", "storage", "--limit", "1", "--points", "32", "--workers", "1",
+    assert main(["pointcloud", "make-clouds", "--category", "storage", "--limit", "1", "--points", "32", "--workers", "1",
                  "--quiet", "--out", str(tmp_path / "c")]) == 0
     out = capsys.readouterr().out
     assert "2 clouds of 32 points" in out and "storage_split.json" in out
@@ -172,7 +172,7 @@ def test_make_clouds_command(tmp_path, capsys):
     # a second run into the folder never replaces the cache
     before = (tmp_path / "c" / "storage_clouds.npz").read_bytes()
     with pytest.raises(SystemExit, match=r"storage_clouds\.npz: exists"):
-        main(["make-clouds", "--category", "storage", "--limit", "2", "--points", "32", "--workers", "1", "--quiet",
+        main(["pointcloud", "make-clouds", "--category", "storage", "--limit", "2", "--points", "32", "--workers", "1", "--quiet",
               "--out", str(tmp_path / "c")])
     assert (tmp_path / "c" / "storage_clouds.npz").read_bytes() == before
     # a split file of another run beside the cache is refused where both are read

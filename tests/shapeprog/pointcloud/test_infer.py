@@ -165,7 +165,7 @@ def test_a_fit_that_stops_early_is_reported_by_infer_and_the_cli(tmp_path, weigh
     src = tmp_path / "comp_pc.npy"
     np.save(src, pts)
     out = tmp_path / "out"
-    assert main(["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability", "--fit",
+    assert main(["pointcloud", "infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability", "--fit",
                  "--steps", "5"]) == 0
     assert f"fitting: {stop}" in capsys.readouterr().out
     assert json.loads((out / "comp_pc.json").read_text())["fit_stopped"].startswith(stop)
@@ -185,7 +185,7 @@ def test_cli_leaves_no_half_result_when_a_write_fails(tmp_path, weights, monkeyp
     src = tmp_path / "comp_pc.npy"
     np.save(src, corpus.example_points("comp_pc.obj"))
     out = tmp_path / "out"
-    assert main(["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]) == 1
+    assert main(["pointcloud", "infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]) == 1
     assert "error: disk full" in capsys.readouterr().err
     assert list(out.iterdir()) == []  # the program, mesh and picture written before it are removed again
 
@@ -209,11 +209,11 @@ def test_cli_reads_a_mesh_and_names_bad_files(tmp_path, weights):
     faces = [(1, 2, 4), (1, 4, 3), (5, 7, 8), (5, 8, 6), (1, 5, 6), (1, 6, 2), (3, 4, 8), (3, 8, 7),
              (1, 3, 7), (1, 7, 5), (2, 6, 8), (2, 8, 4)]
     mesh.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in verts) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces))
-    assert main(["infer", str(mesh), "--weights", str(weights), "--out", str(tmp_path / "o"), "--no-stability"]) == 0
+    assert main(["pointcloud", "infer", str(mesh), "--weights", str(weights), "--out", str(tmp_path / "o"), "--no-stability"]) == 0
     assert (tmp_path / "o" / "box.obj").exists()
     empty = tmp_path / "empty.xyz"
     empty.write_text("")
-    assert main(["infer", str(empty), "--weights", str(weights), "--out", str(tmp_path / "e")]) == 1
+    assert main(["pointcloud", "infer", str(empty), "--weights", str(weights), "--out", str(tmp_path / "e")]) == 1
     assert not (tmp_path / "e").exists()
 
 
@@ -247,7 +247,7 @@ def test_cli_writes_the_macro_program_of_a_macro_model(tmp_path, capsys):
     src = tmp_path / "comp_pc.npy"
     np.save(src, corpus.example_points("comp_pc.obj"))
     out = tmp_path / "out"
-    assert main(["infer", str(src), "--weights", str(WEIGHTS / "pointcloud_e2e_chair_macros.pt"), "--out", str(out),
+    assert main(["pointcloud", "infer", str(src), "--weights", str(WEIGHTS / "pointcloud_e2e_chair_macros.pt"), "--out", str(out),
                  "--no-stability"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["comp_pc.json", "comp_pc.obj", "comp_pc.png", "comp_pc.txt",
                                                      "comp_pc_macros.txt"]
@@ -276,7 +276,7 @@ def test_a_code_that_decodes_to_nothing_is_a_clear_error_naming_the_search(model
 def test_pointcloud_tables_never_write_over_the_weights(tmp_path, weights):
     before = weights.read_bytes()
     with pytest.raises(SystemExit, match=r"tiny\.pt: this output would overwrite an input file"):
-        main(["pointcloud-tables", "--category", "chair", "--clouds", str(tmp_path), "--weights", str(weights),
+        main(["pointcloud", "tables", "--category", "chair", "--clouds", str(tmp_path), "--weights", str(weights),
               "--out", str(weights)])
     assert weights.read_bytes() == before
 
@@ -291,7 +291,7 @@ def test_defect_infer_writes_programs_its_own_tools_read_at_any_input_scale(tmp_
     src = tmp_path / "cloud.npy"
     np.save(src, (cloud * scale + np.array([1.0, 2.0, 3.0]) * scale).astype(np.float32))
     out = tmp_path / "out"
-    assert main(["infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]) == 0
+    assert main(["pointcloud", "infer", str(src), "--weights", str(weights), "--out", str(out), "--no-stability"]) == 0
     record = json.loads((out / "cloud.json").read_text())
     assert record["unit"] == {1e-3: 1e-3, 1.0: 1.0, 1e3: 1e3, 1e30: 1e30}[scale]
     txt = out / "cloud.txt"
@@ -305,9 +305,9 @@ def test_defect_infer_writes_programs_its_own_tools_read_at_any_input_scale(tmp_
                      if line.startswith("v ")])
     assert np.allclose(placed.reshape(-1, 3), mesh, rtol=0, atol=2e-3 * scale)
     capsys.readouterr()
-    assert main(["run", str(txt), "-o", str(tmp_path / "run.obj")]) == 0
-    assert main(["fit", str(txt), "--points", "example", "--steps", "2", "-o", str(tmp_path / "fit.txt")]) == 0
-    assert main(["refactor", str(txt), "--library", "chair", "-o", str(tmp_path / "macros.txt")]) == 0
+    assert main(["assembly", "run", str(txt), "-o", str(tmp_path / "run.obj")]) == 0
+    assert main(["assembly", "fit", str(txt), "--points", "example", "--steps", "2", "-o", str(tmp_path / "fit.txt")]) == 0
+    assert main(["macros", "refactor", str(txt), "--library", "chair", "-o", str(tmp_path / "macros.txt")]) == 0
     assert EditSession(txt.read_text(), str(txt)).controls()
 
 

@@ -180,10 +180,10 @@ def test_cli_search_prints_and_records_it(tmp_path, model, capsys):
                 "meta": {}}, path)
     cloud = tmp_path / "c.npy"
     np.save(cloud, corpus_cloud("chair", CHAIR, n_points=2000))
-    assert main(["infer", str(cloud), "--weights", str(path), "--search-schedule", "3:0.5", "--no-stability",
+    assert main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--search-schedule", "3:0.5", "--no-stability",
                  "--out", str(tmp_path / "o")]) == 0
     assert "latent search: 4 decodes" in capsys.readouterr().out
     record = json.loads((tmp_path / "o" / "c.json").read_text())
     assert record["search"]["decodes"] == 4
     with pytest.raises(SystemExit, match="search step 0"):
-        main(["infer", str(cloud), "--weights", str(path), "--search-schedule", "3", "--out", str(tmp_path / "p")])
+        main(["pointcloud", "infer", str(cloud), "--weights", str(path), "--search-schedule", "3", "--out", str(tmp_path / "p")])

@@ -71,7 +71,7 @@ def test_evaluate_and_write_both_layouts(tmp_path):
     text = write_tables(res, tmp_path / "m.md").read_text()
     assert "| ShapeMOD paper, ShapeMOD (macros) | 41.7 | 56.1 | 96.9 | 88.0 |" in text
     assert "| Ours, ShapeMOD macros: PointNet++" in text and "| Ours: PointNet++" not in text
-    assert main(["pointcloud-tables", "--clouds", str(tmp_path / "c"), "--weights", str(w), "--limit", "1",
+    assert main(["pointcloud", "tables", "--clouds", str(tmp_path / "c"), "--weights", str(w), "--limit", "1",
                  "--steps", "1", "--no-stability", "--no-retrieval", "--quiet", "--out", str(tmp_path / "t2.md")]) == 0
     assert "--limit 1" in (tmp_path / "t2.md").read_text()
 

@@ -134,7 +134,7 @@ def test_fit_logs_images_and_resumes_from_last(clouds, tmp_path, cls):
         load_model(path, "table")
     # the export command recognises a point-cloud checkpoint
     from shapeprog.__main__ import main
-    assert main(["export-weights", str(last), "--out", str(tmp_path / "cli.pt")]) == 0
+    assert main(["pointcloud", "export-weights", str(last), "--out", str(tmp_path / "cli.pt")]) == 0
     assert load_model(tmp_path / "cli.pt").recipe == cls.recipe
 
 

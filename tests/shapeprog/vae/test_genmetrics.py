@@ -306,7 +306,8 @@ def test_pointnet_with_input_transform_and_bad_input():
 
 
 def test_evaluate_generation_command(tmp_path, monkeypatch, capsys):
-    import shapeprog.__main__ as cli
+    import shapeprog.vae.commands as cli
+    from shapeprog.__main__ import main
 
     calls = []
 
@@ -320,7 +321,7 @@ def test_evaluate_generation_command(tmp_path, monkeypatch, capsys):
     (folder / "a.txt").write_text(FLAT)
     (folder / "b.txt").write_text("bbox = Cuboid(1.0, 1.0, 1.0, True)\ncube0 = cubiod(1)\n")
     out = tmp_path / "t.md"
-    assert cli.main(["evaluate-generation", "--category", "table", "--programs", str(folder), "--out", str(out),
+    assert main(["vae", "evaluate", "--category", "table", "--programs", str(folder), "--out", str(out),
                      "--no-stability", "--fool-epochs", "3", "--candidates", "0", "--quiet"]) == 0
     (samples, category, kw), = calls
     assert category == "table" and samples[0] == parse(FLAT) and isinstance(samples[1], str)
@@ -329,8 +330,8 @@ def test_evaluate_generation_command(tmp_path, monkeypatch, capsys):
     captured = capsys.readouterr()
     assert "| table |" in captured.out and "b.txt:2:9: unknown command 'cubiod'" in captured.err
     with pytest.raises(SystemExit, match="no such folder"):
-        cli.main(["evaluate-generation", "--category", "chair", "--programs", str(tmp_path / "none")])
+        main(["vae", "evaluate", "--category", "chair", "--programs", str(tmp_path / "none")])
     with pytest.raises(SystemExit, match="no .txt program files"):
-        cli.main(["evaluate-generation", "--category", "chair", "--programs", str(tmp_path)])
+        main(["vae", "evaluate", "--category", "chair", "--programs", str(tmp_path)])
     with pytest.raises(SystemExit, match="nothing to evaluate"):
-        cli.main(["evaluate-generation", "--category", "chair", "--no-ground-truth"])
+        main(["vae", "evaluate", "--category", "chair", "--no-ground-truth"])

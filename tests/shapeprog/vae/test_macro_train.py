@@ -69,14 +69,14 @@ def test_evaluate_generation_samples_a_macro_model_through_its_expansions(tmp_pa
     import argparse
 
     import shapeprog
-    from shapeprog.__main__ import _vae_samples
+    from shapeprog.vae.commands import vae_samples
     from shapeprog.lang import Program
     from shapeprog.vae.layout import LineLayout
 
     torch.manual_seed(0)
     path = save_weights(MacroVAE(LineLayout(load_library("chair")), hidden_dim=16), tmp_path / "m.pt", "chair")
     args = argparse.Namespace(weights=str(path), category="chair", n=3, seed=0)
-    programs, name, line = _vae_samples(args)
+    programs, name, line = vae_samples(args)
     assert len(programs) == 3 and all(isinstance(p, Program) for p in programs)
     assert all(shapeprog.execute(p).corners.shape[0] >= 1 for p in programs)
     assert "macro programs" in line and str(path) in name
@@ -90,13 +90,13 @@ def test_the_sample_command_writes_macro_programs_and_others_refuse_a_macro_mode
     lib = load_library("chair")
     weights = str(save_weights(MacroVAE(LineLayout(lib), hidden_dim=16), tmp_path / "m.pt", "chair"))
     out = tmp_path / "samples"
-    assert main(["sample", "chair", "-n", "2", "--out", str(out), "--weights", weights, "--quiet"]) == 0
+    assert main(["vae", "sample", "--category", "chair", "-n", "2", "--out", str(out), "--weights", weights, "--quiet"]) == 0
     assert "2 samples of chair" in capsys.readouterr().out
     for i in range(2):
         h = parse_hierarchy((out / f"sample_{i:04d}.txt").read_text(), library=lib)  # macro text, reads back
         assert execute_hierarchy(h, lib).corners.shape[0] >= 1 and (out / f"sample_{i:04d}.obj").is_file()
     with pytest.raises(SystemExit, match="macro programs"):
-        main(["reconstruct", "chair/173", "--weights", weights])
+        main(["vae", "reconstruct", "chair/173", "--weights", weights])
 
 
 def test_the_shipped_macro_chair_model_samples_valid_macro_programs():

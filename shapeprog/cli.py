@@ -1,0 +1,298 @@
+"""What every command of ``python -m shapeprog`` shares, written once.
+
+- :func:`add_command` makes a command's parser: help that shows each option's default and one example in its
+  epilog; the outputs it lists are checked by the dispatcher before the command's work starts.
+- The category is always ``--category`` (:func:`add_category`): one of :data:`CATEGORIES`, by default
+  :data:`DEFAULT_CATEGORY`, or, for commands whose input names one (a corpus id, a weights file), the input's.
+- A corpus id (``chair/173``) names a program of the ShapeAssembly corpus, everywhere (:class:`Program`).
+- Outputs go to ``--out``; an existing output file is refused unless ``--overwrite``
+  (:func:`refuse_existing`), and an output that is one of the inputs is always refused (:func:`refuse_inputs`).
+- ``--quiet`` silences progress output (:func:`add_quiet`).
+- A command that scores something writes its figures with ``--json FILE`` as a result file of
+  :mod:`shapeio.results` (:func:`add_json`, :func:`write_json`, :func:`markdown_result`).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import shlex
+import sys
+from pathlib import Path
+
+from shapeio import atomic_write, refuse_overwrite
+from shapeio.mesh import WRITE_SUFFIXES
+from shapeio.options import float_in, int_in
+
+from . import corpus
+from . import io
+from .errors import ExecutionError
+from .execute import execute
+from .lang import parse
+from .limits import decode
+
+__all__ = ["PROG", "CATEGORIES", "DEFAULT_CATEGORY", "MAX_COUNT_OPTION", "MAX_WORKERS", "MAX_SEED",
+           "MAX_SECONDS_OPTION", "HelpFormatter", "add_command", "add_category", "category_of", "add_quiet",
+           "add_overwrite", "add_json", "write_json", "markdown_result", "int_at_least", "seed", "float_in",
+           "positive_float", "Program", "check_outputs", "refuse_inputs", "refuse_existing", "write_mesh",
+           "emit_text", "command_line", "category_pairs", "macro_library"]
+
+#: How the commands are started, for examples and the command lines recorded in written files.
+PROG = "python -m shapeprog"
+#: The corpus categories every ``--category`` takes.
+CATEGORIES = corpus.CATEGORIES
+#: The category of a command whose input does not name one.
+DEFAULT_CATEGORY = "chair"
+#: The largest value of a count, step or size option that has no maximum of its own.
+MAX_COUNT_OPTION = 10_000_000
+#: The most worker processes of an option ``--workers``.
+MAX_WORKERS = 256
+#: The largest seed (NumPy and torch both take 0 to 2**63 - 1).
+MAX_SEED = 2 ** 63 - 1
+#: The largest time option, in seconds (``--stop-after``, ``--wake-seconds``; minutes options: this / 60).
+MAX_SECONDS_OPTION = 366 * 24 * 3600.0
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Help that names each option's default (none for options without one, or flags that are off) and keeps
+    the epilog's example lines as written."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if (action.default is None or action.default is False or action.default is argparse.SUPPRESS
+                or "%(default)" in text or not action.option_strings):
+            return text
+        return text + " (default: %(default)s)"
+
+    def _fill_text(self, text, width, indent):
+        if text.startswith("example:"):
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+
+def add_command(sub, name: str, func, *, help: str, description: str, example: str,
+                outputs: dict | None = None) -> argparse.ArgumentParser:
+    """A command's parser in ``sub`` (a system's sub-parsers) that runs ``func(args)``.
+
+    Args:
+        example: one command line after ``python -m shapeprog`` (``vae sample --category chair``); the
+            epilog shows it and a test parses it.
+        outputs: each output option's attribute and what it names: ``"folder"`` (created with its parents),
+            ``"file"`` (in an existing folder) or ``"file+"`` (its folder created); the dispatcher checks
+            them with :func:`shapeio.files.output_problem` before the command's work starts.
+    """
+    p = sub.add_parser(name, help=help, description=description, epilog=f"example:\n  {PROG} {example}",
+                       formatter_class=HelpFormatter)
+    p.set_defaults(func=func, outputs=dict(outputs or {}), example=example, parser=p)
+    return p
+
+
+def add_category(parser, *, from_input: str | None = None, multiple: bool = False, help: str | None = None) -> None:
+    """``--category``, one of :data:`CATEGORIES` (several with ``multiple``): by default
+    :data:`DEFAULT_CATEGORY`, or with ``from_input`` (what names it: "the corpus id") the input's category,
+    resolved by :func:`category_of`."""
+    what = help or ("the categories" if multiple else "the category")
+    if from_input:
+        parser.add_argument("--category", choices=CATEGORIES, default=None,
+                            help=f"{what} (default: {from_input}'s, else {DEFAULT_CATEGORY})")
+    elif multiple:
+        parser.add_argument("--category", nargs="+", choices=CATEGORIES, default=[DEFAULT_CATEGORY],
+                            metavar="CATEGORY", help=f"{what}: one or more of {', '.join(CATEGORIES)}")
+    else:
+        parser.add_argument("--category", choices=CATEGORIES, default=DEFAULT_CATEGORY, help=what)
+
+
+def category_of(spec: str | None) -> str | None:
+    """The category of a corpus id (``chair/173`` -> ``chair``); None for a file or anything else."""
+    if not spec:
+        return None
+    cat = spec.partition("/")[0]
+    return cat if cat in CATEGORIES and not Path(spec).is_file() else None
+
+
+def add_quiet(parser, what: str = "progress output") -> None:
+    parser.add_argument("--quiet", action="store_true", help=f"no {what}")
+
+
+def add_overwrite(parser) -> None:
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace existing output files (an output that is one of the inputs is always refused)")
+
+
+def add_json(parser, what: str = "the figures") -> None:
+    parser.add_argument("--json", metavar="FILE",
+                        help=f"also write {what} to this JSON file (a result file of shapeio.results)")
+
+
+def write_json(args, result: dict) -> None:
+    """Write ``result`` (:func:`shapeio.results.make_result`) to ``args.json`` when given."""
+    if getattr(args, "json", None):
+        from shapeio.results import write_result
+
+        print(f"wrote {write_result(args.json, result)}")
+
+
+def _number(cell: str):
+    """A table cell as a number when it is one (``81.2``, ``1,024``, ``12 %``), else its text."""
+    text = cell.strip().replace(",", "").removesuffix("%").strip()
+    try:
+        value = float(text)
+    except ValueError:
+        return cell.strip()
+    return int(value) if re.fullmatch(r"[+-]?\d+", text) else value if math.isfinite(value) else None
+
+
+def markdown_result(text: str, title: str, command: str) -> dict:
+    """The markdown tables of ``text`` as one result (:func:`shapeio.results.make_result`): a column ``table``
+    (the heading or bold line above each table) and every table's columns; a row has None where its table has
+    no such column. The text's other lines become the notes."""
+    from shapeio.results import column, make_result
+
+    columns, keys, rows, notes = [column("table", "table")], {}, [], []
+    heading, header = title, None
+    for line in text.splitlines():
+        s = line.strip()
+        if s.startswith("|") and s.endswith("|"):
+            cells = [c.strip() for c in s.strip("|").split("|")]
+            if header is None:
+                header = cells
+                for label in cells:
+                    if label not in keys:
+                        keys[label] = re.sub(r"\W+", "_", label.lower()).strip("_") or f"column{len(keys)}"
+                        while keys[label] in [c["key"] for c in columns]:
+                            keys[label] += "_"
+                        columns.append(column(keys[label], label))
+            elif not all(set(c) <= set(":- ") for c in cells):
+                rows.append({"table": heading, **{keys[h]: _number(c) for h, c in zip(header, cells)}})
+            continue
+        header = None
+        if s.startswith("#") or (s.startswith("**") and s.endswith("**")):
+            heading = s.lstrip("#").strip().strip("*").strip()
+        elif s:
+            notes.append(s)
+    full = [{c["key"]: r.get(c["key"]) for c in columns} for r in rows]
+    return make_result(title, columns, full, notes, command)
+
+
+def int_at_least(low: int, high: int = MAX_COUNT_OPTION):
+    """An argparse type: an int from ``low`` to ``high`` (:func:`shapeio.options.int_in`)."""
+    return int_in(low, high)
+
+
+def seed(text: str) -> int:
+    """An argparse type: a seed, 0 to :data:`MAX_SEED`."""
+    return int_at_least(0, MAX_SEED)(text)
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a positive finite float."""
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+class Program:
+    """A loaded program, the name printed for it and the file name its errors carry."""
+
+    def __init__(self, spec: str):
+        path = Path(spec)
+        cat, _, ident = spec.partition("/")
+        if path.is_file():
+            self.name = self.file = str(path)
+            text = decode(path.read_bytes(), self.file)
+        elif cat in corpus.CATEGORIES and ident.isascii() and ident.isdigit():
+            self.name, self.file = spec, f"{cat}/{int(ident)}.txt"
+            try:
+                text = corpus.read(cat, int(ident))
+            except KeyError:
+                raise SystemExit(f"error: no program {cat}/{int(ident)} in the corpus") from None
+        else:
+            raise SystemExit(f"error: {spec!r} is neither a file nor a corpus id like 'chair/173'")
+        self.program = parse(text, file=self.file)
+
+    def execute(self, program=None, **kwargs):
+        """Execute this program (or ``program``, e.g. a fitted version); errors carry the file name."""
+        try:
+            return execute(self.program if program is None else program, **kwargs)
+        except ExecutionError as e:
+            raise ExecutionError(e.reason, e.line, file=self.file) from None
+
+
+def check_outputs(meshes=(), others=()) -> None:
+    """Stop before any work when an output's folder is missing or a mesh suffix is unknown."""
+    for path in [p for p in (*meshes, *others) if p]:
+        folder = Path(path).parent
+        if not folder.is_dir():
+            raise SystemExit(f"error: {path}: folder {str(folder)!r} does not exist")
+    for path in [p for p in meshes if p]:
+        if Path(path).suffix.lower() not in WRITE_SUFFIXES:
+            raise SystemExit(f"error: {path}: unknown mesh format {Path(path).suffix!r} "
+                             f"(use {', '.join(WRITE_SUFFIXES)})")
+
+
+def refuse_inputs(outputs, inputs) -> None:
+    """Stop before writing an output over an input file (a corpus id is no file: never matches)."""
+    try:
+        refuse_overwrite(outputs, [p for p in inputs if p is not None and Path(p).is_file()])
+    except FileExistsError as e:
+        raise SystemExit(f"error: {e}") from None
+
+
+def refuse_existing(paths, overwrite: bool = False,
+                    hint: str = "give --overwrite to replace them, or choose another output") -> None:
+    """Stop before any work when one of ``paths`` exists, unless ``overwrite``: a second run into the same
+    place would otherwise replace, or mix with, the first run's files."""
+    taken = [p for p in paths if p and Path(p).exists()]
+    if taken and not overwrite:
+        raise SystemExit(f"error: {taken[0]}: exists ({len(taken)} of the outputs do); {hint}")
+
+
+def write_mesh(path: str, shape) -> None:
+    suffix = Path(path).suffix.lower()
+    if suffix == ".obj":
+        io.write_obj(path, shape.corners, lines=shape.line)
+    elif suffix == ".ply":
+        io.write_ply(path, shape.corners, labels=shape.line.numpy())
+    else:
+        io.write_glb(path, shape.corners, labels=shape.line.numpy())
+
+
+def emit_text(path: str | None, text: str) -> None:
+    """Write a program to ``path`` (atomically) or, without one, print it."""
+    if path:
+        atomic_write(path, text)
+        print(f"wrote {path}")
+    else:
+        sys.stdout.write(text)
+
+
+def command_line(args) -> str:
+    """The command line that ran, for the files that record it."""
+    return f"{PROG} " + shlex.join(sys.argv[1:] if getattr(args, "argv", None) is None else args.argv)
+
+
+def category_pairs(values, form: str, flag: str = "--library") -> dict:
+    """``--library CATEGORY=PATH`` values as a dict; a value without '=' stops with the expected form."""
+    bad = [x for x in values or () if "=" not in x]
+    if bad:
+        raise SystemExit(f"error: {flag} {bad[0]!r}: expected {form}")
+    return dict(x.split("=", 1) for x in values or ())
+
+
+def macro_library(name: str, option: str = "", text: bool = False):
+    """The ShapeMOD library ``name``: a library file when one exists at that path, else a shipped category;
+    SystemExit with the reason otherwise. ``text``: (library, its file's text)."""
+    # the macro library code is imported when a command reads a library, not for --help
+    from .macros import Library, load_library
+    from .macros.api import library_text
+
+    if Path(name).is_file():
+        src = decode(Path(name).read_bytes(), name)
+        lib = Library.from_text(src, name)
+    else:
+        try:
+            lib, src = load_library(name), (library_text(name) if text else "")
+        except ValueError as e:
+            raise SystemExit(f"error: {option}{e}" + (" (or give a library file)" if option else "")) from None
+    return (lib, src) if text else lib

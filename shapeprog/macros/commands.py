@@ -1,0 +1,243 @@
+"""``python -m shapeprog macros ...``: ShapeMOD, discover macro libraries, refactor programs and the corpus
+with them, and the paper's Table 1."""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import platform
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from shapeio import atomic_write
+from shapeio.results import column, make_result
+
+from .. import corpus
+from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
+                   add_quiet, category_pairs, command_line, float_in, int_at_least, macro_library, markdown_result,
+                   refuse_existing, refuse_inputs, seed, write_json)
+from .api import collection
+from .api import refactor
+from .discover import discover, prior_rounds, rounds_line
+from .state import Discovery
+from .config import load_config
+from .lang import from_lines, to_text
+from .refactored import check_target, refactor_corpus, write_refactored
+from .table1 import table1
+
+SPLITS = ("train", "val", "all")
+SEARCHES = ("beam", "exact")
+
+
+def cmd_discover(args) -> int:
+    cfg = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
+                      abs_shape_num=args.subsample, selection=args.selection, search=args.search)
+    lib0, text0 = macro_library(args.start_from, "--start-from: ", text=True) if args.start_from else (None, "")
+    prior = prior_rounds(text0, str(args.start_from)) if args.start_from else []
+    out = Path(args.out)
+    refuse_inputs([out / "library.txt"], [args.start_from, args.config])
+    if (out / "library.txt").exists() and not (out / "state.json").exists():  # user files are never overwritten
+        raise SystemExit(f"error: {out} holds a library.txt but no state.json of a discovery run to resume; "
+                         "choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    command = command_line(args)
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    t0 = time.time()
+    log = (lambda m: None) if args.quiet else (lambda m: print(f"[{time.time() - t0:7.1f} s] {m}", flush=True))
+    try:
+        nodes, ids = collection(args.category, args.split, args.limit, args.seed, executor=pool,
+                                max_orders=cfg["abs_order_num"])
+        log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
+        start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior, args.start_from)
+        state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
+                         stop_after=args.stop_after, start=start)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    lib = state.library()
+    header = (f"# ShapeMOD library ({args.category}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
+              f"# command: {command}\n"
+              f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}), sub-programs: {len(nodes.keys)}\n"
+              f"{rounds_line(state, cfg)}\n"
+              f"# time: {time.time() - t0:.0f} s on {platform.machine()}, {os.cpu_count()} CPUs, "
+              f"{args.workers} worker(s)\n")
+    atomic_write(out / "library.txt", header + lib.to_text())
+    print(f"wrote {out / 'library.txt'} ({len(lib.macros)} macros)")
+    return 0
+
+
+def cmd_refactor(args) -> int:
+    refuse_inputs([args.out, args.json], [args.program, args.library])
+    refuse_existing([args.out, args.json], args.overwrite)
+    prog = Program(args.program)
+    lib = macro_library(args.library)
+    cat, _, ident = args.program.partition("/")
+    named = cat in corpus.CATEGORIES and ident.isdigit() and not Path(args.program).is_file()
+    r = refactor(prog.program, lib, mode=args.search, category=cat if named else Path(args.program).stem,
+                 shape_id=int(ident) if named else 0)
+    for b in r.blocks:
+        print(f"# {b.key}: f {b.f_base:.2f} (base) -> {b.f:.2f} (macros)")
+        base = to_text(from_lines(b.lines))
+        left = base.splitlines()
+        right = b.text.splitlines()
+        width = max((len(x) for x in left), default=0)
+        for i in range(max(len(left), len(right))):
+            a = left[i] if i < len(left) else ""
+            c = right[i] if i < len(right) else ""
+            print(f"{a:<{width}}  |  {c}")
+        print()
+    st = r.stats
+    print(f"total: f {st['f_base']:.2f} -> {st['f']:.2f}; lines {st['lines']}, floats {st['float']}, "
+          f"cuboid ids {st['cube']}, categoricals {st['categorical']}, booleans {st['bool']} "
+          f"(after the bbox lines)")
+    if args.out:
+        atomic_write(args.out, r.text)
+        print(f"wrote {args.out}")
+    rows = [{"block": b.key, "f_base": float(b.f_base), "f": float(b.f)} for b in r.blocks]
+    rows.append({"block": "total", "f_base": float(st["f_base"]), "f": float(st["f"])})
+    write_json(args, make_result(f"ShapeMOD refactor of {prog.name} with {args.library}",
+                                 [column("block", "sub-program"), column("f_base", "f (base)", 2),
+                                  column("f", "f (macros)", 2)], rows,
+                                 [f"total: lines {st['lines']}, floats {st['float']}, cuboid ids {st['cube']}, "
+                                  f"categoricals {st['categorical']}, booleans {st['bool']} (after the bbox lines)"],
+                                 command_line(args)))
+    return 0
+
+
+def _size(path: Path) -> str:
+    n = path.stat().st_size if path.is_file() else sum(f.stat().st_size for f in path.iterdir())
+    return f"{n / 1024:.0f} KiB"
+
+
+def cmd_refactor_corpus(args) -> int:
+    out = Path(args.out)
+    try:
+        check_target(out)
+    except (FileExistsError, FileNotFoundError) as e:
+        raise SystemExit(f"error: {e}") from None
+    lib = macro_library(args.library)
+    command = command_line(args)
+    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
+            if args.workers > 1 else None)
+    t0 = time.perf_counter()
+    try:
+        rc = refactor_corpus(args.category, lib, args.library, split=args.split, limit=args.limit, seed=args.seed,
+                             executor=pool, mode=args.search, check=not args.no_check)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    seconds = time.perf_counter() - t0
+    rc.meta["seconds"] = round(seconds, 1)
+    rc.meta["workers"] = args.workers
+    write_refactored(rc, out, command)
+    s = rc.summary()
+    m = s["mean_per_shape"]
+    print(f"{args.category}: {s['refactored']} of {s['shapes']} shapes refactored with {args.library} "
+          f"(|L| = {len(lib)}) in {seconds:.0f} s, {s['failed']} failed")
+    if m["f_before"] is not None:
+        print(f"per shape: f {m['f_before']:.2f} -> {m['f_after']:.2f}, lines {m['lines_before']:.2f} -> "
+              f"{m['lines_after']:.2f}, floats {m['float_before']:.2f} -> {m['float_after']:.2f}")
+    if s["max_corner_error"] is not None:
+        print(f"check: largest leaf-corner distance to the original {s['max_corner_error']:.4f}; "
+              f"{len(s['over_tolerance'])} shape(s) above {s['check_tolerance']}")
+    for f in s["failures"]:
+        print(f"failed: {args.category}/{f['id']}: {f['reason']}", file=sys.stderr)
+    print(f"wrote {out} ({s['refactored']} programs and summary.json, {_size(out)})")
+    return 0
+
+
+def cmd_tables(args) -> int:
+    library_files = category_pairs(args.library, "CATEGORY=FILE")
+    refuse_inputs([args.out, args.json], library_files.values())
+    refuse_existing([args.out, args.json], args.overwrite)
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    try:
+        text = table1(args.category, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
+                      library_files=library_files,
+                      log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    print(text)
+    if args.out:
+        atomic_write(args.out, text + "\n")
+        print(f"wrote {args.out}")
+    write_json(args, markdown_result(text, "ShapeMOD Table 1", command_line(args)))
+    return 0
+
+
+def register(sub) -> None:
+    """Add the ``macros`` commands to ``sub``."""
+    d = add_command(sub, "discover", cmd_discover, help="discover a macro library from a category's programs",
+                    description="Run ShapeMOD discovery (proposal, generalisation, integration, filterBadOrders) "
+                                "on a corpus category; state.json is written after every round and an "
+                                "interrupted run resumes from it (an --out folder of a run is continued, never "
+                                "overwritten); library.txt holds the result.",
+                    example="macros discover --category chair --rounds 5 --workers 2 --out runs/shapemod_chair",
+                    outputs={"out": "folder"})
+    add_category(d)
+    d.add_argument("--out", required=True, help="output folder (state.json, library.txt)")
+    d.add_argument("--config", help="settings YAML (default: configs/shapemod/default.yaml's values)")
+    d.add_argument("--rounds", type=int_at_least(1), help="rounds (default: the settings', 5)")
+    d.add_argument("--proposal-steps", type=int_at_least(1), help="proposal steps per round (default: 10000)")
+    d.add_argument("--subsample", type=int_at_least(1), help="sub-programs of the integration subsample "
+                                                            "(default: 1000)")
+    d.add_argument("--selection", choices=("greedy", "milp"), help="greedy (the reference) or milp (exact)")
+    d.add_argument("--search", choices=SEARCHES, help="best-program search: beam (reference) or exact")
+    d.add_argument("--split", default="all", choices=SPLITS, help="the corpus split whose shapes are used")
+    d.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes")
+    d.add_argument("--seed", type=seed, default=0, help="seed of --limit's subset and of the searches")
+    d.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1,
+                   help="processes for the searches (1: none)")
+    d.add_argument("--stop-after", type=float_in(0, MAX_SECONDS_OPTION),
+                   help="seconds after which no new round starts")
+    d.add_argument("--start-from", metavar="LIBRARY",
+                   help="continue from a library (a shipped category's or a file) when --out holds no state: "
+                        "its macros are L, the rounds its header records count toward --rounds, and the "
+                        "orderings are filtered with it first (a library file does not record them)")
+    add_quiet(d, "progress lines")
+    rf = add_command(sub, "refactor", cmd_refactor, help="rewrite a program with a ShapeMOD library",
+                     description="Rewrite every sub-program with the library's macros (best program over its "
+                                 "orderings); print it beside the base program with both f.",
+                     example="macros refactor chair/173 --library chair", outputs={"out": "file", "json": "file"})
+    rf.add_argument("program", help="corpus id (chair/173) or a ShapeAssembly program file")
+    rf.add_argument("--library", default="chair", help="a shipped library's category or a library file")
+    rf.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
+    rf.add_argument("-o", "--out", help="write the macro programs here")
+    add_json(rf, "f per sub-program, before and after")
+    add_overwrite(rf)
+    rc = add_command(sub, "refactor-corpus", cmd_refactor_corpus,
+                     help="rewrite every corpus program of a category with a library",
+                     description="Refactor every corpus program of a category with a ShapeMOD library (process "
+                                 "pool with --workers > 1), check each against its original (parse back, "
+                                 "execute, leaf cuboids matched), and write one macro program per shape "
+                                 "(<id>.txt) and summary.json (its figures) into a new folder, atomically.",
+                     example="macros refactor-corpus --category chair --library chair --workers 2 --out chair_macros",
+                     outputs={"out": "folder"})
+    add_category(rc)
+    rc.add_argument("--library", required=True, help="a shipped library's category or a library file")
+    rc.add_argument("--out", required=True, help="the new folder (must not exist, or be empty), or a new "
+                                                 "FILE.tar.xz archive of the same files")
+    rc.add_argument("--split", default="all", choices=SPLITS, help="the corpus split")
+    rc.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes of the split")
+    rc.add_argument("--seed", type=seed, default=0, help="seed of --limit's subset")
+    rc.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
+    rc.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2,
+                    help="processes of the pool (1: no pool, everything in this process)")
+    rc.add_argument("--no-check", action="store_true", help="skip reading back and executing every result")
+    tb = add_command(sub, "tables", cmd_tables, help="ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows",
+                     description="Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the "
+                                 "given categories beside the paper's rows.",
+                     example="macros tables --category chair --limit 200 --out table1.md --json table1.json",
+                     outputs={"out": "file", "json": "file"})
+    add_category(tb, multiple=True)
+    tb.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes per category")
+    tb.add_argument("--seed", type=seed, default=0, help="seed of --limit's subset")
+    tb.add_argument("--library", action="append", help="CATEGORY=FILE: a library file instead of the shipped one")
+    tb.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
+    tb.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
+    tb.add_argument("--out", help="also write the table (markdown) here")
+    add_json(tb, "the table")
+    add_quiet(tb, "progress lines")
+    add_overwrite(tb)

@@ -1,0 +1,424 @@
+"""``python -m shapeprog vae ...``: sample, interpolate and reconstruct programs with the VAE, evaluate
+generated programs (the generation tables), train the metrics' classifier, export trained weights.
+
+"""
+from __future__ import annotations
+
+import multiprocessing
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import torch
+from tqdm import tqdm
+
+from shapeio import atomic_write, write_new
+from shapeio.results import column, make_result
+
+from .. import io
+from ..cli import (DEFAULT_CATEGORY, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
+                   add_quiet, category_of, check_outputs, command_line, emit_text, int_at_least, markdown_result,
+                   refuse_existing, refuse_inputs, seed, write_json, write_mesh)
+from ..errors import ParseError
+from ..execute import execute
+from ..lang import parse
+from ..limits import decode
+from ..metrics import adaptive_threshold, chamfer, fscore
+from ..picture import MAX_SIZE as MAX_PICTURE_SIZE
+from ..picture import check_grid as check_picture_grid
+from ..picture import render_grid
+from ..sampling import sample_surface
+from .decode import MAX_SAMPLES, MAX_TRIES
+from .decode import decode as decode_latent
+from .decode import encode, interpolate, sample
+from .gentable import generation_table, train_category_classifier
+from .macro_decode import sample_macro
+from .macro_model import MacroVAE
+from .pointnet import load_classifier, save_classifier, sha256_file
+from .pretrained import export_weights, load_model, load_pretrained
+
+WEIGHTS_HELP = "VAE weights file or Lightning checkpoint (default: the shipped model of the category)"
+#: The draws per sample of ``evaluate -n`` before a sample is decoded without rejection.
+EVALUATE_TRIES = 10
+
+
+def load_vae(args, category: str | None, macro: bool = False):
+    """The VAE of ``--weights`` or the shipped model of ``category`` (the input's; :data:`DEFAULT_CATEGORY`
+    when None); a usage error when ``--weights`` is a model of macro programs and the command (``macro``
+    False) reads ShapeAssembly programs."""
+    try:
+        if args.weights:
+            vae = load_model(args.weights, category=args.category)
+            if args.category is None and category is not None and vae.category != category:
+                raise SystemExit(f"error: {args.weights}: a {vae.category} model, but the input is a {category} "
+                                 f"program (give --category {vae.category} to use this model anyway)")
+            if isinstance(vae, MacroVAE) and not macro:
+                raise SystemExit(f"error: {args.weights} is a VAE over macro programs (ShapeMOD); this command reads "
+                                 f"ShapeAssembly programs: use `vae sample` or `vae evaluate` with it")
+            return vae
+        return load_pretrained(category or DEFAULT_CATEGORY)
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
+
+
+def planned_files(out: str | None, name: str, n: int) -> list[Path]:
+    """The ``.txt`` and ``.obj`` files :func:`export_decoded` writes into ``out`` for ``n`` programs."""
+    return [] if not out else [Path(out) / f"{name.format(i)}{s}" for i in range(n) for s in (".txt", ".obj")]
+
+
+def check_grid(count: int, cols: int, size: int) -> None:
+    """Stop before any work when a picture grid would exceed :data:`shapeprog.picture.MAX_GRID_PIXELS`."""
+    try:
+        check_picture_grid(count, cols, size)
+    except ValueError as e:
+        raise SystemExit(f"error: --png: {e}") from None
+
+
+def export_decoded(results, out: str | None, name: str, png: str | None, cols: int, size: int,
+                   progress: bool = False, overwrite: bool = False) -> None:
+    """Write decoded programs: ``name.format(i)`` + ``.txt`` and ``.obj`` in ``out`` (none of which may exist
+    yet unless ``overwrite``: the commands check :func:`planned_files` with :func:`refuse_existing` before their
+    work, and the text files are written with ``write_new``), a picture grid ``png`` (``cols`` cells of ``size``
+    pixels per row); print the programs when neither is given. Each program is executed once."""
+    if not out and not png:
+        for i, r in enumerate(results):
+            print(f"# {name.split('_')[0]} {i}\n{r.text}")
+        return
+    if out:
+        Path(out).mkdir(parents=True, exist_ok=True)
+    write_text = atomic_write if overwrite else write_new
+    shapes = []
+    for i, r in enumerate(tqdm(results, desc="writing", unit="shape", disable=not progress)):
+        with torch.no_grad():
+            shape = execute(r.program)
+        if out:
+            write_text(Path(out) / f"{name.format(i)}.txt", r.text)
+            io.write_obj(Path(out) / f"{name.format(i)}.obj", shape.corners, lines=shape.line)
+        shapes.append((shape.corners, shape.line.numpy()))
+    if out:
+        print(f"wrote {len(results)} programs and meshes to {out}/")
+    if png:
+        render_grid(shapes, png, cols=cols, size=size)
+        print(f"wrote {png}")
+
+
+def sampling_report(results, max_tries: int, seconds: float) -> str:
+    """How often :func:`shapeprog.vae.sample` was refused: first-draw and within-``max_tries`` shares, the
+    refused share of all draws, and the rate."""
+    n = len(results)
+    draws = sum(min(r.tries, max_tries) for r in results)
+    first = sum(r.tries == 1 for r in results)
+    within = sum(r.tries <= max_tries for r in results)
+    return (f"{100 * first / n:.1f} % valid on the first draw, {100 * within / n:.1f} % within {max_tries} draws, "
+            f"{100 * (1 - within / max(draws, 1)):.1f} % of {draws} draws refused; sampling took {seconds:.1f} s "
+            f"({n / seconds:.1f} samples/s)")
+
+
+def draw(vae, n: int, seed: int, max_tries: int):
+    """``n`` validity-checked samples of ``vae`` (macro programs for a ShapeMOD model)."""
+    if isinstance(vae, MacroVAE):  # macro programs: written as macro text, executed through their expansion
+        return sample_macro(vae, n, seed=seed, max_tries=max_tries)
+    return sample(vae, n, seed=seed, max_tries=max_tries)
+
+
+def cmd_sample(args) -> int:
+    check_outputs(others=[args.png])
+    if args.png:
+        check_grid(args.n, args.cols, args.size)
+    refuse_existing([*planned_files(args.out, "sample_{:04d}", args.n), args.png], args.overwrite)
+    vae = load_vae(args, args.category, macro=True)
+    t0 = time.perf_counter()
+    results = draw(vae, args.n, args.seed, args.max_tries)
+    seconds = time.perf_counter() - t0
+    first = sum(r.tries == 1 for r in results)
+    within = sum(r.tries <= args.max_tries for r in results)
+    print(f"{args.n} samples of {vae.category} in {seconds:.1f} s ({args.n / seconds:.1f}/s): "
+          f"{first} valid on the first try, {within} within {args.max_tries} tries")
+    export_decoded(results, args.out, "sample_{:04d}", args.png, args.cols, args.size, progress=not args.quiet,
+                   overwrite=args.overwrite)
+    return 0
+
+
+def cmd_interpolate(args) -> int:
+    check_outputs(others=[args.png])
+    a, b = Program(args.a), Program(args.b)
+    planned = planned_files(args.out, "step_{:03d}", args.steps)
+    refuse_inputs([args.png, *planned], [args.a, args.b])
+    refuse_existing([*planned, args.png], args.overwrite)
+    vae = load_vae(args, args.category or category_of(args.a) or category_of(args.b))
+    results = interpolate(vae, a.program, b.program, args.steps)
+    export_decoded(results, args.out, "step_{:03d}", args.png, len(results), args.size, overwrite=args.overwrite)
+    return 0
+
+
+def cmd_reconstruct(args) -> int:
+    check_outputs([args.mesh], [args.out, args.png, args.json])
+    prog = Program(args.program)
+    outputs = [args.out, args.mesh, args.png, args.json]
+    refuse_inputs(outputs, [args.program])
+    refuse_existing(outputs, args.overwrite)
+    vae = load_vae(args, args.category or category_of(args.program))
+    result = decode_latent(vae, encode(vae, prog.program))
+    figures = {"program": prog.name, "leaves": None, "input_leaves": None, "fscore": 0.0, "chamfer": None}
+    with torch.no_grad():
+        target, shape = prog.execute(), execute(result.program)
+        if len(shape) == 0:  # nothing to sample: no point of the input is recovered
+            y, _ = sample_surface(target.corners, 10000, generator=torch.Generator().manual_seed(args.seed))
+            thr = float(adaptive_threshold(y))
+            score = f"F-score @{thr:.3g} 0.0 (no leaf cuboid decoded)"
+        else:
+            g = torch.Generator().manual_seed(args.seed)
+            x, _ = sample_surface(shape.corners, 10000, generator=g)
+            y, _ = sample_surface(target.corners, 10000, generator=g)
+            thr = float(adaptive_threshold(y))  # fscore's default threshold, printed with the score
+            figures.update(fscore=float(fscore(x, y, threshold=thr)), chamfer=float(chamfer(x, y)))
+            score = f"F-score @{thr:.3g} {figures['fscore']:.1f}, chamfer {figures['chamfer']:.4f}"
+    figures.update(leaves=len(shape), input_leaves=len(target))
+    print(f"{prog.name}: reconstructed with {len(shape)} leaf cuboids (input {len(target)}), {score}")
+    emit_text(args.out, result.text)
+    if args.mesh:
+        write_mesh(args.mesh, shape)
+    if args.png:
+        render_grid([(target.corners, target.line.numpy()), (shape.corners, shape.line.numpy())], args.png,
+                    cols=2, size=args.size)
+        print(f"wrote {args.png} (input, reconstruction)")
+    write_json(args, make_result(
+        "VAE reconstruction", [column("program", "program"), column("leaves", "leaf cuboids"),
+                               column("input_leaves", "input leaf cuboids"),
+                               column("fscore", f"F-score @{thr:.3g}", 1), column("chamfer", "chamfer", 4)],
+        [figures], [f"weights: {args.weights or 'the shipped model'}; seed {args.seed}"], command_line(args)))
+    return 0
+
+
+def is_pointcloud_checkpoint(path: str) -> bool:
+    """Whether ``path`` is a Lightning checkpoint of a :mod:`shapeprog.pointcloud.train` module."""
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:  # unreadable: the exporter reports it, naming the file
+        return False
+    return isinstance(payload, dict) and "shapeprog_pointcloud" in payload
+
+
+def cmd_export_weights(args) -> int:
+    check_outputs(others=[args.out])
+    refuse_inputs([args.out], [args.checkpoint])
+    refuse_existing([args.out], args.overwrite)
+    if Path(args.checkpoint).is_file() and is_pointcloud_checkpoint(args.checkpoint):
+        raise SystemExit(f"error: {args.checkpoint}: a checkpoint of a point-cloud model; export it with "
+                         "`python -m shapeprog pointcloud export-weights`")
+    try:
+        path = export_weights(args.checkpoint, args.out, half=not args.float32)
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
+    print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
+    return 0
+
+
+def read_programs(folder: str) -> list:
+    """The ``*.txt`` files of ``folder`` in name order, parsed; a file that does not decode or parse is
+    kept as its text (it counts as an invalid sample) and reported on stderr."""
+    path = Path(folder)
+    if not path.is_dir():
+        raise SystemExit(f"error: {folder}: no such folder")
+    files = sorted(path.glob("*.txt"))
+    if not files:
+        raise SystemExit(f"error: {folder}: no .txt program files")
+    out = []
+    for f in files:
+        text = ""
+        try:
+            text = decode(f.read_bytes(), str(f))
+            out.append(parse(text, file=str(f)))
+        except ParseError as e:
+            print(f"warning: {e}", file=sys.stderr)
+            out.append(text)
+    return out
+
+
+def vae_samples(args) -> tuple[list, str, str]:
+    """``-n`` programs sampled from the VAE (``--weights`` or the shipped model), the row name and a line
+    on how often sampling was refused."""
+    vae = load_vae(args, args.category, macro=True)
+    t0 = time.perf_counter()
+    results = draw(vae, args.n, args.seed, EVALUATE_TRIES)
+    seconds = time.perf_counter() - t0
+    where = args.weights or f"the shipped {args.category} model"
+    meta = getattr(vae, "meta", {}) or {}
+    epoch = f", epoch {meta['epoch']}" if "epoch" in meta else ""
+    line = (f"Samples: {len(results)} from {where}{epoch} (seed {args.seed}, validity-checked decoding with "
+            f"rejection, at most {EVALUATE_TRIES} draws each): {sampling_report(results, EVALUATE_TRIES, seconds)}. "
+            f"A sample refused {EVALUATE_TRIES} times is decoded without rejection and kept."
+            + (" The samples are macro programs; the metrics read their expansions (% novel compares those "
+               "with the corpus's ShapeAssembly programs)." if isinstance(vae, MacroVAE) else "") + "\n\n")
+    return [r.program for r in results], f"VAE samples ({where})", line
+
+
+def cmd_evaluate(args) -> int:
+    check_outputs(others=[args.out, args.json])
+    refuse_inputs([args.out, args.json], [args.classifier])
+    refuse_existing([args.out, args.json], args.overwrite)
+    if args.programs and args.n:
+        raise SystemExit("error: give either --programs DIR or -n N (samples of the VAE), not both")
+    model = None
+    if args.classifier:
+        try:
+            model = load_classifier(args.classifier)[0]
+        except (FileNotFoundError, ValueError) as e:
+            raise SystemExit(f"error: {e}") from None
+    header, name = "", f"programs in {args.programs}" if args.programs else "generated"
+    if args.n:
+        samples, name, header = vae_samples(args)
+    else:
+        samples = read_programs(args.programs) if args.programs else []
+    if not samples and args.no_ground_truth:
+        raise SystemExit("error: nothing to evaluate: give --programs or -n, or leave out --no-ground-truth")
+    pool = None
+    if args.workers > 1:
+        pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"))
+    t0 = time.perf_counter()
+    try:
+        table = generation_table(samples, args.category, ground_truth=not args.no_ground_truth, executor=pool,
+                                 model=model,
+                                 stability=not args.no_stability, fool=not args.no_fool, fool_epochs=args.fool_epochs,
+                                 fool_average_last=args.fool_average_last, fool_points=args.fool_points,
+                                 candidates=args.candidates or None, seed=args.seed,
+                                 name=name,
+                                 log=None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True)))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    table = header + table
+    sys.stdout.write(table)
+    if args.out:
+        atomic_write(args.out, table)
+        print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s)")
+    write_json(args, markdown_result(table, f"generation metrics ({args.category})", command_line(args)))
+    return 0
+
+
+def cmd_train_classifier(args) -> int:
+    check_outputs(others=[args.out, args.json])
+    refuse_existing([args.out, args.json], args.overwrite)
+    log = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))
+    model, meta = train_category_classifier(epochs=args.epochs, per_class=args.per_class, points=args.points,
+                                            finetune_epochs=args.finetune_epochs, seed=args.seed, log=log)
+    save_classifier(args.out, model, meta["categories"], meta)
+    per = ", ".join(f"{c} {a:.1f}" for c, a in meta["val_accuracy_per_category"].items())
+    print(f"val accuracy {meta['val_accuracy']:.2f} % ({per}); trained in {meta['train_seconds']:.0f} s")
+    print(f"wrote {args.out}, SHA-256 {sha256_file(args.out)}")
+    rows = [{"category": c, "accuracy": float(a)} for c, a in meta["val_accuracy_per_category"].items()]
+    rows.append({"category": "all", "accuracy": float(meta["val_accuracy"])})
+    write_json(args, make_result("PointNet category classifier: val accuracy (%)",
+                                 [column("category", "category"), column("accuracy", "val accuracy (%)", 2)], rows,
+                                 [f"weights {args.out}, SHA-256 {sha256_file(args.out)}; trained in "
+                                  f"{meta['train_seconds']:.0f} s"], command_line(args)))
+    return 0
+
+
+def register(sub) -> None:
+    """Add the ``vae`` commands to ``sub``."""
+    g = add_command(sub, "sample", cmd_sample, help="generate programs with the VAE",
+                    description="Sample latents from N(0, I) and decode them with semantic validity "
+                                "(rejection sampling); write programs, meshes and a picture grid.",
+                    example="vae sample --category chair -n 16 --seed 0 --out samples --png grid.png",
+                    outputs={"out": "folder"})
+    add_category(g, from_input="the --weights model", help="the shipped model to use")
+    g.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=16, help=f"number of samples (1 to {MAX_SAMPLES})")
+    g.add_argument("--seed", type=seed, default=0, help="seed of the latents (an integer)")
+    g.add_argument("--max-tries", type=int_at_least(1, MAX_TRIES), default=10,
+                   help="draws per sample before giving up rejection")
+    g.add_argument("--out", help="folder for sample_NNNN.txt and sample_NNNN.obj (without it and --png: printed)")
+    g.add_argument("--png", help="picture grid of the samples (.png)")
+    g.add_argument("--cols", type=int_at_least(1), default=4, help="grid columns")
+    g.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=192, help="grid cell side in pixels")
+    g.add_argument("--weights", help=WEIGHTS_HELP)
+    add_quiet(g, "progress bar")
+    add_overwrite(g)
+    i = add_command(sub, "interpolate", cmd_interpolate,
+                    help="decode shapes along the latent line between two programs",
+                    description="Encode two programs, interpolate their latent means linearly and decode "
+                                "each step (both ends included).",
+                    example="vae interpolate chair/173 chair/44017 --steps 8 --png interp.png",
+                    outputs={"out": "folder"})
+    i.add_argument("a", help="the first program: " + "corpus id (chair/173) or a program file")
+    i.add_argument("b", help="the last program: " + "corpus id (chair/44017) or a program file")
+    i.add_argument("--steps", type=int_at_least(2), default=8, help="shapes along the line, ends included (>= 2)")
+    add_category(i, from_input="the first corpus id", help="model category")
+    i.add_argument("--out", help="folder for step_NNN.txt and step_NNN.obj")
+    i.add_argument("--png", help="picture strip of the steps (.png)")
+    i.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=160, help="cell side in pixels")
+    i.add_argument("--weights", help=WEIGHTS_HELP)
+    add_overwrite(i)
+    c = add_command(sub, "reconstruct", cmd_reconstruct,
+                    help="encode a program and decode it back, with the F-score to the input",
+                    description="Encode a program to its latent mean, decode it with semantic validity, and "
+                                "print the F-score and chamfer distance to the input shape.",
+                    example="vae reconstruct chair/173 -o recon.txt --json recon.json",
+                    outputs={"out": "file", "json": "file"})
+    c.add_argument("program", help="corpus id (chair/173) or a program file")
+    add_category(c, from_input="the corpus id", help="model category")
+    c.add_argument("-o", "--out", help="reconstructed program file (without it: printed)")
+    c.add_argument("--mesh", help="also write the reconstructed shape: .obj, .ply or .glb")
+    c.add_argument("--png", help="picture of the input beside the reconstruction (.png)")
+    c.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=256, help="cell side in pixels")
+    c.add_argument("--seed", type=seed, default=0, help="seed of the surface samples of the F-score")
+    c.add_argument("--weights", help=WEIGHTS_HELP)
+    add_json(c, "the F-score and chamfer distance")
+    add_overwrite(c)
+    e = add_command(sub, "evaluate", cmd_evaluate,
+                    help="the generation tables (Tables 2, 4, 5) of VAE samples or a folder of programs",
+                    description="Measure generated programs with the ShapeAssembly paper's generation metrics "
+                                "(% rooted, % stable, % fool, FD, leaf parts, generalization, coverage, variety, "
+                                "% novel) against the corpus train split, beside the ground truth (the val split) "
+                                "and the paper's figures; print a markdown table.",
+                    example="vae evaluate --category chair -n 1000 --out table.md --json table.json",
+                    outputs={"out": "file", "json": "file"})
+    add_category(e, help="the category the programs belong to")
+    e.add_argument("--programs", help="folder of program files (*.txt, one program each); without it and -n, the "
+                                      "ground-truth row alone")
+    e.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), help="evaluate N samples of the VAE (the shipped model "
+                                                                 "of the category, or --weights) instead of a folder")
+    e.add_argument("--weights", help=WEIGHTS_HELP)
+    e.add_argument("--classifier", help="PointNet weights for FD and the features (a train-classifier output; "
+                                        "default: the shipped shapeprog/weights/pointnet_cls.pt)")
+    e.add_argument("--out", help="also write the table to this markdown file")
+    add_json(e, "the table")
+    e.add_argument("--no-ground-truth", action="store_true", help="leave out the ground-truth (val split) row")
+    e.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s per shape)")
+    e.add_argument("--no-fool", action="store_true", help="skip %% fool (trains a PointNet per row)")
+    e.add_argument("--fool-epochs", type=int_at_least(1), default=12, help="%% fool training epochs (paper: 300)")
+    e.add_argument("--fool-average-last", type=int_at_least(1), default=4, help="%% fool: epochs averaged at the end")
+    e.add_argument("--fool-points", type=int_at_least(16), default=512, help="%% fool: points per shape")
+    e.add_argument("--candidates", type=int_at_least(0), default=16,
+                   help="shapes measured exactly per nearest-chamfer search (0: every pair)")
+    e.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes for the per-shape work")
+    e.add_argument("--seed", type=seed, default=0, help="seed of the sampling and of the %% fool training")
+    add_quiet(e, "progress lines on stderr")
+    add_overwrite(e)
+    t = add_command(sub, "train-classifier", cmd_train_classifier,
+                    help="train the PointNet classifier of the generation metrics",
+                    description="Train the chair / table / storage PointNet classifier on the corpus train "
+                                "split; print its val accuracy; write its weights and their SHA-256.",
+                    example="vae train-classifier --out runs/pointnet_cls.pt", outputs={"out": "file+", "json": "file"})
+    t.add_argument("--out", required=True, help="weights file (.pt)")
+    t.add_argument("--epochs", type=int_at_least(1), default=10, help="epochs on point subsets")
+    t.add_argument("--per-class", type=int_at_least(1), default=500, help="shapes per category and epoch")
+    t.add_argument("--points", type=int_at_least(16), default=512, help="points per shape and visit")
+    t.add_argument("--finetune-epochs", type=int_at_least(0), default=1, help="final epochs on all 2,500 points")
+    t.add_argument("--seed", type=seed, default=0, help="seed of the sampling and the training")
+    add_json(t, "the val accuracy")
+    add_quiet(t, "training log")
+    add_overwrite(t)
+    x = add_command(sub, "export-weights", cmd_export_weights,
+                    help="write a VAE training checkpoint as a small weights file",
+                    description="Write the VAE of a Lightning checkpoint (or weights file) as a weights file "
+                                "that --weights and shapeprog.vae.load_pretrained read (a point-cloud model's "
+                                "checkpoint: `pointcloud export-weights`).",
+                    example="vae export-weights runs/vae_chair/checkpoints/last.ckpt --out vae_chair.pt",
+                    outputs={"out": "file"})
+    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config "
+                                      "configs/shapeassembly/...`")
+    x.add_argument("--out", required=True, help="the weights file to write (.pt)")
+    x.add_argument("--float32", action="store_true", help="keep float32 (float16 storage otherwise)")
+    add_overwrite(x)
