@@ -26,31 +26,13 @@ from typing import Iterator, Sequence
 
 from . import limits
 from .errors import ParseError, ParseWarning
-from .syntax import (
+from .syntax import (  # noqa: F401 - the names of syntax are this module's too (__all__)
     AXES, Attach, Block, CORPUS_DECIMALS, Cuboid, FACES, NUM_FIELDS, Program, Reflect, Squeeze, Statement,
     Translate,
 )
+from .syntax import __all__ as _LOWER_NAMES
 
-__all__ = [
-    "AXES",
-    "CORPUS_DECIMALS",
-    "FACES",
-    "NUM_FIELDS",
-    "Attach",
-    "Block",
-    "Cuboid",
-    "ParseError",
-    "ParseWarning",
-    "Program",
-    "Reflect",
-    "Squeeze",
-    "Statement",
-    "Translate",
-    "as_program",
-    "parse",
-    "statement_lines",
-    "to_text",
-]
+__all__ = [*_LOWER_NAMES, "ParseError", "ParseWarning", "as_program", "parse", "statement_lines", "to_text"]
 
 
 def as_program(program, call: str = "this function") -> Program:

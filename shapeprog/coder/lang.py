@@ -39,44 +39,14 @@ from typing import Iterator, Mapping
 
 from ..errors import ParseError
 from . import limits
-from .expr import (
+from .expr import (  # noqa: F401 - the names of expr are this module's too (__all__)
     AXES, Abstraction, AxisConst, Call, Expr, FLOAT_CONSTANTS, FLOAT_FN, FN, IntConst, LANG_2D, LANG_3D,
     Lang, Num, Param, ProgramError, Signature, Type, Var, _NAME, _NAME_START, _NUM_START, _TYPES, _Tokens,
     _short, size, substitute, to_text, variables, walk,
 )
+from .expr import __all__ as _LOWER_NAMES
 
-__all__ = [
-    "AXES",
-    "FLOAT_CONSTANTS",
-    "FLOAT_FN",
-    "FN",
-    "LANG_2D",
-    "LANG_3D",
-    "Abstraction",
-    "AxisConst",
-    "Call",
-    "Expr",
-    "IntConst",
-    "Lang",
-    "Library",
-    "Num",
-    "Param",
-    "ParseError",
-    "ProgramError",
-    "Signature",
-    "Type",
-    "Var",
-    "as_expr",
-    "check",
-    "expand",
-    "parse",
-    "parse_abstraction",
-    "size",
-    "substitute",
-    "to_text",
-    "variables",
-    "walk",
-]
+__all__ = [*_LOWER_NAMES, "Library", "ParseError", "as_expr", "check", "expand", "parse", "parse_abstraction"]
 
 
 @dataclass(frozen=True)

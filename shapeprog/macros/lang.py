@@ -60,42 +60,14 @@ from .. import limits
 from ..errors import ParseError
 from ..lang import AXES, FACES
 from .grammar import BBOX, AttachLine, CuboidLine, Line, ReflectLine, SqueezeLine, TranslateLine
-from .syntax import (
+from .syntax import (  # noqa: F401 - the names of syntax are this module's too (__all__)
     AXIS, Arg, BASE, BB_DIMS, BOOL, CUBE, Call, FACE, FLOAT, FunctionInfo, INDENT, Linear, Literal,
     MAX_EXPANDED_LINES, MacroDef, MacroError, MacroProgram, Name, Param, TYPES, _check_calls, _check_name,
     check_def, check_program, def_text, to_text,
 )
+from .syntax import __all__ as _LOWER_NAMES
 
-__all__ = [
-    "AXIS",
-    "BASE",
-    "BB_DIMS",
-    "BOOL",
-    "CUBE",
-    "FACE",
-    "FLOAT",
-    "INDENT",
-    "MAX_EXPANDED_LINES",
-    "TYPES",
-    "Arg",
-    "Call",
-    "FunctionInfo",
-    "Linear",
-    "Literal",
-    "MacroDef",
-    "MacroError",
-    "MacroProgram",
-    "Name",
-    "Param",
-    "check_def",
-    "check_program",
-    "def_text",
-    "from_lines",
-    "parameters",
-    "parse",
-    "replace_parameters",
-    "to_text",
-]
+__all__ = [*_LOWER_NAMES, "from_lines", "parameters", "parse", "replace_parameters"]
 
 
 # ----------------------------------------------------------------------------- parser

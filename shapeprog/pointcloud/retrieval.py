@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from .. import corpus
-from ..vae.genmetrics import coarse_fields
+from ..vae.genmetrics import _imap, coarse_fields
 from ..lang import Program, parse
 from ..metrics import chamfer
 from .data import cloud_transforms, corpus_splits, sample_clouds
@@ -113,21 +113,6 @@ def _as_clouds(x, name: str) -> list[torch.Tensor]:
 def _exact_job(job) -> list[list[float]]:
     """Exact chamfer of every query against its candidate clouds: ``[(query (N, 3), cands (k, M, 3))]``."""
     return [[float(chamfer(q.double(), r.double(), eps=0.0, method="kdtree")) for r in cands] for q, cands in job]
-
-
-def _imap(executor, fn, jobs, window: int = 4):
-    """``fn`` over the iterable ``jobs``, in order; here, or on ``executor`` with at most ``window`` jobs
-    in flight (the jobs are made as they are needed)."""
-    if executor is None:
-        yield from map(fn, jobs)
-        return
-    pending = []
-    for job in jobs:
-        pending.append(executor.submit(fn, job))
-        if len(pending) >= window:
-            yield pending.pop(0).result()
-    for f in pending:
-        yield f.result()
 
 
 class RetrievalIndex:
