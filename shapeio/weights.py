@@ -5,7 +5,8 @@ A weights file holds one dict ``{"format": family, "version": n, ...}``. :func:`
 temporary file, then ``os.replace``); :func:`read_weights` reads it and checks its family and version, and
 its errors name the file: a missing file is a ``FileNotFoundError``; a file that torch cannot read, a file
 of another family, and a file of another version are ``ValueError`` s. :func:`load_payload` is the reading
-step alone, for files that are not weights files (a Lightning training checkpoint).
+step alone, for files that are not weights files (a Lightning training checkpoint); :func:`checkpoint_entry`
+checks the entry a model family's LightningModule adds to its checkpoints.
 
 Files written before the payload carried ``format`` (the shipped csgnet models and the PointNet
 classifier, whose SHA-256 the generation metrics pin) are read as version 0 of their family: a family
@@ -35,7 +36,7 @@ from typing import Iterable, Mapping, Optional
 
 from .files import PathLike, atomic_write
 
-__all__ = ["LEGACY_VERSION", "check_weights", "load_payload", "read_weights", "write_weights"]
+__all__ = ["LEGACY_VERSION", "check_weights", "checkpoint_entry", "load_payload", "read_weights", "write_weights"]
 
 #: The version a payload of a family's old layout (no ``format`` field) is read as.
 LEGACY_VERSION = 0
@@ -120,3 +121,24 @@ def write_weights(path: PathLike, family: str, version: int, fields: Mapping) ->
     buf = io.BytesIO()
     torch.save(payload, buf)
     return Path(atomic_write(path, buf.getvalue(), mkdir=True))
+
+
+def checkpoint_entry(checkpoint: Mapping, key: str, version: int, what: str) -> dict:
+    """The entry ``key`` that a model family's LightningModule adds to its training checkpoints, checked:
+    present, and its ``format`` is ``version``.
+
+    Args:
+        checkpoint: the checkpoint dict (as ``on_load_checkpoint`` gets it).
+        key: the family's entry (``"shapeprog_vae"``).
+        version: the entry's format this version writes.
+        what: the module that writes it, for the error (``"shapeprog.vae.train.VAEModule"``).
+
+    Raises:
+        ValueError: no such entry, or another format.
+    """
+    info = checkpoint.get(key)
+    if info is None:
+        raise ValueError(f"not a checkpoint of {what} (no {key!r} entry)")
+    if info.get("format") != version:
+        raise ValueError(f"the checkpoint has format {info.get('format')!r}; this version reads {version}")
+    return info

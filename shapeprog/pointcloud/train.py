@@ -42,7 +42,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from shapeio.weights import load_payload, write_weights
+from shapeio.weights import checkpoint_entry, load_payload, write_weights
 
 from ..picture import render_grid
 from ..vae.batch import BatchOutput, TreeBatch, batch_loss, decode_batch, encode_batch
@@ -261,12 +261,8 @@ class _CloudModule(L.LightningModule):
         checkpoint["shapeprog_pointcloud"] = self._info()
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
-        info = checkpoint.get("shapeprog_pointcloud")
-        if info is None:
-            raise ValueError("not a checkpoint of a shapeprog.pointcloud.train module (no 'shapeprog_pointcloud')")
-        if info.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"the checkpoint has format {info.get('format')!r}; this version reads "
-                             f"{CHECKPOINT_FORMAT}")
+        info = checkpoint_entry(checkpoint, "shapeprog_pointcloud", CHECKPOINT_FORMAT,
+                                "a shapeprog.pointcloud.train module")
         mine = self._info()
         if {k: info.get(k) for k in mine} != mine:
             short = lambda d: {k: ("<macro library>" if k == "library" and v else v) for k, v in d.items()}

@@ -34,6 +34,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from shapeio import atomic_write
+from shapeio.weights import checkpoint_entry
 
 from ..picture import render_grid
 from .batch import TreeBatch, batch_forward, batch_loss, collate_trees
@@ -305,12 +306,7 @@ class VAEModule(L.LightningModule):
             checkpoint["shapeprog_vae"]["library_text"] = self._library_text()
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
-        info = checkpoint.get("shapeprog_vae")
-        if info is None:
-            raise ValueError("not a checkpoint of shapeprog.vae.train.VAEModule (no 'shapeprog_vae' entry)")
-        if info.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"the checkpoint has format {info.get('format')!r}; this version reads "
-                             f"{CHECKPOINT_FORMAT}")
+        info = checkpoint_entry(checkpoint, "shapeprog_vae", CHECKPOINT_FORMAT, "shapeprog.vae.train.VAEModule")
         mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim}
         theirs = {k: info.get(k) for k in mine}
         if theirs != mine:

@@ -5,7 +5,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from shapeio.weights import LEGACY_VERSION, check_weights, load_payload, read_weights, write_weights
+from shapeio.weights import (LEGACY_VERSION, check_weights, checkpoint_entry, load_payload, read_weights,
+                             write_weights)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -84,3 +85,11 @@ def test_every_shipped_weights_file_loads():
     loaded.append("recnet_round5.pt")
     shipped = {p.name for d in (ROOT / "csgnet" / "weights", weights, ROOT / "runs_in_progress") for p in d.glob("*.pt")}
     assert shipped <= set(loaded)
+
+
+def test_checkpoint_entry_is_checked():
+    assert checkpoint_entry({"fam": {"format": 2, "x": 1}}, "fam", 2, "m") == {"format": 2, "x": 1}
+    with pytest.raises(ValueError, match=r"^not a checkpoint of the module m \(no 'fam' entry\)$"):
+        checkpoint_entry({}, "fam", 2, "the module m")
+    with pytest.raises(ValueError, match=r"^the checkpoint has format 1; this version reads 2$"):
+        checkpoint_entry({"fam": {"format": 1}}, "fam", 2, "m")
