@@ -24,7 +24,7 @@ from shapeio.mesh import MESH_SUFFIXES, load_mesh
 from shapeio.weights import check_weights, load_payload, write_weights
 
 from .decode import decode
-from .lang import Program, parse
+from .lang import Program, is_valid, parse
 from .models import CSGNet, ModelConfig, preset
 from .score import score_beams
 
@@ -117,7 +117,7 @@ def _affine(scale, shift) -> np.ndarray:
 def _voxelise(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """The filled 64³ volume of a mesh and the affine from its voxel coordinates to the mesh's units."""
     # SciPy's ndimage takes tenths of a second to import: loaded only where a mesh is voxelised
-    from scipy.ndimage import binary_fill_holes
+    from scipy.ndimage import binary_fill_holes  # lazy: scipy only for a mesh or grid input
 
     name = str(path)
     mesh = load_mesh(path)
@@ -358,8 +358,6 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
         extend: with the ``"short"`` rule, also try adding any primitive of the vocabulary
             (:func:`csgnet.rewrite.extend`).
     """
-    from .lang import is_valid
-
     frame = None
     if isinstance(shape, (str, Path)):
         shape, frame = load_shape_framed(shape)
@@ -374,7 +372,7 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
     program = decoded.program if decoded.valid else None
     refined = None
     if refine and program is not None:
-        from .refinement import refine_guarded
+        from .refinement import refine_guarded  # lazy: refinement brings scipy and OpenCV
 
         beams = []
         for text in decoded.beams:

@@ -7,7 +7,9 @@ The permissions and temporary-file names of :func:`atomic_write` are described i
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import glob
+import json
 import os
 import re
 import stat
@@ -94,8 +96,6 @@ def parse_json(text: str, file: str, error: Callable[[str, int, int], Exception]
         what ``error`` makes: not JSON, too deep, a non-finite constant or a float out of range, an integer too
         long to convert.
     """
-    import json
-
     def fail(reason: str, line: int = 1, column: int = 1) -> Exception:
         if error is not None:
             return error(reason, line, column)
@@ -397,8 +397,6 @@ def c_output_silenced():
         yield
     finally:
         try:
-            import ctypes
-
             ctypes.CDLL(None).fflush(None)  # C stdio buffers go to the null device, not to the restored stdout
         except (OSError, AttributeError):
             pass

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from .dream import DREAM_TIMEOUT, N_DREAMS
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUE_SCHEDULES, VALUES, check_limits
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .train import TrainConfig
 
 __all__ = [
     "Config",
@@ -97,8 +98,6 @@ class Config:
 
     def train_config(self):
         """The :class:`shapeprog.coder.train.TrainConfig` of these settings."""
-        from .train import TrainConfig
-
         return TrainConfig(lr=self.train_lr, batch=self.train_batch, epochs=self.train_epochs,
                            patience=self.train_patience, min_delta=self.train_min_delta, holdout=self.train_holdout,
                            max_seconds=self.train_seconds, dropout=self.dropout,

@@ -33,12 +33,18 @@ after every phase; a run started again on the same folder resumes after the last
 from __future__ import annotations
 
 import concurrent.futures as cf
+import hashlib
 import json
+import multiprocessing
 import random
 import time
 from dataclasses import dataclass, field, asdict
 from pathlib import Path
 from typing import Callable, Sequence
+
+from shapeio import atomic_write
+
+from shapeio.files import parse_json
 
 from .lang import LANG_3D, Call, Expr, Lang, Library, ProgramError, expand, parse, to_text, walk
 from .objective import WEIGHTS, omega, token_counts
@@ -46,6 +52,9 @@ from .proposal import propose
 from .refactor import VALUES, RefactorError
 from .config import Config
 from .wake import _best_of, _limits, _map, evaluate, train_network, wake, wake_network
+from . import data
+from ..errors import ParseError
+from ..limits import decode
 
 __all__ = [
     "Config",
@@ -227,7 +236,6 @@ class DiscoveryResult:
 def _save(out: Path | None, state: dict) -> None:
     if out is None:
         return
-    from shapeio import atomic_write
 
     atomic_write(out / "state.json", json.dumps(state, indent=1), mkdir=True)
 
@@ -235,10 +243,7 @@ def _save(out: Path | None, state: dict) -> None:
 def _load(out: Path | None, lang: Lang):
     if out is None or not (out / "state.json").is_file():
         return None
-    from shapeio.files import parse_json
 
-    from ..errors import ParseError
-    from ..limits import decode
 
     file = str(out / "state.json")
     st = parse_json(decode((out / "state.json").read_bytes(), file), file,
@@ -435,10 +440,6 @@ def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str],
     ``log.json`` (the F log, the summary and the SHA-256 of the other two files) into ``out``, each atomically
     and ``log.json`` last: a write interrupted between the files leaves digests that do not match, which
     :func:`shapeprog.coder.tables.from_run` refuses."""
-    import hashlib
-
-    from shapeio import atomic_write
-
     out = Path(out)
     texts = {"library.txt": header + result.library.to_text(),
              "programs.txt": "".join(f"{k}:{to_text(p)}\n" for k, p in zip(keys, result.programs))}
@@ -462,8 +463,6 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     Raises:
         FileExistsError: ``out`` has outputs of something else.
     """
-    from . import data
-
     out = Path(out)
     if (out / "library.txt").exists() and not (out / "state.json").exists():
         raise FileExistsError(f"{out / 'library.txt'} exists and is not from a resumable run; choose another --out")
@@ -473,8 +472,6 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
         start_from(out, recs, start[0], start[1], cfg, LANG_3D, first, start[2])
     stop_at = None if minutes is None else time.time() + 60 * minutes
     if workers > 1:
-        import multiprocessing
-
         # the network wake runs torch in this process: workers forked after that can hang, so they start
         # from a fresh interpreter
         ctx = multiprocessing.get_context("forkserver") if cfg.wake == "network" else None

@@ -25,12 +25,13 @@ from shapeio.files import resolve_shipped
 
 from ..limits import decode
 from . import data
-from .wake import evaluate
+from .wake import evaluate, network_best, network_payload
 from .execute import order
 from .lang import LANG_3D, Library, Num, expand, substitute, to_text
 from .objective import naive_program
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES, RefactorError, refactor
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .recnet import load_checkpoint
 
 __all__ = ["PASSES", "Inferred", "check_search_budget", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
 
@@ -120,8 +121,6 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
             break
         best = (r.expr, got)
     if network is not None:
-        from .wake import network_best, network_payload
-
         payload = network if len(network) == 4 else network_payload(*network)
         limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values}
         search = {"batch": WAKE_BATCH, "batches": int(search_batches), "seconds": float(search_seconds)}
@@ -155,8 +154,6 @@ def load_network(category: str) -> tuple:
     Raises:
         ValueError: no network is shipped for ``category``.
     """
-    from .recnet import load_checkpoint
-
     if category not in shipped_networks():
         raise ValueError(f"no shipped recognition network for {category!r}; shipped: "
                          f"{', '.join(shipped_networks()) or 'none'}")

@@ -46,6 +46,7 @@ from ..errors import RefactorError
 from .lang import (
     as_expr, Expr, Lang, Library, Num, ProgramError, Type, Var, _library, _short, check, substitute, walk,
 )
+from .objective import program_cost
 from .rules import (
     SCHEMES, _from_term, _term, egglog_program, naive_egglog_program, naive_relations, relations_command,
 )
@@ -149,9 +150,8 @@ def refactor(expr: Expr, library: Library | Lang | None = None, env: Mapping | N
         RefactorError: a program that is not a closed Shape expression, a limit out of range, or an
             egglog failure.
     """
-    from egglog import bindings
+    from egglog import bindings  # lazy: egglog only when a program is refactored
 
-    from .objective import program_cost
 
     t0 = time.perf_counter()
     lib = _library(library)

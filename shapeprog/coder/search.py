@@ -34,11 +34,14 @@ import time
 from dataclasses import dataclass
 from typing import Sequence
 
+import torch
+
 from .dream import split_cost
 from .execute import ExecutionError, run
 from .lang import Call, Expr, Library, Num, ProgramError, parse, substitute, to_text
 from .objective import match, naive_program, program_cost
 from .proposal import pieces
+from .recnet import sample
 
 __all__ = ["ALIGN_TOL", "WAKE_BATCH", "WAKE_BATCHES", "WAKE_SECONDS", "Found", "Store", "covers", "naive_piece",
            "search_shape", "union", "wake_score"]
@@ -140,10 +143,6 @@ def search_shape(prims: Sequence, library: Library, model, vocab, *, batch: int 
     Returns:
         list of :class:`Found`, whose covered sets partition the primitives.
     """
-    import torch
-
-    from .recnet import sample
-
     prims = tuple(tuple(p) for p in prims)
     remaining = list(range(len(prims)))
     out = []

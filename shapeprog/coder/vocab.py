@@ -31,6 +31,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .dream import LITERAL_TOL, distance_literals
 from .lang import (FLOAT_CONSTANTS, FLOAT_FN, AxisConst, Call, Expr, IntConst, Library, Num, ProgramError, Type,
                    walk)
 
@@ -163,8 +164,6 @@ def encode_target(expr: Expr, scene_prims, vocab: Vocab, library: Library | None
     Raises:
         TargetError: a token outside the vocabulary, or more than :data:`MAX_TOKENS` - 1 tokens.
     """
-    from .dream import LITERAL_TOL, distance_literals
-
     scene = scene_prims if isinstance(scene_prims, Scene) else encode_scene(scene_prims)
     vals = np.asarray(scene.values)
     dist = distance_literals(expr, library)

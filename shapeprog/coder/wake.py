@@ -10,18 +10,26 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import functools
+import hashlib
+import multiprocessing
 import time
 from dataclasses import asdict
 from pathlib import Path
 from typing import Callable, Sequence
+
+import torch
 
 from .execute import execute
 from .lang import Expr, Library, Num, ProgramError, expand, substitute, to_text
 from .objective import WEIGHTS, match, naive_program, program_cost
 from .refactor import RefactorError, refactor
 from .rules import egglog_program
-from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .search import Store, WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS, naive_piece, search_shape, union
 from .config import Config
+from .dream import dream
+from .recnet import NetConfig, RecognitionNet, load_checkpoint, save_checkpoint
+from .train import device_of, train
+from .vocab import Vocab
 
 __all__ = [
     "evaluate",
@@ -117,13 +125,6 @@ def _model_from(payload):
     """The (model, vocab) of a payload ``(key, config dict, vocab tokens, state_dict)``, cached per process."""
     key = payload[0]
     if key not in _MODELS:
-        import multiprocessing
-
-        import torch
-
-        from .recnet import NetConfig, RecognitionNet
-        from .vocab import Vocab
-
         if multiprocessing.parent_process() is not None:
             torch.set_num_threads(1)  # a pool worker: one thread each
         _MODELS.clear()
@@ -140,8 +141,6 @@ def _model_from(payload):
 def network_payload(model, vocab) -> tuple:
     """A picklable ``(key, config dict, vocab, state_dict)`` of a network for worker processes (each
     builds the model once per key)."""
-    import hashlib
-
     state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
     digest = hashlib.sha1(b"".join(v.numpy().tobytes() for v in state.values())).hexdigest()
     return (digest, asdict(model.cfg), vocab, state)
@@ -164,8 +163,6 @@ def network_best(current: Expr, library: Library, prims, payload, limits: dict, 
 def _network_best(task) -> tuple:
     """Worker: the network search of one shape, the store's combinations, then the refactor of every
     candidate; ``(program, cost, error, store entries, source)``."""
-    from .search import Store, naive_piece, search_shape, union
-
     current, library, prims, payload, entries, limits, search, seed = task
     model, vocab = _model_from(payload)
     store = Store(prims, library, entries)
@@ -219,13 +216,6 @@ def train_network(shapes: Sequence, library: Library, cfg: Config = Config(), se
         shapes: real primitive sets (the dreams' distractors).
         cache: abstraction dreams kept across rounds (see :func:`shapeprog.coder.dream.dream`).
     """
-    import torch
-
-    from .dream import dream
-    from .recnet import NetConfig, RecognitionNet, load_checkpoint, save_checkpoint
-    from .vocab import Vocab
-    from .train import device_of, train
-
     log = log or (lambda s: None)
     if checkpoint is not None and Path(checkpoint).is_file():
         try:

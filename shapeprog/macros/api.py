@@ -22,10 +22,10 @@ import numpy as np
 
 from shapeio.files import resolve_shipped
 
-from ..lang import Program
+from ..lang import Program, parse
 from ..limits import decode
 from ..lang import parse as parse_program
-from .data import convert_program
+from .data import convert_corpus, convert_program
 from .subprogram import SubProgram
 from .state import Nodes, nodes_from_subprograms
 from .grammar import to_shapeassembly
@@ -34,6 +34,8 @@ from .hierarchy import as_hierarchy, is_hierarchy_text
 from .hierarchy import parse as parse_hierarchy
 from .library import Library, as_macro_program
 from .objective import Result, best_program, templates, to_program
+from .. import corpus
+from .execute import compile_hierarchy
 
 __all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library",
            "refactor", "program_stats"]
@@ -216,8 +218,6 @@ def expand(program, library: Library | None = None) -> Program:
     if h is None and isinstance(program, str) and is_hierarchy_text(program):
         h = parse_hierarchy(program, library=lib)
     if h is not None:
-        from .execute import compile_hierarchy
-
         return compile_hierarchy(h, lib).program
     program = as_macro_program(program, lib, "shapeprog.macros.expand")
     return to_shapeassembly(lib.expand(program).lines)
@@ -235,13 +235,10 @@ def collection(category: str, split: str = "all", limit: int | None = None, seed
     Returns:
         (nodes, the shape ids used, sorted).
     """
-    from .. import corpus
-    from .data import convert_corpus
     ids = corpus.ids(category, split)
     if limit is not None and limit < len(ids):
         rng = np.random.default_rng(seed)
         ids = sorted(int(i) for i in rng.choice(ids, size=limit, replace=False))
-        from ..lang import parse
         subs = []
         for i in ids:
             subs += convert_program(parse(corpus.read(category, i), f"{category}/{i}.txt"), category, i).subprograms

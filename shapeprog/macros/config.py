@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import ParseError
+from ..limits import decode
 
 __all__ = [
     "DEFAULTS",
@@ -59,9 +60,8 @@ def load_config(path: str | Path | None = None, **overrides) -> dict:
     cfg = dict(DEFAULTS)
     items: list[tuple[str, object, str, int, int]] = []  # key, value, file, line, column
     if path is not None:
-        import yaml
+        import yaml  # lazy: PyYAML only when a settings file is read
 
-        from ..limits import decode
         with open(path, "rb") as f:
             raw = f.read(MAX_CONFIG_BYTES + 1)
         if len(raw) > MAX_CONFIG_BYTES:

@@ -38,7 +38,12 @@ from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
-from ..lang import Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate
+import torch
+
+from .. import corpus
+from ..errors import ParseError
+from ..execute import execute_batch
+from ..lang import Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, parse
 from .grammar import (
     BBOX, AttachLine, CuboidLine, ReflectLine, Signature, SqueezeLine, TranslateLine, to_shapeassembly,
 )
@@ -252,10 +257,6 @@ def _max_error(a: dict, b: dict) -> float:
 
 def _first_order_error(block: Block, bbox, cubes, names) -> float:
     """Corner difference between the block as written and its first grounded PBlock order."""
-    import torch
-
-    from ..execute import execute_batch
-
     levels = _levels(cubes, names)
     perm = orderings(levels, 1)[0][0]
     sub = SubProgram("", 0, block.name, None, bbox, tuple(cubes), tuple(levels), (Ordering(perm, ()),), 1)
@@ -340,10 +341,6 @@ def convert_block(program: Program, block: str, category: str = "", shape_id: in
 
 def _dropped_error(block: Block, bbox, cubes, trial, names) -> float:
     """Corner difference between the first orders of two cube lists (the original and a cleaned one)."""
-    import torch
-
-    from ..execute import execute_batch
-
     subs = []
     for cs in (cubes, trial):
         levels = _levels(cs, names)
@@ -422,10 +419,6 @@ class CorpusData:
 
 def _convert_ids(category: str, ids: list[int], cleanup: str, max_orders: int) -> Conversion:
     """Worker: read, parse and convert some corpus programs (module level, so process pools can run it)."""
-    from .. import corpus
-    from ..errors import ParseError
-    from ..lang import parse
-
     out = Conversion()
     intern: dict = {}
     for i in ids:
@@ -459,8 +452,6 @@ def convert_corpus(categories: Iterable[str] = ("chair", "table", "storage"), sp
     Returns:
         The :class:`CorpusData`; equal signatures are shared objects across the whole result.
     """
-    from .. import corpus
-
     if cleanup not in CLEANUP_MODES:
         raise ValueError(f"unknown cleanup {cleanup!r}; expected one of {', '.join(CLEANUP_MODES)}")
     if max_orders < 1:
@@ -517,10 +508,6 @@ def order_errors(items: Sequence[tuple[SubProgram, Program]], max_orders: int | 
     Raises:
         LineError: an ordering that is not an executable sequence (e.g. a cube before its targets).
     """
-    import torch
-
-    from ..execute import execute_batch
-
     dtype = torch.float32 if dtype is None else dtype
     jobs = []  # (item index, program, keys, is_reference)
     for n, (sub, prog) in enumerate(items):

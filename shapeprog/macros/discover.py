@@ -44,6 +44,8 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from shapeio import atomic_write
+
 from ..errors import ParseError
 from .lang import BASE, MacroDef, check_def, def_text
 from .library import Library
@@ -181,8 +183,8 @@ def _greedy(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub,
 
 
 def _milp(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub, cfg, executor, log):
-    from scipy.optimize import Bounds, LinearConstraint, milp
-    from scipy.sparse import coo_matrix
+    from scipy.optimize import Bounds, LinearConstraint, milp  # lazy: scipy only for the milp selection
+    from scipy.sparse import coo_matrix  # lazy: as above
     f_start, _ = evaluate(lib, state.active, sub, cfg, executor)
     f_prev = f_start
     if cfg["milp_warm"]:  # the greedy picks first: the milp then starts from them and cannot end worse
@@ -418,6 +420,5 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
             log(f"round {rnd + 1} done: f {f0:.3f} -> {f2:.3f}, |L| = {5 + len(state.active)}, "
                 f"{dropped} orderings dropped, {time.time() - t0:.0f} s")
         if path is not None:
-            from shapeio import atomic_write
             atomic_write(path, state.to_json(digest, cfg, seed, start_digest), mkdir=True)
     return state

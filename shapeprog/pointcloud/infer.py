@@ -55,6 +55,11 @@ from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, _corners_of, align_program, normalize, scale_program
 from .search import (SEARCH_POINTS, SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule, selection_chamfers,
                      selection_target)
+from ..macros.library import Library
+from ..physics import rootedness, stability as stable_fn
+from ..vae.layout import LineLayout
+from ..vae.macro_decode import decode_macro
+from ..vae.macro_model import MacroVAE
 
 __all__ = [
     "ENCODER_POINTS",
@@ -132,7 +137,6 @@ def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
     if getattr(vae, "layout", None) is None:
         with torch.no_grad():
             return decode_programs(vae.decoder, codes)
-    from ..vae.macro_decode import decode_macro
 
     out = []
     with torch.no_grad():
@@ -226,10 +230,6 @@ def load_model(path, category: Optional[str] = None) -> CloudModel:
     try:
         if payload["recipe"] == "e2e":
             if payload.get("library") is not None:
-                from ..macros.library import Library
-                from ..vae.layout import LineLayout
-                from ..vae.macro_model import MacroVAE
-
                 library = Library.from_text(payload["library"], f"{path}:library")
                 vae = MacroVAE(LineLayout(library), int(payload["hidden_dim"]))
             else:
@@ -289,8 +289,6 @@ def shape_metrics(corners: torch.Tensor, target: torch.Tensor, points: int = MET
     out["cd"] = float(chamfer(pred, tgt, eps=0.0))
     out["fscore"] = float(fscore(pred, tgt, FSCORE_THRESHOLD))
     if physics:
-        from ..physics import rootedness, stability as stable_fn
-
         c = corners.detach().double().numpy()
         out["rooted"] = bool(rootedness(c))
         out["stable"] = bool(out["rooted"] and stable_fn(c)) if stability else None

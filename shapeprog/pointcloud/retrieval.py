@@ -30,6 +30,8 @@ from typing import Optional, Sequence, Union
 import numpy as np
 import torch
 
+from shapeio.cache import cached
+
 from .. import corpus
 from ..vae.genmetrics import _imap, coarse_fields
 from ..lang import Program, parse
@@ -37,6 +39,7 @@ from ..metrics import chamfer
 from .data import cloud_transforms, corpus_splits, sample_clouds
 from .dataset import load_cache, read_split
 from .normalize import CANONICAL_DIAGONAL, Transform, scale_program
+from ..corpus import data_digest
 
 __all__ = ["INDEX_CANDIDATES", "INDEX_GRID", "INDEX_POINTS", "Match", "RetrievalIndex"]
 
@@ -209,10 +212,6 @@ class RetrievalIndex:
             return {"ids": np.asarray(cs.ids, dtype=np.int64), "unit": unit, "centers": centers, "scales": scales}
 
         if cache:
-            from shapeio.cache import cached
-
-            from ..corpus import data_digest
-
             key = {"category": category, "points": int(points), "seed": int(seed), "ids": [int(i) for i in ids],
                    "corpus": data_digest(), "version": INDEX_CACHE_VERSION}
             got = cached("retrieval-index", key, compute)

@@ -14,6 +14,7 @@ from .. import corpus
 from ..errors import ParseError
 from ..lang import parse
 from ..macros.api import load_library
+from ..macros.refactored import load_refactored, read_refactored
 from .layout import LineLayout, MacroNode, macro_program_to_tree
 from .vectors import VectorNode, program_to_tree
 
@@ -130,8 +131,6 @@ def load_macro_trees(keys: list[str], layout: LineLayout, programs: dict,
 
 
 def _read_macro_programs(category: str, keys: list[str], programs: str | None, library) -> dict:
-    from ..macros.refactored import load_refactored, read_refactored
-
     ids = sorted({int(k.split("/")[1]) for k in keys})
     if programs is None:
         return load_refactored(category, ids=ids)[0]

@@ -34,6 +34,7 @@ from ..errors import ExecutionError, ParseError
 from ..execute import ExecutedShape, execute, execute_batch
 from ..lang import Program, parse, to_text
 from ..sampling import sample_surface
+from .pointnet import global_features, load_classifier, fit_classifier, predict
 
 __all__ = ["CLASSIFIER_POINTS", "CHAMFER_POINTS", "FoolResult", "chamfer_clouds", "classifier_clouds",
            "classifier_features", "coarse_fields", "coverage", "execute_samples", "feature_variance", "frechet_distance",
@@ -171,8 +172,6 @@ def classifier_features(shapes, model=None, batch_size: int = 32, seed: int = 0)
         model: a :class:`~shapeprog.vae.pointnet.PointNetCls`; default the shipped classifier
             (:func:`shapeprog.vae.pointnet.load_classifier`).
     """
-    from .pointnet import global_features, load_classifier
-
     if model is None:
         model = load_classifier()[0]
     clouds = shapes if isinstance(shapes, torch.Tensor) else classifier_clouds(shapes, seed=seed)
@@ -325,8 +324,6 @@ def percent_fool(
     Returns:
         A :class:`FoolResult`.
     """
-    from .pointnet import fit_classifier, predict
-
     if not 1 <= average_last <= epochs:
         raise ValueError(f"`average_last` must lie in [1, epochs={epochs}], got {average_last}")
     if not 0.0 < holdout < 1.0:

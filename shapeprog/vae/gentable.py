@@ -10,6 +10,8 @@ Definitions and decisions: ``docs/generation_metrics.md``.
 """
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -18,10 +20,16 @@ from typing import Optional, Sequence
 import numpy as np
 import torch
 
+from shapeio.cache import cached
+
 from .genmetrics import (CHAMFER_POINTS, CLASSIFIER_POINTS, FoolResult, chamfer_clouds, classifier_clouds,
                          classifier_features, coverage, execute_samples, frechet_distance, gaussian_fit,
                          generalization, leaf_parts, novelty, percent_fool, variety)
 from ..lang import Program
+from .. import corpus
+from ..corpus import data_digest
+from ..physics import rootedness, stability
+from .pointnet import accuracy, fit_classifier, PRETRAINED_SHA256, load_classifier
 
 __all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_table",
            "table_notes", "train_category_classifier"]
@@ -48,8 +56,6 @@ _DIGITS = {"rooted": 1, "stable": 1, "fool": 2, "fd": 2, "leaf_parts": 2, "gener
 
 
 def _corpus(category: str, split: str) -> tuple[list[Program], list[torch.Tensor]]:
-    from .. import corpus  # lazy: the corpus archive is read on first use
-
     programs = [p for _, p in corpus.load(category, split)]
     corners, errors = execute_samples(programs)
     if errors:
@@ -83,8 +89,6 @@ def train_category_classifier(
         ``(model, meta)``; ``meta`` records the settings, the val accuracy overall and per category
         (percent), the shape counts and the training seconds.
     """
-    from .pointnet import accuracy, fit_classifier
-
     t0 = time.perf_counter()
     data = {}
     for split, s in (("train", seed), ("val", seed + 1)):
@@ -196,8 +200,6 @@ class GenerationRow:
 
 
 def _physics_job(job) -> tuple[bool, Optional[bool]]:
-    from ..physics import rootedness, stability
-
     corners, stable = job
     rooted = rootedness(corners)
     if not stable:
@@ -344,13 +346,6 @@ def ground_truth_row(refs: References, classifier_sha: Optional[str], **kw) -> G
     on-disk cache (:mod:`shapeio.cache`) keyed by the category, the classifier's SHA-256, the corpus archive's
     digest, the metric settings in ``kw`` and :data:`GROUND_TRUTH_CACHE_VERSION`; computed (with a progress line
     through ``kw['log']``) when not there. Not cached for a classifier without a known digest."""
-    import dataclasses
-    import json
-
-    from shapeio.cache import cached
-
-    from ..corpus import data_digest
-
     def compute() -> GenerationRow:
         say = kw.get("log") or (lambda s: None)
         say(f"{refs.category}: measuring the ground-truth row ({len(refs.val_programs)} shapes; cached after this "
@@ -395,8 +390,6 @@ def generation_table(
     say how each was measured. Arguments as :func:`evaluate_generation`; ``samples`` may be empty
     (``[]``) with ``ground_truth=True`` for the ground-truth row alone.
     """
-    from .pointnet import PRETRAINED_SHA256, load_classifier
-
     if category not in PAPER:
         raise ValueError(f"unknown category {category!r}; expected one of {', '.join(PAPER)}")
     meta, sha = {}, None

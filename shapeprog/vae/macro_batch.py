@@ -13,6 +13,7 @@ import torch.nn.functional as F
 
 from .model import NodeOutput, VAEOutput
 from .batch import BatchOutput, _LevelRows, _commands_by_node, _latents
+from .losses import MACRO_LOSS_WEIGHTS
 
 __all__ = [
     "MacroPlan",
@@ -278,8 +279,6 @@ def macro_batch_loss(vae, batch: MacroTreeBatch, sample: bool = True, weights: M
     point-cloud encoder's codes, :mod:`shapeprog.pointcloud.train`); there is no posterior then, so ``kl``
     must be False.
     """
-    from .losses import MACRO_LOSS_WEIGHTS
-
     if codes is not None and kl:
         raise ValueError("codes given: there is no posterior to take a KL term of; pass kl=False")
     out = macro_batch_forward(vae, batch, sample=sample, generator=generator, eps=eps, codes=codes)

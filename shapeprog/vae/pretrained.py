@@ -24,6 +24,9 @@ from pathlib import Path
 
 from shapeio.weights import check_weights, load_payload, write_weights
 
+from ..macros.library import Library
+from .layout import LineLayout
+from .macro_model import MacroVAE
 from .model import VAE
 
 __all__ = ["FORMAT", "PRETRAINED", "PRETRAINED_MACROS", "VERSION", "WEIGHTS", "export_weights", "load_model", "load_pretrained",
@@ -88,10 +91,6 @@ def load_model(path, category: str | None = None, device=None):
     if category is not None and info["category"] != category:
         raise ValueError(f"{path}: weights of category {info['category']!r}, not {category!r}")
     if info.get("library") is not None:
-        from ..macros.library import Library
-        from .layout import LineLayout
-        from .macro_model import MacroVAE
-
         vae = MacroVAE(LineLayout(Library.from_text(info["library"], f"{path}:library")), hidden_dim=info["hidden_dim"])
     else:
         vae = VAE(hidden_dim=info["hidden_dim"])

@@ -7,11 +7,13 @@ from __future__ import annotations
 import torch
 
 from ..execute import execute
+from ..macros.execute import compile_hierarchy
 from ..metrics import fscore
 from ..sampling import sample_surface
 from .batch import TreeBatch, encode_batch
 from .decode import decode_latent
 from .layout import LineLayout, tree_to_macro_program
+from .macro_decode import decode_macro
 from .macro_model import MacroVAE
 from .model import VAE
 from .vectors import VectorNode, tree_to_program
@@ -33,7 +35,6 @@ def tree_program(tree, layout: LineLayout | None = None):
     program of a :class:`~shapeprog.vae.layout.MacroNode` (``layout`` needed)."""
     if isinstance(tree, VectorNode):
         return tree_to_program(tree)
-    from ..macros.execute import compile_hierarchy
     return compile_hierarchy(tree_to_macro_program(tree, layout), layout.library).program
 
 
@@ -44,7 +45,6 @@ def reconstruct(vae: VAE, trees: list[VectorNode]) -> list:
     decoded macro program (:func:`~shapeprog.vae.macro_decode.decode_macro`)."""
     device, dtype = next(vae.parameters()).device, next(vae.parameters()).dtype
     if isinstance(vae, MacroVAE):
-        from .macro_decode import decode_macro
         out = []
         with torch.no_grad():
             for t in trees:

@@ -41,6 +41,7 @@ from .batch import TreeBatch, batch_forward, batch_loss, collate_trees
 from .macro_batch import MacroTreeBatch, collate_macro_trees, macro_batch_loss
 from .decode import sample
 from .layout import LineLayout
+from .macro_decode import sample_macro
 from .losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
 from .macro_model import MacroVAE
 from .model import VAE
@@ -52,6 +53,7 @@ from .data import (
 from .reconstruct import (
     _corners, _same_trees, reconstruct, reconstruction_fscores, target_surfaces, tree_program,
 )
+from .pretrained import read_weights
 
 __all__ = [
     "CHECKPOINT_FORMAT",
@@ -259,7 +261,6 @@ class VAEModule(L.LightningModule):
 
     def _load_init(self, path: str) -> None:
         """Start from the weights of ``path`` (a weights file or a training checkpoint) of the same VAE."""
-        from .pretrained import read_weights
         info, state = read_weights(path)
         mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim, "library": self._library_text()}
         theirs = {"category": info["category"], "hidden_dim": info["hidden_dim"], "library": info.get("library")}
@@ -389,7 +390,6 @@ class VAEModule(L.LightningModule):
                       dataformats="HWC")
         try:
             if self.layout is not None:
-                from .macro_decode import sample_macro
                 samples = sample_macro(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
             else:
                 samples = sample(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
