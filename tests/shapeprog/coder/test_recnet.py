@@ -306,15 +306,15 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     from shapeprog.coder.infer import infer, load_library, load_network
     from shapeprog.coder.search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
-    wake = importlib.import_module("shapeprog.coder.wake")
+    coder_infer = importlib.import_module("shapeprog.coder.infer")  # the attribute infer is the function
     seen = []
-    real = wake.network_best
+    real = coder_infer.network_best
 
     def spy(current, library, prims, payload, limits, search=None, seed=0):
         seen.append(dict(search))
         return real(current, library, prims, payload, limits, search={**search, "batches": 1}, seed=seed)
 
-    monkeypatch.setattr(wake, "network_best", spy)
+    monkeypatch.setattr(coder_infer, "network_best", spy)
     lib, net = load_library("chair"), load_network("chair")
     rec = data.load("chair", "heldout")[1]
     infer(rec.prims, lib, network=net)
