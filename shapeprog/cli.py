@@ -22,6 +22,7 @@ from pathlib import Path
 
 from shapeio import atomic_write, refuse_overwrite
 from shapeio.mesh import WRITE_SUFFIXES
+from shapeio.files import NotShippedError
 from shapeio.options import float_in, int_in
 
 from . import corpus
@@ -281,18 +282,14 @@ def category_pairs(values, form: str, flag: str = "--library") -> dict:
 
 
 def macro_library(name: str, option: str = "", text: bool = False):
-    """The ShapeMOD library ``name``: a library file when one exists at that path, else a shipped category;
-    SystemExit with the reason otherwise. ``text``: (library, its file's text)."""
+    """The ShapeMOD library ``name`` (:func:`shapeprog.macros.api.read_library`: a library file when one exists
+    at that path, else a shipped category); SystemExit with the reason otherwise. ``text``: (library, its
+    file's text)."""
     # the macro library code is imported when a command reads a library, not for --help
-    from .macros import Library, load_library  # lazy: loaded when the command runs
-    from .macros.api import library_text  # lazy: loaded when the command runs
+    from .macros.api import read_library  # lazy: loaded when the command runs
 
-    if Path(name).is_file():
-        src = decode(Path(name).read_bytes(), name)
-        lib = Library.from_text(src, name)
-    else:
-        try:
-            lib, src = load_library(name), (library_text(name) if text else "")
-        except ValueError as e:
-            raise SystemExit(f"error: {option}{e}" + (" (or give a library file)" if option else "")) from None
+    try:
+        lib, src = read_library(name)
+    except NotShippedError as e:
+        raise SystemExit(f"error: {option}{e}") from None
     return (lib, src) if text else lib

@@ -37,7 +37,7 @@ from .objective import Result, best_program, templates, to_program
 from .. import corpus
 from .execute import compile_hierarchy
 
-__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library",
+__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library", "read_library",
            "refactor", "program_stats"]
 
 #: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
@@ -55,8 +55,19 @@ def load_library(name: str) -> Library:
         NotShippedError: neither a file nor a shipped category (a ``ValueError``; the message names both).
         ParseError: the file is not a library (file, line and column).
     """
+    return read_library(name)[0]
+
+
+def read_library(name: str) -> tuple[Library, str]:
+    """``(library, its file's text)`` of :func:`load_library` (the text with its header, as shipped).
+
+    Raises:
+        NotShippedError: neither a file nor a shipped category.
+        ParseError: the file is not a library.
+    """
     path = resolve_shipped(name, LIBRARIES, "ShapeMOD library")
-    return Library.from_text(decode(path.read_bytes(), str(path)), str(path))
+    text = decode(path.read_bytes(), str(path))
+    return Library.from_text(text, str(path)), text
 
 
 def library_text(category: str) -> str:

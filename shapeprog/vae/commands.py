@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from shapeio import atomic_write, write_new
 from shapeio.results import column, make_result
+from shapeio.weights import load_payload
 
 from .. import io
 from ..cli import (DEFAULT_CATEGORY, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
@@ -194,8 +195,8 @@ def cmd_reconstruct(args) -> int:
 def is_pointcloud_checkpoint(path: str) -> bool:
     """Whether ``path`` is a Lightning checkpoint of a :mod:`shapeprog.pointcloud.train` module."""
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception:  # unreadable: the exporter reports it, naming the file
+        payload = load_payload(path, "checkpoint")
+    except (OSError, ValueError):  # unreadable: the exporter reports it, naming the file
         return False
     return isinstance(payload, dict) and "shapeprog_pointcloud" in payload
 
