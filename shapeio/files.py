@@ -191,6 +191,16 @@ def remove_stale_temps(folder: PathLike, name: str | None = None) -> list[Path]:
     return removed
 
 
+def _write_synced(f: BinaryIO, data) -> None:
+    """Write ``data`` (bytes, a str as UTF-8, or a function given the open file) to ``f``, flushed and synced."""
+    if callable(data):
+        data(f)
+    else:
+        f.write(data.encode("utf-8") if isinstance(data, str) else data)
+    f.flush()
+    os.fsync(f.fileno())
+
+
 def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], object]],
                  mkdir: bool = False) -> Path:
     """Write a file so that a reader never sees it half-written.
@@ -232,12 +242,7 @@ def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], ob
     try:
         with os.fdopen(fd, "wb") as f:
             os.fchmod(f.fileno(), mode)
-            if callable(data):
-                data(f)
-            else:
-                f.write(data.encode("utf-8") if isinstance(data, str) else data)
-            f.flush()
-            os.fsync(f.fileno())
+            _write_synced(f, data)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -274,26 +279,18 @@ def write_new(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], objec
     if os.path.lexists(path):
         raise FileExistsError(f"{path}: the file exists; it is not replaced")
 
-    def write(f):
-        if callable(data):
-            data(f)
-        else:
-            f.write(data.encode("utf-8") if isinstance(data, str) else data)
-        f.flush()
-        os.fsync(f.fileno())
-
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.atomic-{os.getpid()}-", suffix=".tmp", dir=folder)
     try:
         with os.fdopen(fd, "wb") as f:
             os.fchmod(f.fileno(), 0o666 & ~_umask())
-            write(f)
+            _write_synced(f, data)
         try:
             os.link(tmp, path)
         except FileExistsError:
             raise FileExistsError(f"{path}: the file exists; it is not replaced") from None
         except OSError:  # no hard links here: an exclusive create
             with open(path, "xb") as f:
-                write(f)
+                _write_synced(f, data)
     finally:
         try:
             os.unlink(tmp)
