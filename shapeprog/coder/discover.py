@@ -57,7 +57,6 @@ from ..errors import ParseError
 from ..limits import decode
 
 __all__ = [
-    "Config",
     "DiscoveryResult",
     "Summary",
     "discover",

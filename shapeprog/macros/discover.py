@@ -51,13 +51,11 @@ from .lang import BASE, MacroDef, check_def, def_text
 from .library import Library
 from .objective import templates
 from .proposal import PROPOSAL_TRIES, Candidate, gain, generalise, heur_score, propose_step
-from .config import DEFAULTS, load_config
+from .config import DEFAULTS
 from .state import Discovery, Nodes, _map, _options_chunk, evaluate
 
 __all__ = [
-    "Discovery",
     "discover",
-    "load_config",
     "prior_rounds",
 ]
 

@@ -270,7 +270,7 @@ def test_discovery_with_the_network_wake_writes_and_reuses_its_checkpoint(tmp_pa
 
 
 def test_discovery_defaults_train_with_the_papers_settings():
-    # discover.Config keeps torch-free copies of TrainConfig's defaults; they must stay the paper's
+    # config.Config keeps torch-free copies of TrainConfig's defaults; they must stay the paper's
     from shapeprog.coder.config import Config
     from shapeprog.coder.train import PAPER
 
