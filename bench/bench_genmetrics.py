@@ -1,7 +1,7 @@
 """The generation metrics' ground-truth row: the corpus val split of one category measured against its train split.
 
 Builds the category's references (train and val executed and sampled, the train features fitted), runs
-every metric of :func:`shapeprog.gentable.evaluate_generation` on the val programs (coverage excepted),
+every metric of :func:`shapeprog.vae.gentable.evaluate_generation` on the val programs (coverage excepted),
 prints the markdown table beside the paper's figures and the seconds per metric. With
 ``--check-recall N`` it also compares the two-stage nearest-chamfer search with the exhaustive one on N
 val shapes against the whole train split (recall of the exact nearest shape, and the mean distances).
@@ -25,9 +25,9 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import torch
 
-from shapeprog.genmetrics import nearest_chamfer
-from shapeprog.gentable import References, evaluate_generation, format_table, table_notes
-from shapeprog.pointnet import PRETRAINED_SHA256, load_classifier
+from shapeprog.vae.genmetrics import nearest_chamfer
+from shapeprog.vae.gentable import References, evaluate_generation, format_table, table_notes
+from shapeprog.vae.pointnet import PRETRAINED_SHA256, load_classifier
 
 
 def main(argv=None):

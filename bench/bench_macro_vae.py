@@ -39,7 +39,8 @@ def main() -> None:
     from shapeprog.macros import load_library
     from shapeprog.macros.execute import execute_hierarchy
     from shapeprog.macros.refactored import load_refactored
-    from shapeprog.vae.batch import MacroTreeBatch, TreeBatch, batch_forward, batch_loss, macro_batch_loss
+    from shapeprog.vae.batch import TreeBatch, batch_forward, batch_loss
+    from shapeprog.vae.macro_batch import MacroTreeBatch, macro_batch_loss
     from shapeprog.vae.layout import LineLayout, macro_program_to_tree, tree_to_macro_program
     from shapeprog.vae.losses import macro_program_loss, program_loss
     from shapeprog.vae.macro_model import MacroVAE

@@ -26,7 +26,8 @@ import torch
 from shapeprog.coder import data, load_library
 from shapeprog.coder.dream import dream
 from shapeprog.coder.lang import to_text
-from shapeprog.coder.recnet import NetConfig, RecognitionNet, Vocab, sample
+from shapeprog.coder.recnet import NetConfig, RecognitionNet, sample
+from shapeprog.coder.vocab import Vocab
 from shapeprog.coder.train import TrainConfig, batch_loss, batches, tensorize
 
 

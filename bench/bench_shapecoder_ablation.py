@@ -18,7 +18,8 @@ import sys
 import time
 
 from shapeprog.coder import data
-from shapeprog.coder.discover import Config, discover
+from shapeprog.coder.discover import discover
+from shapeprog.coder.config import Config
 from shapeprog.coder.objective import naive_summary
 
 PAPER = {"chair": {"full": 63.6, "no abstraction": 104.9, "no semantic rewrites": 75.2}}

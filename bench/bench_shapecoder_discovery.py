@@ -20,7 +20,8 @@ import time
 from pathlib import Path
 
 from shapeprog.coder import data
-from shapeprog.coder.discover import Config, discover_category
+from shapeprog.coder.discover import discover_category
+from shapeprog.coder.config import Config
 
 
 def _table(log: list, title: str) -> None:

@@ -9,11 +9,11 @@ checked before each iteration, so one iteration can overshoot it) and a time lim
 in a process of its own that is killed if it has not answered 30 s after that (the reference kills its e-graph
 process the same way), once per scheme:
 
-* ``conditional``: the library's method (:func:`shapeprog.coder.refactor.egglog_program`): a value table
+* ``conditional``: the library's method (:func:`shapeprog.coder.rules.egglog_program`): a value table
   kept by rules and guarded rewrites;
 * ``naive``: every pairwise relation of the program's floats is put into the e-graph as e-nodes before the
-  run (:func:`shapeprog.coder.refactor.naive_relations`) and the rules are plain patterns
-  (:func:`shapeprog.coder.refactor.naive_egglog_program`).
+  run (:func:`shapeprog.coder.rules.naive_relations`) and the rules are plain patterns
+  (:func:`shapeprog.coder.rules.naive_egglog_program`).
 
 Prints per size and scheme: programs, median seconds per whole call (building the e-graph, the run and the
 extraction; a call that ran out of time counts as ``--timeout``) and median CPU seconds (when every call

@@ -19,7 +19,8 @@ import sys
 import time
 
 from shapeprog.coder import data
-from shapeprog.coder.discover import Config, discover
+from shapeprog.coder.discover import discover
+from shapeprog.coder.config import Config
 from shapeprog.coder.objective import naive_summary
 
 

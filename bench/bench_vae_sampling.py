@@ -33,7 +33,8 @@ import torch
 from shapeprog import corpus, parse
 from shapeprog.vae import VAE, sample
 from shapeprog.vae.pretrained import load_model
-from shapeprog.vae.decode import DecodeOptions, InvalidSample, _decode_with, _Net, decode, decode_latent
+from shapeprog.vae.decode import DecodeOptions, InvalidSample, _decode_with, decode, decode_latent
+from shapeprog.vae.step import _Net
 from shapeprog.vae.replay import Replay
 from shapeprog.vae.vectors import program_to_tree
 

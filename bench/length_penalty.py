@@ -29,8 +29,9 @@ import torch
 
 from csgnet import render
 from csgnet.data import load_dataset
+from csgnet.cli.common import is_valid_text
 from csgnet.inference import infer, load_model, load_pretrained
-from csgnet.lang import is_valid, parse
+from csgnet.lang import parse
 from csgnet.refinement import refine_guarded
 from csgnet.rewrite import LENGTH_PENALTY, MAX_VAL_IOU_COST
 
@@ -66,7 +67,7 @@ def main(argv=None) -> int:
     starts = infer(model, targets, beam=args.beam, select="match")
     per_penalty: dict[float, list[tuple[float, int, int]]] = {lam: [] for lam in args.penalties}
     for prog, target, start in zip(programs, targets, starts):
-        valid = [parse(b, args.dim) for b in start.beams if b and _valid(b, args.dim)]
+        valid = [parse(b, args.dim) for b in start.beams if is_valid_text(b, args.dim)]
         for lam in args.penalties:
             if not start.valid:
                 per_penalty[lam].append((0.0, 0, len(prog.draws)))
@@ -105,13 +106,6 @@ def main(argv=None) -> int:
                  f"most {100 * MAX_VAL_IOU_COST:g} points below λ = 0's."]
         print(f"wrote {write_result(args.out, make_result(f'The short rule: price per primitive ({args.dim}D)', cols, rows, notes, command))}")
     return 0
-
-
-def _valid(text: str, dim: int) -> bool:
-    try:
-        return is_valid(parse(text, dim))
-    except ValueError:
-        return False
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import torch
 
-from shapeprog.pointcloud.data import CloudDataset
+from shapeprog.pointcloud.dataset import CloudDataset
 from shapeprog.pointcloud.retrieval import INDEX_CANDIDATES, INDEX_GRID, RetrievalIndex
 
 

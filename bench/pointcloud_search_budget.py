@@ -30,7 +30,7 @@ import time
 import numpy as np
 import torch
 
-from shapeprog.pointcloud.data import load_cache, read_split
+from shapeprog.pointcloud.dataset import load_cache, read_split
 from shapeprog.pointcloud.infer import infer, load_model, load_pretrained, shape_metrics
 from shapeprog.pointcloud.retrieval import RetrievalIndex
 from shapeprog.pointcloud.search import parse_schedule

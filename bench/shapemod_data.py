@@ -25,7 +25,8 @@ import torch
 
 from shapeprog import corpus
 from shapeprog.lang import parse
-from shapeprog.macros.data import MAX_ORDERS, ORDER_TOL, convert_corpus, convert_program, order_errors
+from shapeprog.macros.data import convert_corpus, convert_program, order_errors
+from shapeprog.macros.subprogram import MAX_ORDERS, ORDER_TOL
 
 
 def _check(category: str, ids: list[int], first: bool) -> tuple[int, int, list[tuple[float, str]]]:

@@ -23,7 +23,9 @@ import numpy as np
 
 from shapeprog.macros import load_library
 from shapeprog.macros.api import collection
-from shapeprog.macros.discover import discover, evaluate, load_config
+from shapeprog.macros.discover import discover
+from shapeprog.macros.state import evaluate
+from shapeprog.macros.config import load_config
 
 
 def main(argv=None):

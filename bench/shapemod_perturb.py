@@ -29,11 +29,11 @@ import numpy as np
 import torch
 
 from shapeprog import corpus
-from shapeprog.genmetrics import classifier_clouds, classifier_features, execute_samples, frechet_distance, gaussian_fit
+from shapeprog.vae.genmetrics import classifier_clouds, classifier_features, execute_samples, frechet_distance, gaussian_fit
 from shapeprog.macros import Library, hierarchy, load_library
 from shapeprog.macros.perturb import PerturbablePrograms
 from shapeprog.macros.refactored import refactor_corpus
-from shapeprog.pointnet import load_classifier
+from shapeprog.vae.pointnet import load_classifier
 from shapeio.files import atomic_write
 
 SIGMAS = (0.0, 0.01, 0.025, 0.05, 0.1, 0.15, 0.2)

@@ -17,6 +17,8 @@ Entry points:
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 
 from .lang import Draw, Op, ParseError, Program, is_valid, parse, parse_lines, to_text
@@ -52,7 +54,7 @@ def render(programs, dim: int = 2, device=None) -> np.ndarray:
     """
     import torch  # lazy: `import csgnet` (the language) loads neither torch nor the renderer
 
-    from . import renderer as _r
+    from . import renderer as _r  # lazy, as torch above
 
     if isinstance(programs, (str, Program)):
         programs = [programs]
@@ -64,8 +66,6 @@ def render(programs, dim: int = 2, device=None) -> np.ndarray:
 
 
 def __getattr__(name):  # lazy submodules: csgnet.metrics etc. without work at import
-    import importlib
-
     if name in {"metrics", "export", "data", "renderer", "primitives", "refinement", "models", "score",
                 "decode", "train", "paper", "inference"}:
         return importlib.import_module(f".{name}", __name__)

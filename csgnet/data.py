@@ -23,6 +23,7 @@ import torch
 from tqdm.auto import tqdm
 
 from shapeio import atomic_write
+from shapeio.files import parse_json
 
 from . import primitives as P
 from .lang import MAX_TOKENS, OPERATORS, STOP, Program, parse_lines
@@ -264,7 +265,6 @@ class DatasetWarning(UserWarning):
 def _read_meta(path: Path) -> dict | None:
     if not path.exists():
         return None
-    from shapeio.files import parse_json
 
     try:
         text = path.read_bytes().decode("utf-8")

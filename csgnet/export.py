@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from PIL import Image, ImageDraw
 from skimage.measure import marching_cubes
 
 from shapeio import atomic_write
@@ -210,8 +211,6 @@ def save_sheet(sheet, path, scale: int = 3, columns=(), rows=()) -> Path:
     """Write a :func:`contact_sheet` as a PNG, each pixel ``scale`` times (atomically), with ``columns``
     labels in a band above the columns and ``rows`` labels in a band left of the rows (black on white, the
     default bitmap font; no band without labels). The sheet itself starts at ``(LABEL_BAND, left band)``."""
-    from PIL import Image, ImageDraw
-
     big = np.kron(np.asarray(sheet, dtype=np.uint8), np.ones((scale, scale), np.uint8))
     top = LABEL_BAND if columns else 0
     left = (LABEL_BAND // 2) * (max(map(len, rows)) + 1) if rows else 0

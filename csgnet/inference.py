@@ -17,23 +17,28 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from shapeio import InputError, atomic_write
+from shapeio import InputError
 from shapeio.arrays import read_grid
 from shapeio.image import IMAGE_SUFFIXES, MARGIN, centre_on_canvas, fit_to_canvas, read_mask
 from shapeio.mesh import MESH_SUFFIXES, load_mesh
+from shapeio.weights import check_weights, load_payload, write_weights
 
 from .decode import decode
-from .lang import Program, parse
+from .lang import Program, is_valid, parse
 from .models import CSGNet, ModelConfig, preset
 from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "load_shape_framed", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
            "load_pretrained", "infer", "Inference", "parse_shape", "Parsed",
-           "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH"]
+           "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH", "FORMAT", "VERSION"]
 
 WEIGHTS = Path(__file__).parent / "weights"
 KINDS = ("csgnet", "csgnetstack")
 TUNINGS = ("supervised", "reinforce", "selftrain")
+#: The weights-file family of a csgnet model and its version (the shipped files: the unversioned layout, 0).
+FORMAT, VERSION = "csgnet", 1
+#: The keys of a weights file written before weights files carried ``format`` (the shipped ones).
+_LEGACY_KEYS = ("config", "state_dict")
 # (dim, kind, tuning) -> the shipped file (docs/csgnet.md says how each was trained)
 SHIPPED = {
     (2, "csgnet", "supervised"): "csgnet2d.pt",
@@ -112,7 +117,7 @@ def _affine(scale, shift) -> np.ndarray:
 def _voxelise(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """The filled 64³ volume of a mesh and the affine from its voxel coordinates to the mesh's units."""
     # SciPy's ndimage takes tenths of a second to import: loaded only where a mesh is voxelised
-    from scipy.ndimage import binary_fill_holes
+    from scipy.ndimage import binary_fill_holes  # lazy: scipy only for a mesh or grid input
 
     name = str(path)
     mesh = load_mesh(path)
@@ -146,9 +151,9 @@ def _voxelise(path: Path) -> tuple[np.ndarray, np.ndarray]:
 # models
 
 def read_checkpoint(path) -> tuple[ModelConfig, dict, dict]:
-    """The model of a weights file (``{"config", "state_dict"}``) or of a Lightning training checkpoint.
-
-    Files are read with ``torch.load(weights_only=True)``.
+    """The model of a weights file (:mod:`shapeio.weights`, family :data:`FORMAT`: ``{"config",
+    "state_dict", "meta"}``; the shipped files, written before weights files carried their family, are its
+    version 0) or of a Lightning training checkpoint.
 
     Returns:
         ``(config, state_dict, meta)``: the model's configuration, its tensors (as stored) and, for a
@@ -158,17 +163,9 @@ def read_checkpoint(path) -> tuple[ModelConfig, dict, dict]:
         FileNotFoundError: no such file.
         ValueError: naming the file, for anything that is not one of the two layouts.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such weights file")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:
-        # torch's own message suggests unsafe loading; the type of the failure is what a user needs
-        raise ValueError(f"{path}: not a Lightning training checkpoint or weights file of csgnet "
-                         f"(unreadable: {type(e).__name__})") from None
-    if not isinstance(payload, dict):
-        raise ValueError(f"{path}: neither a weights file nor a Lightning checkpoint (a {type(payload).__name__})")
+    payload = load_payload(path, "Lightning training checkpoint or weights file of csgnet")
+    if "config" in payload or "format" in payload:
+        payload = check_weights(payload, path, FORMAT, VERSION, legacy=_LEGACY_KEYS)
     try:
         if "config" in payload:
             return ModelConfig.from_dict(payload["config"]), payload["state_dict"], payload.get("meta", {})
@@ -199,15 +196,14 @@ def load_model(path, device=None) -> CSGNet:
 
 def export_weights(checkpoint, out, half: bool = True) -> Path:
     """Write the model of a training checkpoint (or weights file) as a small weights file
-    ``{"config", "state_dict", "meta"}``, atomically.
+    ``{"config", "state_dict", "meta"}`` of family :data:`FORMAT`, version :data:`VERSION`, atomically.
 
     ``half`` stores float16 tensors (loaded back as float32 by :func:`load_model`).
     """
     config, state, meta = read_checkpoint(checkpoint)
     if half:
         state = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
-    payload = {"config": config.to_dict(), "state_dict": state, "meta": meta}
-    return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
+    return write_weights(out, FORMAT, VERSION, {"config": config.to_dict(), "state_dict": state, "meta": meta})
 
 
 def load_pretrained(dim: int = 2, kind: str | None = None, tuning: str = "supervised", device=None) -> CSGNet:
@@ -362,8 +358,6 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
         extend: with the ``"short"`` rule, also try adding any primitive of the vocabulary
             (:func:`csgnet.rewrite.extend`).
     """
-    from .lang import is_valid
-
     frame = None
     if isinstance(shape, (str, Path)):
         shape, frame = load_shape_framed(shape)
@@ -378,7 +372,7 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
     program = decoded.program if decoded.valid else None
     refined = None
     if refine and program is not None:
-        from .refinement import refine_guarded
+        from .refinement import refine_guarded  # lazy: refinement brings scipy and OpenCV
 
         beams = []
         for text in decoded.beams:

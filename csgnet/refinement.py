@@ -28,15 +28,26 @@ import numpy as np
 import torch
 from scipy import optimize
 
-from .lang import Draw, Program, is_valid, parse
+from .lang import Draw, Program, is_valid
 from .metrics import CHAMFER_PENALTY
 from .primitives import MAX_PARAMS, SIZE, primitive
-from .renderer import draw_packed, render_programs
-from .score import score_renders
+from .renderer import draw_packed
+from .rewrite import choose, extend, graft, prune
+from .score import _check_program, _check_target, program_scores
 from .vocab import codes
 
-__all__ = ["METRICS", "MODES", "RULES", "MAX_IOU_DROP", "RefineResult", "Refined", "refine", "refine_beams",
-           "refine_each", "refine_guarded", "program_scores"]
+__all__ = [
+    "METRICS",
+    "MODES",
+    "RULES",
+    "MAX_IOU_DROP",
+    "RefineResult",
+    "Refined",
+    "refine",
+    "refine_beams",
+    "refine_each",
+    "refine_guarded",
+]
 
 METRICS = ("chamfer", "iou")
 """Objectives: the edge chamfer distance (2D only) and IoU (2D ``/|A∨B|``, 3D ``/(|A∨B| + 1)``)."""
@@ -268,33 +279,6 @@ class _Problem:
 # public API
 
 
-def _check_target(target) -> np.ndarray:
-    """A (64, 64) image or (64, 64, 64) volume, NumPy or torch -> bool of the same shape, not empty."""
-    if type(target).__module__.startswith("torch"):
-        target = target.detach().cpu().numpy()
-    t = np.asarray(target)
-    if t.shape not in ((SIZE,) * 2, (SIZE,) * 3):
-        raise ValueError(f"target must be one ({SIZE}, {SIZE}, {SIZE}) volume or one image of shape "
-                         f"({SIZE}, {SIZE}), got {t.shape}")
-    t = t != 0
-    if not t.any():
-        what = "image" if t.ndim == 2 else "volume"
-        raise ValueError(f"target {what} is empty (all False): there is nothing to refine against")
-    return t
-
-
-def _check_program(program, dim: int) -> Program:
-    """A ``dim``-D program (text is parsed leniently) for a ``dim``-D target."""
-    if isinstance(program, str):
-        program = parse(program, dim, strict=False)  # malformed text raises ParseError (a ValueError)
-    if not isinstance(program, Program):
-        raise TypeError(f"program must be a csgnet.lang.Program or program text, got {type(program).__name__}")
-    if program.dim != dim:
-        raise ValueError(f"a {dim}D target needs {dim}D programs, got a {program.dim}D program: "
-                         f"{program.text()!r}")
-    return program
-
-
 def _check_args(metric: str | None, maxiter, mode: str, dim: int) -> str:
     """Check the arguments for a ``dim``-D target; returns the metric (None: chamfer in 2D, IoU in 3D)."""
     if metric is None:
@@ -468,18 +452,6 @@ class Refined:
     rule: str
 
 
-def program_scores(programs: Sequence[Program | str], target) -> list[tuple[float, float]]:
-    """``(iou, chamfer)`` of each program against one target, as :func:`csgnet.score.score_renders`:
-    2D: IoU ``|A∧B| / |A∨B|`` (0 when both are empty) and the paper's edge chamfer in pixels
-    (:func:`csgnet.metrics.chamfer`); 3D: IoU ``|A∧B| / (|A∨B| + 1)`` and chamfer NaN (not defined).
-    An invalid program renders empty."""
-    t = _check_target(target)
-    pred = render_programs([_check_program(p, t.ndim) for p in programs], t.ndim).cpu()
-    t = torch.from_numpy(t)
-    ious, cds = score_renders(pred, t.expand(len(pred), *t.shape), t.ndim)
-    return [(float(a), float(b)) for a, b in zip(ious, cds)]
-
-
 def refine_guarded(start: Program | str, programs: Sequence[Program | str], target, rule: str = "short",
                    maxiter: int | None = None, max_iou_drop: float = MAX_IOU_DROP,
                    penalty: float | None = None, use_graft: bool = True, use_extend: bool = True) -> Refined:
@@ -511,8 +483,6 @@ def refine_guarded(start: Program | str, programs: Sequence[Program | str], targ
     Returns:
         A :class:`Refined` with the chosen program and both programs' IoU and chamfer.
     """
-    from .rewrite import choose, extend, graft, prune
-
     if rule not in RULES:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
     dim = _check_target(target).ndim

@@ -29,7 +29,10 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from .lang import Draw, Program, is_valid, parse
+from . import render
+from .lang import OPERATORS, Draw, Op, Program, is_valid, parse
+from .renderer import draw_packed, pack
+from .score import _check_target, program_scores
 from .vocab import vocabulary
 
 __all__ = ["LENGTH_PENALTY", "MAX_PRUNE_ROUNDS", "MAX_GRAFT_ROUNDS", "MAX_EXTEND_ROUNDS", "MAX_GRAFT_DRAWS",
@@ -89,8 +92,6 @@ def removals(program: Program) -> list[Program]:
 
 
 def _scores(programs: Sequence[Program], target) -> list[float]:
-    from .refinement import program_scores
-
     return [iou for iou, _ in program_scores(programs, target)]
 
 
@@ -121,8 +122,6 @@ def prune(program: Program | str, target, penalty: float | None = None,
         penalty: IoU per primitive (default ``LENGTH_PENALTY`` of the dimension).
         max_rounds: removals made at most.
     """
-    from .refinement import _check_target
-
     t = _check_target(target)
     penalty = LENGTH_PENALTY[t.ndim] if penalty is None else float(penalty)
     best = _program(program, t.ndim)
@@ -134,8 +133,6 @@ def prune(program: Program | str, target, penalty: float | None = None,
 def choose(programs: Sequence[Program | str], target, penalty: float | None = None) -> tuple[int, list[float]]:
     """The index of the program with the highest :func:`objective` (the earliest on ties), and every
     program's IoU. Invalid programs render empty."""
-    from .refinement import _check_target
-
     t = _check_target(target)
     penalty = LENGTH_PENALTY[t.ndim] if penalty is None else float(penalty)
     progs = [_program(p, t.ndim) for p in programs]
@@ -153,9 +150,6 @@ def graft(program: Program | str, donors: Sequence[Program | str], target, penal
     and difference at its end (``P q +``, ``P q *``, ``P q -``) and keeps the best change, until no change
     raises the objective, ``max_rounds`` changes were made, or the program has ``max_draws`` primitives.
     Returns ``program`` itself when it is invalid or nothing helps."""
-    from .lang import OPERATORS, Op
-    from .refinement import _check_target
-
     t = _check_target(target)
     penalty = LENGTH_PENALTY[t.ndim] if penalty is None else float(penalty)
     best = _program(program, t.ndim)
@@ -178,8 +172,6 @@ def graft(program: Program | str, donors: Sequence[Program | str], target, penal
 def _vocabulary_canvases(dim: int) -> tuple[np.ndarray, np.ndarray]:
     """Every vocabulary primitive's token index and packed canvas ``(P, words) uint64`` (drawn once per
     process: 3D, 6,631 primitives of 32 KiB)."""
-    from .renderer import draw_packed
-
     vocab = vocabulary(dim)
     kinds, params = vocab.table()
     ids = np.array([i for i, d in enumerate(vocab._draws) if isinstance(d, Draw)], dtype=np.int64)
@@ -195,11 +187,6 @@ def extend(program: Program | str, target, penalty: float | None = None, max_rou
     not rendered one by one) and keeps the best change; it stops when no change raises the objective,
     after ``max_rounds`` changes, or at ``MAX_GRAFT_DRAWS`` primitives. Returns ``program`` itself when
     it is invalid or nothing helps."""
-    from . import render
-    from .lang import Op
-    from .refinement import _check_target
-    from .renderer import pack
-
     t = _check_target(target)
     dim = t.ndim
     penalty = LENGTH_PENALTY[dim] if penalty is None else float(penalty)

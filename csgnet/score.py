@@ -4,16 +4,18 @@ of inference, evaluation and the paper's tables (IoU and chamfer as spec section
 
 from __future__ import annotations
 
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import numpy as np
 import torch
 
 from . import metrics
 from .decode import Decoded
-from .renderer import render_tokens
+from .lang import Program, parse
+from .primitives import SIZE
+from .renderer import render_programs, render_tokens
 
-__all__ = ["score_renders", "score_beams", "best_iou_matches"]
+__all__ = ["score_renders", "score_beams", "best_iou_matches", "program_scores"]
 
 
 def score_renders(pred: torch.Tensor, target: torch.Tensor, dim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -68,3 +70,42 @@ def best_iou_matches(queries: torch.Tensor, chunks: Iterable[tuple[int, torch.Te
         best = torch.where(better, val, best)
         best_idx = torch.where(better, idx + lo, best_idx)
     return best_idx
+
+
+def _check_target(target) -> np.ndarray:
+    """A (64, 64) image or (64, 64, 64) volume, NumPy or torch -> bool of the same shape, not empty."""
+    if type(target).__module__.startswith("torch"):
+        target = target.detach().cpu().numpy()
+    t = np.asarray(target)
+    if t.shape not in ((SIZE,) * 2, (SIZE,) * 3):
+        raise ValueError(f"target must be one ({SIZE}, {SIZE}, {SIZE}) volume or one image of shape "
+                         f"({SIZE}, {SIZE}), got {t.shape}")
+    t = t != 0
+    if not t.any():
+        what = "image" if t.ndim == 2 else "volume"
+        raise ValueError(f"target {what} is empty (all False): there is nothing to refine against")
+    return t
+
+
+def _check_program(program, dim: int) -> Program:
+    """A ``dim``-D program (text is parsed leniently) for a ``dim``-D target."""
+    if isinstance(program, str):
+        program = parse(program, dim, strict=False)  # malformed text raises ParseError (a ValueError)
+    if not isinstance(program, Program):
+        raise TypeError(f"program must be a csgnet.lang.Program or program text, got {type(program).__name__}")
+    if program.dim != dim:
+        raise ValueError(f"a {dim}D target needs {dim}D programs, got a {program.dim}D program: "
+                         f"{program.text()!r}")
+    return program
+
+
+def program_scores(programs: Sequence[Program | str], target) -> list[tuple[float, float]]:
+    """``(iou, chamfer)`` of each program against one target, as :func:`csgnet.score.score_renders`:
+    2D: IoU ``|A∧B| / |A∨B|`` (0 when both are empty) and the paper's edge chamfer in pixels
+    (:func:`csgnet.metrics.chamfer`); 3D: IoU ``|A∧B| / (|A∨B| + 1)`` and chamfer NaN (not defined).
+    An invalid program renders empty."""
+    t = _check_target(target)
+    pred = render_programs([_check_program(p, t.ndim) for p in programs], t.ndim).cpu()
+    t = torch.from_numpy(t)
+    ious, cds = score_renders(pred, t.expand(len(pred), *t.shape), t.ndim)
+    return [(float(a), float(b)) for a, b in zip(ious, cds)]

@@ -60,7 +60,7 @@ def load_silhouettes(split: str = "train", path: str | os.PathLike | None = None
 
 def _h5py():
     try:
-        import h5py
+        import h5py  # optional: the 'cad' extra
     except ImportError as e:
         raise ImportError("reading cad.h5 needs h5py, which is not installed; install the 'cad' extra: "
                           "pip install -e '.[cad]' in the checkout (or pip install h5py)") from e

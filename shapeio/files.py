@@ -1,4 +1,5 @@
-"""Atomic writes, the guard that keeps outputs off inputs, and the error for unreadable user files.
+"""Atomic writes, the guard that keeps outputs off inputs, the error for unreadable user files, and the one
+rule for an argument that is a shipped name or a file (:func:`resolve_shipped`: an existing file wins).
 
 The permissions and temporary-file names of :func:`atomic_write` are described in ``docs/shapeio.md``.
 """
@@ -6,7 +7,9 @@ The permissions and temporary-file names of :func:`atomic_write` are described i
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import glob
+import json
 import os
 import re
 import stat
@@ -15,9 +18,9 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import BinaryIO, Callable, Iterable, Union
+from typing import BinaryIO, Callable, Iterable, Mapping, Union
 
-__all__ = ["InputError", "MAX_JSON_DEPTH", "atomic_write", "c_output_silenced", "output_problem", "parse_json", "refuse_overwrite",
+__all__ = ["InputError", "MAX_JSON_DEPTH", "NotShippedError", "resolve_shipped", "atomic_write", "c_output_silenced", "output_problem", "parse_json", "refuse_overwrite",
            "remove_stale_temps", "write_new",
            "write_new_set", "STALE_TEMP_SECONDS"]
 
@@ -32,6 +35,11 @@ _UMASK_LOCK = threading.Lock()
 
 class InputError(ValueError):
     """A user's file that cannot be read as asked; the message starts with the file's path."""
+
+
+class NotShippedError(FileNotFoundError, ValueError):
+    """An argument that is neither an existing file nor a shipped name (:func:`resolve_shipped`); caught as
+    either a missing file or a bad value."""
 
 
 MAX_JSON_DEPTH = 64
@@ -88,8 +96,6 @@ def parse_json(text: str, file: str, error: Callable[[str, int, int], Exception]
         what ``error`` makes: not JSON, too deep, a non-finite constant or a float out of range, an integer too
         long to convert.
     """
-    import json
-
     def fail(reason: str, line: int = 1, column: int = 1) -> Exception:
         if error is not None:
             return error(reason, line, column)
@@ -185,6 +191,16 @@ def remove_stale_temps(folder: PathLike, name: str | None = None) -> list[Path]:
     return removed
 
 
+def _write_synced(f: BinaryIO, data) -> None:
+    """Write ``data`` (bytes, a str as UTF-8, or a function given the open file) to ``f``, flushed and synced."""
+    if callable(data):
+        data(f)
+    else:
+        f.write(data.encode("utf-8") if isinstance(data, str) else data)
+    f.flush()
+    os.fsync(f.fileno())
+
+
 def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], object]],
                  mkdir: bool = False) -> Path:
     """Write a file so that a reader never sees it half-written.
@@ -226,12 +242,7 @@ def atomic_write(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], ob
     try:
         with os.fdopen(fd, "wb") as f:
             os.fchmod(f.fileno(), mode)
-            if callable(data):
-                data(f)
-            else:
-                f.write(data.encode("utf-8") if isinstance(data, str) else data)
-            f.flush()
-            os.fsync(f.fileno())
+            _write_synced(f, data)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -268,26 +279,18 @@ def write_new(path: PathLike, data: Union[bytes, str, Callable[[BinaryIO], objec
     if os.path.lexists(path):
         raise FileExistsError(f"{path}: the file exists; it is not replaced")
 
-    def write(f):
-        if callable(data):
-            data(f)
-        else:
-            f.write(data.encode("utf-8") if isinstance(data, str) else data)
-        f.flush()
-        os.fsync(f.fileno())
-
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.atomic-{os.getpid()}-", suffix=".tmp", dir=folder)
     try:
         with os.fdopen(fd, "wb") as f:
             os.fchmod(f.fileno(), 0o666 & ~_umask())
-            write(f)
+            _write_synced(f, data)
         try:
             os.link(tmp, path)
         except FileExistsError:
             raise FileExistsError(f"{path}: the file exists; it is not replaced") from None
         except OSError:  # no hard links here: an exclusive create
             with open(path, "xb") as f:
-                write(f)
+                _write_synced(f, data)
     finally:
         try:
             os.unlink(tmp)
@@ -391,8 +394,6 @@ def c_output_silenced():
         yield
     finally:
         try:
-            import ctypes
-
             ctypes.CDLL(None).fflush(None)  # C stdio buffers go to the null device, not to the restored stdout
         except (OSError, AttributeError):
             pass
@@ -400,3 +401,25 @@ def c_output_silenced():
         os.dup2(saved[1], 2)
         for fd in saved + [null]:
             os.close(fd)
+
+
+def resolve_shipped(name: Union[str, PathLike], shipped: Mapping[str, PathLike], what: str) -> Path:
+    """The file an argument names, by the one rule for "a shipped name or a file": ``name`` itself when a
+    file of that path exists (an existing file wins), else the shipped file of that name.
+
+    Args:
+        name: a path or a shipped name (``"chair"``).
+        shipped: shipped name -> its file.
+        what: what is looked for, for the error (``"ShapeMOD library"``).
+
+    Raises:
+        NotShippedError: neither a file nor a shipped name (a ``FileNotFoundError`` and a ``ValueError``);
+            the message names both readings and the shipped names.
+    """
+    path = Path(name)
+    if path.is_file():
+        return path
+    if str(name) in shipped:
+        return Path(shipped[str(name)])
+    names = ", ".join(sorted(shipped)) or "none"
+    raise NotShippedError(f"{name}: neither a {what} file nor a shipped {what} (shipped: {names})")

@@ -12,6 +12,7 @@ The rules, and which one is the default where, are in ``docs/shapeio.md``.
 
 from __future__ import annotations
 
+import io
 import os
 import warnings
 from pathlib import Path
@@ -66,8 +67,6 @@ def png_bytes(image, scale: int = 1, where: PathLike = "<image>") -> bytes:
     Raises:
         ValueError: naming ``where``, for a bad shape, dtype, value range or ``scale``.
     """
-    import io
-
     arr = as_numpy(image)
     if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (3, 4))) or 0 in arr.shape[:2]:
         raise ValueError(f"{where}: `image` must be (H, W), (H, W, 3) or (H, W, 4) and not empty, got {arr.shape}")
@@ -166,7 +165,7 @@ def binarise(gray: np.ndarray, alpha: np.ndarray | None = None, threshold: int |
         fg = gray > int(threshold)
         return ~fg if invert else fg
     # scikit-image (with SciPy) takes tenths of a second to import: loaded only where Otsu's rule runs
-    from skimage.filters import threshold_otsu
+    from skimage.filters import threshold_otsu  # lazy: scikit-image only for grey images
 
     if alpha is not None and alpha.min() < 255:
         fg = alpha >= 128
@@ -226,7 +225,7 @@ def fit_to_canvas(mask: np.ndarray, margin: int = MARGIN, name: str = "shape", s
     if mask.shape == (size,) * mask.ndim:
         return mask
     # SciPy's ndimage takes tenths of a second to import: loaded only where a mask is scaled
-    from scipy.ndimage import zoom
+    from scipy.ndimage import zoom  # lazy: scipy only when a mask is resized
 
     idx = np.nonzero(mask)
     if not idx[0].size:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from shapeio import atomic_write, refuse_overwrite
 from shapeio.mesh import WRITE_SUFFIXES
+from shapeio.files import NotShippedError
 from shapeio.options import float_in, int_in
 
 from . import corpus
@@ -127,7 +128,7 @@ def add_json(parser, what: str = "the figures") -> None:
 def write_json(args, result: dict) -> None:
     """Write ``result`` (:func:`shapeio.results.make_result`) to ``args.json`` when given."""
     if getattr(args, "json", None):
-        from shapeio.results import write_result
+        from shapeio.results import write_result  # lazy: loaded when the command runs
 
         print(f"wrote {write_result(args.json, result)}")
 
@@ -146,7 +147,7 @@ def markdown_result(text: str, title: str, command: str) -> dict:
     """The markdown tables of ``text`` as one result (:func:`shapeio.results.make_result`): a column ``table``
     (the heading or bold line above each table) and every table's columns; a row has None where its table has
     no such column. The text's other lines become the notes."""
-    from shapeio.results import column, make_result
+    from shapeio.results import column, make_result  # lazy: loaded when the command runs
 
     columns, keys, rows, notes = [column("table", "table")], {}, [], []
     heading, header = title, None
@@ -281,18 +282,14 @@ def category_pairs(values, form: str, flag: str = "--library") -> dict:
 
 
 def macro_library(name: str, option: str = "", text: bool = False):
-    """The ShapeMOD library ``name``: a library file when one exists at that path, else a shipped category;
-    SystemExit with the reason otherwise. ``text``: (library, its file's text)."""
+    """The ShapeMOD library ``name`` (:func:`shapeprog.macros.api.read_library`: a library file when one exists
+    at that path, else a shipped category); SystemExit with the reason otherwise. ``text``: (library, its
+    file's text)."""
     # the macro library code is imported when a command reads a library, not for --help
-    from .macros import Library, load_library
-    from .macros.api import library_text
+    from .macros.api import read_library  # lazy: loaded when the command runs
 
-    if Path(name).is_file():
-        src = decode(Path(name).read_bytes(), name)
-        lib = Library.from_text(src, name)
-    else:
-        try:
-            lib, src = load_library(name), (library_text(name) if text else "")
-        except ValueError as e:
-            raise SystemExit(f"error: {option}{e}" + (" (or give a library file)" if option else "")) from None
+    try:
+        lib, src = read_library(name)
+    except NotShippedError as e:
+        raise SystemExit(f"error: {option}{e}") from None
     return (lib, src) if text else lib

@@ -63,7 +63,7 @@ def cmd_fit(args) -> int:
         except ValueError as e:  # the message names the file (and line)
             print(f"error: {e}", file=sys.stderr)
             return 1
-        from shapeio.points import MIN_POINTS
+        from shapeio.points import MIN_POINTS  # lazy: loaded when the command runs
 
         if len(pts) < MIN_POINTS:
             print(f"error: {args.points}: {len(pts)} points; fitting needs at least {MIN_POINTS}", file=sys.stderr)
@@ -115,14 +115,14 @@ def cmd_silhouettes(args) -> int:
 def open_for_edit(args):
     """The edit session of ``edit``'s arguments: (session, the text as read, its file name)."""
     # the editor's session code is imported when a page is served, not for --help
-    from .editor.session import EditSession, is_corpus_text, read_source, refactor_source
+    from .editor.session import EditSession, is_corpus_text, read_source, refactor_source  # lazy: loaded when the command runs
 
     library = None
     if args.library:
         library = macro_library(args.library, "--library: ")
     if args.sample:
         # the VAE's model code loads torch modules only this option needs
-        from .vae import load_pretrained, sample
+        from .vae import load_pretrained, sample  # lazy: loaded when the command runs
 
         if args.program:
             raise SystemExit("error: give a PROGRAM or --sample, not both")
@@ -158,14 +158,14 @@ def open_for_edit(args):
 
 
 def cmd_edit(args) -> int:
-    from shapeedit import editor_preflight, serve_until_interrupted
+    from shapeedit import editor_preflight, serve_until_interrupted  # lazy: loaded when the command runs
 
     problem = editor_preflight(args.export_dir)
     if problem:
         raise SystemExit(f"error: {problem}")  # exit status 1, as the argument errors of open_for_edit
     session, text, file = open_for_edit(args)
     # the server needs the optional 'editor' extra (viser), checked by editor_preflight above
-    from .editor.server import EditorApp
+    from .editor.server import EditorApp  # lazy: loaded when the command runs
 
     app = EditorApp(session, host=args.host, port=args.port, export_dir=args.export_dir, source_text=text)
     return serve_until_interrupted(app, file, args.export_dir, not args.no_browser)

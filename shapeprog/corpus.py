@@ -22,6 +22,7 @@ import tarfile
 import warnings
 from importlib import resources
 
+from shapeio.cache import file_digest
 from shapeio.points import obj_vertices
 
 from .errors import ParseError
@@ -45,8 +46,6 @@ def _data(name: str) -> bytes:
 @functools.lru_cache(maxsize=None)
 def data_digest() -> str:
     """SHA-256 of the corpus archive: the key under which results derived from the corpus are cached."""
-    from shapeio.cache import file_digest
-
     return file_digest(str(resources.files("shapeprog").joinpath("data", "shapeassembly_partnet.tar.xz")))
 
 

@@ -68,7 +68,7 @@ class ExecutedShape:
         """The leaf cuboids as one ``trimesh.Trimesh`` (float64 vertices in :meth:`mesh`'s order, no merging);
         ``face_attributes['part']`` holds each triangle's leaf index and ``metadata['lines']`` each leaf's
         0-based program line."""
-        import trimesh
+        import trimesh  # lazy: trimesh only for a mesh
 
         verts, faces = mesh_arrays(self.corners.detach().cpu().double())
         part = torch.arange(len(self)).repeat_interleave(faces.shape[0] // max(len(self), 1))

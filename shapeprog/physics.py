@@ -20,6 +20,7 @@ from typing import List, Tuple
 import numpy as np
 import torch
 
+from shapeio.files import c_output_silenced
 from shapeprog.geometry import CORNER_SIGNS, numpy_corners
 
 __all__ = ["box_distances", "contact_graph", "rooted_parts", "rootedness", "stability"]
@@ -286,7 +287,6 @@ def stability(
     adj = contact_graph(corners, contact_tolerance, surface)
     if not _rooted(adj).all():
         return False
-    from shapeio.files import c_output_silenced
 
     try:
         with c_output_silenced():  # pybullet prints its build banner from C on import and connect

@@ -62,7 +62,7 @@ def is_valid_text(text: str, dim: int = 2) -> bool:
 
 def labelled_models(specs, dim: int = 2):
     """``(label, model)`` per ``[LABEL=]PATH`` spec; the shipped ``dim``-D model when there is none."""
-    from ..inference import load_model, load_pretrained
+    from ..inference import load_model, load_pretrained  # lazy: loaded when the command runs
 
     def kind(model) -> str:
         return "CSGNetStack" if model.config.stack else "CSGNet"
@@ -90,10 +90,10 @@ def decoding(args) -> str:
 
 def measured_on() -> str:
     """Where and when the written tables' times were measured, for their notes."""
-    import datetime
-    import platform
+    import datetime  # lazy: loaded when the command runs
+    import platform  # lazy: loaded when the command runs
 
-    import torch
+    import torch  # lazy: loaded when the command runs
 
     n = torch.get_num_threads()
     where = (f"{platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, {n} thread{'s' if n != 1 else ''}"

@@ -10,7 +10,7 @@ from ..primitives import primitives
 
 
 def cmd_edit(args) -> int:
-    from ..editor import CSGEditSession
+    from ..editor import CSGEditSession  # lazy: loaded when the command runs
 
     problem = editor_preflight(args.export_dir)
     if problem:
@@ -33,7 +33,7 @@ def cmd_edit(args) -> int:
     session = CSGEditSession(text, args.dim, name=name)
     if session.error is not None:
         print(f"error: {session.error} (the page shows it; fix the text there)", file=sys.stderr)
-    from ..editor.server import CSGEditorApp
+    from ..editor.server import CSGEditorApp  # lazy: loaded when the command runs
 
     app = CSGEditorApp(session, host=args.host, port=args.port, export_dir=args.export_dir, source_text=text)
     return serve_until_interrupted(app, repr(text), args.export_dir, not args.no_browser)

@@ -35,7 +35,7 @@ def _parse_models(args) -> dict:
     """The models ``parse`` uses, by dimension: a weights file given with ``--weights-2d`` / ``--weights-3d``
     is loaded now, so that a bad one is reported once, before any input; the shipped models (``--model``,
     default the strongest of each dimension) are loaded when an input of their dimension comes."""
-    from ..inference import load_model
+    from ..inference import load_model  # lazy: loaded when the command runs
 
     models: dict = {}
     for dim, weights in ((2, args.weights_2d), (3, args.weights_3d)):
@@ -49,7 +49,7 @@ def _parse_models(args) -> dict:
 
 def _parse_model(models: dict, dim: int, kind: str | None):
     """The ``dim``-D model (a shipped one loaded once; a failure is kept and raised again for every input)."""
-    from ..inference import load_pretrained
+    from ..inference import load_pretrained  # lazy: loaded when the command runs
 
     if dim not in models:
         try:
@@ -69,7 +69,7 @@ def _scores_line(iou: float, chamfer: float, program) -> str:
 def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> dict:
     """Infer, optionally refine, report and write one input's program (``parse``: one
     :func:`csgnet.inference.parse_shape`); returns its record for the results file."""
-    from ..inference import parse_shape
+    from ..inference import parse_shape  # lazy: loaded when the command runs
 
     dim = shape.ndim
     parsed = parse_shape(shape, model=model, beam=args.beam, select=args.select, refine=args.refine,
@@ -86,7 +86,7 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
               "chamfer": None if dim == 3 else float(res.chamfer),
               "primitives": len(res.program.draws) if res.valid else 0}
     if ref is not None:
-        from ..refinement import MAX_IOU_DROP
+        from ..refinement import MAX_IOU_DROP  # lazy: loaded when the command runs
 
         (i0, c0), (i1, c1) = ref.before, ref.after
         what = {"short": "IoU - %g per primitive" % _penalty(dim), "guarded": "guarded", "chamfer": "chamfer"}
@@ -119,7 +119,7 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
 
 
 def _penalty(dim: int) -> float:
-    from ..rewrite import LENGTH_PENALTY
+    from ..rewrite import LENGTH_PENALTY  # lazy: loaded when the command runs
 
     return LENGTH_PENALTY[dim]
 
@@ -150,9 +150,9 @@ def _results_path(out: Path) -> Path:
 
 def cmd_parse(args) -> int:
     """Infer a program for each input shape with a trained model; a bad input is reported and skipped."""
-    from shapeio import InputError
+    from shapeio import InputError  # lazy: loaded when the command runs
 
-    from ..inference import load_shape_framed
+    from ..inference import load_shape_framed  # lazy: loaded when the command runs
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -55,7 +55,7 @@ def cmd_render(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    from ..data import generate_dataset
+    from ..data import generate_dataset  # lazy: loaded when the command runs
 
     existing = Path(args.out) / f"{args.dim}d"
     if (existing / "meta.json").exists() or any(existing.glob("len_*")):
@@ -69,7 +69,7 @@ def cmd_generate(args) -> int:
 
 def cmd_demo(args) -> int:
     """A small synthetic 2D and 3D dataset and previews of some of its programs (PNG, OBJ, OpenSCAD, a TSV)."""
-    from ..data import generate_dataset, load_dataset
+    from ..data import generate_dataset, load_dataset  # lazy: loaded when the command runs
 
     out = Path(args.out)
     data_dir = out / "synthetic"

@@ -16,8 +16,8 @@ from .common import (beam_width, command_line, decoding, labelled_models, locate
 
 
 def cmd_evaluate(args) -> int:
-    from ..data import load_dataset
-    from ..paper.tables import evaluate_model, markdown_tables, nearest_neighbour, table_result
+    from ..data import load_dataset  # lazy: loaded when the command runs
+    from ..paper.tables import evaluate_model, markdown_tables, nearest_neighbour, table_result  # lazy: loaded when the command runs
 
     refuse_table_over_inputs(args)
     tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
@@ -36,7 +36,7 @@ def cmd_evaluate(args) -> int:
         rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
                                constrained=args.constrained)
         if args.refined:
-            from ..paper.tables import evaluate_refined
+            from ..paper.tables import evaluate_refined  # lazy: loaded when the command runs
 
             print(f"parsing with refinement ({name}, {args.refined} per length) ...", flush=True)
             rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined))
@@ -54,7 +54,7 @@ def write_result_file(args, make, notes) -> bool:
     print it as markdown and return True; otherwise False (the command writes markdown)."""
     if not (args.out and str(args.out).endswith(".json")):
         return False
-    from shapeio.results import markdown, write_result
+    from shapeio.results import markdown, write_result  # lazy: loaded when the command runs
 
     result = make(notes)
     print(markdown(result))
@@ -63,7 +63,7 @@ def write_result_file(args, make, notes) -> bool:
 
 
 def cmd_export_weights(args) -> int:
-    from ..inference import export_weights
+    from ..inference import export_weights  # lazy: loaded when the command runs
 
     if not Path(args.checkpoint).is_file():
         print(f"error: {args.checkpoint}: no such checkpoint file", file=sys.stderr)
@@ -96,12 +96,12 @@ TABLE4_MODELS = (("CSGNet supervised", "csgnet2d.pt"), ("CSGNet RL", "rl_csgnet2
 
 
 def cmd_table4(args) -> int:
-    from ..inference import WEIGHTS
-    from ..paper.protocols import subset, table4, table4_markdown, table4_result
+    from ..inference import WEIGHTS  # lazy: loaded when the command runs
+    from ..paper.protocols import subset, table4, table4_markdown, table4_result  # lazy: loaded when the command runs
 
     refuse_table_over_inputs(args)
     if args.cad:
-        from ..shapes2d import load_cad_h5
+        from ..shapes2d import load_cad_h5  # lazy: loaded when the command runs
 
         test, source = load_cad_h5(args.cad, "test"), f"test images of {args.cad} (the paper's CAD set)"
         train = None if args.no_nn else load_cad_h5(args.cad, "train")
@@ -124,9 +124,9 @@ def cmd_table4(args) -> int:
 
 
 def cmd_table1(args) -> int:
-    from ..inference import WEIGHTS
-    from ..paper.protocols import subset, table4, table4_markdown, table4_result
-    from ..train.sweep import reward_sweep
+    from ..inference import WEIGHTS  # lazy: loaded when the command runs
+    from ..paper.protocols import subset, table4, table4_markdown, table4_result  # lazy: loaded when the command runs
+    from ..train.sweep import reward_sweep  # lazy: loaded when the command runs
 
     refuse_table_over_inputs(args)
     init = args.init or str(WEIGHTS / "csgnet2d.pt")
@@ -150,9 +150,9 @@ def cmd_table1(args) -> int:
 
 
 def cmd_datasize(args) -> int:
-    from ..data import load_dataset
-    from ..paper.tables import evaluate_model, markdown_tables, table_result
-    from ..train.datasize import data_size_runs
+    from ..data import load_dataset  # lazy: loaded when the command runs
+    from ..paper.tables import evaluate_model, markdown_tables, table_result  # lazy: loaded when the command runs
+    from ..train.datasize import data_size_runs  # lazy: loaded when the command runs
 
     refuse_table_over_inputs(args)
     tests = load_dataset(args.data, 2, "test", None, errors="raise")
@@ -174,18 +174,18 @@ def cmd_datasize(args) -> int:
 
 
 def cmd_table6(args) -> int:
-    from ..paper.protocols import table6, table6_markdown, table6_result
+    from ..paper.protocols import table6, table6_markdown, table6_result  # lazy: loaded when the command runs
 
     refuse_table_over_inputs(args)
     lengths = args.lengths or [3, 5, 7, 9, 11, 13]
     if args.data:
-        from ..data import load_dataset
+        from ..data import load_dataset  # lazy: loaded when the command runs
 
         tests = load_dataset(args.data, 2, "test", lengths, errors="raise")
         programs = [p for L in sorted(tests) for p in tests[L][: args.per_length]]
         source = f"{args.data} (test split, {args.per_length} per length)"
     else:
-        from ..synth import sample_programs
+        from ..synth import sample_programs  # lazy: loaded when the command runs
 
         rng = np.random.default_rng(args.seed)
         vocab = vocabulary(2)

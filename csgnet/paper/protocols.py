@@ -17,6 +17,8 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
+from shapeio.results import column, make_result
+
 from ..decode import Decoded, beam_search, decode, greedy
 from ..score import best_iou_matches, score_beams, score_renders
 from ..lang import Draw, Program
@@ -202,8 +204,6 @@ def table4_result(rows: Sequence[Table4Row], iterations: Sequence = ITERATIONS, 
                   "test split)", paper: bool = True) -> dict:
     """Table 4 as a result file's content (:func:`shapeio.results.make_result`): CD after each refinement
     iteration limit, IoU before refinement, decoding milliseconds per image."""
-    from shapeio.results import column, make_result
-
     its = [0] + [i for i in iterations if i != 0]
     cols = [column("method", "method"), column("protocol", "protocol")]
     cols += [column(f"cd_{_it_name(i)}", f"CD {_it_name(i)} it.", 3) for i in its]
@@ -411,8 +411,6 @@ def table6_markdown(rows: Sequence[Table6Row], note: str = "") -> str:
 def table6_result(labelled: Sequence[tuple[str, Sequence[Table6Row]]], notes=(), command: str | None = None) -> dict:
     """Table 6 as a result file's content, one block of rows per ``(label, rows)`` model: AP per primitive
     type, mAP, the paper's mAP, images per second."""
-    from shapeio.results import column, make_result
-
     names = list(detection_classes().values())
     cols = [column("method", "method"), column("k", "k")] + [column(f"ap_{n}", f"AP {n} %", 1, 100.0) for n in names]
     cols += [column("map", "mAP %", 1, 100.0), column("paper_map", "paper mAP %", 1),

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from shapeio.results import column, make_result
+
 from ..decode import decode
 from ..lang import Program
 from ..renderer import render_programs
@@ -89,7 +91,7 @@ def evaluate_refined(model, tests: dict[int, list[Program]], beam: int = 10, nam
     refinement of every valid beam, the ``rule``'s choice) on the first ``per_length`` targets per length:
     a row ``"{name} k=K + refinement ({rule})"`` with the chosen programs' IoU (and chamfer in 2D);
     ``seconds`` per image."""
-    from ..inference import parse_shape
+    from ..inference import parse_shape  # lazy: inference brings PIL (users' images)
 
     dim = model.config.dim
     row = Row(f"{name} k={beam} + refinement ({rule})")
@@ -160,8 +162,6 @@ def markdown_tables(rows: list[Row], dim: int, note: str = "") -> str:
 def table_result(rows: list[Row], dim: int, notes=(), command: str | None = None) -> dict:
     """The rows as a result file's content (:func:`shapeio.results.make_result`): per-length IoU, overall IoU,
     (2D) chamfer in pixels and milliseconds per image, with the test programs per length in a note."""
-    from shapeio.results import column, make_result
-
     lengths = sorted({L for r in rows for L in r.count})
     cols = [column("method", "method")] + [column(f"iou_len{L}", f"IoU len {L}", 2, 100.0) for L in lengths]
     cols.append(column("iou", "IoU all", 2, 100.0))

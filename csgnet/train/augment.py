@@ -126,7 +126,7 @@ def jitter_reference(images, generator, shift: float = 3.0, zoom: float = 2.0 / 
     Returns:
         (B, 64, 64) bool NumPy array.
     """
-    from scipy.ndimage import affine_transform
+    from scipy.ndimage import affine_transform  # lazy: scipy only for this augmentation
 
     arr = (images.detach().cpu().numpy() if isinstance(images, torch.Tensor) else np.asarray(images)).astype(np.uint8)
     z, offset = _draws(arr.shape[0], generator, shift, zoom)

@@ -33,7 +33,8 @@ from . import objective  # the module, callable: objective(programs, library) is
 from .objective import WEIGHTS, match, naive_cost, naive_program, naive_summary, omega, preference, program_cost
 from ..errors import RefactorError
 from .refactor import Refactored, refactor
-from .discover import Config, DiscoveryResult, Summary, discover, summarize
+from .discover import DiscoveryResult, Summary, discover, summarize
+from .config import Config
 from .infer import Inferred, infer, load_library
 
 __all__ = [

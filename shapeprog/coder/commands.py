@@ -17,6 +17,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from shapeio import atomic_write
+from shapeio.files import NotShippedError
 from shapeio.results import column, make_result
 
 from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, add_category, add_command, add_json, add_overwrite, add_quiet,
@@ -27,9 +28,9 @@ from ..limits import decode
 from ..fit import MAX_LR
 from . import data
 from . import tables
-from .discover import Config, discover_category
+from .discover import discover_category
+from .config import Config
 from .infer import infer, load_library, load_network, shipped_libraries
-from .lang import Library
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUE_SCHEDULES, VALUES
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
@@ -151,19 +152,15 @@ def cmd_discover(args) -> int:
 def cmd_infer(args) -> int:
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
-    if args.library in shipped_libraries():
+    try:
         lib = load_library(args.library)
-    else:
-        path = Path(args.library)
-        if not path.is_file():
-            raise SystemExit(f"error: {args.library!r} is neither a shipped library "
-                             f"({', '.join(shipped_libraries()) or 'none'}) nor a file")
-        lib = Library.from_text(decode(path.read_bytes(), str(path)), file=str(path))
+    except NotShippedError as e:
+        raise SystemExit(f"error: {e}") from None
     shape = shape_of(args.shape)
     network = None
     budget = search_budget(args.search_seconds, args.search_batches, args.network, "", "--network")
     if args.network:
-        if args.library not in shipped_libraries():
+        if Path(args.library).is_file() or args.library not in shipped_libraries():
             raise SystemExit("error: --network needs a shipped library (its recognition network ships with it)")
         try:
             network = load_network(args.library)

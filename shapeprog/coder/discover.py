@@ -4,11 +4,11 @@ integration, and a final round with the library fixed. Per-program work goes thr
 
 One round (``rounds`` of them, then a final wake with the library fixed):
 
-1. **Wake** (:func:`wake`, ``Config.wake="refactor"``, the default): each shape's candidates (its current
+1. **Wake** (:func:`~shapeprog.coder.wake.wake`, ``Config.wake="refactor"``, the default): each shape's candidates (its current
    program, the same with every abstraction expanded, and the naive program) are refactored with the
    current library (:func:`shapeprog.coder.refactor.refactor`); the cheapest that re-covers the shape's
    primitives (a valid Hungarian match of every primitive, :func:`shapeprog.coder.objective.match`) is
-   kept. With ``Config.wake="network"`` (:func:`wake_network`) the round first dreams
+   kept. With ``Config.wake="network"`` (:func:`~shapeprog.coder.wake.wake_network`) the round first dreams
    (:func:`shapeprog.coder.dream.dream`) and trains a recognition network on the dreams
    (:mod:`shapeprog.coder.train`; the weights are written to ``out/recnet_round<k>.pt`` and reused on a
    resume); each shape is then searched with the network (:func:`shapeprog.coder.search.search_shape`),
@@ -33,117 +33,39 @@ after every phase; a run started again on the same folder resumes after the last
 from __future__ import annotations
 
 import concurrent.futures as cf
-import functools
+import hashlib
 import json
+import multiprocessing
 import random
 import time
 from dataclasses import dataclass, field, asdict
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .execute import execute
-from .lang import LANG_3D, Call, Expr, Lang, Library, Num, ProgramError, expand, parse, substitute, to_text, walk
-from .objective import WEIGHTS, match, naive_program, omega, program_cost, token_counts
-from .dream import DREAM_TIMEOUT, N_DREAMS
+from shapeio import atomic_write
+
+from shapeio.files import parse_json
+
+from .lang import LANG_3D, Call, Expr, Lang, Library, ProgramError, expand, parse, to_text, walk
+from .objective import WEIGHTS, omega, token_counts
 from .proposal import propose
-from .refactor import (MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUE_SCHEDULES, VALUES, RefactorError, check_limits,
-                       egglog_program, refactor)
-from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .refactor import VALUES, RefactorError
+from .config import Config
+from .wake import _best_of, _limits, _map, evaluate, train_network, wake, wake_network
+from . import data
+from ..errors import ParseError
+from ..limits import decode
 
-__all__ = ["Config", "DiscoveryResult", "Summary", "WAKES", "discover", "discover_category", "evaluate", "integrate",
-           "network_best", "network_payload", "start_from", "summarize", "train_network", "wake",
-           "wake_network", "write_outputs"]
-
-#: The wake searches: by refactoring only, or with the recognition network.
-WAKES = ("refactor", "network")
-
-
-@dataclass(frozen=True)
-class Config:
-    """Settings of a discovery run (the paper's values where it has them).
-
-    Attributes:
-        rounds: proposal/integration rounds (``max_sc_rounds`` 4), then one final wake.
-        n_proposals: proposals per round (10,000).
-        n_abstractions: candidates tried per round (N_A, 20).
-        seed: random seed of the proposals (42).
-        iterations, max_nodes, time_limit: e-graph limits of each refactor (5, 10,000, 5 s).
-        egraph_values: how the e-graph's value table follows its e-nodes (:data:`~shapeprog.coder.refactor.VALUES`;
-            ``"lagged"`` reproduces runs made before 2026-11-29; :func:`~shapeprog.coder.refactor.refactor`).
-        refactor_all: integration refactors every program (the paper) rather than only those a candidate
-            covers.
-        semantic_rewrites: use the semantic rewrites (False: only the abstraction rules, the paper's
-            "no semantic rewrites" ablation).
-        wake: ``"refactor"`` (search by refactoring) or ``"network"`` (dreams, a recognition network, the
-            network search; see the module docstring).
-        n_dreams, dream_timeout: valid dreams per function (N_D, 10,000) and seconds per function (1,800).
-        train_lr, train_batch, train_epochs, train_patience, train_min_delta, train_holdout,
-            train_seconds, dropout, train_bucket: the network's training (:class:`shapeprog.coder.train.TrainConfig`;
-            the paper's values by default, ``train_seconds`` per round).
-        wake_batch, wake_batches, wake_seconds: samples per batch (64), batches per search step at most,
-            and seconds per search step (1 s; None: the search depends only on the seed).
-        device: where the network trains (``"auto"``: CUDA when available).
-        network_from: with ``wake="network"``, the first round whose wake uses the network; the rounds
-            before it use the refactor-only wake (cheap early rounds, then the network; ours, not the paper's).
-        wake_repeats: network wakes per round with the round's network, each from the programs of the one
-            before and with other sampling seeds (a shape keeps its program unless a candidate is cheaper,
-            so F never rises); 1 is the paper's one wake per round.
-    """
-
-    rounds: int = 4
-    n_proposals: int = 10_000
-    n_abstractions: int = 20
-    seed: int = 42
-    iterations: int = MAX_ITERATIONS
-    max_nodes: int = MAX_ENODES
-    time_limit: float = TIME_LIMIT
-    egraph_values: str = VALUES
-    refactor_all: bool = False
-    semantic_rewrites: bool = True
-    wake: str = "refactor"
-    n_dreams: int = N_DREAMS
-    dream_timeout: float = DREAM_TIMEOUT
-    train_lr: float = 1e-4
-    train_batch: int = 64
-    train_epochs: int = 300
-    train_patience: int = 30
-    train_min_delta: float = 0.025
-    train_holdout: float = 0.1
-    train_seconds: float | None = 12_000.0
-    dropout: float = 0.5
-    train_bucket: bool = True
-    wake_batch: int = WAKE_BATCH
-    wake_batches: int = WAKE_BATCHES
-    wake_seconds: float | None = WAKE_SECONDS
-    device: str = "auto"
-    network_from: int = 0
-    wake_repeats: int = 1
-
-    def __post_init__(self):
-        for name in ("rounds", "n_proposals", "n_abstractions", "iterations", "max_nodes", "train_epochs",
-                     "network_from"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"Config.{name} must be an int >= 0, got {v!r}")
-        for name in ("n_dreams", "train_batch", "train_patience", "wake_batch", "wake_batches", "wake_repeats"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"Config.{name} must be an int >= 1, got {v!r}")
-        if self.wake not in WAKES:
-            raise ValueError(f"Config.wake must be one of {', '.join(WAKES)}, got {self.wake!r}")
-        check_limits(self.iterations, self.max_nodes, self.time_limit)  # before any work, not in a worker
-        if self.egraph_values not in VALUE_SCHEDULES:
-            raise ValueError(f"Config.egraph_values must be one of {', '.join(VALUE_SCHEDULES)}, "
-                             f"got {self.egraph_values!r}")
-
-    def train_config(self):
-        """The :class:`shapeprog.coder.train.TrainConfig` of these settings."""
-        from .train import TrainConfig
-
-        return TrainConfig(lr=self.train_lr, batch=self.train_batch, epochs=self.train_epochs,
-                           patience=self.train_patience, min_delta=self.train_min_delta, holdout=self.train_holdout,
-                           max_seconds=self.train_seconds, dropout=self.dropout,
-                           bucket=self.train_bucket)
+__all__ = [
+    "DiscoveryResult",
+    "Summary",
+    "discover",
+    "discover_category",
+    "integrate",
+    "start_from",
+    "summarize",
+    "write_outputs",
+]
 
 
 @dataclass(frozen=True)
@@ -178,259 +100,6 @@ def summarize(programs: Sequence[Expr], library: Library, errors: Sequence[float
     lib_cost = sum(omega(ab, library) for ab in library.abstractions)
     return Summary(prog + lib_cost, prog, library.size, sum(c.num_struct for c in counts) / n,
                    sum(c.num_param for c in counts) / n, n)
-
-
-def evaluate(expr: Expr, library: Library, prims) -> tuple | None:
-    """``(cost, error)`` of a program for a shape, or None when it does not re-cover the primitives
-    (a hard error, another primitive count, or a match beyond the threshold)."""
-    try:
-        got = execute(expr, library, strict=True)
-    except (ProgramError, ValueError):
-        return None
-    if len(got) != len(prims):
-        return None
-    m = match(got, prims, threshold=library.lang.match_threshold)
-    if not m.valid:
-        return None
-    return program_cost(expr, library) + WEIGHTS.error * m.error, m.error
-
-
-@functools.lru_cache(maxsize=8)
-def _rules(library: Library, semantic: bool = True) -> str:
-    return egglog_program(library, None if semantic else [])
-
-
-def _best_of(task) -> tuple:
-    """Worker: refactor each candidate program with the library; the cheapest valid one (or the current)."""
-    current, candidates, library, prims, limits = task
-    limits = dict(limits)
-    semantic = limits.pop("semantic", True)
-    best = evaluate(current, library, prims)
-    best_expr = current
-    rules = _rules(library, semantic)
-    for cand in candidates:
-        try:
-            r = refactor(cand, library, rules=rules, **limits)
-        except RefactorError:
-            continue
-        for e in (r.expr, cand):
-            got = evaluate(e, library, prims)
-            if got is not None and (best is None or got[0] < best[0] - 1e-9):
-                best, best_expr = got, e
-    return best_expr, (None if best is None else best[0]), (None if best is None else best[1])
-
-
-def _limits(cfg: Config) -> dict:
-    return {"iterations": cfg.iterations, "max_nodes": cfg.max_nodes, "time_limit": cfg.time_limit,
-            "values": cfg.egraph_values, "semantic": cfg.semantic_rewrites}
-
-
-def _map(executor, fn, tasks, progress: Callable | None, desc: str):
-    it = executor.map(fn, tasks) if executor is not None else map(fn, tasks)
-    if progress is not None:
-        it = progress(it, total=len(tasks), desc=desc)
-    return list(it)
-
-
-def wake(shapes: Sequence, programs: Sequence[Expr] | None, library: Library, cfg: Config = Config(),
-         executor: cf.Executor | None = None, progress: Callable | None = None) -> tuple:
-    """Search by refactoring: ``(programs, costs, errors)``, one per shape (see the module docstring).
-
-    Args:
-        shapes: primitive sets (tuples of 9-tuples, or records with ``.prims``).
-        programs: the current programs (None: start from the naive ones).
-    """
-    prims = [getattr(s, "prims", s) for s in shapes]
-    tasks = []
-    for k, p in enumerate(prims):
-        naive, env = naive_program(p)
-        naive = substitute(naive, {n: Num(v) for n, v in env.items()})
-        cur = naive if programs is None else programs[k]
-        cands = [cur]
-        if programs is not None:
-            ex = expand(cur, library)
-            if ex != cur:
-                cands.append(ex)
-            cands.append(naive)
-        tasks.append((cur, cands, library, p, _limits(cfg)))
-    out = _map(executor, _best_of, tasks, progress, "wake")
-    return [o[0] for o in out], [o[1] for o in out], [o[2] for o in out]
-
-
-_MODELS: dict = {}
-
-
-def _model_from(payload):
-    """The (model, vocab) of a payload ``(key, config dict, vocab tokens, state_dict)``, cached per process."""
-    key = payload[0]
-    if key not in _MODELS:
-        import multiprocessing
-
-        import torch
-
-        from .recnet import NetConfig, RecognitionNet, Vocab
-
-        if multiprocessing.parent_process() is not None:
-            torch.set_num_threads(1)  # a pool worker: one thread each
-        _MODELS.clear()
-        model = RecognitionNet(NetConfig(**payload[1]))
-        model.load_state_dict(payload[3])
-        model.eval()
-        vocab = payload[2]
-        if not isinstance(vocab, Vocab):
-            raise TypeError("the payload's vocabulary must be a Vocab")
-        _MODELS[key] = (model, vocab)
-    return _MODELS[key]
-
-
-def network_payload(model, vocab) -> tuple:
-    """A picklable ``(key, config dict, vocab, state_dict)`` of a network for worker processes (each
-    builds the model once per key)."""
-    import hashlib
-
-    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
-    digest = hashlib.sha1(b"".join(v.numpy().tobytes() for v in state.values())).hexdigest()
-    return (digest, asdict(model.cfg), vocab, state)
-
-
-def network_best(current: Expr, library: Library, prims, payload, limits: dict, search: dict | None = None,
-                 seed: int = 0) -> tuple:
-    """The network search of one shape, then the refactor of every candidate (see :func:`wake_network`)
-    with an empty store: ``(program, cost, error, source)``, never dearer than ``current``.
-
-    Args:
-        payload: from :func:`network_payload`. limits: ``iterations``, ``max_nodes``, ``time_limit``.
-        search: ``batch``, ``batches``, ``seconds`` of the search (default the wake's).
-    """
-    search = search or {"batch": WAKE_BATCH, "batches": WAKE_BATCHES, "seconds": WAKE_SECONDS}
-    expr, cost, error, _, source = _network_best((current, library, prims, payload, {}, dict(limits), search, seed))
-    return expr, cost, error, source
-
-
-def _network_best(task) -> tuple:
-    """Worker: the network search of one shape, the store's combinations, then the refactor of every
-    candidate; ``(program, cost, error, store entries, source)``."""
-    from .search import Store, naive_piece, search_shape, union
-
-    current, library, prims, payload, entries, limits, search, seed = task
-    model, vocab = _model_from(payload)
-    store = Store(prims, library, entries)
-    found = search_shape(prims, library, model, vocab, seed=seed, **search)
-    for f in found:
-        if f.from_network:
-            store.add(f.expr, f.covered)
-    net_prog = union([f.expr for f in sorted(found, key=lambda f: f.covered)])
-    cands = [("current", current)]
-    ex = expand(current, library)
-    if ex != current:
-        cands.append(("expanded", ex))
-    cands.append(("naive", union([naive_piece(p) for p in prims])))
-    if any(f.from_network for f in found):
-        cands.append(("network", net_prog))
-    parts = store.add_program(current)
-    if parts is not None:
-        cands.append(("replace", store.replace(parts)))
-    cands.append(("rebuild", store.rebuild()))
-    seen, uniq = set(), []
-    for name, c in cands:
-        key = to_text(c)
-        if key not in seen:
-            seen.add(key)
-            uniq.append((name, c))
-    best, best_expr, source = evaluate(current, library, prims), current, "current"
-    rules = _rules(library, limits.get("semantic", True))
-    lim = {k: v for k, v in limits.items() if k != "semantic"}
-    for name, cand in uniq:
-        outs = [cand]
-        try:
-            outs.insert(0, refactor(cand, library, rules=rules, **lim).expr)
-        except RefactorError:
-            pass
-        for e in outs:
-            got = evaluate(e, library, prims)
-            if got is not None and (best is None or got[0] < best[0] - 1e-9):
-                best, best_expr, source = got, e, name
-    store.add_program(best_expr)
-    return (best_expr, None if best is None else best[0], None if best is None else best[1], store.to_dict(), source)
-
-
-def train_network(shapes: Sequence, library: Library, cfg: Config = Config(), seed: int = 42,
-                  executor: cf.Executor | None = None, cache: dict | None = None, log: Callable | None = None,
-                  checkpoint: str | Path | None = None) -> tuple:
-    """The dream phase and the network's training for one round: ``(model, vocab, info)``, the model on
-    the CPU in eval mode. With ``checkpoint``: an existing file written for the same library is loaded
-    instead; otherwise the trained weights are written there (atomically).
-
-    Args:
-        shapes: real primitive sets (the dreams' distractors).
-        cache: abstraction dreams kept across rounds (see :func:`shapeprog.coder.dream.dream`).
-    """
-    import torch
-
-    from .dream import dream
-    from .recnet import NetConfig, RecognitionNet, Vocab, load_checkpoint, save_checkpoint
-    from .train import device_of, train
-
-    log = log or (lambda s: None)
-    if checkpoint is not None and Path(checkpoint).is_file():
-        try:
-            model, vocab, extra = load_checkpoint(checkpoint, library)
-            if extra.get("library") == library.to_text():
-                log(f"network: loaded {checkpoint}")
-                return model.eval(), vocab, extra
-        except (ValueError, RuntimeError, KeyError):
-            pass
-    t0 = time.time()
-    d = dream(library, cfg.n_dreams, seed, [getattr(s, "prims", s) for s in shapes], executor, cache,
-              cfg.dream_timeout)
-    for line in d.summary().splitlines():
-        log(f"dreams: {line}")
-    t1 = time.time()
-    vocab = Vocab.of(library)
-    lang = library.lang
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        model = RecognitionNet(NetConfig(len(vocab), fields=len(lang.prim_fields), max_prims=lang.max_prims,
-                                         dropout=cfg.dropout))
-    tl = train(model, d.pairs, vocab, cfg.train_config(), torch.Generator().manual_seed(seed), device_of(cfg.device),
-               library=library)
-    model.cpu().eval()
-    info = {"library": library.to_text(), "pairs": tl.pairs, "epochs": len(tl.train_loss),
-            "train_loss": round(tl.train_loss[-1], 4) if tl.train_loss else None,
-            "val_loss": round(tl.best, 4) if tl.val_loss else None, "stop": tl.stop,
-            "dream_seconds": round(t1 - t0, 1), "train_seconds": round(tl.seconds, 1)}
-    log(f"network: {tl.pairs} pairs, {len(tl.train_loss)} epochs ({tl.stop}), held-out loss "
-        f"{info['val_loss']}, dreams {t1 - t0:.0f} s, training {tl.seconds:.0f} s")
-    if checkpoint is not None:
-        save_checkpoint(checkpoint, model, vocab, info)
-    return model, vocab, info
-
-
-def wake_network(shapes: Sequence, programs: Sequence[Expr] | None, library: Library, model, vocab,
-                 stores: list | None = None, cfg: Config = Config(), executor: cf.Executor | None = None,
-                 progress: Callable | None = None, seed: int = 0) -> tuple:
-    """The wake with the recognition network (see the module docstring): ``(programs, costs, errors,
-    stores, sources)``, ``stores`` the per-shape store entries and ``sources`` which candidate won per
-    shape (``current``, ``expanded``, ``naive``, ``network``, ``replace``, ``rebuild``).
-
-    A process pool for ``executor`` must not fork its workers after this process has run torch (they can
-    hang): use a ``spawn`` or ``forkserver`` context, or a pool whose workers started before.
-    """
-    prims = [getattr(s, "prims", s) for s in shapes]
-    stores = [dict() for _ in prims] if stores is None else stores
-    payload = network_payload(model, vocab)
-    search = {"batch": cfg.wake_batch, "batches": cfg.wake_batches, "seconds": cfg.wake_seconds}
-    tasks = []
-    for k, p in enumerate(prims):
-        if programs is None:
-            naive, env = naive_program(p)
-            cur = substitute(naive, {n: Num(v) for n, v in env.items()})
-        else:
-            cur = programs[k]
-        tasks.append((cur, library, p, payload, stores[k], _limits(cfg), search, seed * 100_003 + k))
-    out = _map(executor, _network_best, tasks, progress, "wake (network)")
-    return ([o[0] for o in out], [o[1] for o in out], [o[2] for o in out], [o[3] for o in out],
-            [o[4] for o in out])
 
 
 def _uses(programs: Sequence[Expr], name: str) -> int:
@@ -566,7 +235,6 @@ class DiscoveryResult:
 def _save(out: Path | None, state: dict) -> None:
     if out is None:
         return
-    from shapeio import atomic_write
 
     atomic_write(out / "state.json", json.dumps(state, indent=1), mkdir=True)
 
@@ -574,10 +242,7 @@ def _save(out: Path | None, state: dict) -> None:
 def _load(out: Path | None, lang: Lang):
     if out is None or not (out / "state.json").is_file():
         return None
-    from shapeio.files import parse_json
 
-    from ..errors import ParseError
-    from ..limits import decode
 
     file = str(out / "state.json")
     st = parse_json(decode((out / "state.json").read_bytes(), file), file,
@@ -774,10 +439,6 @@ def write_outputs(out: str | Path, result: DiscoveryResult, keys: Sequence[str],
     ``log.json`` (the F log, the summary and the SHA-256 of the other two files) into ``out``, each atomically
     and ``log.json`` last: a write interrupted between the files leaves digests that do not match, which
     :func:`shapeprog.coder.tables.from_run` refuses."""
-    import hashlib
-
-    from shapeio import atomic_write
-
     out = Path(out)
     texts = {"library.txt": header + result.library.to_text(),
              "programs.txt": "".join(f"{k}:{to_text(p)}\n" for k, p in zip(keys, result.programs))}
@@ -801,8 +462,6 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
     Raises:
         FileExistsError: ``out`` has outputs of something else.
     """
-    from . import data
-
     out = Path(out)
     if (out / "library.txt").exists() and not (out / "state.json").exists():
         raise FileExistsError(f"{out / 'library.txt'} exists and is not from a resumable run; choose another --out")
@@ -812,8 +471,6 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
         start_from(out, recs, start[0], start[1], cfg, LANG_3D, first, start[2])
     stop_at = None if minutes is None else time.time() + 60 * minutes
     if workers > 1:
-        import multiprocessing
-
         # the network wake runs torch in this process: workers forked after that can hang, so they start
         # from a fresh interpreter
         ctx = multiprocessing.get_context("forkserver") if cfg.wake == "network" else None

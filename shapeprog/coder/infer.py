@@ -19,13 +19,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
+
+from shapeio.files import resolve_shipped
+
+from ..limits import decode
 from . import data
-from .discover import evaluate
+from .wake import evaluate, network_best, network_payload
 from .execute import order
 from .lang import LANG_3D, Library, Num, expand, substitute, to_text
 from .objective import naive_program
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES, RefactorError, refactor
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .recnet import load_checkpoint
 
 __all__ = ["PASSES", "Inferred", "check_search_budget", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
 
@@ -78,7 +84,7 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
         passes: refactor calls at most, each on the previous one's program (each call is limited by
             ``iterations``, ``max_nodes``, ``time_limit``); stops at the first that does not lower the cost.
         network: a recognition network for ``library`` (:func:`load_network`, a ``(model, vocab)`` pair, or
-            a payload of :func:`shapeprog.coder.discover.network_payload`): the refactored program is then a
+            a payload of :func:`shapeprog.coder.wake.network_payload`): the refactored program is then a
             candidate of the network wake's search for the shape (the paper's post hoc inference), and the
             cheaper program is kept. seed: seeds that search.
         search_seconds, search_batches: the network search's budget per step: no new batch of
@@ -115,8 +121,6 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
             break
         best = (r.expr, got)
     if network is not None:
-        from .discover import network_best, network_payload
-
         payload = network if len(network) == 4 else network_payload(*network)
         limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values}
         search = {"batch": WAKE_BATCH, "batches": int(search_batches), "seconds": float(search_seconds)}
@@ -150,8 +154,6 @@ def load_network(category: str) -> tuple:
     Raises:
         ValueError: no network is shipped for ``category``.
     """
-    from .recnet import load_checkpoint
-
     if category not in shipped_networks():
         raise ValueError(f"no shipped recognition network for {category!r}; shipped: "
                          f"{', '.join(shipped_networks()) or 'none'}")
@@ -169,17 +171,19 @@ def shipped_libraries() -> tuple:
                         and p.name.endswith(".txt")))
 
 
-def load_library(category: str) -> Library:
-    """The shipped library of ``category`` (``shapeprog/data/coder_libraries/<category>.txt``, one
-    abstraction per line; see docs/shapecoder.md for how it was discovered).
+def load_library(name: str) -> Library:
+    """A ShapeCoder library: the library file ``name`` when one exists at that path, else the shipped library
+    of category ``name`` (``shapeprog/data/coder_libraries/<category>.txt``, one abstraction per line; see
+    docs/shapecoder.md for how it was discovered); the rule of :func:`shapeio.files.resolve_shipped`: an
+    existing file wins.
 
     Raises:
-        ValueError: no library is shipped for ``category`` (the message lists those that are).
+        NotShippedError: neither a file nor a shipped category (a ``ValueError``; the message names both and
+            lists the shipped categories).
         ParseError: a malformed library file (file, line, column).
     """
-    names = shipped_libraries()
-    if category not in names:
-        raise ValueError(f"no shipped library for {category!r}; shipped: {', '.join(names) or 'none'}")
-    name = f"{category}.txt"
-    text = resources.files("shapeprog").joinpath(*_DIR, name).read_text(encoding="utf-8")
-    return Library.from_text(text, LANG_3D, file=name)
+    folder = resources.files("shapeprog").joinpath(*_DIR)
+    shipped = {c: Path(str(folder.joinpath(f"{c}.txt"))) for c in shipped_libraries()}
+    path = resolve_shipped(name, shipped, "ShapeCoder library")
+    label = path.name if shipped.get(name) == path else str(path)
+    return Library.from_text(decode(path.read_bytes(), label), LANG_3D, file=label)

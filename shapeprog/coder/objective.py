@@ -334,7 +334,7 @@ def match(a, b, threshold: float | None = None, penalty: float = MISMATCH_PENALT
     Returns:
         :class:`Match`; its ``error`` is the geometric error of F.
     """
-    from scipy.optimize import linear_sum_assignment
+    from scipy.optimize import linear_sum_assignment  # lazy: scipy only when primitives are matched
 
     a, b = _as_prims(a, "a"), _as_prims(b, "b")
     if threshold is None:

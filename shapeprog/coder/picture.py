@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .dream import function_dreams
 from .execute import corners, run
 from .lang import Call, Expr, Library, walk
 from .proposal import pieces
@@ -47,7 +48,7 @@ def usage_sheet(programs, library: Library, name: str, path=None, count: int = 4
     Raises:
         ValueError: no program calls ``name``.
     """
-    from shapeprog.picture import render_grid
+    from shapeprog.picture import render_grid  # lazy: pictures bring PIL
 
     using = [p for p in programs if any(isinstance(n, Call) and n.fn == name for n in walk(p))][:count]
     if not using:
@@ -64,9 +65,8 @@ def dream_sheet(name: str, library: Library, path=None, count: int = 4, size: in
     Raises:
         ValueError: no valid dream was found (the function was abandoned).
     """
-    from shapeprog.picture import render_grid
+    from shapeprog.picture import render_grid  # lazy: pictures bring PIL
 
-    from .dream import function_dreams
 
     fd = function_dreams(name, library, n=count, seed=seed, timeout=60.0)
     if not fd.dreams:

@@ -2,17 +2,8 @@
 library out, its floats as references to the scene's values. Plain PyTorch; the training loop is
 :mod:`shapeprog.coder.train`.
 
-* **Values as ranks** (:func:`encode_scene`). The scene's distinct values (2 decimals) are sorted; each
-  slot (primitive p, field j) is the *rank* of its value in that list. Up to P = 16 primitives × 9 fields
-  = 144 conditioning tokens (2D: 12 × 4).
-* **Vocabulary** (:class:`Vocab`): ``<start>``, ``<var>`` (a float that refers to a scene value), the
-  library's shape functions (base and abstractions), the float operators, the constants 0, 1, 2, the axes
-  and the counts ``INT#1#`` … ``INT#6#``.
-* **Targets** (:func:`encode_target`): the expression in prefix order; a float literal within
-  :data:`~shapeprog.coder.dream.LITERAL_TOL` of a scene value is ``<var>`` with that value's rank; else,
-  for a ``SymTrans`` distance that is the difference of two scene values, ``Sub <var> <var>``; else
-  ``<var>`` with the nearest value's rank (the positions of a sub-dream that got an extra Move).
-  :func:`decode_tokens` inverts it.
+Scenes and targets as tokens: :mod:`shapeprog.coder.vocab`.
+
 * **Model** (:class:`RecognitionNet`). Conditioning token i: [a learned 128-d vector of position i ‖
   Embedding(rank) + Embedding(field), 16-d]. Sequence token t: [Embedding(token), 128-d ‖ the rank
   embedding of the referenced value for ``<var>`` tokens, else 0] + a learned positional embedding
@@ -26,219 +17,34 @@ library out, its floats as references to the scene's values. Plain PyTorch; the 
   :data:`MAX_TOKENS`. Row 0 of a batch is the greedy (arg-max) expression when asked. Decoding is
   incremental (:meth:`RecognitionNet.step`): the keys and values of the conditioning tokens are computed
   once per scene and those of the sequence once per token.
-
-Example:
-    >>> from shapeprog.coder.lang import Library, parse
-    >>> scene = ((0.1, 0.5, 0.1, -0.4, 0.0, 0.2, 0.0, 0.0, 0.0), (0.1, 0.5, 0.1, 0.4, 0.0, 0.2, 0.0, 0.0, 0.0))
-    >>> vocab = Vocab.of(Library())
-    >>> e = parse("SymRef(Move(Cuboid(0.1,0.5,0.1),-0.4,0.0,0.2),AX)")
-    >>> toks, ranks = encode_target(e, scene, vocab)
-    >>> [vocab.tokens[t] for t in toks[:3]], ranks[3:7]
-    (['SymRef', 'Move', 'Cuboid'], [2, 5, 2, 0])
-    >>> decode_tokens(toks, ranks, scene, vocab) == e
-    True
 """
 from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Sequence
 
 import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .lang import (FLOAT_CONSTANTS, FLOAT_FN, AxisConst, Call, Expr, IntConst, Library, Num, ProgramError, Type,
-                   walk)
+from shapeio.weights import read_weights, write_weights
 
-__all__ = ["COUNT_TOKENS", "MAX_FLOAT_TERMS", "MAX_TOKENS", "NetConfig", "RecognitionNet", "Scene", "TargetError", "Vocab",
-           "decode_tokens", "encode_scene", "encode_target", "load_checkpoint", "sample", "save_checkpoint"]
+from .lang import Library, Type
+from .vocab import MAX_FLOAT_TERMS, MAX_TOKENS, Vocab, decode_tokens, encode_scene
 
-#: Tokens of one expression at most, the start token included.
-MAX_TOKENS = 32
-#: Terms (leaves) of one float sub-expression at most.
-MAX_FLOAT_TERMS = 3
-#: The counts the network can write.
-COUNT_TOKENS = (1, 2, 3, 4, 5, 6)
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "NetConfig",
+    "RecognitionNet",
+    "load_checkpoint",
+    "sample",
+    "save_checkpoint",
+]
 
-
-class TargetError(ProgramError):
-    """A target the network cannot be trained on; ``reason`` names the kind (counted by
-    :func:`~shapeprog.coder.train.tensorize`)."""
-
-    def __init__(self, message: str, reason: str):
-        super().__init__(message)
-        self.reason = reason
-
-    def __reduce__(self):  # picklable, so that it crosses a process pool with its reason
-        return type(self), (str(self), self.reason)
-
-
-START, VAR = "<start>", "<var>"
-
-
-# ----------------------------------------------------------------------------- vocabulary and tokens
-
-
-@dataclass(frozen=True)
-class Vocab:
-    """The output tokens of a library and their types.
-
-    Attributes:
-        tokens: the token texts; index 0 is ``<start>``, 1 is ``<var>``.
-        returns: each token's type (None for ``<start>``).
-        params: each token's argument types (``()`` for leaves).
-    """
-
-    tokens: tuple
-    returns: tuple
-    params: tuple
-
-    @classmethod
-    def of(cls, library: Library) -> "Vocab":
-        lang = library.lang
-        toks, rets, pars = [START, VAR], [None, Type.FLOAT], [(), ()]
-        for sig in lang.functions:
-            if sig.returns is Type.SHAPE:
-                toks.append(sig.name), rets.append(Type.SHAPE), pars.append(sig.params)
-        for ab in library.abstractions:
-            toks.append(ab.name), rets.append(Type.SHAPE), pars.append(ab.signature.params)
-        for sig in lang.functions:
-            if sig.kind == FLOAT_FN:
-                toks.append(sig.name), rets.append(Type.FLOAT), pars.append(sig.params)
-        for c in FLOAT_CONSTANTS:
-            toks.append(repr(c)), rets.append(Type.FLOAT), pars.append(())
-        for a in lang.axes:
-            toks.append(a), rets.append(Type.AXIS), pars.append(())
-        for k in COUNT_TOKENS:
-            toks.append(f"INT#{k}#"), rets.append(Type.INT), pars.append(())
-        return cls(tuple(toks), tuple(rets), tuple(pars))
-
-    def __len__(self) -> int:
-        return len(self.tokens)
-
-    def index(self, token: str) -> int:
-        try:
-            return self._index()[token]
-        except KeyError:
-            raise TargetError(f"token {token!r} is not in the vocabulary", "token not in the vocabulary") from None
-
-    def _index(self) -> dict:
-        d = self.__dict__.get("_idx")
-        if d is None:
-            d = {t: i for i, t in enumerate(self.tokens)}
-            object.__setattr__(self, "_idx", d)
-        return d
-
-
-@dataclass(frozen=True)
-class Scene:
-    """A scene as the network reads it.
-
-    Attributes:
-        values: the sorted distinct values (the rank of a value is its index).
-        ranks: (P·S,) int64, the rank of each slot, primitive by primitive.
-        fields: (P·S,) int64, each slot's field index (0..S-1).
-    """
-
-    values: tuple
-    ranks: np.ndarray
-    fields: np.ndarray
-
-
-def encode_scene(prims: Sequence[Sequence[float]]) -> Scene:
-    """The :class:`Scene` of primitives (values rounded to 2 decimals)."""
-    p = np.round(np.asarray(prims, dtype=np.float64), 2) + 0.0
-    if p.ndim != 2 or len(p) == 0:
-        raise ValueError(f"a scene is a non-empty (P, S) array of primitives, got shape {p.shape}")
-    values = np.unique(p)
-    ranks = np.searchsorted(values, p.ravel())
-    fields = np.tile(np.arange(p.shape[1]), p.shape[0])
-    return Scene(tuple(float(v) for v in values), ranks.astype(np.int64), fields.astype(np.int64))
-
-
-def _nearest(values: tuple, v: float) -> int:
-    a = np.asarray(values)
-    return int(np.abs(a - v).argmin())
-
-
-def encode_target(expr: Expr, scene_prims, vocab: Vocab, library: Library | None = None) -> tuple:
-    """``(tokens, ranks)``: the expression's tokens in prefix order (no start token) and, per token, the
-    referenced rank (``<var>`` tokens) or -1. ``library``: the abstractions of ``expr`` (for their
-    ``SymTrans`` distance parameters).
-
-    Raises:
-        TargetError: a token outside the vocabulary, or more than :data:`MAX_TOKENS` - 1 tokens.
-    """
-    from .dream import LITERAL_TOL, distance_literals
-
-    scene = scene_prims if isinstance(scene_prims, Scene) else encode_scene(scene_prims)
-    vals = np.asarray(scene.values)
-    dist = distance_literals(expr, library)
-    toks, ranks = [], []
-    for n in walk(expr):
-        if isinstance(n, Call):
-            toks.append(vocab.index(n.fn)), ranks.append(-1)
-        elif isinstance(n, Num):
-            r = _nearest(scene.values, n.value)
-            if abs(vals[r] - n.value) > LITERAL_TOL + 1e-9 and id(n) in dist and "Sub" in vocab.tokens:
-                d = np.abs(vals[:, None] - vals[None] - n.value)
-                a, b = np.unravel_index(int(d.argmin()), d.shape)
-                if d[a, b] <= LITERAL_TOL + 1e-9:
-                    toks += [vocab.index("Sub"), 1, 1]
-                    ranks += [-1, int(a), int(b)]
-                    continue
-            toks.append(1), ranks.append(r)
-        elif isinstance(n, AxisConst):
-            toks.append(vocab.index(n.name)), ranks.append(-1)
-        elif isinstance(n, IntConst):
-            toks.append(vocab.index(f"INT#{n.value}#")), ranks.append(-1)
-        else:
-            raise TargetError(f"a target has no variables; got {n!r}", "target not encodable")
-    if len(toks) > MAX_TOKENS - 1:
-        raise TargetError(f"the target has {len(toks)} tokens; at most {MAX_TOKENS - 1} (MAX_TOKENS)",
-                          "target over MAX_TOKENS")
-    return toks, ranks
-
-
-def decode_tokens(tokens: Sequence[int], ranks: Sequence[int], scene_prims, vocab: Vocab) -> Expr:
-    """The expression of prefix ``tokens`` (no start token); ``<var>`` tokens take the value of their
-    rank in the scene.
-
-    Raises:
-        ProgramError: an incomplete or overlong token sequence, or a rank outside the scene.
-    """
-    scene = scene_prims if isinstance(scene_prims, Scene) else encode_scene(scene_prims)
-    pos = [0]
-
-    def go():
-        if pos[0] >= len(tokens):
-            raise ProgramError("the token sequence ends inside an expression")
-        i = pos[0]
-        pos[0] += 1
-        t = int(tokens[i])
-        name = vocab.tokens[t]
-        if t == 1:
-            r = int(ranks[i])
-            if not 0 <= r < len(scene.values):
-                raise ProgramError(f"rank {r} is outside the scene's {len(scene.values)} values")
-            return Num(scene.values[r])
-        if t == 0:
-            raise ProgramError("<start> inside an expression")
-        ret = vocab.returns[t]
-        if ret is Type.AXIS:
-            return AxisConst(name)
-        if ret is Type.INT:
-            return IntConst(int(name[4:-1]))
-        if ret is Type.FLOAT and not vocab.params[t]:
-            return Num(float(name))
-        return Call(name, tuple(go() for _ in vocab.params[t]))
-
-    e = go()
-    if pos[0] != len(tokens):
-        raise ProgramError(f"{len(tokens) - pos[0]} token(s) after the end of the expression")
-    return e
+#: The weights-file family of a recognition network and its version.
+FORMAT, VERSION = "shapeprog-coder-recnet", 1
 
 
 # ----------------------------------------------------------------------------- the model
@@ -437,26 +243,21 @@ def var_mask(n_values: torch.Tensor, inputs: int) -> torch.Tensor:
 
 
 def save_checkpoint(path, model: RecognitionNet, vocab: Vocab, extra: dict | None = None) -> None:
-    """Write the model's ``state_dict``, its :class:`NetConfig` and the vocabulary atomically."""
-    import io
-
-    from shapeio import atomic_write
-
-    buf = io.BytesIO()
-    torch.save({"format": "shapeprog-coder-recnet", "version": 1, "config": asdict(model.cfg),
-                "vocab": list(vocab.tokens), "state_dict": model.state_dict(), "extra": extra or {}}, buf)
-    atomic_write(path, buf.getvalue(), mkdir=True)
+    """Write the model's ``state_dict``, its :class:`NetConfig` and the vocabulary atomically (a weights file
+    of :mod:`shapeio.weights`, family :data:`FORMAT`, version :data:`VERSION`)."""
+    write_weights(path, FORMAT, VERSION, {"config": asdict(model.cfg), "vocab": list(vocab.tokens),
+                                          "state_dict": model.state_dict(), "extra": extra or {}})
 
 
-def load_checkpoint(path, library: Library, map_location="cpu") -> tuple:
-    """``(model, vocab, extra)`` from :func:`save_checkpoint`; the vocabulary must be the library's.
+def load_checkpoint(path, library: Library) -> tuple:
+    """``(model, vocab, extra)`` from :func:`save_checkpoint`, on the CPU; the vocabulary must be the
+    library's.
 
     Raises:
-        ValueError: not such a checkpoint, or written for another library.
+        FileNotFoundError: no such file.
+        ValueError: naming the file: not such a checkpoint, another version, or written for another library.
     """
-    ck = torch.load(path, map_location=map_location, weights_only=True)
-    if not isinstance(ck, dict) or ck.get("format") != "shapeprog-coder-recnet":
-        raise ValueError(f"{path}: not a recognition network checkpoint")
+    ck = read_weights(path, FORMAT, VERSION, what="recognition network checkpoint")
     vocab = Vocab.of(library)
     if tuple(ck["vocab"]) != vocab.tokens:
         raise ValueError(f"{path}: the checkpoint's vocabulary is not the library's")
@@ -628,4 +429,3 @@ def sample(model: RecognitionNet, vocab: Vocab, prims, n: int = 64, generator: t
         if g.done:
             exprs.append(decode_tokens(out_t[i], out_r[i], scene, vocab))
     return exprs
-

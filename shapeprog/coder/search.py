@@ -17,7 +17,7 @@ expressions that combines what every round found.
 rounds. :meth:`Store.replace` swaps a program's pieces for cheaper stored ones that cover the same
 primitives (the paper's combine variant iii) and :meth:`Store.rebuild` builds a program greedily from
 the stored expressions, cheapest per covered primitive first, without overlaps, the rest naive (variant
-iv). The discovery (:func:`shapeprog.coder.discover.wake` with a network) refactors these candidates with
+iv). The discovery (:func:`shapeprog.coder.wake.wake` with a network) refactors these candidates with
 the e-graph and keeps the cheapest.
 
 Example:
@@ -34,11 +34,14 @@ import time
 from dataclasses import dataclass
 from typing import Sequence
 
+import torch
+
 from .dream import split_cost
 from .execute import ExecutionError, run
 from .lang import Call, Expr, Library, Num, ProgramError, parse, substitute, to_text
 from .objective import match, naive_program, program_cost
 from .proposal import pieces
+from .recnet import sample
 
 __all__ = ["ALIGN_TOL", "WAKE_BATCH", "WAKE_BATCHES", "WAKE_SECONDS", "Found", "Store", "covers", "naive_piece",
            "search_shape", "union", "wake_score"]
@@ -140,10 +143,6 @@ def search_shape(prims: Sequence, library: Library, model, vocab, *, batch: int 
     Returns:
         list of :class:`Found`, whose covered sets partition the primitives.
     """
-    import torch
-
-    from .recnet import sample
-
     prims = tuple(tuple(p) for p in prims)
     remaining = list(range(len(prims)))
     out = []

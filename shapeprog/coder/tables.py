@@ -24,6 +24,7 @@ Example (``python -m shapeprog table2-coder --categories chair --train 20 --held
 """
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass
 from importlib import resources
@@ -35,12 +36,14 @@ from shapeio.files import parse_json
 from ..errors import ParseError
 from ..limits import decode
 from . import data
-from .discover import Summary, evaluate, summarize
-from .infer import PASSES, check_search_budget, infer, shipped_libraries
+from .discover import Summary, summarize
+from .wake import evaluate, network_payload
+from .infer import PASSES, check_search_budget, infer, load_network, shipped_libraries
 from .lang import LANG_3D, Call, Library, parse, walk
 from .objective import naive_summary, omega
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES
 from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .recnet import load_checkpoint
 
 __all__ = ["BASELINE_ROWS", "PAPER_TABLE2", "PAPER_TABLE3", "Phi", "Run", "Table2", "baseline", "format_tables", "from_run", "phi",
            "shipped", "table2", "table3"]
@@ -140,9 +143,6 @@ def network_of(run: Run) -> tuple:
     Raises:
         ValueError: the run has no network.
     """
-    from .infer import load_network
-    from .recnet import load_checkpoint
-
     if run.source.startswith("shapeprog/data/"):
         return load_network(run.category)
     files = sorted(Path(run.source).glob("recnet_round*.pt"), key=lambda p: int(p.stem[len("recnet_round"):]))
@@ -161,8 +161,6 @@ def from_run(folder, category: str) -> Run:
             ``log.json`` records (a write interrupted between the files; folders written before the digests
             were recorded are not checked).
     """
-    import hashlib
-
     folder = Path(folder)
     lib_path, prog_path = folder / "library.txt", folder / "programs.txt"
     for p in (lib_path, prog_path):
@@ -278,8 +276,6 @@ def phi(split: str, records: Sequence, library: Library, *, executor=None, itera
         raise ValueError(f"{split}: no shape with at most {library.lang.max_prims} primitives")
     payload = None
     if network is not None:
-        from .discover import network_payload
-
         payload = network_payload(*network)
     tasks = [(r.prims, library.to_text(), limits, payload, k, budget) for k, r in enumerate(kept)]
     t0 = time.time()

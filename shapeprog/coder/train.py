@@ -33,7 +33,8 @@ from typing import Callable, Sequence
 
 import torch
 
-from .recnet import MAX_TOKENS, RecognitionNet, TargetError, Vocab, encode_scene, encode_target
+from .recnet import RecognitionNet
+from .vocab import MAX_TOKENS, TargetError, Vocab, encode_scene, encode_target
 
 __all__ = ["BUCKET_GROUP", "CPU", "PAPER", "Batch", "TrainConfig", "TrainLog", "batch_loss", "batches", "device_of",
            "tensorize", "train"]
@@ -134,8 +135,8 @@ def tensorize(pairs: Sequence, vocab: Vocab, inputs: int, library=None, skipped:
     """The :class:`Batch` of ``pairs`` (:class:`~shapeprog.coder.dream.DreamPair`, or ``(scene, target)``
     tuples); ``inputs`` is the network's conditioning length (fields × max primitives). Pairs whose
     scene is longer than ``inputs``, or whose target does not fit the vocabulary or
-    :data:`~shapeprog.coder.recnet.MAX_TOKENS`, are skipped and counted in ``skipped`` (per reason).
-    ``library``: the targets' library (see :func:`~shapeprog.coder.recnet.encode_target`)."""
+    :data:`~shapeprog.coder.vocab.MAX_TOKENS`, are skipped and counted in ``skipped`` (per reason).
+    ``library``: the targets' library (see :func:`~shapeprog.coder.vocab.encode_target`)."""
     skipped = Counter() if skipped is None else skipped
     rows = []
     for p in pairs:

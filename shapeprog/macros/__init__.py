@@ -32,8 +32,8 @@ Example:
 """
 from __future__ import annotations
 
-from .data import (Conversion, CorpusData, Cube, Failure, Ordering, SubProgram, convert_corpus, convert_program,
-                   order_errors)
+from .data import Conversion, CorpusData, Failure, convert_corpus, convert_program, order_errors
+from .subprogram import Cube, Ordering, SubProgram
 from .api import BlockRefactor, Refactored, collection, expand, load_library, program_stats, refactor
 from .execute import execute, execute_batch, program_parameters
 from .lang import Call, Linear, Literal, MacroDef, MacroError, MacroProgram, Name, Param, from_lines, to_text

@@ -15,35 +15,59 @@ from __future__ import annotations
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from ..lang import Program
+from shapeio.files import resolve_shipped
+
+from ..lang import Program, parse
+from ..limits import decode
 from ..lang import parse as parse_program
-from .data import SubProgram, convert_program
-from .discover import Nodes, nodes_from_subprograms
+from .data import convert_corpus, convert_program
+from .subprogram import SubProgram
+from .state import Nodes, nodes_from_subprograms
 from .grammar import to_shapeassembly
 from .lang import BASE, BOOL, CUBE, FLOAT, Call, MacroProgram, Name, to_text
 from .hierarchy import as_hierarchy, is_hierarchy_text
 from .hierarchy import parse as parse_hierarchy
 from .library import Library, as_macro_program
 from .objective import Result, best_program, templates, to_program
+from .. import corpus
+from .execute import compile_hierarchy
 
-__all__ = ["BlockRefactor", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library",
+__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library", "read_library",
            "refactor", "program_stats"]
 
 #: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
 LIBRARY_CATEGORIES = ("chair", "table", "storage")
+#: The shipped libraries: category -> file.
+LIBRARIES = {c: Path(__file__).resolve().parent / "libs" / f"{c}.txt" for c in LIBRARY_CATEGORIES}
 
 
-def load_library(category: str) -> Library:
-    """The shipped discovered library of ``category`` (see ``shapeprog/macros/libs/README.md``).
+def load_library(name: str) -> Library:
+    """A ShapeMOD library: the library file ``name`` when one exists at that path, else the shipped library of
+    category ``name`` (:data:`LIBRARIES`; the rule of :func:`shapeio.files.resolve_shipped`: an existing file
+    wins; see ``shapeprog/macros/libs/README.md`` for the shipped ones).
 
     Raises:
-        ValueError: no library is shipped for ``category``.
+        NotShippedError: neither a file nor a shipped category (a ``ValueError``; the message names both).
+        ParseError: the file is not a library (file, line and column).
     """
-    return Library.from_text(library_text(category), f"shapeprog/macros/libs/{category}.txt")
+    return read_library(name)[0]
+
+
+def read_library(name: str) -> tuple[Library, str]:
+    """``(library, its file's text)`` of :func:`load_library` (the text with its header, as shipped).
+
+    Raises:
+        NotShippedError: neither a file nor a shipped category.
+        ParseError: the file is not a library.
+    """
+    path = resolve_shipped(name, LIBRARIES, "ShapeMOD library")
+    text = decode(path.read_bytes(), str(path))
+    return Library.from_text(text, str(path)), text
 
 
 def library_text(category: str) -> str:
@@ -205,8 +229,6 @@ def expand(program, library: Library | None = None) -> Program:
     if h is None and isinstance(program, str) and is_hierarchy_text(program):
         h = parse_hierarchy(program, library=lib)
     if h is not None:
-        from .execute import compile_hierarchy
-
         return compile_hierarchy(h, lib).program
     program = as_macro_program(program, lib, "shapeprog.macros.expand")
     return to_shapeassembly(lib.expand(program).lines)
@@ -214,7 +236,7 @@ def expand(program, library: Library | None = None) -> Program:
 
 def collection(category: str, split: str = "all", limit: int | None = None, seed: int = 0,
                executor: Executor | None = None, max_orders: int = 1000) -> tuple[Nodes, list[int]]:
-    """The sub-programs of a corpus category as discovery :class:`~shapeprog.macros.discover.Nodes`.
+    """The sub-programs of a corpus category as discovery :class:`~shapeprog.macros.state.Nodes`.
 
     Args:
         category, split: the corpus programs.
@@ -224,13 +246,10 @@ def collection(category: str, split: str = "all", limit: int | None = None, seed
     Returns:
         (nodes, the shape ids used, sorted).
     """
-    from .. import corpus
-    from .data import convert_corpus
     ids = corpus.ids(category, split)
     if limit is not None and limit < len(ids):
         rng = np.random.default_rng(seed)
         ids = sorted(int(i) for i in rng.choice(ids, size=limit, replace=False))
-        from ..lang import parse
         subs = []
         for i in ids:
             subs += convert_program(parse(corpus.read(category, i), f"{category}/{i}.txt"), category, i).subprograms

@@ -19,7 +19,9 @@ from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, Program, add_category, add_c
                    refuse_existing, refuse_inputs, seed, write_json)
 from .api import collection
 from .api import refactor
-from .discover import Discovery, discover, load_config, prior_rounds, rounds_line
+from .discover import discover, prior_rounds, rounds_line
+from .state import Discovery
+from .config import load_config
 from .lang import from_lines, to_text
 from .refactored import check_target, refactor_corpus, write_refactored
 from .table1 import table1

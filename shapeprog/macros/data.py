@@ -31,173 +31,46 @@ Example:
 """
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from collections import Counter
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence, Union
+from typing import Iterable, Sequence
 
-from ..lang import Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate
-from .grammar import (BBOX, AttachLine, CuboidLine, Line, ReflectLine, Signature, SqueezeLine, TranslateLine,
-                      bbox_side, squeeze_sides, to_shapeassembly)
+import torch
+
+from .. import corpus
+from ..errors import ParseError
+from ..execute import execute_batch
+from ..lang import Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, parse
+from .grammar import (
+    BBOX, AttachLine, CuboidLine, ReflectLine, Signature, SqueezeLine, TranslateLine, to_shapeassembly,
+)
+from .subprogram import (
+    ConversionError, Cube, MAX_ORDERS, Move, ORDER_TOL, Ordering, SubProgram, _levels, _signature,
+    _signature_parts, orderings,
+)
 
 __all__ = [
     "CLEANUP_MODES",
-    "MAX_ORDERS",
     "MIN_SEP_DIST",
-    "ORDER_TOL",
     "ConversionError",
     "Conversion",
     "CorpusData",
-    "Cube",
     "Failure",
-    "Ordering",
-    "SubProgram",
     "block_program",
     "convert_block",
     "convert_corpus",
     "convert_program",
     "order_errors",
-    "orderings",
 ]
 
-#: At most this many orderings are enumerated per sub-program (the reference's MAX_ORDERS).
-MAX_ORDERS = 10000
 #: Two attach points on the moving cube closer than this (local coordinates) are one contact.
 MIN_SEP_DIST = 0.25
-#: Largest corner difference for two executions to count as the same cuboids.
-ORDER_TOL = 1e-4
 #: ``"exact"``: a close second attach is dropped only when that leaves the executed cuboids unchanged;
 #: ``"spec"``: always dropped, as the reference's cleanup does (shapes may change).
 CLEANUP_MODES = ("exact", "spec")
-
-Move = Union[AttachLine, SqueezeLine]
-Sym = Union[ReflectLine, TranslateLine]
-
-
-class ConversionError(ValueError):
-    """A block that cannot be written in the modified grammar; the message says why."""
-
-
-@dataclass(frozen=True)
-class Cube:
-    """One non-bbox cuboid of a sub-program, as the text declares and moves it.
-
-    Attributes:
-        name: its name in the block (``'cube3'`` or ``'Program_2'``).
-        line: its dims and aligned flag.
-        moves: the lines that move it, in text order: one or two :class:`AttachLine`, or one
-            :class:`SqueezeLine`. Their targets are *original* cube indices (positions in
-            :attr:`SubProgram.cubes`) or :data:`~shapeprog.macros.grammar.BBOX`.
-        sym: its reflect or translate line, or None.
-        child: the block of a ``Program_`` part (its sub-program), None for a leaf.
-    """
-
-    name: str
-    line: CuboidLine
-    moves: tuple[Move, ...]
-    sym: Sym | None = None
-    child: str | None = None
-
-    def targets(self) -> set[int]:
-        """Original indices of the cubes it attaches to (the bbox excluded)."""
-        out = set()
-        for m in self.moves:
-            out.update((m.target,) if type(m) is AttachLine else (m.t1, m.t2))
-        out.discard(BBOX)
-        return out
-
-
-@dataclass(frozen=True, slots=True)
-class Ordering:
-    """One valid line ordering o in O_P.
-
-    Attributes:
-        cubes: original cube indices in declaration order; the canonical id of ``cubes[i]`` is ``i``.
-        signature: the canonical order signature (:func:`shapeprog.macros.grammar.signature` of
-            :meth:`SubProgram.lines`); equal signatures are structural matches.
-    """
-
-    cubes: tuple[int, ...]
-    signature: Signature
-
-
-@dataclass(frozen=True)
-class SubProgram:
-    """One non-hierarchical sub-program (one block of a corpus program) and its orderings.
-
-    Attributes:
-        category: corpus category (``'chair'``, ...; may be empty for programs from elsewhere).
-        shape_id: the program's id in its category.
-        block: the block's name (``'Program_k'``).
-        parent: ``(parent block, cube index there)`` of a non-root block, None for the root.
-        bbox: the bbox line.
-        cubes: the cuboids in declaration order (see :class:`Cube`).
-        levels: grounding level of each cube (1: attached to the bbox only; the longest path to it).
-        orders: the enumerated orderings, at most the ``max_orders`` given to the conversion.
-        n_orders: |O_P|, the number of valid orderings before that limit.
-        notes: what the cleanup did to this block (e.g. ``'cube2: close second attach dropped'``).
-    """
-
-    category: str
-    shape_id: int
-    block: str
-    parent: tuple[str, int] | None
-    bbox: CuboidLine
-    cubes: tuple[Cube, ...]
-    levels: tuple[int, ...]
-    orders: tuple[Ordering, ...]
-    n_orders: int
-    notes: tuple[str, ...] = ()
-
-    @property
-    def key(self) -> str:
-        """``'category/id/Program_k'``, unique over the corpus."""
-        return f"{self.category}/{self.shape_id}/{self.block}"
-
-    def lines(self, order: Ordering | Sequence[int] | None = None) -> tuple[Line, ...]:
-        """The sub-program in the modified grammar, in ``order`` (default: the first ordering).
-
-        The bbox line comes first; targets are canonical ids (positions in ``order``).
-        """
-        perm = self._perm(order)
-        pos = {c: i for i, c in enumerate(perm)}
-        pos[BBOX] = BBOX
-        out: list[Line] = [self.bbox]
-        for c in perm:
-            cube = self.cubes[c]
-            out.append(cube.line)
-            for m in cube.moves:
-                if type(m) is AttachLine:
-                    out.append(AttachLine(pos[m.target], m.x1, m.y1, m.z1, m.x2, m.y2, m.z2))
-                else:
-                    out.append(SqueezeLine(pos[m.t1], pos[m.t2], m.face, m.u, m.v))
-            if cube.sym is not None:
-                out.append(cube.sym)
-        return tuple(out)
-
-    def _perm(self, order) -> tuple[int, ...]:
-        if order is None:
-            order = self.orders[0]
-        perm = tuple(order.cubes if isinstance(order, Ordering) else order)
-        if sorted(perm) != list(range(len(self.cubes))):
-            raise ValueError(f"{self.key}: {perm} is not a permutation of its {len(self.cubes)} cubes")
-        return perm
-
-    def statement_keys(self, order: Ordering | Sequence[int] | None = None) -> list[list[tuple[int, int]]]:
-        """Per line of :meth:`lines`, the cuboids it creates as ``(original cube index, copy)``: copy 0
-        is the declared cuboid, 1..n its reflect/translate copies (the bbox line creates none)."""
-        keys: list[list[tuple[int, int]]] = [[]]
-        for c in self._perm(order):
-            cube = self.cubes[c]
-            keys.append([(c, 0)])
-            keys.extend([] for _ in cube.moves)
-            if cube.sym is not None:
-                n = 1 if type(cube.sym) is ReflectLine else cube.sym.n
-                keys.append([(c, i) for i in range(1, n + 1)])
-        return keys
 
 
 @dataclass(frozen=True)
@@ -302,75 +175,6 @@ def _as_squeeze(a: AttachLine, b: AttachLine) -> SqueezeLine | None:
     return None
 
 
-def _levels(cubes: Sequence[Cube], names: Sequence[str]) -> list[int]:
-    """Grounding level of every cube: 1 + the largest level of its targets (bbox 0)."""
-    level: dict[int, int] = {}
-    state: dict[int, int] = {}
-
-    def visit(i: int) -> int:
-        if i in level:
-            return level[i]
-        if state.get(i) == 1:
-            raise ConversionError(f"{names[i]} is part of an attachment cycle")
-        state[i] = 1
-        level[i] = 1 + max([visit(t) for t in cubes[i].targets()], default=0)
-        return level[i]
-
-    return [visit(i) for i in range(len(cubes))]
-
-
-def orderings(levels: Sequence[int], limit: int = MAX_ORDERS) -> tuple[list[tuple[int, ...]], int]:
-    """The grounded orders of cubes with the given levels: levels in turn, every permutation of the
-    cubes inside a level.
-
-    Returns:
-        The first ``limit`` orders in lexicographic order (each a tuple of cube indices) and the
-        number of valid orders, ``prod(n_l!)``.
-
-    Example:
-        >>> orderings([1, 2, 1])
-        ([(0, 2, 1), (2, 0, 1)], 2)
-    """
-    if limit < 1:
-        raise ValueError(f"`limit` must be >= 1, got {limit}")
-    groups = [[i for i, lv in enumerate(levels) if lv == g] for g in sorted(set(levels))]
-    total = math.prod(math.factorial(len(g)) for g in groups)
-    perms = (itertools.permutations(g) for g in groups)
-    out = [tuple(itertools.chain.from_iterable(p)) for p in itertools.islice(itertools.product(*perms), limit)]
-    return out, total
-
-
-def _signature_parts(cubes: Sequence[Cube]) -> list[list[tuple]]:
-    """Per cube, its signature entries with original target indices (bbox targets already sided)."""
-    parts = []
-    for cube in cubes:
-        ent: list[tuple] = []
-        for m in cube.moves:
-            if type(m) is AttachLine:
-                ent.append(("att", bbox_side(m.y2) if m.target == BBOX else (m.target,)))
-            else:
-                s1, s2 = squeeze_sides(m)
-                ent.append(("squeeze", s1 if m.t1 == BBOX else (m.t1,), s2 if m.t2 == BBOX else (m.t2,)))
-        if cube.sym is not None:
-            ent.append(("ref",) if type(cube.sym) is ReflectLine else ("trans",))
-        parts.append(ent)
-    return parts
-
-
-def _signature(parts, perm, intern: dict) -> Signature:
-    pos = {c: i for i, c in enumerate(perm)}
-    out = []
-    for i, c in enumerate(perm):
-        for e in parts[c]:
-            if len(e) == 1:
-                t = (e[0], i)
-            else:
-                t = (e[0], i) + tuple(x if isinstance(x, int) else pos[x[0]] for x in e[1:])
-            out.append(intern.setdefault(t, t))
-    sig = tuple(out)
-    return intern.setdefault(sig, sig)
-
-
 def _parse_block(block: Block) -> tuple[CuboidLine, list[Cube], list[int], bool]:
     """Cubes with all their text moves (no cleanup); the cubes' attach-point distances; and whether the
     text's statement order could execute differently from a grounded PBlock order."""
@@ -453,10 +257,6 @@ def _max_error(a: dict, b: dict) -> float:
 
 def _first_order_error(block: Block, bbox, cubes, names) -> float:
     """Corner difference between the block as written and its first grounded PBlock order."""
-    import torch
-
-    from ..execute import execute_batch
-
     levels = _levels(cubes, names)
     perm = orderings(levels, 1)[0][0]
     sub = SubProgram("", 0, block.name, None, bbox, tuple(cubes), tuple(levels), (Ordering(perm, ()),), 1)
@@ -541,10 +341,6 @@ def convert_block(program: Program, block: str, category: str = "", shape_id: in
 
 def _dropped_error(block: Block, bbox, cubes, trial, names) -> float:
     """Corner difference between the first orders of two cube lists (the original and a cleaned one)."""
-    import torch
-
-    from ..execute import execute_batch
-
     subs = []
     for cs in (cubes, trial):
         levels = _levels(cs, names)
@@ -623,10 +419,6 @@ class CorpusData:
 
 def _convert_ids(category: str, ids: list[int], cleanup: str, max_orders: int) -> Conversion:
     """Worker: read, parse and convert some corpus programs (module level, so process pools can run it)."""
-    from .. import corpus
-    from ..errors import ParseError
-    from ..lang import parse
-
     out = Conversion()
     intern: dict = {}
     for i in ids:
@@ -660,8 +452,6 @@ def convert_corpus(categories: Iterable[str] = ("chair", "table", "storage"), sp
     Returns:
         The :class:`CorpusData`; equal signatures are shared objects across the whole result.
     """
-    from .. import corpus
-
     if cleanup not in CLEANUP_MODES:
         raise ValueError(f"unknown cleanup {cleanup!r}; expected one of {', '.join(CLEANUP_MODES)}")
     if max_orders < 1:
@@ -718,10 +508,6 @@ def order_errors(items: Sequence[tuple[SubProgram, Program]], max_orders: int | 
     Raises:
         LineError: an ordering that is not an executable sequence (e.g. a cube before its targets).
     """
-    import torch
-
-    from ..execute import execute_batch
-
     dtype = torch.float32 if dtype is None else dtype
     jobs = []  # (item index, program, keys, is_reference)
     for n, (sub, prog) in enumerate(items):

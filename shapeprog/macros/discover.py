@@ -36,317 +36,28 @@ writes them inlined into their callers.
 from __future__ import annotations
 
 import copy
-import hashlib
-import json
 import math
 import time
 from concurrent.futures import Executor
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from shapeio.files import parse_json
+from shapeio import atomic_write
 
 from ..errors import ParseError
-from .grammar import Line
 from .lang import BASE, MacroDef, check_def, def_text
 from .library import Library
-from .objective import WEIGHTS, beam_search, exact_search, fit_options, templates
+from .objective import templates
 from .proposal import PROPOSAL_TRIES, Candidate, gain, generalise, heur_score, propose_step
+from .config import DEFAULTS
+from .state import Discovery, Nodes, _map, _options_chunk, evaluate
 
-__all__ = ["DEFAULTS", "Discovery", "Nodes", "discover", "evaluate", "load_config", "nodes_from_subprograms",
-           "prior_rounds"]
-
-#: The spec's defaults (``configs/shapemod/default.yaml`` holds the same values).
-DEFAULTS: dict = {
-    "num_rounds": 5, "cand_cluster_num": 10000, "cand_cluster_size": 20, "cand_abs_num": 20, "cand_max_changes": 2,
-    "cand_max_error": 0.05, "cand_max_avg_error": 0.02, "cand_max_lines": 4, "abs_shape_num": 1000,
-    "abs_order_num": 1000, "abs_beam_size": 10, "abs_max_error": 0.06, "abs_add_threshold": 0.05,
-    "order_thresh": 1.0, "func_change_thresh": 0.5, "err_shape_perc": 0.7, "err_const_perc": 0.9, "prec": 2,
-    "scale_prec": 20, "cluster_eps": 0.05, "gen_limit": 300, "selection": "greedy", "search": "beam",
-    "milp_pool": 60, "milp_time_limit": 120, "milp_warm": True, "chunk": 50,
-}
-_CHOICES = {"selection": ("greedy", "milp"), "search": ("beam", "exact")}
-#: The range of every numeric setting (inclusive): a value outside is refused when the config is loaded.
-LIMITS: dict = {
-    "num_rounds": (0, 100), "cand_cluster_num": (1, 10**6), "cand_cluster_size": (1, 10**4), "cand_abs_num": (1, 10**4),
-    "cand_max_changes": (0, 100), "cand_max_error": (0.0, 10.0), "cand_max_avg_error": (0.0, 10.0),
-    "cand_max_lines": (1, 100), "abs_shape_num": (1, 10**6), "abs_order_num": (1, 10**6), "abs_beam_size": (1, 1000),
-    "abs_max_error": (0.0, 10.0), "abs_add_threshold": (0.0, 10.0), "order_thresh": (0.0, 10.0),
-    "func_change_thresh": (0.0, 10.0), "err_shape_perc": (0.0, 1.0), "err_const_perc": (0.0, 1.0), "prec": (0, 10),
-    "scale_prec": (1, 10**4), "cluster_eps": (0.0, 10.0), "gen_limit": (1, 10**6), "milp_pool": (1, 10**4),
-    "milp_time_limit": (1, 10**6), "chunk": (1, 10**6),
-}
-
-
-#: Bytes of a config file (the shipped ones: under 2 KB); a larger file is refused before it is read.
-MAX_CONFIG_BYTES = 1 << 20
-#: Characters of a value shown in an error (a longer one is cut).
-_SHOWN = 60
-
-
-def _shown(value) -> str:
-    text = repr(value)
-    return text if len(text) <= _SHOWN else f"{text[:_SHOWN]}... ({len(text)} characters)"
-
-
-def load_config(path: str | Path | None = None, **overrides) -> dict:
-    """The defaults, updated from a YAML file and then ``overrides``.
-
-    The file may hold at most :data:`MAX_CONFIG_BYTES` and no YAML alias (``*name``), so that what it loads
-    to is no larger than its text.
-
-    Raises:
-        ParseError: an unknown key or a value of the wrong type, naming the file and the key; a file over
-            :data:`MAX_CONFIG_BYTES`, an alias.
-    """
-    cfg = dict(DEFAULTS)
-    items: list[tuple[str, object, str, int, int]] = []  # key, value, file, line, column
-    if path is not None:
-        import yaml
-
-        from ..limits import decode
-        with open(path, "rb") as f:
-            raw = f.read(MAX_CONFIG_BYTES + 1)
-        if len(raw) > MAX_CONFIG_BYTES:
-            raise ParseError(f"a config has at most {MAX_CONFIG_BYTES} bytes (MAX_CONFIG_BYTES)", str(path), 1, 1, "")
-        text = decode(raw, str(path))
-        try:
-            alias = next((e for e in yaml.parse(text) if isinstance(e, yaml.AliasEvent)), None)
-            if alias is None:
-                data = yaml.safe_load(text)
-            node = yaml.compose(text)
-        except yaml.YAMLError as e:
-            mark = getattr(e, "problem_mark", None)
-            line, col = (mark.line + 1, mark.column + 1) if mark is not None else (1, 1)
-            raise ParseError(f"not YAML: {getattr(e, 'problem', None) or e}", str(path), line, col, "") from None
-        except (ValueError, RecursionError) as e:  # an integer of too many digits, nesting too deep
-            raise ParseError(f"not a config: {type(e).__name__}: {str(e)[:120]}", str(path), 1, 1, "") from None
-        if alias is not None:  # each alias could repeat a large value: a few lines could load to gigabytes
-            mark = alias.start_mark
-            raise ParseError(f"YAML aliases (*{alias.anchor[:_SHOWN]}) are not allowed in a config", str(path),
-                             mark.line + 1, mark.column + 1, f"*{alias.anchor}"[:_SHOWN])
-        if node is None:  # an empty file, or comments only: the defaults
-            data, node = {}, yaml.MappingNode("tag:yaml.org,2002:map", [])
-        if not isinstance(data, dict) or not isinstance(node, yaml.MappingNode):
-            raise ParseError("a config is a mapping of settings", str(path), 1, 1, "")
-        marks = {k.value: (k.start_mark.line + 1, k.start_mark.column + 1) for k, _ in node.value
-                 if isinstance(k, yaml.ScalarNode)}
-        items += [(k, v, str(path), *marks.get(str(k), (1, 1))) for k, v in data.items()]
-    items += [(k, v, "<overrides>", 1, 1) for k, v in overrides.items() if v is not None]
-    for k, v, where, line, col in items:
-        if k not in DEFAULTS:
-            raise ParseError(f"unknown setting {_shown(k)}", where, line, col, str(k)[:_SHOWN])
-        want = type(DEFAULTS[k])
-        if want is float and isinstance(v, int) and not isinstance(v, bool):
-            v = float(v)
-        if not isinstance(v, want) or isinstance(v, bool) != (want is bool):
-            raise ParseError(f"setting {_shown(k)} must be {want.__name__}, got {_shown(v)}", where, line, col,
-                             str(k)[:_SHOWN])
-        if k in _CHOICES and v not in _CHOICES[k]:
-            raise ParseError(f"setting {k!r} must be one of {_CHOICES[k]}, got {_shown(v)}", where, line, col, str(k))
-        if k in LIMITS and not LIMITS[k][0] <= v <= LIMITS[k][1]:
-            raise ParseError(f"setting {k!r} must be in {LIMITS[k][0]}..{LIMITS[k][1]}, got {v!r}", where, line, col,
-                             str(k))
-        cfg[k] = v
-    return cfg
-
-
-@dataclass
-class Nodes:
-    """The collection: per sub-program its key, its orderings' lines and their signatures."""
-
-    keys: list[str]
-    lines: list[list[tuple[Line, ...]]]
-    sigs: list[list[tuple]]
-
-    def digest(self) -> str:
-        h = hashlib.sha256()
-        for k, ls in zip(self.keys, self.lines):
-            h.update(f"{k}:{len(ls)};".encode())
-        return h.hexdigest()[:16]
-
-
-def nodes_from_subprograms(subs, max_orders: int = 1000) -> Nodes:
-    """:class:`Nodes` from :class:`~shapeprog.macros.data.SubProgram` s (their first ``max_orders``
-    orderings)."""
-    keys, lines, sigs = [], [], []
-    for s in subs:
-        if not s.orders or not s.cubes:
-            continue
-        os = s.orders[:max_orders]
-        keys.append(s.key)
-        lines.append([s.lines(o) for o in os])
-        sigs.append([o.signature for o in os])
-    return Nodes(keys, lines, sigs)
-
-
-# ----------------------------------------------------------------------------- evaluation (the hot spot)
-
-
-def _eval_chunk(lib_text: str, active: tuple[str, ...], items: list[list[tuple[Line, ...]]], cfg: dict,
-                per_order: bool):
-    """Worker: best programs of some sub-programs. Returns per item (f, called function names) or, with
-    ``per_order``, per item the f of every ordering."""
-    lib = Library.from_text(lib_text) if lib_text else Library()
-    tpls = templates(lib)
-    tpls = [t for t in tpls if t.name in BASE or t.name in active]
-    nm = len(active)
-    out = []
-    for orders in items:
-        scores = []
-        best, best_f = (), math.inf
-        for lines in orders:
-            opts = fit_options(lines, tpls, cfg["abs_max_error"], cfg["prec"])
-            if cfg["search"] == "beam":
-                calls, f = beam_search(opts, nm, cfg["abs_beam_size"])
-            else:
-                calls, f = exact_search(opts, nm)
-            scores.append(f)
-            if f < best_f:
-                best, best_f = calls, f
-        out.append(scores if per_order else (best_f, [o.func for o in best]))
-    return out
-
-
-def _map(executor: Executor | None, fn, chunks: list) -> list:
-    if executor is None:
-        return [fn(*c) for c in chunks]
-    futs = [executor.submit(fn, *c) for c in chunks]
-    return [f.result() for f in futs]
-
-
-def evaluate(library: Library, active: Sequence[str], items: Sequence[Sequence[tuple[Line, ...]]], cfg: Mapping,
-             executor: Executor | None = None, per_order: bool = False):
-    """Best programs of ``items`` (each a list of orderings' lines) under ``library`` restricted to
-    ``active`` macros, through ``executor`` in chunks of ``cfg['chunk']``.
-
-    Returns:
-        ``(mean f, usage)`` with usage the number of calls per function, or with ``per_order`` the list
-        of per-ordering f of every item.
-    """
-    text = library.to_text()
-    ch = max(1, int(cfg["chunk"]))
-    chunks = [(text, tuple(active), list(items[i:i + ch]), dict(cfg), per_order) for i in range(0, len(items), ch)]
-    res = [r for part in _map(executor, _eval_chunk, chunks) for r in part]
-    if per_order:
-        return res
-    usage: dict[str, int] = {}
-    for _, funcs in res:
-        for f in funcs:
-            usage[f] = usage.get(f, 0) + 1
-    return float(np.mean([f for f, _ in res])) if res else 0.0, usage
-
-
-def _options_chunk(lib_text: str, names: tuple[str, ...], items, cfg: dict):
-    """Worker for the milp: per item, per ordering, (n lines, [(func, pos, k, cost + 10 * error)])."""
-    lib = Library.from_text(lib_text) if lib_text else Library()
-    tpls = [t for t in templates(lib) if t.name in BASE or t.name in names]
-    out = []
-    for orders in items:
-        per = []
-        for lines in orders:
-            opts = fit_options(lines, tpls, cfg["abs_max_error"], cfg["prec"])
-            per.append((len(lines), [(o.func, o.pos, o.k, o.cost + WEIGHTS["err"] * o.error)
-                                     for row in opts for o in row]))
-        out.append(per)
-    return out
-
-
-# ----------------------------------------------------------------------------- state
-
-
-@dataclass
-class Discovery:
-    """The state of a discovery run.
-
-    Attributes:
-        macros: every accepted macro in definition order (``nfunc_<k>``).
-        active: the names of the macros in L.
-        current: per node, the indices of its current orderings.
-        history: per finished round, a dict of figures (f before/after, |L|, candidates, seconds...).
-        counter: the next macro number.
-    """
-
-    macros: list[MacroDef]
-    active: list[str]
-    current: list[list[int]]
-    history: list[dict] = field(default_factory=list)
-    counter: int = 0
-
-    def full_library(self) -> Library:
-        return Library(self.macros)
-
-    def library(self) -> Library:
-        """L as a library: the active macros, where each one that calls a removed macro is inlined to base
-        calls (so the library holds exactly |L| - 5 macros)."""
-        full = self.full_library()
-        active = set(self.active)
-        out = []
-        for m in self.macros:
-            if m.name not in active:
-                continue
-            if any(c.func not in BASE and c.func not in active for c in m.body):
-                m = full.expand_macro(m.name)
-            out.append(m)
-        return Library(out)
-
-    def digest(self) -> str:
-        """A digest of the macros, active set and history (what a continued run starts from)."""
-        key = json.dumps([Library(self.macros).to_text(), self.active, self.history], sort_keys=True)
-        return hashlib.sha256(key.encode()).hexdigest()[:16]
-
-    def to_json(self, nodes_digest: str, cfg: Mapping, seed: int, start: str | None = None) -> str:
-        return json.dumps({"format": "shapemod-discovery/1", "nodes": nodes_digest, "seed": seed, "config": dict(cfg),
-                           "start": start,
-                           "library": Library(self.macros).to_text(), "active": self.active, "current": self.current,
-                           "history": self.history, "counter": self.counter}, indent=1)
-
-    @classmethod
-    def from_library(cls, library: Library, nodes: "Nodes", prior: Sequence[float] = (),
-                     source: str = "library") -> "Discovery":
-        """A state that continues discovery from ``library`` (a shipped or earlier library): its macros, all
-        active; every ordering of every node (:func:`discover` runs filterBadOrders with the library before
-        its first round, as the end of a round does, since a library file does not record the orderings);
-        one history entry per ``prior`` round (its f per sub-program, from the library's header), so the
-        rounds that follow are numbered, and seeded, after them. New macros are numbered after the
-        largest ``nfunc_<k>`` of the library."""
-        nums = [int(m.name[6:]) for m in library.macros if m.name.startswith("nfunc_") and m.name[6:].isdigit()]
-        history = [{"round": k + 1, "f_after": float(f), "from": source} for k, f in enumerate(prior)]
-        return cls(list(library.macros), [m.name for m in library.macros],
-                   [list(range(len(ls))) for ls in nodes.lines], history, max(nums, default=-1) + 1)
-
-    @classmethod
-    def from_json(cls, text: str, file: str = "state.json") -> tuple["Discovery", dict]:
-        d = parse_json(text, file, ParseError.in_file(file))
-        if not isinstance(d, dict) or d.get("format") != "shapemod-discovery/1":
-            raise ParseError("not a shapemod discovery state", file, 1, 1, "")
-        try:
-            fields = [("library", isinstance(d["library"], str)),
-                      ("active", isinstance(d["active"], list) and all(isinstance(a, str) for a in d["active"])),
-                      ("current", isinstance(d["current"], list) and all(
-                          isinstance(c, list) and all(type(o) is int and o >= 0 for o in c) for c in d["current"])),
-                      ("history", isinstance(d["history"], list) and all(isinstance(h, dict) for h in d["history"])),
-                      ("counter", type(d["counter"]) is int and d["counter"] >= 0),
-                      ("config", isinstance(d["config"], dict)), ("nodes", isinstance(d["nodes"], str))]
-            bad = [k for k, ok in fields if not ok]
-            if bad:
-                raise TypeError(f"field {bad[0]!r} does not hold what a discovery state writes there")
-            lib = Library.from_text(d["library"], file) if d["library"] else Library()
-            state = cls(list(lib.macros), [str(a) for a in d["active"]], [[int(o) for o in c] for c in d["current"]],
-                        list(d["history"]), int(d["counter"]))
-            for k in ("nodes", "seed", "config"):
-                d[k]
-        except (KeyError, TypeError, ValueError) as e:
-            if isinstance(e, ParseError):
-                raise
-            raise ParseError(f"a damaged discovery state ({type(e).__name__}: {e})", file, 1, 1, "") from None
-        unknown = [a for a in state.active if a not in lib]
-        if unknown:
-            raise ParseError(f"active macro {unknown[0]!r} is not defined", file, 1, 1, unknown[0])
-        return state, d
+__all__ = [
+    "discover",
+    "prior_rounds",
+]
 
 
 # ----------------------------------------------------------------------------- a round
@@ -470,8 +181,8 @@ def _greedy(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub,
 
 
 def _milp(nodes, state: Discovery, lib: Library, cands: dict, comp: dict, sub, cfg, executor, log):
-    from scipy.optimize import Bounds, LinearConstraint, milp
-    from scipy.sparse import coo_matrix
+    from scipy.optimize import Bounds, LinearConstraint, milp  # lazy: scipy only for the milp selection
+    from scipy.sparse import coo_matrix  # lazy: as above
     f_start, _ = evaluate(lib, state.active, sub, cfg, executor)
     f_prev = f_start
     if cfg["milp_warm"]:  # the greedy picks first: the milp then starts from them and cannot end worse
@@ -707,6 +418,5 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
             log(f"round {rnd + 1} done: f {f0:.3f} -> {f2:.3f}, |L| = {5 + len(state.active)}, "
                 f"{dropped} orderings dropped, {time.time() - t0:.0f} s")
         if path is not None:
-            from shapeio import atomic_write
             atomic_write(path, state.to_json(digest, cfg, seed, start_digest), mkdir=True)
     return state

@@ -30,7 +30,7 @@ import torch
 from ..execute import ExecutedShape, ExecutionPlan
 from ..lang import Program
 from .grammar import TranslateLine, to_shapeassembly
-from .hierarchy import as_hierarchy, is_hierarchy_text, rename_block
+from .hierarchy import as_hierarchy, is_hierarchy_text, parse as parse_hierarchy, rename_block
 from .lang import MacroProgram, parameters
 from .library import Expansion, Library, as_macro_program
 
@@ -158,8 +158,6 @@ def execute(program: MacroProgram, library: Library | None = None, params: torch
     """
     h = as_hierarchy(program)
     if h is None and isinstance(program, str) and is_hierarchy_text(program):
-        from .hierarchy import parse as parse_hierarchy
-
         h = parse_hierarchy(program, library=library)
     if h is not None:
         return execute_hierarchy(h, library, params, dtype, device)

@@ -37,10 +37,20 @@ import dataclasses
 import re
 from dataclasses import dataclass
 
+from .. import limits
 from ..errors import ParseError
-from .lang import MacroProgram, def_text, to_text as program_text
+from ..lang import Attach, Block, Cuboid, Squeeze, block_rows
+from .grammar import to_shapeassembly
+from .lang import MacroProgram, to_text as program_text
+from .library import Library, _parse_block
 
-__all__ = ["HEADER", "MacroHierarchy", "is_hierarchy_text", "parse", "to_text"]
+__all__ = [
+    "HEADER",
+    "MacroHierarchy",
+    "is_hierarchy_text",
+    "parse",
+    "to_text",
+]
 
 #: A block's header line: ``# <key>``, the key ending in the block's name ``Program_k``.
 HEADER = re.compile(r"#[ \t]*(?P<key>(?:\S*/)?(?P<name>Program_\d+))[ \t]*")
@@ -133,8 +143,6 @@ def check(h: MacroHierarchy, file: str = "<string>", header_lines=None) -> None:
 def rename_block(block, names, block_name: str):
     """A block's flat expansion with its cuboids named as the macro program binds them (``names``, per
     non-bbox Cuboid line), declarations first; and the expansion line of each statement of the result."""
-    from ..lang import Attach, Block, Cuboid, Squeeze
-
     old = [s.name for s in block.statements if isinstance(s, Cuboid)][1:]
     m = dict(zip(old, names))
     m["bbox"] = "bbox"
@@ -161,11 +169,6 @@ def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header
     """The ShapeAssembly limits of the program the hierarchy expands to (:func:`shapeprog.limits.check_tree`:
     sub-program depth, executed cuboids and attach operations), each error at its block's header line.
     ``expansions``: each block's :meth:`~shapeprog.macros.library.Library.expand` when the caller has them."""
-    from .. import limits
-    from ..lang import Cuboid, block_rows
-    from .grammar import to_shapeassembly
-    from .library import Library
-
     lib = Library() if library is None else library
     header_lines = block_line_offsets(h) if header_lines is None else header_lines
     blocks, parent = {}, {}
@@ -183,25 +186,6 @@ def check_limits(h: MacroHierarchy, library=None, file: str = "<string>", header
     limits.check_tree(blocks, parent, file)
 
 
-def _parse_block(body: str, file: str, lib) -> tuple:
-    """``(program, expansion)`` of one block: on its own (it carries its definitions, which may repeat the
-    library's), else with the library's functions."""
-    from .lang import MacroError
-    from .library import Library
-
-    try:
-        program, exp = Library().parse_expanded(body, file)
-    except ParseError:
-        return lib.parse_expanded(body, file)
-    try:
-        lib.with_program(program)  # the same definitions as the library's: the same expansion
-    except MacroError as e:
-        d = next(k for k, d in enumerate(program.defs) if d.name == e.macro)
-        line = 1 + sum(x.count("\n") + 1 for x in map(def_text, program.defs[:d]))
-        raise ParseError(e.reason, file, line, 5, e.macro) from None
-    return program, exp
-
-
 def parse(text: str, file: str = "<string>", library=None) -> MacroHierarchy:
     """Parse a hierarchical macro program; each block with ``library``
     (:meth:`shapeprog.macros.library.Library.parse`, which also checks that it expands).
@@ -209,8 +193,6 @@ def parse(text: str, file: str = "<string>", library=None) -> MacroHierarchy:
     Raises:
         ParseError: with the line in the whole text (syntax, names, types, expansion, block structure).
     """
-    from .library import Library
-
     lib = Library() if library is None else library
     lines = text.split("\n")
     starts = [i for i, ln in enumerate(lines) if HEADER.fullmatch(ln)]

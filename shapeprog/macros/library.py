@@ -393,8 +393,6 @@ def as_macro_program(program, library: Library | None = None, call: str = "this 
     if isinstance(program, MacroProgram):
         return program
     if isinstance(program, str):  # it may carry definitions that repeat the library's (a refactored block)
-        from .hierarchy import _parse_block
-
         return _parse_block(program, "<string>", Library() if library is None else library)[0]
     name = type(program).__name__
     if name == "Program":
@@ -412,3 +410,18 @@ def parse(text: str, library: Library | None = None, file: str = "<string>") -> 
     """Parse a macro program that may call ``library``'s functions (:meth:`Library.parse`)."""
     return (Library() if library is None else library).parse(text, file)
 
+
+def _parse_block(body: str, file: str, lib) -> tuple:
+    """``(program, expansion)`` of one block: on its own (it carries its definitions, which may repeat the
+    library's), else with the library's functions."""
+    try:
+        program, exp = Library().parse_expanded(body, file)
+    except ParseError:
+        return lib.parse_expanded(body, file)
+    try:
+        lib.with_program(program)  # the same definitions as the library's: the same expansion
+    except MacroError as e:
+        d = next(k for k, d in enumerate(program.defs) if d.name == e.macro)
+        line = 1 + sum(x.count("\n") + 1 for x in map(def_text, program.defs[:d]))
+        raise ParseError(e.reason, file, line, 5, e.macro) from None
+    return program, exp

@@ -45,7 +45,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .grammar import BBOX, AttachLine, CuboidLine, Line, ReflectLine, SqueezeLine, command
-from .lang import AXIS, BB_DIMS, BOOL, CUBE, FACE, FLOAT, Call, Linear, Literal, MacroProgram, Name
+from .lang import AXIS, BB_DIMS, BOOL, CUBE, FACE, FLOAT, Call, Linear, Literal, MacroProgram, Name, BASE
 from .library import Library
 
 __all__ = [
@@ -137,7 +137,6 @@ def template(library: Library, name: str, weights: Mapping[str, float] = WEIGHTS
     floats, cubes, cats, rows, bbs, consts = [], [], [], [], [], []
     uses = [0] * len(fidx)
     plain = [True] * len(fidx)
-    from .lang import BASE
     for call in defn.body:
         info = BASE[call.func]
         fl, cu, ca = [], [], []

@@ -33,8 +33,9 @@ import numpy as np
 import torch
 
 from ..execute import ExecutionPlan
-from .execute import _N_NUMBERS, compile_hierarchy
+from .execute import _N_NUMBERS, compile_hierarchy, hierarchy_parameters
 from .grammar import TranslateLine
+from .lang import parameters
 from .library import Library
 
 __all__ = ["COORD_RANGE", "MIN_DIM", "PerturbablePrograms", "continuous_mask"]
@@ -49,7 +50,6 @@ def continuous_mask(h, library: Library | None = None) -> np.ndarray:
     """``(P,) bool``: which free parameters of hierarchical macro program ``h`` are continuous (module
     docstring): not a block's bbox floats, not feeding a translate count."""
     masks = []
-    from .lang import parameters
 
     for p in h.programs:
         lib = (Library() if library is None else library).with_program(p)
@@ -77,8 +77,6 @@ class PerturbablePrograms:
     """
 
     def __init__(self, programs: Sequence, library: Library | None = None):
-        from .execute import hierarchy_parameters
-
         self.compiled = [compile_hierarchy(h, library) for h in programs]
         self.params = [hierarchy_parameters(h, torch.float64) for h in programs]
         self.masks = [torch.from_numpy(continuous_mask(h, library)) for h in programs]

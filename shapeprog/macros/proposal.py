@@ -26,8 +26,10 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .grammar import BBOX, CuboidLine, Line, command, float_params
-from .lang import (AXIS, BB_DIMS, BOOL, CUBE, FACE, FLOAT, Call, Linear, Literal, MacroDef, MacroError, Name, Param,
-                   check_def, def_text)
+from .lang import (
+    AXIS, BB_DIMS, BOOL, CUBE, FACE, FLOAT, Call, Linear, Literal, MacroDef, MacroError, Name, Param,
+    check_def, def_text, BASE,
+)
 from .library import Library
 from .objective import WEIGHTS, Template, fit, interface_cost
 
@@ -57,7 +59,6 @@ class Candidate:
 
 def base_cost(structure: Sequence[str], weights: Mapping[str, float] = WEIGHTS) -> float:
     """f of the base calls of ``structure``: 8 per line plus their interfaces."""
-    from .lang import BASE
     return sum(weights["fn"] + interface_cost(BASE[c].params, weights) for c in structure)
 
 

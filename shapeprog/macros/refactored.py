@@ -23,6 +23,7 @@ Example:
 """
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import lzma
@@ -32,14 +33,27 @@ import tarfile
 import tempfile
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+import torch
 
+from shapeio import write_new, InputError
 from shapeio.files import parse_json
 
-from .lang import MacroError
+from .. import corpus
+from ..errors import ExecutionError, ParseError
+from ..execute import execute as sa_execute
+from ..lang import parse
+from ..limits import decode
+from . import hierarchy
+from .api import program_stats, refactor
+from .data import convert_program
+from .execute import execute_hierarchy
+from .lang import MacroError, from_lines
+from .library import Library
 
 __all__ = ["CHUNK", "CHECK_TOL", "MAX_ARCHIVE_BYTES", "SHIPPED", "SUMMARY", "RefactoredCorpus", "ShapeRefactor", "check_target", "load_refactored",
            "read_refactored", "refactor_corpus", "refactor_texts", "write_refactored"]
@@ -122,7 +136,7 @@ def _leaf_error(got, want) -> float:
     """The corner distance between two sets of leaf cuboids ``(L, 8, 3)``: the largest coordinate
     difference of corresponding corners (L-infinity), over the cuboids matched one to one by the assignment
     minimising the summed per-cuboid distances; inf when the counts differ."""
-    from scipy.optimize import linear_sum_assignment
+    from scipy.optimize import linear_sum_assignment  # lazy: scipy only when a refactor is checked
 
     a, b = got.detach().double().numpy(), want.detach().double().numpy()
     if a.shape != b.shape:
@@ -135,8 +149,6 @@ def _leaf_error(got, want) -> float:
 
 
 def _counts(programs, library) -> dict:
-    from .api import program_stats
-
     out = dict.fromkeys(_COUNTS, 0)
     for p in programs:
         st = program_stats(p, library)
@@ -147,18 +159,6 @@ def _counts(programs, library) -> dict:
 
 def _one(category: str, shape_id: int, text: str, library, mode: str, max_orders: int,
          check: bool) -> ShapeRefactor:
-    import torch
-
-    from ..errors import ExecutionError, ParseError
-    from ..execute import execute as sa_execute
-    from ..lang import parse
-    from . import hierarchy
-    from .api import refactor
-    from .data import convert_program
-    from .execute import execute_hierarchy
-    from .lang import from_lines
-    from .library import Library
-
     file = f"{category}/{shape_id}.txt"
 
     def failed(reason: str) -> ShapeRefactor:
@@ -244,8 +244,6 @@ def refactor_corpus(category: str, library, library_name: str = "", split: str =
     Raises:
         ValueError: an unknown category or split, or an id that is not in the corpus.
     """
-    from .. import corpus
-
     given = ids is not None
     if not given:
         ids = corpus.ids(category, split)
@@ -259,7 +257,6 @@ def refactor_corpus(category: str, library, library_name: str = "", split: str =
         except KeyError:
             raise ValueError(f"no program {category}/{i} in the corpus") from None
     shapes = refactor_texts(category, items, library, executor, chunk, mode, max_orders, check)
-    import hashlib
 
     meta = {"library_sha256": hashlib.sha256(library.to_text().encode("utf-8")).hexdigest(),
             "split": None if given else split, "ids": len(ids) if given else None, "limit": limit, "seed": seed,
@@ -320,8 +317,6 @@ def write_refactored(result: RefactoredCorpus, out, command: str | None = None) 
         FileExistsError: ``out`` exists (a folder: is not empty; checked before and at the rename).
         FileNotFoundError: ``out``'s parent folder does not exist.
     """
-    from shapeio import write_new
-
     out = Path(out)
     check_target(out)
     if _is_archive(out):
@@ -361,8 +356,6 @@ def load_refactored(category: str, ids: Sequence[int] | None = None) -> tuple[di
     Raises:
         ValueError: none is shipped for ``category``.
     """
-    from importlib import resources
-
     if category not in SHIPPED:
         raise ValueError(f"no shipped refactored corpus for {category!r} (shipped: {', '.join(SHIPPED)})")
     ref = resources.files("shapeprog").joinpath("data", SHIPPED[category])
@@ -376,8 +369,6 @@ def _decompress(path: Path) -> bytes:
     Raises:
         shapeio.InputError: larger than the limit, truncated, or not xz.
     """
-    from shapeio import InputError
-
     d = lzma.LZMADecompressor()
     out = d.decompress(path.read_bytes(), max_length=MAX_ARCHIVE_BYTES + 1)
     if len(out) > MAX_ARCHIVE_BYTES:
@@ -404,11 +395,6 @@ def read_refactored(path, library=None, ids: Sequence[int] | None = None) -> tup
             :data:`MAX_ARCHIVE_BYTES`), a summary that is not a JSON object.
         FileNotFoundError: no such folder or archive.
     """
-    from shapeio import InputError
-
-    from ..limits import decode
-    from . import hierarchy
-
     path = Path(path)
     files: dict[str, bytes] = {}
     if path.is_dir():

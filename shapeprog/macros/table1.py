@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import time
 from concurrent.futures import Executor
+from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
@@ -108,7 +109,6 @@ def table1(categories: Sequence[str] = ("chair",), limit: int | None = None, see
                 "Baseline": baseline_library([ls[0] for ls in nodes.lines])}
         files = dict(library_files or {})
         if cat in files:
-            from pathlib import Path
             libs["ShapeMOD"] = Library.from_text(Path(files[cat]).read_text(encoding="utf-8"), files[cat])
         else:
             try:

@@ -26,7 +26,8 @@ from __future__ import annotations
 from shapeio.points import read_cloud
 from shapeprog.errors import PointCloudError
 
-from .data import CloudDataset, collate_clouds, corpus_cloud, load_cache, make_clouds, program_cloud
+from .data import corpus_cloud, make_clouds, program_cloud
+from .dataset import CloudDataset, collate_clouds, load_cache
 from .encoder import PointNet2SSG, SetAbstraction
 from .infer import CloudModel, Inference, infer, load_model
 from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program

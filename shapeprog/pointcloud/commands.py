@@ -237,7 +237,7 @@ def cmd_make_clouds(args) -> int:
 
 def cmd_export_weights(args) -> int:
     # the training module imports Lightning, needed only to read a training checkpoint
-    from .train import export_weights
+    from .train import export_weights  # lazy: the training module brings Lightning
 
     check_outputs(others=[args.out])
     refuse_inputs([args.out], [args.checkpoint])

@@ -40,8 +40,9 @@ from typing import Optional
 import numpy as np
 import torch
 
+from shapeio.weights import read_weights
+
 from ..errors import PointCloudError
-from ..execute import execute
 from ..geometry import CORNER_SIGNS
 from ..fit import fit as fit_program
 from ..lang import Program, to_text
@@ -52,7 +53,14 @@ from ..vae.model import VAE
 from ..vae.pretrained import load_pretrained as load_vae
 from .data import TRAIN_POINTS
 from .encoder import PointNet2SSG
-from .normalize import CANONICAL_DIAGONAL, Transform, normalize, scale_program
+from .normalize import CANONICAL_DIAGONAL, Transform, _corners_of, align_program, normalize, scale_program
+from .search import (SEARCH_POINTS, SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule, selection_chamfers,
+                     selection_target)
+from ..macros.library import Library
+from ..physics import rootedness, stability as stable_fn
+from ..vae.layout import LineLayout
+from ..vae.macro_decode import decode_macro
+from ..vae.macro_model import MacroVAE
 
 __all__ = ["DEFAULT_METHOD", "ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MAX_DIAGONAL", "METHODS", "MIN_DIAGONAL",
            "MIN_POINTS", "POLISH_STEPS", "PRETRAINED", "RETRIEVAL_CANDIDATES", "ROBUST_CANDIDATES", "ROBUST_SUBSETS",
@@ -135,7 +143,6 @@ def cloud_corners(points, count: int = _PICTURE_POINTS, side: float = _PICTURE_C
     return p[:, None, :] + (side / 2) * signs[None]
 
 
-
 def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
     """Decode latents ``(B, H)`` with ``vae``'s decoder (non-rejecting validity decoding), None where decoding
     fails: programs (corpus frame); for a :class:`~shapeprog.vae.macro_model.MacroVAE` the expansions of its
@@ -144,7 +151,6 @@ def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
     if getattr(vae, "layout", None) is None:
         with torch.no_grad():
             return decode_programs(vae.decoder, codes)
-    from ..vae.macro_decode import decode_macro
 
     out = []
     with torch.no_grad():
@@ -204,17 +210,7 @@ class CloudModel(torch.nn.Module):
 
 def _read_weights(path, category: Optional[str] = None) -> tuple[dict, PointNet2SSG]:
     """The checked payload of a weights file and its encoder (float32, its recorded sizes)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such weights file")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:
-        raise ValueError(f"{path}: not a point-cloud model weights file (unreadable: {type(e).__name__})") from None
-    if not isinstance(payload, dict) or payload.get("format") != _FORMAT:
-        raise ValueError(f"{path}: not a point-cloud model weights file (format {_FORMAT!r})")
-    if int(payload.get("version", -1)) != _VERSION:
-        raise ValueError(f"{path}: weights file version {payload.get('version')!r}; this version reads {_VERSION}")
+    payload = read_weights(path, _FORMAT, _VERSION, what="point-cloud model weights file")
     cat = payload["category"]
     if category is not None and cat != category:
         raise ValueError(f"{path}: a model of category {cat!r}, not {category!r}")
@@ -248,10 +244,6 @@ def load_model(path, category: Optional[str] = None) -> CloudModel:
     try:
         if payload["recipe"] == "e2e":
             if payload.get("library") is not None:
-                from ..macros.library import Library
-                from ..vae.layout import LineLayout
-                from ..vae.macro_model import MacroVAE
-
                 library = Library.from_text(payload["library"], f"{path}:library")
                 vae = MacroVAE(LineLayout(library), int(payload["hidden_dim"]))
             else:
@@ -292,41 +284,6 @@ def text_unit(diagonal: float) -> float:
     return float(f"1e{round(math.log10(diagonal / CANONICAL_DIAGONAL))}")
 
 
-def _corners_of(program: Optional[Program]) -> torch.Tensor:
-    if program is None:
-        return torch.zeros(0, 8, 3)
-    try:
-        with torch.no_grad():
-            return execute(program).corners
-    except ValueError:
-        return torch.zeros(0, 8, 3)
-
-
-def align_program(program: Program, diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
-    """Scale ``program`` uniformly so that its executed cuboids' bounding box has ``diagonal``, and the offset
-    ``(3,) float64`` that moves that box's centre to the origin (executed points + offset = aligned shape).
-
-    Raises:
-        ValueError: the program executes to no cuboid.
-    """
-    return _align_executed(program, _corners_of(program), diagonal)
-
-
-def _align_executed(program: Program, corners: torch.Tensor,
-                    diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
-    """:func:`align_program` given the program's executed corners ``(L, 8, 3)``."""
-    c = corners.double()
-    if len(c) == 0:
-        raise ValueError("the program executes to no cuboid")
-    flat = c.reshape(-1, 3)
-    lo, hi = flat.min(0).values, flat.max(0).values
-    diag = float((hi - lo).norm())
-    if not diag > 0:
-        raise ValueError("the program's cuboids have no extent")
-    k = diagonal / diag
-    return scale_program(program, k), (-(lo + hi) / 2 * k).numpy()
-
-
 def shape_metrics(corners: torch.Tensor, target: torch.Tensor, points: int = METRIC_POINTS, seed: int = 0,
                   physics: bool = True, stability: bool = True) -> dict:
     """Chamfer distance (unsquared, both directions, eps 0), F-score at :data:`FSCORE_THRESHOLD`, rooted and
@@ -346,8 +303,6 @@ def shape_metrics(corners: torch.Tensor, target: torch.Tensor, points: int = MET
     out["cd"] = float(chamfer(pred, tgt, eps=0.0))
     out["fscore"] = float(fscore(pred, tgt, FSCORE_THRESHOLD))
     if physics:
-        from ..physics import rootedness, stability as stable_fn
-
         c = corners.detach().double().numpy()
         out["rooted"] = bool(rootedness(c))
         out["stable"] = bool(out["rooted"] and stable_fn(c)) if stability else None
@@ -545,7 +500,6 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
     code = model.codes(cloud[None])[0]
     searched = None
     if search:
-        from .search import SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule
 
         if search_schedule is None:
             schedule = SEARCH_SCHEDULE
@@ -792,7 +746,6 @@ def _check_retrieval(index, k, model) -> None:
     """Refuse a bad candidate count, an index of another category than ``model``'s, or one whose clouds have
     fewer points than the selection chamfer uses (a training shape would then be scored with fewer points
     than the decoded program, which biases the choice against it)."""
-    from .search import SEARCH_POINTS
 
     if isinstance(k, bool) or not isinstance(k, int) or k < 1:
         raise ValueError(f"retrieval_candidates must be an integer >= 1, got {k!r}")
@@ -813,7 +766,6 @@ def _retrieve(index, k, program: Optional[Program], cloud: torch.Tensor, unit: n
     the search has scored it already), a training program's from the first that many points of its reference
     cloud in the index (samples of the same cuboid surfaces in the same frame, so no program is executed until
     one is kept)."""
-    from .search import SEARCH_POINTS, selection_chamfers, selection_target
 
     matches = index.shortlist(cloud.double(), k)
     target = selection_target(unit, SEARCH_POINTS, torch.Generator().manual_seed(int(seed)))

@@ -36,14 +36,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Mapping, Optional
 
 import numpy as np
 import torch
 
+from ..execute import execute
 from ..lang import Cuboid, Program
 
-__all__ = ["CANONICAL_DIAGONAL", "UP_AXES", "Transform", "normalize", "scale_program"]
+__all__ = ["CANONICAL_DIAGONAL", "UP_AXES", "Transform", "align_program", "normalize", "scale_program"]
 
 #: The AABB diagonal of a cloud in the canonical frame (the corpus median is 2.0).
 CANONICAL_DIAGONAL = 2.0
@@ -224,3 +225,38 @@ def scale_program(program: Program, factor: float) -> Program:
                       if isinstance(s, Cuboid) else s for s in b.statements)
         blocks.append(dataclasses.replace(b, statements=stmts))
     return dataclasses.replace(program, blocks=tuple(blocks))
+
+
+def _corners_of(program: Optional[Program]) -> torch.Tensor:
+    if program is None:
+        return torch.zeros(0, 8, 3)
+    try:
+        with torch.no_grad():
+            return execute(program).corners
+    except ValueError:
+        return torch.zeros(0, 8, 3)
+
+
+def align_program(program: Program, diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
+    """Scale ``program`` uniformly so that its executed cuboids' bounding box has ``diagonal``, and the offset
+    ``(3,) float64`` that moves that box's centre to the origin (executed points + offset = aligned shape).
+
+    Raises:
+        ValueError: the program executes to no cuboid.
+    """
+    return _align_executed(program, _corners_of(program), diagonal)
+
+
+def _align_executed(program: Program, corners: torch.Tensor,
+                    diagonal: float = CANONICAL_DIAGONAL) -> tuple[Program, np.ndarray]:
+    """:func:`align_program` given the program's executed corners ``(L, 8, 3)``."""
+    c = corners.double()
+    if len(c) == 0:
+        raise ValueError("the program executes to no cuboid")
+    flat = c.reshape(-1, 3)
+    lo, hi = flat.min(0).values, flat.max(0).values
+    diag = float((hi - lo).norm())
+    if not diag > 0:
+        raise ValueError("the program's cuboids have no extent")
+    k = diagonal / diag
+    return scale_program(program, k), (-(lo + hi) / 2 * k).numpy()

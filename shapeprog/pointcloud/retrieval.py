@@ -6,9 +6,9 @@ A :class:`RetrievalIndex` holds the normalised clouds of a category's training s
 chamfer distance (:func:`shapeprog.metrics.chamfer` with ``eps = 0``: mean nearest-point distance,
 both directions summed, in canonical units).
 
-The search has two stages, as :func:`shapeprog.genmetrics.nearest_chamfer`: a coarse estimate of the
+The search has two stages, as :func:`shapeprog.vae.genmetrics.nearest_chamfer`: a coarse estimate of the
 query against every reference from distance fields on a ``grid^3`` lattice (the references' fields are
-computed once, when the index is built; :func:`shapeprog.genmetrics.coarse_fields`), then exact
+computed once, when the index is built; :func:`shapeprog.vae.genmetrics.coarse_fields`), then exact
 chamfer distances (k-d trees, float64) to the ``candidates`` best estimates. With
 ``candidates=None`` every reference is measured exactly. How often the two agree and the timings:
 ``docs/pointcloud.md`` (Retrieval).
@@ -30,12 +30,16 @@ from typing import Optional, Sequence, Union
 import numpy as np
 import torch
 
+from shapeio.cache import cached
+
 from .. import corpus
-from ..genmetrics import coarse_fields
+from ..vae.genmetrics import _imap, coarse_fields
 from ..lang import Program, parse
 from ..metrics import chamfer
-from .data import cloud_transforms, corpus_splits, load_cache, read_split, sample_clouds
+from .data import cloud_transforms, corpus_splits, sample_clouds
+from .dataset import load_cache, read_split
 from .normalize import CANONICAL_DIAGONAL, Transform, scale_program
+from ..corpus import data_digest
 
 __all__ = ["INDEX_CANDIDATES", "INDEX_GRID", "INDEX_POINTS", "Match", "RetrievalIndex"]
 
@@ -112,21 +116,6 @@ def _as_clouds(x, name: str) -> list[torch.Tensor]:
 def _exact_job(job) -> list[list[float]]:
     """Exact chamfer of every query against its candidate clouds: ``[(query (N, 3), cands (k, M, 3))]``."""
     return [[float(chamfer(q.double(), r.double(), eps=0.0, method="kdtree")) for r in cands] for q, cands in job]
-
-
-def _imap(executor, fn, jobs, window: int = 4):
-    """``fn`` over the iterable ``jobs``, in order; here, or on ``executor`` with at most ``window`` jobs
-    in flight (the jobs are made as they are needed)."""
-    if executor is None:
-        yield from map(fn, jobs)
-        return
-    pending = []
-    for job in jobs:
-        pending.append(executor.submit(fn, job))
-        if len(pending) >= window:
-            yield pending.pop(0).result()
-    for f in pending:
-        yield f.result()
 
 
 class RetrievalIndex:
@@ -237,10 +226,6 @@ class RetrievalIndex:
                     "scales": scales, "splat": built.splat.numpy(), "field": built.field.numpy()}
 
         if cache:
-            from shapeio.cache import cached
-
-            from ..corpus import data_digest
-
             key = {"category": category, "points": int(points), "seed": int(seed), "grid": grid,
                    "ids": [int(i) for i in ids], "corpus": data_digest(), "version": INDEX_CACHE_VERSION}
             got = cached("retrieval-index", key, compute)

@@ -7,7 +7,7 @@ part), so a program decoded from a nearby code often matches the cloud better. :
 for it without gradients (the decoder's structure choices have none): a cross-entropy-style local search
 that, at each step of :data:`SEARCH_SCHEDULE`, draws ``samples`` codes around the best code so far with the
 step's ``sigma``, decodes them (non-rejecting validity decoding, as :func:`infer`), scales each program onto
-the cloud's bounding box (:func:`~shapeprog.pointcloud.infer.align_program`) and keeps the candidate of
+the cloud's bounding box (:func:`~shapeprog.pointcloud.normalize.align_program`) and keeps the candidate of
 lowest chamfer distance to the (normalised) input cloud. The input is the only thing it looks at: no
 ground truth, no training shape.
 
@@ -30,6 +30,7 @@ from ..execute import execute_batch
 from ..lang import Program
 from ..metrics import chamfer
 from ..sampling import sample_surface
+from .normalize import _align_executed, _corners_of
 
 __all__ = ["FAST_SEARCH_SCHEDULE", "MAX_SEARCH_DECODES", "MAX_SIGMA", "NAMED_SCHEDULES", "QUICK_SEARCH_SCHEDULE", "SEARCH_POINTS",
            "SEARCH_SCHEDULE",
@@ -203,13 +204,11 @@ def selection_chamfers(programs: Sequence[Optional[Program]], target: torch.Tens
 
 def aligned_corners(programs: Sequence[Optional[Program]]) -> list[Optional[torch.Tensor]]:
     """The corners ``(L, 8, 3)`` float64 of each program aligned as :func:`~shapeprog.pointcloud.infer.infer`
-    aligns its result (:func:`~shapeprog.pointcloud.infer.align_program`: scaled to the canonical diagonal,
+    aligns its result (:func:`~shapeprog.pointcloud.normalize.align_program`: scaled to the canonical diagonal,
     its box centred), None for a program that is None, executes to no cuboid or has no extent.
 
     The programs run together (:func:`~shapeprog.execute.execute_batch`: the same numbers as one by one,
     several times faster), twice: once as decoded, to measure each box, and once scaled."""
-    from .infer import _align_executed
-
     out: list[Optional[torch.Tensor]] = [None] * len(programs)
     live = [i for i, p in enumerate(programs) if p is not None]
     aligned, offsets, rows = [], [], []
@@ -230,8 +229,6 @@ def aligned_corners(programs: Sequence[Optional[Program]]) -> list[Optional[torc
 def _executed(programs: Sequence[Program]) -> list[torch.Tensor]:
     """Executed corners of each program (``(0, 8, 3)`` where execution fails): one batch, or one by one when
     a program of the batch fails."""
-    from .infer import _corners_of
-
     if not programs:
         return []
     try:

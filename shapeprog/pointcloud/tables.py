@@ -40,10 +40,11 @@ from shapeio import atomic_write
 from ..geometry import CORNER_SIGNS
 from ..metrics import chamfer
 from ..sampling import sample_surface
-from .data import load_cache, read_split
-from .infer import FIT_STEPS, _corners_of, infer, load_model, shape_metrics
+from .dataset import load_cache, read_split
+from .infer import FIT_STEPS, RETRIEVAL_CANDIDATES, infer, load_model, load_pretrained, shape_metrics
+from .normalize import _corners_of, normalize
 from .retrieval import RetrievalIndex
-from .search import QUICK_SEARCH_SCHEDULE
+from .search import QUICK_SEARCH_SCHEDULE, SEARCH_SCHEDULE
 
 __all__ = ["INPUT_POINTS", "NOISE", "PAPER_TABLE3", "PAPER_TABLE3_MACROS", "PAPER_TABLE7", "ROWS", "TableResult", "evaluate",
            "fit_cuboids", "write_tables"]
@@ -189,7 +190,6 @@ def _index(root, category) -> RetrievalIndex:
 def _model(weights, category):
     key = (str(weights), category)
     if key not in _MODELS:  # one load per worker process
-        from .infer import load_pretrained
         _MODELS[key] = load_pretrained(category) if weights is None else load_model(weights, category)
     return _MODELS[key]
 
@@ -255,7 +255,6 @@ def evaluate(root, category: str = "chair", weights=None, limit: Optional[int] =
     if retrieval:
         index = _index(root, category)
         queries, transforms = [], []
-        from .normalize import normalize
         for i, c in zip(ids, clean):
             x, _, _ = _inputs(c, i, seed)
             unit, t = normalize(x)
@@ -354,7 +353,6 @@ def write_tables(result: TableResult, out, command: str = "") -> Path:
         lines += [f"**The learned model loses to retrieval** on F-score ({_f(r['model']['fscore'])} against "
                   f"{_f(r['retrieval']['fscore'])}) without fitting.", ""]
     if "search" in r:
-        from .search import SEARCH_SCHEDULE
         decodes = 1 + sum(n for n, _ in SEARCH_SCHEDULE)
         lines += [f"Latent search (`infer(..., search=True)`, `shapeprog.pointcloud.search`): {decodes} decodes of codes "
                   "drawn around the predicted one, the program of lowest chamfer to the *input* cloud kept (no ground "
@@ -362,7 +360,6 @@ def write_tables(result: TableResult, out, command: str = "") -> Path:
                   "above it.", ""]
         lines += _against_retrieval(r, "search", "With latent search the model {} retrieval")
     if "augmented" in r:
-        from .infer import RETRIEVAL_CANDIDATES
         quick = 1 + sum(n for n, _ in QUICK_SEARCH_SCHEDULE)
         lines += [f"Retrieval-augmented decoding (`infer(..., search=True, search_schedule=QUICK_SEARCH_SCHEDULE, "
                   f"retrieval=index)`; CLI `--retrieval --search-schedule quick`): the program of a {quick}-decode latent "

@@ -26,7 +26,7 @@ split; the cache's ``test`` split, the corpus's val split, is never read here). 
 programs' line-vector trees (:class:`~shapeprog.vae.batch.TreeBatch`) beside the clouds.
 
 Every ``recon_every_n_epochs`` epochs the validation logs ``val/fscore`` (decoded programs against the target
-programs, :func:`shapeprog.vae.train.reconstruction_fscores`) and an image grid ``val/clouds`` (each input
+programs, :func:`shapeprog.vae.reconstruct.reconstruction_fscores`) and an image grid ``val/clouds`` (each input
 cloud drawn as small cubes beside its decoded shape). ``python train.py fit --config
 configs/pointcloud/latent_chair.yaml`` runs it; ``--ckpt_path last`` resumes. :func:`export_weights` writes
 the small weights file :mod:`shapeprog.pointcloud.infer` loads.
@@ -42,20 +42,22 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from shapeio import atomic_write
+from shapeio.weights import checkpoint_entry, load_payload, write_weights
 
 from ..picture import render_grid
-from ..vae.batch import (BatchOutput, MacroTreeBatch, TreeBatch, batch_loss, decode_batch, encode_batch,
-                         macro_batch_loss)
+from ..vae.batch import BatchOutput, TreeBatch, batch_loss, decode_batch, encode_batch
+from ..vae.macro_batch import MacroTreeBatch, macro_batch_loss
 from ..vae.layout import LineLayout
 from ..vae.losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
 from ..vae.macro_model import MacroVAE
 from ..vae.model import VAE
 from ..vae.pretrained import load_model, load_pretrained
-from ..vae.train import (_corners, _read_macro_programs, check_data_category, load_macro_library, load_macro_trees,
-                         load_trees, reconstruction_fscores, target_surfaces)
+from ..vae.train import check_data_category
+from ..vae.reconstruct import _corners, reconstruction_fscores, target_surfaces
+from ..vae.data import _read_macro_programs, load_macro_library, load_macro_trees, load_trees
 from ..vae.vectors import VectorNode
-from .data import TRAIN_POINTS, CloudDataset, collate_clouds, read_split
+from .data import TRAIN_POINTS
+from .dataset import CloudDataset, collate_clouds, read_split
 from .encoder import NPOINTS, NSAMPLES, RADII, WIDTHS, PointNet2SSG
 from .infer import cloud_corners, decode_codes, load_encoder, load_model as load_cloud_model
 
@@ -121,7 +123,7 @@ class CloudDataModule(L.LightningDataModule):
         max_val_shapes: the first N validation clouds only.
         seed: the subsets' and the noise's draws.
         library: serve macro programs calling this ShapeMOD library (a shipped category's name or a library
-            file, :func:`shapeprog.vae.train.load_macro_library`); it must be the decoder's. None: the
+            file, :func:`shapeprog.vae.data.load_macro_library`); it must be the decoder's. None: the
             corpus's ShapeAssembly programs.
         programs: with ``library``, the macro-refactored corpus to read (a folder or ``.tar.xz`` of
             :func:`shapeprog.macros.write_refactored`); None: the shipped one of the category.
@@ -259,12 +261,8 @@ class _CloudModule(L.LightningModule):
         checkpoint["shapeprog_pointcloud"] = self._info()
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
-        info = checkpoint.get("shapeprog_pointcloud")
-        if info is None:
-            raise ValueError("not a checkpoint of a shapeprog.pointcloud.train module (no 'shapeprog_pointcloud')")
-        if info.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"the checkpoint has format {info.get('format')!r}; this version reads "
-                             f"{CHECKPOINT_FORMAT}")
+        info = checkpoint_entry(checkpoint, "shapeprog_pointcloud", CHECKPOINT_FORMAT,
+                                "a shapeprog.pointcloud.train module")
         mine = self._info()
         if {k: info.get(k) for k in mine} != mine:
             short = lambda d: {k: ("<macro library>" if k == "library" and v else v) for k, v in d.items()}
@@ -487,7 +485,7 @@ class EndToEndModule(_CloudModule):
         return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
 
     def _macro_losses(self, z: torch.Tensor, trees: MacroTreeBatch) -> tuple[torch.Tensor, dict]:
-        """:func:`~shapeprog.vae.batch.macro_batch_loss` (no KL) of the trees decoded teacher-forced from their
+        """:func:`~shapeprog.vae.macro_batch.macro_batch_loss` (no KL) of the trees decoded teacher-forced from their
         clouds' codes, averaged over the batch (the level-by-level batched pass)."""
         total, terms = macro_batch_loss(self.vae, trees, weights=self.weights, kl=False, codes=z)
         return total.mean(), {k: v.mean() for k, v in terms.items() if k != "kl"}
@@ -504,13 +502,8 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
     model decodes with the shipped VAE of its category). ``meta`` records epoch, step and what the caller adds.
     The file is written atomically; an existing ``out`` is replaced (it is the caller's to name).
     """
-    try:
-        payload = torch.load(checkpoint, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{checkpoint}: no such checkpoint") from None
-    except Exception as e:
-        raise ValueError(f"{checkpoint}: not a readable checkpoint ({type(e).__name__})") from None
-    info = payload.get("shapeprog_pointcloud") if isinstance(payload, dict) else None
+    payload = load_payload(checkpoint, "readable checkpoint", missing="checkpoint")
+    info = payload.get("shapeprog_pointcloud")
     if info is None:
         raise ValueError(f"{checkpoint}: not a checkpoint of a shapeprog.pointcloud.train module")
     state = payload["state_dict"]
@@ -519,7 +512,7 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
         return {k[len(prefix):]: (v.half() if half and v.is_floating_point() else v)
                 for k, v in state.items() if k.startswith(prefix)}
 
-    body = {"format": WEIGHTS_FORMAT, "version": CHECKPOINT_FORMAT, "recipe": info["recipe"],
+    body = {"recipe": info["recipe"],
             "category": info["category"], "config": info["encoder"], "hidden_dim": info["hidden_dim"],
             "encoder": part("encoder."),
             "meta": {"epoch": int(payload.get("epoch", -1)), "global_step": int(payload.get("global_step", -1)),
@@ -528,7 +521,7 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
         body["decoder"] = part("vae.decoder.")
     if info.get("library") is not None:
         body["library"] = info["library"]
-    return atomic_write(out, lambda f: torch.save(body, f), mkdir=True)
+    return write_weights(out, WEIGHTS_FORMAT, CHECKPOINT_FORMAT, body)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -6,7 +6,11 @@
 teacher-forced pass over a batch of trees, level by level, :mod:`~shapeprog.vae.decode` the
 validity-checked decoding with the model's entry points (:func:`sample`, :func:`encode`, :func:`decode`,
 :func:`interpolate`), and :mod:`~shapeprog.vae.pretrained` weights files and the shipped models
-(:func:`load_pretrained`). :mod:`shapeprog.vae.train` (PyTorch Lightning; not imported here) trains it.
+(:func:`load_pretrained`). :mod:`shapeprog.vae.train` (PyTorch Lightning; not imported here) trains it on
+the trees of :mod:`~shapeprog.vae.data` and scores reconstructions with :mod:`~shapeprog.vae.reconstruct`.
+Generation evaluation (not imported here): :mod:`~shapeprog.vae.genmetrics` the metrics of generated
+programs, :mod:`~shapeprog.vae.gentable` their table, :mod:`~shapeprog.vae.pointnet` the PointNet
+classifier they use.
 See ``docs/shapeassembly_vae.md``.
 
 Macro programs (ShapeMOD, Appendix C): :mod:`~shapeprog.vae.layout` computes a :class:`LineLayout` from a

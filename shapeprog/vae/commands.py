@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from shapeio import atomic_write, write_new
 from shapeio.results import column, make_result
+from shapeio.weights import load_payload
 
 from .. import io
 from ..cli import (DEFAULT_CATEGORY, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
@@ -22,22 +23,20 @@ from ..cli import (DEFAULT_CATEGORY, MAX_WORKERS, Program, add_category, add_com
                    refuse_existing, refuse_inputs, seed, write_json, write_mesh)
 from ..errors import ParseError
 from ..execute import execute
-from ..gentable import generation_table
-from ..gentable import train_category_classifier
 from ..lang import parse
 from ..limits import decode
 from ..metrics import adaptive_threshold, chamfer, fscore
 from ..picture import MAX_SIZE as MAX_PICTURE_SIZE
 from ..picture import check_grid as check_picture_grid
 from ..picture import render_grid
-from ..pointnet import load_classifier
-from ..pointnet import save_classifier, sha256_file
 from ..sampling import sample_surface
 from .decode import MAX_SAMPLES, MAX_TRIES
 from .decode import decode as decode_latent
 from .decode import encode, interpolate, sample
+from .gentable import generation_table, train_category_classifier
 from .macro_decode import sample_macro
 from .macro_model import MacroVAE
+from .pointnet import load_classifier, save_classifier, sha256_file
 from .pretrained import export_weights, load_model, load_pretrained
 
 WEIGHTS_HELP = "VAE weights file or Lightning checkpoint (default: the shipped model of the category)"
@@ -196,8 +195,8 @@ def cmd_reconstruct(args) -> int:
 def is_pointcloud_checkpoint(path: str) -> bool:
     """Whether ``path`` is a Lightning checkpoint of a :mod:`shapeprog.pointcloud.train` module."""
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception:  # unreadable: the exporter reports it, naming the file
+        payload = load_payload(path, "checkpoint")
+    except (OSError, ValueError):  # unreadable: the exporter reports it, naming the file
         return False
     return isinstance(payload, dict) and "shapeprog_pointcloud" in payload
 

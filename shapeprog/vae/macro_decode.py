@@ -44,6 +44,7 @@ from ..macros.execute import compile_hierarchy
 from ..macros.grammar import CuboidLine
 from ..macros.hierarchy import MacroHierarchy, to_text
 from ..macros.lang import BOOL, CUBE, FLOAT, MacroError, MacroProgram
+from .decode import MAX_SAMPLES, MAX_TRIES, _check_int
 from .layout import GROUPS, MAX_BLOCK_LINES, NUM_SLOTS, LineLayout, MacroNode, macro_program_to_tree, tree_to_macro_program
 from .macro_model import MacroVAE
 from .model import one_hot_argmax
@@ -290,8 +291,6 @@ def decode_macro_latent(vae: MacroVAE, z: torch.Tensor, *, reject: bool = False,
 def sample_macro(vae: MacroVAE, n: int, seed: int = 0, max_tries: int = 10, decimals: int = 3) -> list[MacroDecoded]:
     """``n`` programs from latents drawn from N(0, I) (seeded), with rejection: a refused sample draws a new
     latent, up to ``max_tries`` times, then its last latent is decoded without rejection."""
-    from .decode import MAX_SAMPLES, MAX_TRIES, _check_int
-
     n = _check_int("n", n, 0, MAX_SAMPLES)
     max_tries = _check_int("max_tries", max_tries, 1, MAX_TRIES)
     seed = _check_int("seed", seed, -(2 ** 63))

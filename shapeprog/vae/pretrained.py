@@ -1,7 +1,7 @@
 """Weights files of the ShapeAssembly VAE: export from a training checkpoint, load, and the shipped models.
 
-A weights file is ``{"format", "version", "category", "hidden_dim", "state_dict", "meta"}`` read with
-``torch.load(weights_only=True)``, plus ``"library"`` (the macro library's text) for a
+A weights file (:mod:`shapeio.weights`, family :data:`FORMAT`, version :data:`VERSION`) holds
+``{"category", "hidden_dim", "state_dict", "meta"}``, plus ``"library"`` (the macro library's text) for a
 :class:`~shapeprog.vae.macro_model.MacroVAE` trained on macro programs: :func:`load_model` rebuilds its
 :class:`~shapeprog.vae.layout.LineLayout` from that text (a file without it is the base-language VAE); :func:`read_weights` also reads a Lightning training checkpoint of
 :class:`shapeprog.vae.train.VAEModule` (its ``hyper_parameters`` name the category and size). A file of
@@ -22,10 +22,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import torch
+from shapeio.weights import check_weights, load_payload, write_weights
 
-from shapeio import atomic_write
-
+from ..macros.library import Library
+from .layout import LineLayout
+from .macro_model import MacroVAE
 from .model import VAE
 
 __all__ = ["FORMAT", "PRETRAINED", "PRETRAINED_MACROS", "VERSION", "WEIGHTS", "export_weights", "load_model", "load_pretrained",
@@ -51,22 +52,9 @@ def read_weights(path) -> tuple[dict, dict]:
         FileNotFoundError: no such file.
         ValueError: naming the file, for an unreadable file, another format or a newer version.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such weights file")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:
-        raise ValueError(f"{path}: not a ShapeAssembly VAE weights file or checkpoint "
-                         f"(unreadable: {type(e).__name__})") from None
-    if not isinstance(payload, dict):
-        raise ValueError(f"{path}: not a ShapeAssembly VAE weights file (a {type(payload).__name__})")
+    payload = load_payload(path, "ShapeAssembly VAE weights file or checkpoint")
     if "format" in payload:
-        if payload["format"] != FORMAT:
-            raise ValueError(f"{path}: a {payload['format']!r} file, not a ShapeAssembly VAE ({FORMAT!r})")
-        if int(payload.get("version", -1)) != VERSION:
-            raise ValueError(f"{path}: weights file version {payload.get('version')!r}; this version of "
-                             f"shapeprog reads version {VERSION}")
+        payload = check_weights(payload, path, FORMAT, VERSION)
         info = {"category": payload["category"], "hidden_dim": int(payload["hidden_dim"]),
                 "meta": dict(payload.get("meta", {}))}
         if payload.get("library") is not None:
@@ -103,10 +91,6 @@ def load_model(path, category: str | None = None, device=None):
     if category is not None and info["category"] != category:
         raise ValueError(f"{path}: weights of category {info['category']!r}, not {category!r}")
     if info.get("library") is not None:
-        from ..macros.library import Library
-        from .layout import LineLayout
-        from .macro_model import MacroVAE
-
         vae = MacroVAE(LineLayout(Library.from_text(info["library"], f"{path}:library")), hidden_dim=info["hidden_dim"])
     else:
         vae = VAE(hidden_dim=info["hidden_dim"])
@@ -126,12 +110,12 @@ def save_weights(vae: VAE, out, category: str, meta: dict | None = None, half: b
     also holds its library's text."""
     state = {k: (v.detach().cpu().half() if half and v.is_floating_point() else v.detach().cpu())
              for k, v in vae.state_dict().items()}
-    payload = {"format": FORMAT, "version": VERSION, "category": category,
-               "hidden_dim": int(vae.decoder.hidden_dim), "state_dict": state, "meta": dict(meta or {})}
+    payload = {"category": category, "hidden_dim": int(vae.decoder.hidden_dim), "state_dict": state,
+               "meta": dict(meta or {})}
     layout = getattr(vae, "layout", None)
     if layout is not None:
         payload["library"] = layout.library.to_text()
-    return atomic_write(out, lambda f: torch.save(payload, f), mkdir=True)
+    return write_weights(out, FORMAT, VERSION, payload)
 
 
 def export_weights(checkpoint, out, half: bool = True, meta: dict | None = None) -> Path:

@@ -16,7 +16,7 @@ class Replay:
     step predicts the tree's next line (one-hot logits scaled by 10, the line's own numbers), so that
     decoding shows what the validity rules make of a given program. ``z`` is the tree itself.
 
-    It has the methods the decoding loop calls on the network (``decode._Net``): pass it where the loop
+    It has the methods the decoding loop calls on the network (``step._Net``): pass it where the loop
     takes a network, e.g. ``decode._decode_with(Replay(), program_to_tree(program), False, DecodeOptions())``.
     """
 

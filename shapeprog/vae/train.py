@@ -34,148 +34,35 @@ import torch
 from torch.utils.data import DataLoader
 
 from shapeio import atomic_write
+from shapeio.weights import checkpoint_entry
 
-from .. import corpus
-from ..errors import ParseError
-from ..execute import execute
-from ..lang import parse
-from ..metrics import fscore
 from ..picture import render_grid
-from ..sampling import sample_surface
-from .batch import (MacroTreeBatch, TreeBatch, batch_forward, batch_loss, collate_macro_trees, collate_trees,
-                    encode_batch, macro_batch_loss)
-from .decode import decode_latent, sample
-from .layout import LineLayout, MacroNode, macro_program_to_tree, tree_to_macro_program
+from .batch import TreeBatch, batch_forward, batch_loss, collate_trees
+from .macro_batch import MacroTreeBatch, collate_macro_trees, macro_batch_loss
+from .decode import sample
+from .layout import LineLayout
+from .macro_decode import sample_macro
 from .losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
 from .macro_model import MacroVAE
 from .model import VAE
-from .vectors import VectorNode, program_to_tree, tree_to_program
+from .vectors import VectorNode
+from .data import (
+    _check_category, _read_macro_programs, load_macro_library, load_macro_trees, load_trees,
+    validation_split,
+)
+from .reconstruct import (
+    _corners, _same_trees, reconstruct, reconstruction_fscores, target_surfaces, tree_program,
+)
+from .pretrained import read_weights
 
-__all__ = ["CATEGORIES", "CHECKPOINT_FORMAT", "VAEDataModule", "VAEModule", "load_macro_library", "load_macro_trees",
-           "load_trees", "reconstruct", "reconstruction_fscores", "target_surfaces", "tree_program",
-           "validation_split"]
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "VAEDataModule",
+    "VAEModule",
+]
 
-#: The categories a run trains on: one of the corpus's, or all three together.
-CATEGORIES = corpus.CATEGORIES + ("all",)
 #: Version of what :class:`VAEModule` adds to its checkpoints (``checkpoint["shapeprog_vae"]``).
 CHECKPOINT_FORMAT = 1
-
-
-def _check_category(category: str) -> None:
-    if category not in CATEGORIES:
-        raise ValueError(f"unknown category {category!r}; expected one of {', '.join(CATEGORIES)}")
-
-
-# ------------------------------------------------------------------------------------------ data
-
-
-def validation_split(category: str, fraction: float = 0.05, count: int | None = None,
-                     seed: int = 42) -> tuple[list[str], list[str]]:
-    """A seeded validation carve-out of the corpus's train split.
-
-    Args:
-        category: ``chair``, ``table``, ``storage`` or ``all`` (each category carved on its own).
-        fraction: the share of each category's train split held out (rounded, at least 1).
-        count: held-out shapes per category instead of ``fraction``.
-        seed: the draw; a category's draw depends only on ``seed`` and the category.
-
-    Returns:
-        ``(train, val)``: program keys ``"chair/173"``, each in the corpus's split-file order.
-    """
-    _check_category(category)
-    if count is None and not 0.0 < fraction < 1.0:
-        raise ValueError(f"fraction must be in (0, 1), got {fraction!r}")
-    train, val = [], []
-    for cat in corpus.CATEGORIES if category == "all" else (category,):
-        ids = corpus.ids(cat, "train")
-        n = max(1, round(fraction * len(ids))) if count is None else int(count)
-        if not 0 < n < len(ids):
-            raise ValueError(f"cannot hold out {n} of the {len(ids)} {cat} training shapes")
-        rng = np.random.default_rng([int(seed), corpus.CATEGORIES.index(cat)])
-        held = set(rng.choice(len(ids), size=n, replace=False).tolist())
-        val += [f"{cat}/{i}" for k, i in enumerate(ids) if k in held]
-        train += [f"{cat}/{i}" for k, i in enumerate(ids) if k not in held]
-    return train, val
-
-
-def load_trees(keys: list[str], dtype: torch.dtype = torch.float32) -> tuple[list[str], list[VectorNode]]:
-    """The line-vector trees of corpus programs ``"category/id"``.
-
-    A program that does not parse or cannot be encoded (:func:`~shapeprog.vae.vectors.program_to_tree`) is
-    left out and named in a :class:`~shapeprog.corpus.CorpusWarning`; the rest still load.
-
-    Returns:
-        ``(keys, trees)`` of the programs loaded, in the order given.
-    """
-    kept, trees, errors = [], [], []
-    for key in keys:
-        cat, i = key.split("/")
-        name = f"{key}.txt"
-        try:
-            trees.append(program_to_tree(parse(corpus.read(cat, i), file=name), file=name, dtype=dtype))
-            kept.append(key)
-        except (ParseError, KeyError) as e:
-            errors.append(f"{name}: {e}")
-    if errors:
-        warnings.warn(f"{len(errors)} program(s) left out: " + "; ".join(errors), corpus.CorpusWarning, stacklevel=2)
-    return kept, trees
-
-
-def load_macro_library(library: str):
-    """The macro library a run trains with: a shipped category's (``"chair"``, :func:`shapeprog.macros.load_library`)
-    or a library file (definitions only, :meth:`shapeprog.macros.Library.from_text`).
-
-    Raises:
-        FileNotFoundError: neither a shipped library nor a file.
-        ParseError: the file does not parse (named, with line and column).
-    """
-    from ..macros import Library, load_library
-    from ..macros.api import LIBRARY_CATEGORIES
-
-    if library in LIBRARY_CATEGORIES:
-        return load_library(library)
-    path = Path(library)
-    if not path.is_file():
-        raise FileNotFoundError(f"{library}: neither a shipped macro library ({', '.join(LIBRARY_CATEGORIES)}) nor "
-                                f"a library file")
-    return Library.from_text(path.read_text(encoding="utf-8"), str(path))
-
-
-def load_macro_trees(keys: list[str], layout: LineLayout, programs: dict,
-                     dtype: torch.dtype = torch.float32) -> tuple[list[str], list[MacroNode]]:
-    """The line-vector trees of the macro programs of ``keys`` (``"chair/173"``), taken from ``programs``
-    (``{id: MacroHierarchy}`` of one category, :func:`shapeprog.macros.read_refactored`).
-
-    A key without a program (its refactoring failed) or whose program cannot be encoded is left out and named
-    in a :class:`~shapeprog.corpus.CorpusWarning`.
-
-    Returns:
-        ``(keys, trees)`` of the programs loaded, in the order given.
-    """
-    kept, trees, errors = [], [], []
-    for key in keys:
-        i = int(key.split("/")[1])
-        if i not in programs:
-            errors.append(f"{key}: no macro program")
-            continue
-        try:
-            trees.append(macro_program_to_tree(programs[i], layout, file=f"{key}.txt", dtype=dtype))
-            kept.append(key)
-        except ParseError as e:
-            errors.append(str(e))
-    if errors:
-        warnings.warn(f"{len(errors)} program(s) left out: " + "; ".join(errors[:20])
-                      + (" ..." if len(errors) > 20 else ""), corpus.CorpusWarning, stacklevel=2)
-    return kept, trees
-
-
-def _read_macro_programs(category: str, keys: list[str], programs: str | None, library) -> dict:
-    from ..macros.refactored import load_refactored, read_refactored
-
-    ids = sorted({int(k.split("/")[1]) for k in keys})
-    if programs is None:
-        return load_refactored(category, ids=ids)[0]
-    return read_refactored(programs, library=library, ids=ids)[0]
 
 
 class VAEDataModule(L.LightningDataModule):
@@ -296,111 +183,6 @@ class VAEDataModule(L.LightningDataModule):
                              f"{self.seed}, {len(self.val_keys)} shapes); resume with the same data settings")
 
 
-# ------------------------------------------------------------------------------------------ reconstruction
-
-
-def tree_program(tree, layout: LineLayout | None = None):
-    """The ShapeAssembly program a tree stands for: :func:`~shapeprog.vae.vectors.tree_to_program` of a
-    :class:`VectorNode`; the expansion (:func:`shapeprog.macros.execute.compile_hierarchy`) of the macro
-    program of a :class:`~shapeprog.vae.layout.MacroNode` (``layout`` needed)."""
-    if isinstance(tree, VectorNode):
-        return tree_to_program(tree)
-    from ..macros.execute import compile_hierarchy
-    return compile_hierarchy(tree_to_macro_program(tree, layout), layout.library).program
-
-
-def reconstruct(vae: VAE, trees: list[VectorNode]) -> list:
-    """The programs decoded from the mean codes of ``trees``: ``decode_latent(vae.decoder, mu, reject=False)``
-    (:mod:`shapeprog.vae.decode`) of each tree's mu, None where decoding raises a ``ValueError``. For a
-    :class:`~shapeprog.vae.macro_model.MacroVAE` and macro trees: the expanded ShapeAssembly program of each
-    decoded macro program (:func:`~shapeprog.vae.macro_decode.decode_macro`)."""
-    device, dtype = next(vae.parameters()).device, next(vae.parameters()).dtype
-    if isinstance(vae, MacroVAE):
-        from .macro_decode import decode_macro
-        out = []
-        with torch.no_grad():
-            for t in trees:
-                try:
-                    out.append(decode_macro(vae, vae.encode(t.to(device, dtype))[1]).program)
-                except ValueError:
-                    out.append(None)
-        return out
-    with torch.no_grad():
-        batch = TreeBatch([t.to("cpu") for t in trees]).to(device, dtype)
-        mu, _ = vae.encoder.sampler(encode_batch(vae.encoder, batch))
-        out = []
-        for z in mu:
-            try:
-                out.append(decode_latent(vae.decoder, z, reject=False).program)
-            except ValueError:
-                out.append(None)
-    return out
-
-
-def target_surfaces(trees: list[VectorNode], points: int = 10_000, seed: int = 0,
-                    layout: LineLayout | None = None) -> list[torch.Tensor]:
-    """``points`` surface samples ``(points, 3)`` of each tree's executed program (:func:`tree_program`;
-    ``layout`` for macro trees): the targets of :func:`reconstruction_fscores`, drawn once for a fixed set of
-    shapes."""
-    gen = torch.Generator().manual_seed(int(seed))
-    return [sample_surface(execute(tree_program(t, layout)).corners, points, gen)[0] for t in trees]
-
-
-def reconstruction_fscores(trees: list[VectorNode], programs: list, points: int = 10_000, seed: int = 0,
-                           targets: list[torch.Tensor] | None = None,
-                           layout: LineLayout | None = None) -> list[float | None]:
-    """The F-score (0-100, :func:`shapeprog.metrics.fscore`) of each tree's shape against a program's.
-
-    ``points`` surface samples of each executed shape are compared (10,000 in the paper); the target
-    program is :func:`~shapeprog.vae.vectors.tree_to_program` of the tree.
-
-    Args:
-        trees: the targets.
-        programs: one program (or None) per tree, e.g. :func:`reconstruct` of the trees.
-        points: surface samples per shape.
-        seed: the samples' draw.
-        targets: :func:`target_surfaces` of ``trees`` with the same ``points`` and ``seed``, when already
-            drawn (the same scores, without executing and sampling the targets again).
-
-    Returns:
-        One F-score per tree, None where the program is None or cannot be executed or sampled (no leaf
-        cuboid, a non-finite corner).
-    """
-    if targets is None:
-        targets = target_surfaces(trees, points, seed, layout)
-    gen = torch.Generator().manual_seed(int(seed) + 1)
-    out: list[float | None] = []
-    for target, program in zip(targets, programs):
-        try:
-            if program is None:
-                raise ValueError("no program")
-            pred, _ = sample_surface(execute(program).corners, points, gen)
-        except ValueError:  # ExecutionError, no leaf cuboid, degenerate surface
-            out.append(None)
-            continue
-        out.append(fscore(pred, target))
-    return out
-
-
-def _same_trees(a: list[VectorNode], b: list[VectorNode]) -> bool:
-    """Whether two lists hold the same trees (equal line vectors and structure)."""
-    def same(x, y) -> bool:
-        if x is None or y is None:
-            return x is y
-        return (len(x.children) == len(y.children) and torch.equal(x.lines.cpu(), y.lines.cpu())
-                and all(same(c, d) for c, d in zip(x.children, y.children)))
-    return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
-
-
-def _corners(program) -> torch.Tensor:
-    """A program's leaf cuboids ``(L, 8, 3)``; none (a white picture) when there is no program or it cannot be
-    executed."""
-    try:
-        return torch.zeros(0, 8, 3) if program is None else execute(program).corners
-    except ValueError:
-        return torch.zeros(0, 8, 3)
-
-
 # ------------------------------------------------------------------------------------------ module
 
 
@@ -479,7 +261,6 @@ class VAEModule(L.LightningModule):
 
     def _load_init(self, path: str) -> None:
         """Start from the weights of ``path`` (a weights file or a training checkpoint) of the same VAE."""
-        from .pretrained import read_weights
         info, state = read_weights(path)
         mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim, "library": self._library_text()}
         theirs = {"category": info["category"], "hidden_dim": info["hidden_dim"], "library": info.get("library")}
@@ -526,12 +307,7 @@ class VAEModule(L.LightningModule):
             checkpoint["shapeprog_vae"]["library_text"] = self._library_text()
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
-        info = checkpoint.get("shapeprog_vae")
-        if info is None:
-            raise ValueError("not a checkpoint of shapeprog.vae.train.VAEModule (no 'shapeprog_vae' entry)")
-        if info.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"the checkpoint has format {info.get('format')!r}; this version reads "
-                             f"{CHECKPOINT_FORMAT}")
+        info = checkpoint_entry(checkpoint, "shapeprog_vae", CHECKPOINT_FORMAT, "shapeprog.vae.train.VAEModule")
         mine = {"category": self.hparams.category, "hidden_dim": self.hparams.hidden_dim}
         theirs = {k: info.get(k) for k in mine}
         if theirs != mine:
@@ -614,7 +390,6 @@ class VAEModule(L.LightningModule):
                       dataformats="HWC")
         try:
             if self.layout is not None:
-                from .macro_decode import sample_macro
                 samples = sample_macro(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)
             else:
                 samples = sample(self.vae, self.hparams.image_shapes, seed=self.hparams.seed)

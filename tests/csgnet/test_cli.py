@@ -125,7 +125,7 @@ def test_defect10_parse_into_a_closed_pipe_ends_quietly(tmp_path):
 
 def test_defect6_parse_refine_reports_the_program_it_writes(tmp_path, capsys):
     import csgnet
-    from csgnet.refinement import program_scores
+    from csgnet.score import program_scores
 
     assert main(["parse", str(EXAMPLES / "house.png"), "--beam", "3", "--refine", "--refine-iters", "1",
                  "--out", str(tmp_path)]) == 0
@@ -142,7 +142,7 @@ def test_parse_refine_refines_a_mesh_by_iou(tmp_path, capsys):
 
     import csgnet
     from csgnet.inference import load_shape
-    from csgnet.refinement import program_scores
+    from csgnet.score import program_scores
 
     assert main(["parse", str(EXAMPLES / "table.obj"), "--beam", "3", "--refine", "--refine-iters", "1",
                  "--out", str(tmp_path)]) == 0

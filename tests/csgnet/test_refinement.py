@@ -252,7 +252,8 @@ def test_scorer_equals_metrics_bit_for_bit():
 
 
 def test_defect6_guarded_rule_keeps_the_program_when_chamfer_costs_iou():
-    from csgnet.refinement import MAX_IOU_DROP, program_scores, refine_guarded
+    from csgnet.refinement import MAX_IOU_DROP, refine_guarded
+    from csgnet.score import program_scores
 
     target = csgnet.render("c(17,29,15)s(21,42,13)-")[0]
     start = "c(25,43,26)"

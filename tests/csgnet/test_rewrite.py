@@ -4,7 +4,8 @@ import pytest
 
 import csgnet
 from csgnet.lang import parse
-from csgnet.refinement import program_scores, refine_guarded
+from csgnet.refinement import refine_guarded
+from csgnet.score import program_scores
 from csgnet.rewrite import LENGTH_PENALTY, choose, objective, prune, removals
 
 

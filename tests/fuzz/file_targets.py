@@ -14,7 +14,8 @@ import tempfile
 from shapeio.files import InputError, parse_json
 from shapeprog.errors import ParseError
 from shapeprog.macros.api import load_library
-from shapeprog.macros.discover import DEFAULTS, Discovery, load_config
+from shapeprog.macros.state import Discovery
+from shapeprog.macros.config import DEFAULTS, load_config
 
 from fuzz.engine import Target
 

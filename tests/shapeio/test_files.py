@@ -1,8 +1,10 @@
 import os
+from pathlib import Path
 
 import pytest
 
 from shapeio import atomic_write, write_new
+from shapeio.files import NotShippedError, resolve_shipped
 
 
 def test_write_is_atomic_on_failure(tmp_path):
@@ -169,3 +171,15 @@ def test_write_new(tmp_path):
     with pytest.raises(RuntimeError):
         write_new(tmp_path / "d.txt", lambda f: (_ for _ in ()).throw(RuntimeError("writer failed")))
     assert not (tmp_path / "d.txt").exists() and not [n for n in os.listdir(tmp_path) if n.endswith(".tmp")]
+
+
+def test_an_existing_file_wins_over_a_shipped_name(tmp_path, monkeypatch):
+    shipped = {"chair": tmp_path / "shipped_chair.txt"}
+    assert resolve_shipped("chair", shipped, "library") == shipped["chair"]
+    monkeypatch.chdir(tmp_path)
+    Path("chair").write_text("mine")
+    assert resolve_shipped("chair", shipped, "library") == Path("chair")
+    with pytest.raises(NotShippedError, match=r"^lamp: neither a library file nor a shipped library "
+                                              r"\(shipped: chair\)$") as e:
+        resolve_shipped("lamp", shipped, "library")
+    assert isinstance(e.value, FileNotFoundError) and isinstance(e.value, ValueError)

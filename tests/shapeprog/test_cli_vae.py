@@ -155,7 +155,7 @@ def test_evaluate_generation_of_vae_samples(weights, tmp_path, monkeypatch):
 
 def test_evaluate_generation_with_another_classifier(weights, tmp_path, monkeypatch):
     from shapeprog import corpus
-    from shapeprog.pointnet import PointNetCls, save_classifier
+    from shapeprog.vae.pointnet import PointNetCls, save_classifier
 
     load = corpus.load
     monkeypatch.setattr(corpus, "load", lambda *a, **k: load(*a, **k)[:6])

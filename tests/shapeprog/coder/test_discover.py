@@ -12,7 +12,9 @@ import egglog  # noqa: E402,F401  (a core dependency: a broken install fails her
 
 from shapeprog.errors import ParseError
 from shapeprog.coder import data
-from shapeprog.coder.discover import Config, discover, evaluate, start_from, summarize
+from shapeprog.coder.discover import discover, start_from, summarize
+from shapeprog.coder.config import Config
+from shapeprog.coder.wake import evaluate
 from shapeprog.coder.execute import execute
 from shapeprog.coder.infer import infer, load_library, shipped_libraries
 from shapeprog.coder.lang import Call, Library, parse, parse_abstraction, to_text, walk
@@ -200,7 +202,7 @@ def test_propose_ranks_candidates_and_respects_frequency():
     assert propose(progs, n_proposals=30, rng=random.Random(0), min_freq=1.1) == []
 
 
-def test_infer_uses_the_library_and_reports_bad_input():
+def test_infer_uses_the_library_and_reports_bad_input(tmp_path):
     lib = Library().add(parse_abstraction(
         "Legs(w: Float, h: Float, x: Float, y: Float, z: Float) = SymRef(Move(Cuboid(w,h,w),x,y,z),AX)"))
     shape = _chairs(1, seed=3)[0]
@@ -218,8 +220,12 @@ def test_infer_uses_the_library_and_reports_bad_input():
         infer("172_0_0 Union(", lib)
     with pytest.raises(ParseError, match="^<shape>:1:15: unexpected end of the text"):
         infer("172_0_0:Union(", lib)
-    with pytest.raises(ValueError, match="no shipped library"):
+    with pytest.raises(ValueError, match=r"^sofa: neither a ShapeCoder library file nor a shipped ShapeCoder library "
+                                         r"\(shipped: chair, storage, table\)$"):
         load_library("sofa")
+    mine = tmp_path / "lib.txt"
+    mine.write_text("Leg(w: Float) = Cuboid(w,0.5,w)\n", encoding="utf-8")
+    assert [a.name for a in load_library(str(mine))] == ["Leg"]
     assert set(shipped_libraries()) == {"chair", "table", "storage"}
     for cat in shipped_libraries():
         assert len(load_library(cat)) >= 1

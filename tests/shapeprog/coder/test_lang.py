@@ -265,10 +265,10 @@ def test_defect_exponential_abstraction_library_is_refused_at_load():
 def test_defect_exponential_abstraction_library_rules_walk_each_body_once(monkeypatch):
     import importlib
 
-    refactor = importlib.import_module("shapeprog.coder.refactor")
+    rules = importlib.import_module("shapeprog.coder.rules")
     lib = Library.from_text(_doubling_library(15))
     walked = []
-    real = refactor.walk
-    monkeypatch.setattr(refactor, "walk", lambda e: walked.append(e) or real(e))
-    refactor._bookkeeping(lib)
+    real = rules.walk
+    monkeypatch.setattr(rules, "walk", lambda e: walked.append(e) or real(e))
+    rules._bookkeeping(lib)
     assert walked == [a.body for a in lib]

@@ -11,8 +11,8 @@ from shapeprog.coder.dream import dream  # noqa: E402
 from shapeprog.coder.execute import execute  # noqa: E402
 from shapeprog.coder.objective import match  # noqa: E402
 from shapeprog.coder.lang import Call, Library, ProgramError, parse, parse_abstraction, to_text, walk  # noqa: E402
-from shapeprog.coder.recnet import (MAX_TOKENS, NetConfig, RecognitionNet, Vocab, decode_tokens,  # noqa: E402
-                                    encode_scene, encode_target, load_checkpoint, sample, save_checkpoint)
+from shapeprog.coder.recnet import NetConfig, RecognitionNet, load_checkpoint, sample, save_checkpoint  # noqa: E402
+from shapeprog.coder.vocab import MAX_TOKENS, Vocab, decode_tokens, encode_scene, encode_target  # noqa: E402
 from shapeprog.coder.train import BUCKET_GROUP, TrainConfig, batch_loss, batches, tensorize, train  # noqa: E402
 
 LEGS = "SymRef(Move(Cuboid(0.06,0.5,0.06),-0.3,-0.25,-0.3),AX)"
@@ -199,7 +199,8 @@ def _planted_model():
 
 
 def test_wake_with_a_network_recovers_planted_symref_and_symtrans():
-    from shapeprog.coder.discover import Config, wake, wake_network
+    from shapeprog.coder.config import Config
+    from shapeprog.coder.wake import wake, wake_network
     from shapeprog.coder.search import search_shape
 
     model, vocab, scene = _planted_model()
@@ -244,7 +245,8 @@ def test_store_combines_pieces():
 def test_discovery_with_the_network_wake_writes_and_reuses_its_checkpoint(tmp_path):
     import json
 
-    from shapeprog.coder.discover import Config, discover
+    from shapeprog.coder.discover import discover
+    from shapeprog.coder.config import Config
 
     shapes = [execute(parse(f"Union({LEGS},{SLATS})")), execute(parse(LEGS))]
     cfg = Config(rounds=0, wake="network", n_dreams=8, train_epochs=1, wake_batch=8, wake_batches=1,
@@ -268,8 +270,8 @@ def test_discovery_with_the_network_wake_writes_and_reuses_its_checkpoint(tmp_pa
 
 
 def test_discovery_defaults_train_with_the_papers_settings():
-    # discover.Config keeps torch-free copies of TrainConfig's defaults; they must stay the paper's
-    from shapeprog.coder.discover import Config
+    # config.Config keeps torch-free copies of TrainConfig's defaults; they must stay the paper's
+    from shapeprog.coder.config import Config
     from shapeprog.coder.train import PAPER
 
     assert Config().train_config() == PAPER
@@ -277,7 +279,7 @@ def test_discovery_defaults_train_with_the_papers_settings():
 
 def test_post_hoc_inference_with_the_shipped_network_is_never_dearer_and_re_covers_the_shape():
     from shapeprog.coder import data, tables
-    from shapeprog.coder.discover import evaluate
+    from shapeprog.coder.wake import evaluate
     from shapeprog.coder.infer import infer, load_library, load_network, shipped_networks
 
     assert "chair" in shipped_networks()
@@ -304,15 +306,15 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     from shapeprog.coder.infer import infer, load_library, load_network
     from shapeprog.coder.search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
 
-    discover = importlib.import_module("shapeprog.coder.discover")
+    coder_infer = importlib.import_module("shapeprog.coder.infer")  # the attribute infer is the function
     seen = []
-    real = discover.network_best
+    real = coder_infer.network_best
 
     def spy(current, library, prims, payload, limits, search=None, seed=0):
         seen.append(dict(search))
         return real(current, library, prims, payload, limits, search={**search, "batches": 1}, seed=seed)
 
-    monkeypatch.setattr(discover, "network_best", spy)
+    monkeypatch.setattr(coder_infer, "network_best", spy)
     lib, net = load_library("chair"), load_network("chair")
     rec = data.load("chair", "heldout")[1]
     infer(rec.prims, lib, network=net)
@@ -346,7 +348,8 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
 def test_network_from_a_later_round_and_repeated_wakes_resume_where_they_stopped(tmp_path):
     import json
 
-    from shapeprog.coder.discover import Config, discover
+    from shapeprog.coder.discover import discover
+    from shapeprog.coder.config import Config
 
     shapes = [execute(parse(f"Union({LEGS},{SLATS})")), execute(parse(LEGS))]
     cfg = Config(rounds=1, n_proposals=50, n_abstractions=2, wake="network", network_from=1, wake_repeats=2,
@@ -379,7 +382,7 @@ def test_targets_left_out_of_training_are_counted_by_kind():
     import pickle
     from collections import Counter
 
-    from shapeprog.coder.recnet import TargetError
+    from shapeprog.coder.vocab import TargetError
 
     vocab = Vocab.of(Library())
     prims = [(1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]

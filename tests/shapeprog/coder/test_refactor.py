@@ -10,7 +10,8 @@ from shapeprog.coder import data
 from shapeprog.coder.execute import execute
 from shapeprog.coder.lang import LANG_2D, Library, expand, parse, parse_abstraction, to_text, walk
 from shapeprog.coder.objective import match, naive_program, program_cost
-from shapeprog.coder.refactor import (RefactorError, abstraction_rule, egglog_program, refactor, semantic_rules)
+from shapeprog.coder.refactor import RefactorError, refactor
+from shapeprog.coder.rules import abstraction_rule, egglog_program, semantic_rules
 
 
 def _same_geometry(a, b, lib=None, tol=0.02):
@@ -194,7 +195,7 @@ def _grow(expr, rules_text, iterations=3):
     """Root variants (terms whose top e-node differs) and the cheapest term after some iterations."""
     from egglog import bindings
 
-    from shapeprog.coder.refactor import _from_term, _term
+    from shapeprog.coder.rules import _from_term, _term
 
     lib = Library()
     eg = bindings.EGraph()
@@ -222,7 +223,7 @@ def test_naive_scheme_finds_what_the_conditional_scheme_finds_on_a_small_scene()
     """The Table 1 ablation: with the relations put in as e-nodes and plain rules, a mirrored instance of a
     planted abstraction gives the same program as the guarded rules; relations are exact at 2 decimals (no
     two leaves merge; a near miss is no relation); an unknown scheme is refused."""
-    from shapeprog.coder.refactor import naive_relations
+    from shapeprog.coder.rules import naive_relations
 
     lib = Library.from_text("A0(F0: Float, F1: Float) = Move(Rectangle(F0,F1),Add(F0,F1),Sub(F1,F0))", LANG_2D)
     p = parse("Union(Move(Rectangle(0.2,0.1),0.3,-0.1),Move(Rectangle(0.2,0.1),-0.3,-0.1))", lib)
@@ -247,7 +248,7 @@ def test_naive_scheme_finds_what_the_conditional_scheme_finds_on_a_small_scene()
     # no two leaves end in one e-class (a tolerance of 0.01 merged every float of a 32-parameter scene)
     from egglog import bindings
 
-    from shapeprog.coder.refactor import naive_egglog_program, relations_command
+    from shapeprog.coder.rules import naive_egglog_program, relations_command
     vals = [0.1, 0.18, 0.12, 0.07, 0.4, 0.05, 0.13, 0.11]
     eg = bindings.EGraph()
     eg.run_program(*eg.parse_program(naive_egglog_program(lib)))

@@ -7,7 +7,7 @@ import pytest
 
 from shapeprog.errors import ParseError
 from shapeprog.coder import data, tables
-from shapeprog.coder.discover import evaluate
+from shapeprog.coder.wake import evaluate
 from shapeprog.coder.infer import infer
 from shapeprog.coder.lang import Call, Library, parse_abstraction, to_text, walk
 from shapeprog.coder.objective import naive_program, naive_summary

@@ -97,5 +97,6 @@ def test_edit_command_refactors_a_corpus_program_with_a_shipped_library():
     s, text, file = open_for_edit(args)
     assert s.error is None and file == "chair/173_macros.txt" and text.startswith("# chair/173/Program_0\n")
     assert len(s.controls(cuboids=False)) == 14
-    with pytest.raises(SystemExit, match="no shipped ShapeMOD library for 'sofa'"):
+    with pytest.raises(SystemExit, match=r"sofa: neither a ShapeMOD library file nor a shipped ShapeMOD library "
+                                         r"\(shipped: chair, storage, table\)"):
         open_for_edit(argparse.Namespace(library="sofa", sample=False, program="chair/173", target=None, seed=0))

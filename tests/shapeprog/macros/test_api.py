@@ -6,6 +6,7 @@ from shapeprog import corpus, parse
 from shapeprog.execute import execute as sa_execute
 from shapeprog.macros import Library, convert_program, expand, load_library, refactor
 from shapeprog.macros import execute as macro_execute
+from shapeprog.macros.api import LIBRARIES
 from shapeprog.macros.baseline import baseline_library
 from shapeprog.macros.grammar import BBOX, AttachLine, CuboidLine, ReflectLine, SqueezeLine, to_shapeassembly
 from shapeprog.macros.objective import ABS_MAX_ERROR
@@ -59,8 +60,16 @@ def test_refactor_with_a_hand_made_library_is_exact():
 
 
 def test_load_library_unknown_category():
-    with pytest.raises(ValueError, match="no shipped ShapeMOD library for 'sofa'"):
+    with pytest.raises(ValueError, match=r"^sofa: neither a ShapeMOD library file nor a shipped ShapeMOD library "
+                                         r"\(shipped: chair, storage, table\)$"):
         load_library("sofa")
+
+
+def test_load_library_an_existing_file_wins(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "chair").write_text("def slab(h: float):\n    c = Cuboid(bb_x, h, bb_z, True)\n", encoding="utf-8")
+    assert [m.name for m in load_library("chair").macros] == ["slab"]
+    assert [m.name for m in load_library("table").macros] == [m.name for m in load_library(str(LIBRARIES["table"])).macros]
 
 
 def test_shipped_library_files_agree_with_their_headers():

@@ -61,6 +61,6 @@ def test_discover_macros_continues_from_a_library(tmp_path, capsys):
     # the state folder belongs to that start: another start is refused
     assert main(common + ["--rounds", "2", "--out", str(second), "--start-from", "chair"]) == 2
     assert "another starting library" in capsys.readouterr().err
-    with pytest.raises(SystemExit, match="--start-from: no shipped ShapeMOD library for 'sofa'"):
+    with pytest.raises(SystemExit, match="--start-from: sofa: neither a ShapeMOD library file nor a shipped ShapeMOD library"):
         main(common + ["--rounds", "2", "--out", str(tmp_path / "x"), "--start-from", "sofa"])
     assert not (tmp_path / "x").exists()

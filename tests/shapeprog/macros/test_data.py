@@ -7,8 +7,10 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 
 from shapeprog.lang import parse
-from shapeprog.macros.data import (MAX_ORDERS, ConversionError, Ordering, block_program, convert_block,
-                                   convert_corpus, convert_program, order_errors, orderings)
+from shapeprog.macros.data import (
+    ConversionError, block_program, convert_block, convert_corpus, convert_program, order_errors,
+)
+from shapeprog.macros.subprogram import MAX_ORDERS, Ordering, orderings
 from shapeprog.macros.grammar import BBOX, AttachLine, LineError, CuboidLine, ReflectLine, SqueezeLine, signature
 
 HEAD = "bbox = Cuboid(1.0, 1.0, 1.0, True)\n"

@@ -12,7 +12,8 @@ import pytest
 
 from shapeprog import corpus
 from shapeprog.lang import parse
-from shapeprog.macros.data import ORDER_TOL, convert_corpus, convert_program, order_errors
+from shapeprog.macros.data import convert_corpus, convert_program, order_errors
+from shapeprog.macros.subprogram import ORDER_TOL
 
 # sub-programs and |O_P| before the MAX_ORDERS limit, per category (docs/shapemod.md)
 EXPECTED = {"chair": (3835, 11911, 50404), "table": (6536, 16758, 983914), "storage": (1551, 3549, 547816)}

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from shapeprog.errors import ParseError
-from shapeprog.macros.discover import DEFAULTS, Discovery, Nodes, discover, load_config, prior_rounds, rounds_line
+from shapeprog.macros.discover import discover, prior_rounds, rounds_line
+from shapeprog.macros.state import Discovery, Nodes
+from shapeprog.macros.config import DEFAULTS, load_config
 from shapeprog.macros.grammar import BBOX, AttachLine, CuboidLine, ReflectLine, SqueezeLine, signature
 from shapeprog.macros.lang import Linear, Literal, Name
 from shapeprog.macros.library import Library
@@ -141,7 +143,7 @@ def test_config_file_and_errors(tmp_path):
         bad.write_text(text)
         with pytest.raises(ParseError, match=match):
             load_config(bad)
-    from shapeprog.macros.discover import LIMITS
+    from shapeprog.macros.config import LIMITS
     assert set(LIMITS) == {k for k, v in DEFAULTS.items() if type(v) in (int, float)}
     assert all(lo <= DEFAULTS[k] <= hi for k, (lo, hi) in LIMITS.items())
 
@@ -239,7 +241,7 @@ def test_a_proposal_step_without_a_common_signature_is_counted_as_missed():
 
 def test_defect_yaml_alias_bomb_is_refused(tmp_path):
     from shapeprog.errors import ParseError
-    from shapeprog.macros.discover import MAX_CONFIG_BYTES
+    from shapeprog.macros.config import MAX_CONFIG_BYTES
 
     levels = ["a: &a [x, x, x, x, x, x, x, x, x]"]
     levels += [f"{c}: &{c} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]"

@@ -11,9 +11,11 @@ from shapeprog import corpus
 from shapeprog.__main__ import main
 from shapeprog.lang import parse
 from shapeprog.pointcloud import normalize
-from shapeprog.pointcloud.data import (CloudDataset, cache_paths, carve_validation, cloud_seed, collate_clouds,
-                                       corpus_cloud, corpus_splits, load_cache, make_clouds, program_cloud,
-                                       read_split, sample_clouds)
+from shapeprog.pointcloud.data import (
+    cache_paths, carve_validation, cloud_seed, corpus_cloud, corpus_splits, make_clouds, program_cloud,
+    sample_clouds,
+)
+from shapeprog.pointcloud.dataset import CloudDataset, collate_clouds, load_cache, read_split
 
 SPLITS = corpus_splits("chair")
 # a handful of chairs from each split: 3 train, 2 carved-out val, 2 test (= corpus val)
@@ -191,7 +193,7 @@ def test_a_cache_of_any_integer_seed_reads_back(tmp_path):
 
 def test_defect_unbounded_reads_cloud_cache_bomb_is_refused_before_decompressing(tmp_path):
     from shapeio import InputError
-    from shapeprog.pointcloud.data import load_cache
+    from shapeprog.pointcloud.dataset import load_cache
 
     bomb = tmp_path / "chair_clouds.npz"
     np.savez_compressed(bomb, points=np.zeros((2, 200_000, 3), np.float32), ids=np.zeros(2, np.int64))

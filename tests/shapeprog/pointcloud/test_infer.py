@@ -12,8 +12,8 @@ from shapeprog.errors import PointCloudError
 from shapeprog.lang import parse, to_text
 from shapeprog.pointcloud.data import corpus_cloud
 from shapeprog.pointcloud.encoder import PointNet2SSG
-from shapeprog.pointcloud.infer import (PRETRAINED, WEIGHTS, CloudModel, align_program, infer, load_model,
-                                        shape_metrics)
+from shapeprog.pointcloud.infer import PRETRAINED, WEIGHTS, CloudModel, infer, load_model, shape_metrics
+from shapeprog.pointcloud.normalize import align_program
 from shapeprog.vae.pretrained import load_pretrained as load_vae
 
 TINY = dict(npoints=[16, 8], radii=[0.3, 0.6], nsamples=[8, 8], widths=[[8, 8, 16], [16, 16, 32], [32, 32, 64]])
@@ -108,8 +108,11 @@ def test_weights_files_are_checked(tmp_path, weights):
         load_model(weights, "table")
     bad = tmp_path / "bad.pt"
     torch.save({"format": "other"}, bad)
-    with pytest.raises(ValueError, match="bad.pt: not a point-cloud model"):
+    with pytest.raises(ValueError, match=r"bad\.pt: a 'other' weights file, not a 'shapeprog-pointcloud' one$"):
         load_model(bad)
+    (tmp_path / "junk.pt").write_bytes(b"junk")
+    with pytest.raises(ValueError, match=r"junk\.pt: not a point-cloud model weights file \(unreadable"):
+        load_model(tmp_path / "junk.pt")
     with pytest.raises(FileNotFoundError, match="missing.pt"):
         load_model(tmp_path / "missing.pt")
 

@@ -12,7 +12,8 @@ from shapeprog.__main__ import main
 from shapeprog.lang import to_text
 from shapeprog.pointcloud.data import corpus_cloud
 from shapeprog.pointcloud.encoder import PointNet2SSG
-from shapeprog.pointcloud.infer import CloudModel, align_program, infer, shape_metrics, _corners_of
+from shapeprog.pointcloud.infer import CloudModel, infer, shape_metrics
+from shapeprog.pointcloud.normalize import align_program, _corners_of
 from shapeprog.pointcloud.normalize import normalize
 from shapeprog.pointcloud.search import (MAX_SEARCH_DECODES, SEARCH_SCHEDULE, aligned_corners, check_schedule,
                                          latent_search, parse_schedule)

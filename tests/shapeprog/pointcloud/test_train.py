@@ -11,7 +11,8 @@ from shapeprog.lang import to_text
 from shapeprog.pointcloud.data import corpus_splits, make_clouds
 from shapeprog.pointcloud.infer import load_model
 from shapeprog.pointcloud.train import CloudDataModule, EndToEndModule, LatentRegressionModule, export_weights
-from shapeprog.vae.batch import MacroTreeBatch, TreeBatch, macro_batch_loss
+from shapeprog.vae.batch import TreeBatch
+from shapeprog.vae.macro_batch import MacroTreeBatch, macro_batch_loss
 from shapeprog.vae.losses import macro_program_loss, program_loss
 from shapeprog.vae.macro_model import MacroVAE
 from shapeprog.vae.model import VAEOutput

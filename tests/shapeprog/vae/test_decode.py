@@ -12,7 +12,8 @@ from shapeprog.errors import ParseError
 from shapeprog.lang import round_numbers
 from shapeprog.vae import VAE, Decoded, Decoder, InvalidSample, decode, decode_latent, encode, interpolate, sample
 from shapeprog.vae.decode import decode_programs
-from shapeprog.vae.decode import _Budget, _decode_tree, _decode_with, _Net, _program, _propose
+from shapeprog.vae.decode import _Budget, _decode_tree, _decode_with, _program, _propose
+from shapeprog.vae.step import _Net
 from shapeprog.vae.replay import Replay
 from shapeprog.vae.validity import ATTACH_CMD as ATTACH
 from shapeprog.vae.validity import CUBOID, REFLECT, SQUEEZE, START, STOP, TRANSLATE

@@ -200,7 +200,7 @@ def _per_tree_losses(vae, trees, eps=None, codes=None, kl=True):
 
 @pytest.mark.parametrize("which", ["hand-built", "shipped chair"])
 def test_the_batched_pass_equals_the_tree_by_tree_pass(which, chairs):
-    from shapeprog.vae.batch import MacroTreeBatch, macro_batch_forward, macro_batch_loss
+    from shapeprog.vae.macro_batch import MacroTreeBatch, macro_batch_forward, macro_batch_loss
     if which == "hand-built":
         lib = Library.from_text(LIB_TEXT)
         lay = LineLayout(lib)
@@ -246,7 +246,7 @@ def test_the_batched_pass_equals_the_tree_by_tree_pass(which, chairs):
 
 
 def test_the_batched_pass_refuses_bad_noise_codes_and_trees():
-    from shapeprog.vae.batch import MacroTreeBatch, macro_batch_loss
+    from shapeprog.vae.macro_batch import MacroTreeBatch, macro_batch_loss
     lib = Library.from_text(LIB_TEXT)
     lay = LineLayout(lib)
     tree = macro_program_to_tree(parse_hierarchy(TWO_LEVELS, library=lib), lay)
@@ -269,7 +269,7 @@ def test_the_batched_pass_refuses_bad_noise_codes_and_trees():
 
 
 def test_decoder_input_dropout_acts_in_training_only_and_adds_no_weights():
-    from shapeprog.vae.batch import MacroTreeBatch, macro_batch_loss
+    from shapeprog.vae.macro_batch import MacroTreeBatch, macro_batch_loss
     from shapeprog.vae.model import VAE
     from shapeprog.vae.train import VAEModule
 

@@ -11,11 +11,13 @@ import torch
 import shapeprog
 from shapeprog import corpus
 from shapeprog.lang import Program, numbers, parse, replace_numbers, to_text
+from shapeprog.vae import reconstruct as vae_reconstruct
 from shapeprog.vae import train as vae_train
 from shapeprog.vae.batch import TreeBatch, batch_forward, batch_loss, collate_trees
 from shapeprog.vae.losses import program_loss
 from shapeprog.vae.model import VAE, VAEOutput, prediction_tree
-from shapeprog.vae.train import VAEDataModule, VAEModule, validation_split
+from shapeprog.vae.train import VAEDataModule, VAEModule
+from shapeprog.vae.data import validation_split
 from shapeprog.vae.vectors import program_to_tree, tree_to_program
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -282,7 +284,7 @@ class _Decoded:
 
 def _fake_decode(monkeypatch, program: Program) -> None:
     """Decoding (and sampling) that always gives ``program``."""
-    monkeypatch.setattr(vae_train, "decode_latent",
+    monkeypatch.setattr(vae_reconstruct, "decode_latent",
                         lambda decoder, z, *, reject=False: _Decoded(program, to_text(program)))
     monkeypatch.setattr(vae_train, "sample",
                         lambda vae, n, seed=0, max_tries=10: [_Decoded(program, to_text(program))] * n)
@@ -306,10 +308,10 @@ def test_reconstruction_hook_logs_fscore_and_images(tmp_path, monkeypatch):
     trainer = _tiny_trainer(tmp_path, max_epochs=1, logger=logger, callbacks=[best], enable_checkpointing=True,
                             num_sanity_val_steps=0)
     trainer.fit(model, dm)
-    scores = vae_train.reconstruction_fscores(dm.val_trees[:2], [target, target], points=500, seed=42)
+    scores = vae_reconstruct.reconstruction_fscores(dm.val_trees[:2], [target, target], points=500, seed=42)
     assert scores[0] > 80 and scores[0] > scores[1]
-    targets = vae_train.target_surfaces(dm.val_trees[:2], points=500, seed=42)  # drawn once, as the hook keeps them
-    assert vae_train.reconstruction_fscores(dm.val_trees[:2], [target, target], 500, 42, targets=targets) == scores
+    targets = vae_reconstruct.target_surfaces(dm.val_trees[:2], points=500, seed=42)  # drawn once, as the hook keeps them
+    assert vae_reconstruct.reconstruction_fscores(dm.val_trees[:2], [target, target], 500, 42, targets=targets) == scores
     assert trainer.callback_metrics["val/fscore"] == pytest.approx(sum(scores) / 2, rel=1e-5)
     assert trainer.callback_metrics["val/recon_failed"] == 0.0
     assert best.best_model_path and (Path(logger.log_dir) / "split.json").is_file()
@@ -317,7 +319,7 @@ def test_reconstruction_hook_logs_fscore_and_images(tmp_path, monkeypatch):
     events.Reload()
     assert {"val/reconstructions", "val/samples"} <= set(events.Tags()["images"])
     # a failed decode scores 0 and is counted
-    assert vae_train.reconstruction_fscores(dm.val_trees[:1], [None], points=100) == [None]
+    assert vae_reconstruct.reconstruction_fscores(dm.val_trees[:1], [None], points=100) == [None]
 
 
 # ------------------------------------------------------------------------------------------ train.py

@@ -5,12 +5,13 @@
 1024, batch norm, ReLU after the first two), a max pool over the points giving the **global feature**
 ``(B, 1024)``, and a head 1024 -> 512 -> 256 -> k (batch norm, ReLU, dropout 0.3 before the second batch
 norm). The input transform (``STN3d``) is optional (``stn=True``); the classifier shipped with the package
-is trained without it (half the compute on CPU). The generation metrics (:mod:`shapeprog.genmetrics`) use
+is trained without it (half the compute on CPU). The generation metrics (:mod:`shapeprog.vae.genmetrics`) use
 the global feature for the Fréchet distance and train fresh binary classifiers for the "% fool" metric.
 
 Clouds are batch first, ``(B, N, 3) float``. Training (:func:`fit_classifier`) and inference touch no
 global state: the random streams come from a seed, and torch's global generator is restored afterwards.
-Weight files are ``{"config", "classes", "state_dict", "meta"}`` read with ``torch.load(weights_only=True)``;
+Weight files (:mod:`shapeio.weights`, family :data:`FORMAT`) hold ``{"config", "classes", "state_dict", "meta"}``;
+the shipped file, written before weights files carried their family, is read as version 0 of it.
 :func:`load_classifier` checks the shipped file's SHA-256 before reading it. How the shipped weights were
 trained and how well they classify: ``docs/generation_metrics.md``.
 
@@ -32,11 +33,17 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["PRETRAINED", "PRETRAINED_SHA256", "PointNetCls", "STN3d", "accuracy", "fit_classifier", "global_features",
+from shapeio.weights import read_weights, write_weights
+
+__all__ = ["FORMAT", "VERSION", "PRETRAINED", "PRETRAINED_SHA256", "PointNetCls", "STN3d", "accuracy", "fit_classifier", "global_features",
            "load_classifier", "predict", "save_classifier", "sha256_file"]
 
+#: The weights-file family of a classifier and its version (the shipped file has the unversioned layout, 0).
+FORMAT, VERSION = "shapeprog-pointnet-cls", 1
+#: The keys of a classifier file written before weights files carried ``format`` (the shipped one).
+_LEGACY_KEYS = ("config", "classes", "state_dict")
 #: The shipped chair / table / storage classifier (``shapeprog/weights``).
-PRETRAINED = Path(__file__).resolve().parent / "weights" / "pointnet_cls.pt"
+PRETRAINED = Path(__file__).resolve().parent.parent / "weights" / "pointnet_cls.pt"
 #: SHA-256 of :data:`PRETRAINED`; :func:`load_classifier` refuses a file that does not match.
 PRETRAINED_SHA256 = "c7a967bb1e291e89f700b2192dda74294221037ab109f36a600e7860bc634385"
 
@@ -279,14 +286,12 @@ def save_classifier(path, model: PointNetCls, classes: Sequence[str], meta: Opti
     Returns:
         ``path``; its SHA-256 is :func:`sha256_file` of it.
     """
-    from shapeio import atomic_write  # lazy: keeps this module's import to torch
-
     classes = [str(c) for c in classes]
     if len(classes) != model.config["k"]:
         raise ValueError(f"{len(classes)} class names for a {model.config['k']}-class model")
     state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
     payload = {"config": dict(model.config), "classes": classes, "state_dict": state, "meta": dict(meta or {})}
-    return atomic_write(path, lambda f: torch.save(payload, f), mkdir=True)
+    return write_weights(path, FORMAT, VERSION, payload)
 
 
 def load_classifier(path=None, sha256: Optional[str] = None, device=None) -> tuple[PointNetCls, tuple[str, ...], dict]:
@@ -316,14 +321,14 @@ def load_classifier(path=None, sha256: Optional[str] = None, device=None) -> tup
         if actual != sha256.lower():
             raise ValueError(f"{path}: SHA-256 {actual} differs from the expected {sha256.lower()}; "
                              "the file is damaged or not the one these metrics were defined with")
+    payload = read_weights(path, FORMAT, VERSION, legacy=_LEGACY_KEYS, what="PointNet classifier weights file")
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
         model = PointNetCls(**payload["config"])
         model.load_state_dict(payload["state_dict"])
         classes = tuple(str(c) for c in payload["classes"])
         meta = dict(payload.get("meta", {}))
-    except Exception as e:  # torch's own message suggests unsafe loading; the failure's type is what helps
-        raise ValueError(f"{path}: not a PointNet classifier weights file (unreadable: {type(e).__name__})") from None
+    except Exception as e:  # missing keys, another model's config or tensors of other shapes
+        raise ValueError(f"{path}: not a PointNet classifier weights file ({type(e).__name__} in its contents)") from None
     if len(classes) != model.config["k"]:
         raise ValueError(f"{path}: {len(classes)} class names for a {model.config['k']}-class model")
     return model.to(device or "cpu").eval(), classes, meta

@@ -1,4 +1,4 @@
-"""Tests for shapeprog.genmetrics, shapeprog.pointnet and shapeprog.gentable: the generation metrics."""
+"""Tests for shapeprog.vae.genmetrics, shapeprog.vae.pointnet and shapeprog.vae.gentable: the generation metrics."""
 import shutil
 from concurrent.futures import ThreadPoolExecutor
 
@@ -8,7 +8,7 @@ import torch
 
 from sa_testutil import boxes
 from shapeprog import corpus, execute, parse
-from shapeprog.genmetrics import (
+from shapeprog.vae.genmetrics import (
     FoolResult,
     chamfer_clouds,
     classifier_clouds,
@@ -26,9 +26,9 @@ from shapeprog.genmetrics import (
     program_key,
     variety,
 )
-from shapeprog.gentable import PAPER, GenerationRow, References, evaluate_generation, format_table
+from shapeprog.vae.gentable import PAPER, GenerationRow, References, evaluate_generation, format_table
 from shapeprog.metrics import chamfer
-from shapeprog.pointnet import (PRETRAINED, PRETRAINED_SHA256, PointNetCls, accuracy, fit_classifier,
+from shapeprog.vae.pointnet import (PRETRAINED, PRETRAINED_SHA256, PointNetCls, accuracy, fit_classifier,
                                 load_classifier, save_classifier, sha256_file)
 
 TINY = dict(widths=(8, 16, 32), head=(16, 8))

@@ -3,7 +3,7 @@
 The metrics of the ShapeAssembly paper's generation tables (Table 2: % rooted, % stable, % fool, FD;
 Table 4: generalization, coverage, variety; Table 5: leaf parts) and the share of novel programs. They take
 executed shapes (leaf ``corners (L, 8, 3)``), point clouds or programs, never a model, so any generator can
-be measured. :func:`shapeprog.gentable.generation_table` puts them into one markdown table. Every definition
+be measured. :func:`shapeprog.vae.gentable.generation_table` puts them into one markdown table. Every definition
 and the choices taken where the paper is vague: ``docs/generation_metrics.md``.
 
 * :func:`leaf_parts`: leaf cuboids of an executed program.
@@ -30,10 +30,11 @@ from typing import Iterable, Optional, Sequence
 import numpy as np
 import torch
 
-from .errors import ExecutionError, ParseError
-from .execute import ExecutedShape, execute, execute_batch
-from .lang import Program, parse, to_text
-from .sampling import sample_surface
+from ..errors import ExecutionError, ParseError
+from ..execute import ExecutedShape, execute, execute_batch
+from ..lang import Program, parse, to_text
+from ..sampling import sample_surface
+from .pointnet import global_features, load_classifier, fit_classifier, predict
 
 __all__ = ["CLASSIFIER_POINTS", "CHAMFER_POINTS", "FoolResult", "chamfer_clouds", "classifier_clouds",
            "classifier_features", "coarse_fields", "coverage", "execute_samples", "feature_variance", "frechet_distance",
@@ -168,11 +169,9 @@ def classifier_features(shapes, model=None, batch_size: int = 32, seed: int = 0)
     Args:
         shapes: clouds ``(S, N, 3)`` prepared as :func:`classifier_clouds` does, or a sequence of leaf
             corners ``(L, 8, 3)`` (sampled here with 2,500 points and ``seed``).
-        model: a :class:`~shapeprog.pointnet.PointNetCls`; default the shipped classifier
-            (:func:`shapeprog.pointnet.load_classifier`).
+        model: a :class:`~shapeprog.vae.pointnet.PointNetCls`; default the shipped classifier
+            (:func:`shapeprog.vae.pointnet.load_classifier`).
     """
-    from .pointnet import global_features, load_classifier
-
     if model is None:
         model = load_classifier()[0]
     clouds = shapes if isinstance(shapes, torch.Tensor) else classifier_clouds(shapes, seed=seed)
@@ -308,8 +307,8 @@ def percent_fool(
     shapes wrong.
 
     ``n = min(len(generated), len(real))`` clouds of each kind are drawn at random (seeded); a fraction
-    ``holdout`` of each kind is held out, and a fresh :class:`~shapeprog.pointnet.PointNetCls` (k = 2) is
-    trained on the rest for ``epochs`` epochs (:func:`shapeprog.pointnet.fit_classifier`). After each of
+    ``holdout`` of each kind is held out, and a fresh :class:`~shapeprog.vae.pointnet.PointNetCls` (k = 2) is
+    trained on the rest for ``epochs`` epochs (:func:`shapeprog.vae.pointnet.fit_classifier`). After each of
     the last ``average_last`` epochs the held-out shapes are classified; the result is the percentage
     misclassified, averaged over those epochs.
 
@@ -320,13 +319,11 @@ def percent_fool(
         holdout: fraction of each kind held out (at least one shape each).
         points: points per cloud and training visit (a random subset; all when None); held-out clouds
             are classified with their first ``points`` points (the samples are i.i.d.).
-        batch_size, lr, seed, log, **model_kwargs: see :func:`shapeprog.pointnet.fit_classifier`.
+        batch_size, lr, seed, log, **model_kwargs: see :func:`shapeprog.vae.pointnet.fit_classifier`.
 
     Returns:
         A :class:`FoolResult`.
     """
-    from .pointnet import fit_classifier, predict
-
     if not 1 <= average_last <= epochs:
         raise ValueError(f"`average_last` must lie in [1, epochs={epochs}], got {average_last}")
     if not 0.0 < holdout < 1.0:

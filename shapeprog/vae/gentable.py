@@ -1,7 +1,7 @@
 """The ShapeAssembly paper's generation tables for a set of generated programs, and the classifier they use.
 
 :func:`generation_table` measures generated programs of one category with every metric of
-:mod:`shapeprog.genmetrics` (the paper's Table 2: % rooted, % stable, % fool, FD; Table 5: leaf parts;
+:mod:`shapeprog.vae.genmetrics` (the paper's Table 2: % rooted, % stable, % fool, FD; Table 5: leaf parts;
 Table 4: generalization, coverage, variety; and % novel programs) against the corpus train split, adds a
 ground-truth row (the corpus val split through the same metrics) and the paper's figures, and returns
 a markdown table. :func:`evaluate_generation` gives one row as numbers. :func:`train_category_classifier`
@@ -10,6 +10,8 @@ Definitions and decisions: ``docs/generation_metrics.md``.
 """
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -18,10 +20,16 @@ from typing import Optional, Sequence
 import numpy as np
 import torch
 
+from shapeio.cache import cached
+
 from .genmetrics import (CHAMFER_POINTS, CLASSIFIER_POINTS, FoolResult, chamfer_clouds, classifier_clouds,
                          classifier_features, coverage, execute_samples, frechet_distance, gaussian_fit,
                          generalization, leaf_parts, novelty, percent_fool, variety)
-from .lang import Program
+from ..lang import Program
+from .. import corpus
+from ..corpus import data_digest
+from ..physics import rootedness, stability
+from .pointnet import accuracy, fit_classifier, PRETRAINED_SHA256, load_classifier
 
 __all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_table",
            "table_notes", "train_category_classifier"]
@@ -48,8 +56,6 @@ _DIGITS = {"rooted": 1, "stable": 1, "fool": 2, "fd": 2, "leaf_parts": 2, "gener
 
 
 def _corpus(category: str, split: str) -> tuple[list[Program], list[torch.Tensor]]:
-    from . import corpus  # lazy: the corpus archive is read on first use
-
     programs = [p for _, p in corpus.load(category, split)]
     corners, errors = execute_samples(programs)
     if errors:
@@ -72,8 +78,8 @@ def train_category_classifier(
 ) -> tuple:
     """Train the PointNet category classifier on the corpus train split; measure it on the val split.
 
-    Every executed train shape gives one :func:`~shapeprog.genmetrics.classifier_clouds` cloud of 2,500
-    points (seed ``seed``); :func:`shapeprog.pointnet.fit_classifier` draws ``per_class`` shapes of each
+    Every executed train shape gives one :func:`~shapeprog.vae.genmetrics.classifier_clouds` cloud of 2,500
+    points (seed ``seed``); :func:`shapeprog.vae.pointnet.fit_classifier` draws ``per_class`` shapes of each
     category per epoch and a random ``points``-point subset of each cloud per visit (cheap), then
     ``finetune_epochs`` more epochs at learning rate ``finetune_lr`` use all 2,500 points, so that the
     head and its batch norms see the max pool of the clouds the metrics use. The accuracy is measured on
@@ -83,8 +89,6 @@ def train_category_classifier(
         ``(model, meta)``; ``meta`` records the settings, the val accuracy overall and per category
         (percent), the shape counts and the training seconds.
     """
-    from .pointnet import accuracy, fit_classifier
-
     t0 = time.perf_counter()
     data = {}
     for split, s in (("train", seed), ("val", seed + 1)):
@@ -129,10 +133,10 @@ class References:
         category: ``"chair"``, ``"table"`` or ``"storage"``.
         train_programs, val_programs: the corpus splits' programs.
         train_corners, val_corners: their leaf corners ``(L, 8, 3)``.
-        train_clouds: :func:`~shapeprog.genmetrics.classifier_clouds` of the train shapes (the real
+        train_clouds: :func:`~shapeprog.vae.genmetrics.classifier_clouds` of the train shapes (the real
             shapes of % fool), ``(T, 2500, 3)``.
         train_fit: Gaussian fit ``(mu, cov)`` of the train shapes' classifier features (FD).
-        train_chamfer, val_chamfer: :func:`~shapeprog.genmetrics.chamfer_clouds` of both splits.
+        train_chamfer, val_chamfer: :func:`~shapeprog.vae.genmetrics.chamfer_clouds` of both splits.
         seed: the sampling seed (train clouds use ``seed``, val ``seed + 1``).
     """
 
@@ -196,8 +200,6 @@ class GenerationRow:
 
 
 def _physics_job(job) -> tuple[bool, Optional[bool]]:
-    from .physics import rootedness, stability
-
     corners, stable = job
     rooted = rootedness(corners)
     if not stable:
@@ -238,9 +240,9 @@ def evaluate_generation(
             runs everything here.
         stability: run the pybullet stability test (about 0.5 s per shape); False leaves it None.
         fool: train the % fool classifier; ``fool_epochs``, ``fool_average_last`` and ``fool_points``
-            are its budget (:func:`~shapeprog.genmetrics.percent_fool`).
+            are its budget (:func:`~shapeprog.vae.genmetrics.percent_fool`).
         with_coverage: measure coverage of the val split (False for the val split itself).
-        candidates: exact chamfer candidates per shape (:func:`~shapeprog.genmetrics.nearest_chamfer`).
+        candidates: exact chamfer candidates per shape (:func:`~shapeprog.vae.genmetrics.nearest_chamfer`).
         chamfer_points: surface points per shape of the chamfer metrics.
         seed: sampling and training seed (samples use ``seed + 2``, their chamfer clouds ``seed + 3``).
         log: a function taking a line of progress text.
@@ -344,13 +346,6 @@ def ground_truth_row(refs: References, classifier_sha: Optional[str], **kw) -> G
     on-disk cache (:mod:`shapeio.cache`) keyed by the category, the classifier's SHA-256, the corpus archive's
     digest, the metric settings in ``kw`` and :data:`GROUND_TRUTH_CACHE_VERSION`; computed (with a progress line
     through ``kw['log']``) when not there. Not cached for a classifier without a known digest."""
-    import dataclasses
-    import json
-
-    from shapeio.cache import cached
-
-    from .corpus import data_digest
-
     def compute() -> GenerationRow:
         say = kw.get("log") or (lambda s: None)
         say(f"{refs.category}: measuring the ground-truth row ({len(refs.val_programs)} shapes; cached after this "
@@ -395,8 +390,6 @@ def generation_table(
     say how each was measured. Arguments as :func:`evaluate_generation`; ``samples`` may be empty
     (``[]``) with ``ground_truth=True`` for the ground-truth row alone.
     """
-    from .pointnet import PRETRAINED_SHA256, load_classifier
-
     if category not in PAPER:
         raise ValueError(f"unknown category {category!r}; expected one of {', '.join(PAPER)}")
     meta, sha = {}, None

@@ -1,8 +1,8 @@
 """The ground-truth row of evaluate-generation is measured once per key and read back whole from the cache."""
 from types import SimpleNamespace
 
-from shapeprog import gentable
-from shapeprog.genmetrics import FoolResult
+from shapeprog.vae import gentable
+from shapeprog.vae.genmetrics import FoolResult
 
 
 def test_ground_truth_row_is_cached(monkeypatch, tmp_path):
