@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-__all__ = ["STATUSES", "Step", "Experiment", "check_experiments", "listing", "register", "QUICK_DIR"]
+__all__ = ["STATUSES", "Step", "Experiment", "check_experiments", "listing", "list_result", "register", "QUICK_DIR"]
 
 #: What an experiment's status may be: built and reproducing its table, built in part, not built, or
 #: impossible here (the reason says why).
@@ -87,6 +87,19 @@ def listing(experiments: Sequence[Experiment], verbose: bool = False, prog: str 
     return "\n".join(lines)
 
 
+def list_result(experiments: Sequence[Experiment], prog: str, path: str) -> dict:
+    """The list as a result file's content (:mod:`shapeio.results`): id, status, description, reason, result."""
+    from .results import column, make_result
+
+    rows = [{"id": e.id, "status": e.status, "description": e.description, "why": e.why or "",
+             "result": e.result or "", "scale": e.scale or ""} for e in experiments]
+    cols = [column("id", "id"), column("status", "status"), column("description", "experiment"),
+            column("scale", "scale"), column("why", "what is missing or why not"), column("result", "result file")]
+    return make_result("The paper's experiments", cols, rows,
+                       [f"`{prog} paper run ID` rebuilds an experiment's result file (`--quick`: a check in minutes)."],
+                       command=f"{prog} paper --list --json {path}")
+
+
 def register(sub, experiments: Sequence[Experiment], main: Callable[[list[str]], int], prog: str) -> None:
     """Add the ``paper`` command (``--list``, ``run ID [--quick] [--out FILE]``) to a sub-parser set."""
     check_experiments(experiments)
@@ -104,12 +117,18 @@ def register(sub, experiments: Sequence[Experiment], main: Callable[[list[str]],
     p.add_argument("--out", default=None,
                    help=f"the result file (default: the docs' file, or {QUICK_DIR}/ID.json with --quick)")
     p.add_argument("--dry-run", action="store_true", help="print the commands without running them")
+    p.add_argument("--json", default=None, metavar="FILE",
+                   help="with --list: also write the list as a result file (shapeio.results; the docs show it)")
 
     def run(args) -> int:
         if args.action is None:
             if args.id is not None:
                 p.error("give 'run ID' to run an experiment, or --list")
             print(listing(experiments, args.verbose, prog))
+            if args.json:
+                from .results import write_result
+
+                print(f"wrote {write_result(args.json, list_result(experiments, prog, args.json))}")
             return 0
         if args.id is None:
             p.error("'run' needs an experiment ID (see --list)")

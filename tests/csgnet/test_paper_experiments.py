@@ -146,3 +146,10 @@ def test_datasize_writes_one_block_per_share(tmp_path):
     rows = read_result(out)["rows"]
     assert [r["method"] for r in rows] == ["1225 training programs (10 %) k=1 top-1",
                                            "12250 training programs (100 %) k=1 top-1"]
+
+
+def test_the_docs_list_of_experiments_is_the_code_list():
+    """docs/results/csgnet/experiments.json (`paper --list --json`) holds exactly the current list."""
+    rows = read_result("docs/results/csgnet/experiments.json")["rows"]
+    assert [(r["id"], r["status"], r["description"], r["why"]) for r in rows] == [
+        (e.id, e.status, e.description, e.why) for e in EXPERIMENTS]
