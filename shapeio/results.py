@@ -33,7 +33,7 @@ from typing import Iterable, Sequence
 from .files import atomic_write
 
 __all__ = ["FORMAT", "VERSION", "MAX_RESULT_BYTES", "column", "make_result", "write_result", "read_result",
-           "markdown", "sync", "machine"]
+           "markdown", "sync", "machine", "headline"]
 
 FORMAT = "shape-programs result"
 VERSION = 1
@@ -172,14 +172,56 @@ def sync(pages: Iterable, root=".", check: bool = False) -> list[Path]:
     return changed
 
 
+def headline(spec_path, root=".", out: str = "FILE") -> dict:
+    """A summary result whose cells are picked from other result files, as a JSON spec names them::
+
+        {"title": "...", "notes": ["..."],
+         "rows": [{"system": "...", "measure": "...", "file": "docs/results/x.json",
+                   "row": {"method": "..."}, "column": "iou", "paper": "91.33", "page": "docs/x.md"}, ...]}
+
+    Each row's ``ours`` is the cell of ``column`` in the row of ``file`` whose values match ``row``, formatted as
+    that file formats it, so that a figure quoted in the summary is the figure of its table."""
+    spec_path = Path(spec_path)
+    try:
+        spec = json.loads(spec_path.read_text(encoding="utf-8"))
+        items = spec["rows"]
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as e:
+        raise ValueError(f"{spec_path}: not a headline spec ({e})") from None
+    rows = []
+    for i, item in enumerate(items):
+        try:
+            src = read_result(Path(root) / item["file"])
+            col = next(c for c in src["columns"] if c["key"] == item["column"])
+            match = [r for r in src["rows"] if all(r.get(k) == v for k, v in item["row"].items())]
+        except (KeyError, TypeError, StopIteration) as e:
+            raise ValueError(f"{spec_path}: row {i}: no column {item.get('column')!r} ({e})") from None
+        if len(match) != 1:
+            raise ValueError(f"{spec_path}: row {i}: {len(match)} rows of {item['file']} match {item['row']}")
+        rows.append({"system": item["system"], "measure": item["measure"], "ours": _cell(match[0][col["key"]], col),
+                     "paper": item.get("paper", "–"), "page": item.get("page", "")})
+    cols = [column("system", "system"), column("measure", "measure"), column("ours", "ours"),
+            column("paper", "paper"), column("page", "details")]
+    return make_result(spec.get("title", "Headline figures"), cols, rows, spec.get("notes", ()),
+                       command=f"python -m shapeio.results --headline {spec_path} --out {out}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m shapeio.results",
                                  description="Rewrite the result tables of docs pages from their result files.")
-    ap.add_argument("pages", nargs="+", help="markdown pages with <!-- result: FILE --> blocks")
+    ap.add_argument("pages", nargs="*", help="markdown pages with <!-- result: FILE --> blocks")
     ap.add_argument("--root", default=".", help="the folder result paths are relative to (default: .)")
     ap.add_argument("--check", action="store_true", help="change nothing; exit 1 if a page is out of step")
+    ap.add_argument("--headline", metavar="SPEC", help="write the summary result that SPEC (JSON) picks from other "
+                    "result files to --out (before the pages are rewritten)")
+    ap.add_argument("--out", help="with --headline: the result file to write")
     args = ap.parse_args(argv)
+    if not args.pages and not args.headline:
+        ap.error("give markdown pages, or --headline SPEC --out FILE")
+    if args.headline and not args.out:
+        ap.error("--headline needs --out")
     try:
+        if args.headline:
+            print(f"wrote {write_result(args.out, headline(args.headline, args.root, args.out))}")
         changed = sync(args.pages, args.root, args.check)
     except (OSError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
