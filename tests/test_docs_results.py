@@ -18,3 +18,11 @@ def test_every_result_file_is_shown_and_readable():
     for f in files:
         read_result(ROOT / f)
     assert shown <= files, f"blocks naming missing files: {sorted(shown - files)}"
+
+
+def test_the_readme_headline_is_picked_from_the_current_result_files():
+    """docs/results/headline.json holds exactly what `python -m shapeio.results --headline` picks today."""
+    from shapeio.results import headline
+
+    got = headline(ROOT / "docs" / "headline_spec.json", ROOT)
+    assert read_result(ROOT / "docs" / "results" / "headline.json")["rows"] == got["rows"]

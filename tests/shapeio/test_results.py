@@ -68,3 +68,21 @@ def test_make_result_refuses_rows_without_a_column_and_repeated_keys():
         make_result("t", [column("a", "A")], [{"b": 1}])
     with pytest.raises(ValueError, match="distinct"):
         make_result("t", [column("a", "A"), column("a", "B")], [])
+
+
+def test_headline_picks_a_formatted_cell_and_refuses_ambiguous_rows(tmp_path):
+    import json
+
+    from shapeio.results import column, headline, make_result, write_result
+
+    write_result(tmp_path / "t.json", make_result("t", [column("method", "method"), column("iou", "IoU", 2, 100.0)],
+                                                  [{"method": "a", "iou": 0.87604}, {"method": "b", "iou": 0.5}]))
+    spec = {"title": "H", "rows": [{"system": "s", "measure": "m", "file": "t.json", "row": {"method": "a"},
+                                    "column": "iou", "paper": "91.33", "page": "p.md"}]}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    got = headline(tmp_path / "spec.json", tmp_path, "h.json")
+    assert got["rows"] == [{"system": "s", "measure": "m", "ours": "87.60", "paper": "91.33", "page": "p.md"}]
+    spec["rows"][0]["row"] = {}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    with pytest.raises(ValueError, match=r"row 0: 2 rows of t.json match \{\}"):
+        headline(tmp_path / "spec.json", tmp_path)
