@@ -20,6 +20,8 @@ def _commands(parser):
     """``(system, command, its parser)`` of every shapeprog command."""
     systems = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     for system, sp in systems.choices.items():
+        if system == "paper":  # the experiment list: one command of its own (test_the_paper_command_has_help)
+            continue
         commands = next(a for a in sp._actions if isinstance(a, argparse._SubParsersAction))
         for command, cp in commands.choices.items():
             yield system, command, cp
@@ -71,3 +73,15 @@ def test_a_wrong_option_in_an_example_would_be_caught(capsys):
     with pytest.raises(SystemExit):
         sp_cli.build_parser().parse_args(shlex.split("macros tables --categories chair --limit 200 --out table1.md"))
     assert "unrecognized arguments: --categories chair" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("cli, prog", [(sp_cli, "python -m shapeprog"), (csg_cli, "python -m csgnet")])
+def test_the_paper_command_has_help_and_an_example(cli, prog):
+    parser = cli.build_parser()
+    systems = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    paper = systems.choices["paper"]
+    assert not [a.dest for a in paper._actions if not a.help]
+    example = paper.epilog.removeprefix("example: ")
+    assert example.startswith(f"{prog} paper run ") and example.endswith(" --quick")
+    args = parser.parse_args(shlex.split(example)[len(shlex.split(prog)):])
+    assert args.action == "run" and args.quick
