@@ -153,13 +153,14 @@ class References:
 
     @classmethod
     def build(cls, category: str, model=None, seed: int = 0, chamfer_points: int = CHAMFER_POINTS,
-              log=None) -> "References":
-        """Execute and sample the corpus train and val splits of ``category``; fit the train features."""
+              log=None, classifier_sha: Optional[str] = None) -> "References":
+        """Execute and sample the corpus train and val splits of ``category``; fit the train features (kept in
+        the on-disk cache, :func:`train_feature_fit`, when ``classifier_sha`` names the classifier)."""
         t0 = time.perf_counter()
         train_programs, train_corners = _corpus(category, "train")
         val_programs, val_corners = _corpus(category, "val")
         train_clouds = classifier_clouds(train_corners, seed=seed)
-        fit = gaussian_fit(classifier_features(train_clouds, model))
+        fit = train_feature_fit(category, train_clouds, model, seed, classifier_sha, log)
         refs = cls(category, train_programs, val_programs, train_corners, val_corners, train_clouds, fit,
                    chamfer_clouds(train_corners, chamfer_points, seed=seed),
                    chamfer_clouds(val_corners, chamfer_points, seed=seed + 1), seed)
@@ -337,6 +338,31 @@ def table_notes(model_meta: dict, sha: Optional[str], fool_epochs: int, fool_ave
     ]
 
 
+#: Bumped when the classifier clouds or features change: cached feature fits of other versions are not read.
+FEATURE_CACHE_VERSION = 1
+
+
+def train_feature_fit(category: str, train_clouds, model, seed: int, classifier_sha: Optional[str] = None,
+                      log=None) -> tuple:
+    """The Gaussian fit ``(mu, cov)`` of the classifier features of a category's training clouds (FD's reference),
+    kept in the on-disk cache (:mod:`shapeio.cache`) keyed by the category, the classifier's SHA-256, the corpus
+    archive's digest, the seed, the cloud size and :data:`FEATURE_CACHE_VERSION`; not cached without a digest."""
+    def compute():
+        if log is not None:
+            log(f"{category}: classifier features of {len(train_clouds)} training shapes (cached after this run)")
+        mu, cov = gaussian_fit(classifier_features(train_clouds, model))
+        return {"mu": mu, "cov": cov}
+
+    if classifier_sha is None:
+        got = compute()
+    else:
+        key = {"category": category, "classifier": classifier_sha, "corpus": data_digest(), "seed": int(seed),
+               "points": int(train_clouds.shape[1]), "shapes": int(train_clouds.shape[0]),
+               "version": FEATURE_CACHE_VERSION}
+        got = cached("train-feature-fit", key, compute)
+    return np.asarray(got["mu"]), np.asarray(got["cov"])
+
+
 #: Bumped when a generation metric changes: cached ground-truth rows of other versions are not read.
 GROUND_TRUTH_CACHE_VERSION = 1
 
@@ -396,7 +422,7 @@ def generation_table(
     if model is None:
         model, _, meta = load_classifier()  # checks the file against PRETRAINED_SHA256
         sha = PRETRAINED_SHA256
-    refs = references or References.build(category, model, seed, chamfer_points, log)
+    refs = references or References.build(category, model, seed, chamfer_points, log, classifier_sha=sha)
     kw = dict(model=model, executor=executor, stability=stability, fool=fool, fool_epochs=fool_epochs,
               fool_average_last=fool_average_last, fool_points=fool_points, candidates=candidates,
               chamfer_points=chamfer_points, seed=seed, log=log)
