@@ -4,18 +4,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .dream import DREAM_TIMEOUT, N_DREAMS
+from .rules import SCHEMES
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUE_SCHEDULES, VALUES, check_limits
-from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS, WAKE_STEP_BUDGET
 from .train import TrainConfig
 
 __all__ = [
     "Config",
+    "CONSTANT_OMEGA",
     "WAKES",
 ]
 
 
 #: The wake searches: by refactoring only, or with the recognition network.
 WAKES = ("refactor", "network")
+#: ω of every abstraction when ``Config.preferences`` is off (the preference score 0: 0.25 · (1 − 0)).
+CONSTANT_OMEGA = 0.25
 
 
 @dataclass(frozen=True)
@@ -27,21 +31,31 @@ class Config:
         n_proposals: proposals per round (10,000).
         n_abstractions: candidates tried per round (N_A, 20).
         seed: random seed of the proposals (42).
-        iterations, max_nodes, time_limit: e-graph limits of each refactor (5, 10,000, 5 s).
+        iterations, max_nodes: the e-graph limits of each refactor (5, 10,000, the paper's); time_limit: a
+            safety cap in seconds, not a budget (:data:`~shapeprog.coder.refactor.TIME_LIMIT`; the paper's 5 s
+            made results depend on the machine's load).
         egraph_values: how the e-graph's value table follows its e-nodes (:data:`~shapeprog.coder.refactor.VALUES`;
             ``"lagged"`` reproduces runs made before 2026-11-29; :func:`~shapeprog.coder.refactor.refactor`).
         refactor_all: integration refactors every program (the paper) rather than only those a candidate
             covers.
         semantic_rewrites: use the semantic rewrites (False: only the abstraction rules, the paper's
             "no semantic rewrites" ablation).
+        scheme: how the e-graph's rewrites are guarded (:data:`~shapeprog.coder.rules.SCHEMES`):
+            ``"conditional"`` (value-guarded rules, the paper's) or ``"naive"`` (plain rewrites over relations
+            put in as e-nodes: the paper's "no conditional rewrites" ablation; needs the semantic rewrites).
+        preferences: ω of each abstraction from its preference score, which also ranks the proposals (the
+            paper's); False: ω = :data:`CONSTANT_OMEGA` for every abstraction and the ranking without the
+            preference term (the paper's "no preferences" ablation; abstractions ω rejects stay rejected).
         wake: ``"refactor"`` (search by refactoring) or ``"network"`` (dreams, a recognition network, the
             network search; see the module docstring).
         n_dreams, dream_timeout: valid dreams per function (N_D, 10,000) and seconds per function (1,800).
         train_lr, train_batch, train_epochs, train_patience, train_min_delta, train_holdout,
             train_seconds, dropout, train_bucket: the network's training (:class:`shapeprog.coder.train.TrainConfig`;
             the paper's values by default, ``train_seconds`` per round).
-        wake_batch, wake_batches, wake_seconds: samples per batch (64), batches per search step at most,
-            and seconds per search step (1 s; None: the search depends only on the seed).
+        wake_batch, wake_batches, wake_step_budget: samples per batch (64), batches per search step at
+            most, and the step's budget in batch-primitives (:func:`~shapeprog.coder.search.step_batches`;
+            the paper's 1 s per step as a count). wake_seconds: a safety cap per search step, not the budget
+            (:data:`~shapeprog.coder.search.WAKE_SECONDS`; None: none).
         device: where the network trains (``"auto"``: CUDA when available).
         network_from: with ``wake="network"``, the first round whose wake uses the network; the rounds
             before it use the refactor-only wake (cheap early rounds, then the network; ours, not the paper's).
@@ -60,6 +74,8 @@ class Config:
     egraph_values: str = VALUES
     refactor_all: bool = False
     semantic_rewrites: bool = True
+    scheme: str = "conditional"
+    preferences: bool = True
     wake: str = "refactor"
     n_dreams: int = N_DREAMS
     dream_timeout: float = DREAM_TIMEOUT
@@ -74,6 +90,7 @@ class Config:
     train_bucket: bool = True
     wake_batch: int = WAKE_BATCH
     wake_batches: int = WAKE_BATCHES
+    wake_step_budget: int | None = WAKE_STEP_BUDGET
     wake_seconds: float | None = WAKE_SECONDS
     device: str = "auto"
     network_from: int = 0
@@ -89,6 +106,14 @@ class Config:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"Config.{name} must be an int >= 1, got {v!r}")
+        if self.wake_step_budget is not None and (isinstance(self.wake_step_budget, bool)
+                                                  or not isinstance(self.wake_step_budget, int)
+                                                  or self.wake_step_budget < 1):
+            raise ValueError(f"Config.wake_step_budget must be None or an int >= 1, got {self.wake_step_budget!r}")
+        if self.scheme not in SCHEMES:
+            raise ValueError(f"Config.scheme must be one of {', '.join(SCHEMES)}, got {self.scheme!r}")
+        if self.scheme == "naive" and not self.semantic_rewrites:
+            raise ValueError("Config.scheme 'naive' needs the semantic rewrites (it replaces their guards)")
         if self.wake not in WAKES:
             raise ValueError(f"Config.wake must be one of {', '.join(WAKES)}, got {self.wake!r}")
         check_limits(self.iterations, self.max_nodes, self.time_limit)  # before any work, not in a worker

@@ -47,10 +47,10 @@ from shapeio import atomic_write
 from shapeio.files import parse_json
 
 from .lang import LANG_3D, Call, Expr, Lang, Library, ProgramError, expand, parse, to_text, walk
-from .objective import WEIGHTS, omega, token_counts
+from .objective import WEIGHTS, omega, preference, token_counts
 from .proposal import propose
-from .refactor import VALUES, RefactorError
-from .config import Config
+from .refactor import TIME_LIMIT, VALUES, RefactorError
+from .config import CONSTANT_OMEGA, Config
 from .wake import _best_of, _limits, _map, evaluate, train_network, wake, wake_network
 from . import data
 from ..errors import ParseError
@@ -62,6 +62,7 @@ __all__ = [
     "discover",
     "discover_category",
     "integrate",
+    "library_cost",
     "start_from",
     "summarize",
     "write_outputs",
@@ -102,6 +103,16 @@ def summarize(programs: Sequence[Expr], library: Library, errors: Sequence[float
                    sum(c.num_param for c in counts) / n, n)
 
 
+def library_cost(library: Library, cfg: Config = Config()) -> float:
+    """Σ ω of ``library``'s abstractions as discovery with ``cfg`` counts it: :func:`~shapeprog.coder.objective.omega`
+    (the preferences), or :data:`~shapeprog.coder.config.CONSTANT_OMEGA` each with ``cfg.preferences`` off (an
+    abstraction ω rejects costs 0.5 either way)."""
+    if cfg.preferences:
+        return sum(omega(ab, library) for ab in library.abstractions)
+    return sum(omega(ab, library) if preference(ab, library) is None else CONSTANT_OMEGA
+               for ab in library.abstractions)
+
+
 def _uses(programs: Sequence[Expr], name: str) -> int:
     return sum(1 for p in programs for n in walk(p) if isinstance(n, Call) and n.fn == name)
 
@@ -119,7 +130,7 @@ def integrate(shapes: Sequence, programs: list, costs: list, errors: list, libra
     index = start_index
 
     def F(lib, cs):
-        return sum(cs) / n + sum(omega(ab, lib) for ab in lib.abstractions)
+        return sum(cs) / n + library_cost(lib, cfg)
 
     def trial(lib, progs, idx, costs, errors):
         tasks = []
@@ -187,7 +198,7 @@ def _remove_sweep(shapes, programs, costs, errors, library, cfg, executor, log, 
     n = len(prims)
 
     def F(lib, cs):
-        return sum(cs) / n + sum(omega(ab, lib) for ab in lib.abstractions)
+        return sum(cs) / n + library_cost(lib, cfg)
 
     base = F(library, costs)
     for ab in list(library.abstractions):
@@ -422,7 +433,8 @@ def discover(shapes: Sequence, cfg: Config = Config(), lang: Lang = LANG_3D, exe
             save(rnd, phase)
         elif phase == "integrate":
             rng = random.Random(cfg.seed + rnd)
-            cands = propose(programs, library, cfg.n_proposals, rng, weights, top=cfg.n_abstractions)
+            cands = propose(programs, library, cfg.n_proposals, rng, weights, top=cfg.n_abstractions,
+                            preferences=cfg.preferences)
             log(f"round {rnd}: {len(cands)} candidates")
             library, programs, costs, errors, acc, index = integrate(
                 shapes, programs, costs, errors, library, cands, cfg, executor, weights, log, progress, index)
@@ -490,10 +502,14 @@ def discover_category(category: str, out: str | Path, cfg: Config = Config(), sh
                  + (f", {cfg.wake_repeats} wakes per round" if cfg.wake_repeats > 1 else "")
                  + ")" if cfg.wake == "network" else "")
               + ("" if cfg.semantic_rewrites else ", semantic rewrites off (abstraction rules only)")
+              + ("" if cfg.scheme == "conditional" else f", {cfg.scheme} rewrite scheme")
+              + ("" if cfg.preferences else f", no preferences (omega {CONSTANT_OMEGA:g} each)")
               + ("" if cfg.egraph_values == VALUES else f", e-graph values {cfg.egraph_values}")
               + ("" if start is None else f", started at round {first} from an earlier library and its programs")
               + f", e-graph limits "
-              f"{cfg.iterations} iterations / {cfg.max_nodes} e-nodes / {cfg.time_limit:g} s; last finished phase: "
+              f"{cfg.iterations} iterations / {cfg.max_nodes} e-nodes"
+              + ("" if cfg.time_limit == TIME_LIMIT else f" (safety cap {cfg.time_limit:g} s)")
+              + "; last finished phase: "
               f"round {last['round']} {last['phase']} after {last['seconds']:.0f} s; F={s.F:.2f}, |L|={s.library_size}\n")
     write_outputs(out, result, [r.key for r in recs], header)
     return result

@@ -30,7 +30,7 @@ from .execute import order
 from .lang import LANG_3D, Library, Num, expand, substitute, to_text
 from .objective import naive_program
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES, RefactorError, refactor
-from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS, WAKE_STEP_BUDGET
 from .recnet import load_checkpoint
 
 __all__ = ["PASSES", "Inferred", "check_search_budget", "infer", "load_library", "load_network", "shipped_libraries", "shipped_networks"]
@@ -74,7 +74,7 @@ def _prims(shape) -> tuple:
 def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MAX_ITERATIONS,
           max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None, seed: int = 0,
           search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
-          values: str = VALUES) -> Inferred:
+          search_step_budget: int = WAKE_STEP_BUDGET, values: str = VALUES) -> Inferred:
     """The program of one shape under ``library``.
 
     Args:
@@ -82,15 +82,17 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
             primitives (9-tuples ``(W, H, D, X, Y, Z, RX, RY, RZ)``; 4-tuples with a 2D library).
         library: e.g. :func:`load_library`.
         passes: refactor calls at most, each on the previous one's program (each call is limited by
-            ``iterations``, ``max_nodes``, ``time_limit``); stops at the first that does not lower the cost.
+            ``iterations`` and ``max_nodes``; ``time_limit`` is a safety cap in seconds, not a budget:
+            :data:`~shapeprog.coder.refactor.TIME_LIMIT`); stops at the first that does not lower the cost.
         network: a recognition network for ``library`` (:func:`load_network`, a ``(model, vocab)`` pair, or
             a payload of :func:`shapeprog.coder.wake.network_payload`): the refactored program is then a
             candidate of the network wake's search for the shape (the paper's post hoc inference), and the
             cheaper program is kept. seed: seeds that search.
-        search_seconds, search_batches: the network search's budget per step: no new batch of
-            :data:`~shapeprog.coder.search.WAKE_BATCH` samples starts after ``search_seconds`` or
-            ``search_batches`` batches (the paper's wake: 1 s, and 16 batches, ours). A larger budget is ours,
-            not the paper's post hoc inference.
+        search_batches, search_step_budget: the network search's budget per step, a count of batches of
+            :data:`~shapeprog.coder.search.WAKE_BATCH` samples (:func:`~shapeprog.coder.search.step_batches`:
+            the wake's defaults stand for the paper's 1 s per step on an idle CPU). A larger budget is ours, not
+            the paper's post hoc inference. search_seconds: a safety cap per step, not the budget
+            (:data:`~shapeprog.coder.search.WAKE_SECONDS`).
         values: the e-graph's value schedule (:func:`~shapeprog.coder.refactor.refactor`).
 
     Raises:
@@ -105,7 +107,7 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
         raise ValueError(f"the shape has {len(prims)} primitives; at most {lang.max_prims} are allowed")
     if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
         raise ValueError(f"passes must be an int >= 1, got {passes!r}")
-    check_search_budget(search_seconds, search_batches)
+    check_search_budget(search_seconds, search_batches, search_step_budget)
     naive, env = naive_program(prims)
     naive = substitute(naive, {k: Num(v) for k, v in env.items()})
     best = (naive, evaluate(naive, library, prims))
@@ -123,7 +125,8 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
     if network is not None:
         payload = network if len(network) == 4 else network_payload(*network)
         limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values}
-        search = {"batch": WAKE_BATCH, "batches": int(search_batches), "seconds": float(search_seconds)}
+        search = {"batch": WAKE_BATCH, "batches": int(search_batches), "step_budget": int(search_step_budget),
+                  "seconds": float(search_seconds)}
         expr, cost, err, _ = network_best(best[0], library, prims, payload, limits, search=search, seed=seed)
         if cost is not None and cost < best[1][0] - 1e-9:
             best = (expr, (cost, err))
@@ -131,12 +134,15 @@ def infer(shape, library: Library, *, passes: int = PASSES, iterations: int = MA
     return Inferred(to_text(e), to_text(expand(e, library)), cost, err, stop)
 
 
-def check_search_budget(seconds, batches) -> None:
-    """Refuse a network-search budget that is not ``seconds > 0`` (finite) and ``batches >= 1`` (an int)."""
+def check_search_budget(seconds, batches, step_budget=WAKE_STEP_BUDGET) -> None:
+    """Refuse a network-search budget that is not ``seconds > 0`` (finite), ``batches >= 1`` and
+    ``step_budget >= 1`` (ints)."""
     if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) or seconds <= 0:
         raise ValueError(f"search_seconds must be a positive finite number, got {seconds!r}")
     if isinstance(batches, bool) or not isinstance(batches, int) or batches < 1:
         raise ValueError(f"search_batches must be an int >= 1, got {batches!r}")
+    if isinstance(step_budget, bool) or not isinstance(step_budget, int) or step_budget < 1:
+        raise ValueError(f"search_step_budget must be an int >= 1, got {step_budget!r}")
 
 
 def shipped_networks() -> tuple:

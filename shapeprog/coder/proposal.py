@@ -286,10 +286,11 @@ def _cluster(s: Structure, rng: random.Random) -> list:
 
 def propose(programs: Sequence[Expr], library: Library | None = None, n_proposals: int = 10_000,
             rng: random.Random | None = None, weights: Sequence[float] | None = None, min_freq: float = MIN_SIG_FREQ,
-            top: int = 20) -> list:
+            top: int = 20, preferences: bool = True) -> list:
     """The ``top`` candidates of ``n_proposals`` proposals over ``programs``, best first:
-    ``[(rank, Candidate)]`` with rank = gain × (weighted share of covered programs) + 0.25 × pref;
-    candidates with the same body pool their coverage; those the library's ω rejects are dropped."""
+    ``[(rank, Candidate)]`` with rank = gain × (weighted share of covered programs) + 0.25 × pref
+    (without ``preferences``: the gain term alone, the paper's "no preferences" ablation); candidates with
+    the same body pool their coverage; those the library's ω rejects are dropped."""
     lib = _library(library)
     rng = rng or random.Random(0)
     n = len(programs)
@@ -323,6 +324,6 @@ def propose(programs: Sequence[Expr], library: Library | None = None, n_proposal
             continue
         if pref is None:
             continue
-        ranked.append((cand.gain * freq + 0.25 * pref, to_text(cand.body), cand))
+        ranked.append((cand.gain * freq + (0.25 * pref if preferences else 0.0), to_text(cand.body), cand))
     ranked.sort(key=lambda x: (-x[0], x[1]))
     return [(r, c) for r, _, c in ranked[:top]]

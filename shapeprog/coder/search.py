@@ -6,7 +6,9 @@ expressions that combines what every round found.
 1. the baseline is the naive expression of the first remaining primitive (a ``Cuboid`` in a ``Move``,
    a ``Rotate`` per non-zero angle);
 2. batches of :data:`WAKE_BATCH` expressions are sampled from the network conditioned on the remaining
-   primitives (at most ``batches`` batches, and no new batch after ``seconds``);
+   primitives: :func:`step_batches` of them, a count (``step_budget`` batch-primitives shared by the scene's
+   primitives, at most ``batches``), so that the search depends only on its seed; ``seconds`` is a safety
+   cap only (no new batch after it), set far above what the count takes on a loaded machine;
 3. a sample counts when its primitives match a subset of the remaining ones directly (Hungarian match,
    every pair within the domain's threshold); otherwise, when its first primitive's dimensions are within
    :data:`ALIGN_TOL` of a remaining primitive's, ``Move(sample, dx, dy, dz)`` onto that primitive is tried;
@@ -43,15 +45,25 @@ from .objective import match, naive_program, program_cost
 from .proposal import pieces
 from .recnet import sample
 
-__all__ = ["ALIGN_TOL", "WAKE_BATCH", "WAKE_BATCHES", "WAKE_SECONDS", "Found", "Store", "covers", "naive_piece",
-           "search_shape", "union", "wake_score"]
+__all__ = ["ALIGN_TOL", "WAKE_BATCH", "WAKE_BATCHES", "WAKE_SECONDS", "WAKE_STEP_BUDGET", "WAKE_BATCH_COST", "Found", "Store",
+           "covers", "naive_piece", "search_shape", "step_batches", "union", "wake_score"]
 
 #: Expressions sampled per batch.
 WAKE_BATCH = 64
 #: Batches per search step at most.
 WAKE_BATCHES = 16
-#: Seconds per search step (``wk_prog_search_timeout``); no new batch starts after it.
-WAKE_SECONDS = 1.0
+#: The budget of one search step, a count: a batch sampled for a scene of n primitives costs
+#: ``n + WAKE_BATCH_COST`` units and a step draws ``ceil(WAKE_STEP_BUDGET / (n + WAKE_BATCH_COST))`` batches
+#: (at most :data:`WAKE_BATCHES`; :func:`step_batches`). A batch takes about (0.045 + 0.0065 n) s of CPU with the
+#: shipped networks, so this count stands for the paper's 1 s per step (``wk_prog_search_timeout``) on an idle
+#: CPU: the batches the 1 s drew when measured in CPU time (docs/shapecoder.md, "Budgets").
+WAKE_STEP_BUDGET = 180
+#: The fixed part of a batch's cost in :data:`WAKE_STEP_BUDGET`'s units (primitives' worth).
+WAKE_BATCH_COST = 7
+#: A safety cap in seconds per search step, not the budget: no new batch starts after it. Far above what
+#: :data:`WAKE_STEP_BUDGET` takes on a loaded machine (16 batches of 64 on a 16-primitive scene: about 3 s of
+#: CPU), so that it does not bind and the search depends only on its seed.
+WAKE_SECONDS = 120.0
 #: Dimension tolerance of the alignment Move.
 ALIGN_TOL = 0.1
 
@@ -129,15 +141,30 @@ class Found:
     from_network: bool
 
 
+def step_batches(n_prims: int, batches: int = WAKE_BATCHES, step_budget: int | None = WAKE_STEP_BUDGET) -> int:
+    """The batches of one search step on a scene of ``n_prims`` primitives:
+    ``ceil(step_budget / (n_prims + WAKE_BATCH_COST))``, at least 1 and at most ``batches``
+    (``step_budget=None``: ``batches``).
+
+    >>> [step_batches(n) for n in (1, 4, 5, 7, 10, 12, 16)]
+    [16, 16, 15, 13, 11, 10, 8]
+    """
+    if step_budget is None:
+        return max(1, batches)
+    return max(1, min(batches, -(-step_budget // (max(1, n_prims) + WAKE_BATCH_COST))))
+
+
 def search_shape(prims: Sequence, library: Library, model, vocab, *, batch: int = WAKE_BATCH,
-                 batches: int = WAKE_BATCHES, seconds: float | None = WAKE_SECONDS, seed: int = 0) -> list:
+                 batches: int = WAKE_BATCHES, step_budget: int | None = WAKE_STEP_BUDGET,
+                 seconds: float | None = WAKE_SECONDS, seed: int = 0) -> list:
     """The network search of one shape (see the module docstring).
 
     Args:
         prims: the shape's primitives (ordered).
         model, vocab: a :class:`~shapeprog.coder.recnet.RecognitionNet` and its vocabulary.
-        batches, seconds: the budget per step (at least one batch); ``seconds=None`` makes the search
-            depend only on ``seed``.
+        batches, step_budget: the budget per step, a count (:func:`step_batches`).
+        seconds: a safety cap per step, not the budget (no new batch after it; None: no cap); the default
+            does not bind on a loaded machine, so the result depends only on ``seed``.
         seed: seeds the sampling (step k uses ``seed * 1000 + k``).
 
     Returns:
@@ -156,7 +183,7 @@ def search_shape(prims: Sequence, library: Library, model, vocab, *, batch: int 
         gen = torch.Generator().manual_seed(seed * 1000 + step)
         seen: set = set()
         t0 = time.perf_counter()
-        for b in range(max(1, batches)):
+        for b in range(step_batches(len(scene), batches, step_budget)):
             if b and seconds is not None and time.perf_counter() - t0 > seconds:
                 break
             for e in sample(model, vocab, scene, batch, gen):

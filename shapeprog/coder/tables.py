@@ -42,7 +42,7 @@ from .infer import PASSES, check_search_budget, infer, load_network, shipped_lib
 from .lang import LANG_3D, Call, Library, parse, walk
 from .objective import naive_summary, omega
 from .refactor import MAX_ENODES, MAX_ITERATIONS, TIME_LIMIT, VALUES
-from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+from .search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS, WAKE_STEP_BUDGET
 from .recnet import load_checkpoint
 
 __all__ = ["BASELINE_ROWS", "PAPER_TABLE2", "PAPER_TABLE3", "Phi", "Run", "Table2", "baseline", "format_tables", "from_run", "phi",
@@ -260,17 +260,18 @@ def _infer_one(task):
 
 def phi(split: str, records: Sequence, library: Library, *, executor=None, iterations: int = MAX_ITERATIONS,
         max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, network=None,
-        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES, values: str = VALUES,
-        passes: int = PASSES) -> Phi:
+        search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
+        search_step_budget: int = WAKE_STEP_BUDGET, values: str = VALUES, passes: int = PASSES) -> Phi:
     """Post hoc inference of ``records`` (:class:`~shapeprog.coder.data.ShapeRecord`) with ``library`` fixed;
     with ``network`` (a ``(model, vocab)`` pair) as :func:`~shapeprog.coder.infer.infer` with the network,
-    shape k's search seeded with k and budgeted by ``search_seconds`` / ``search_batches`` (as
-    :func:`~shapeprog.coder.infer.infer`; ``values``: the e-graph's value schedule, and ``passes``, the
-    refactor calls per shape, as there)."""
-    check_search_budget(search_seconds, search_batches)
+    shape k's search seeded with k and budgeted by ``search_batches`` / ``search_step_budget`` (counts) with
+    ``search_seconds`` as a safety cap (as :func:`~shapeprog.coder.infer.infer`; ``values``: the e-graph's
+    value schedule, and ``passes``, the refactor calls per shape, as there)."""
+    check_search_budget(search_seconds, search_batches, search_step_budget)
     limits = {"iterations": iterations, "max_nodes": max_nodes, "time_limit": time_limit, "values": values,
               "passes": passes}
-    budget = {"search_seconds": float(search_seconds), "search_batches": int(search_batches)}
+    budget = {"search_seconds": float(search_seconds), "search_batches": int(search_batches),
+              "search_step_budget": int(search_step_budget)}
     kept = [r for r in records if len(r.prims) <= library.lang.max_prims]
     if not kept:
         raise ValueError(f"{split}: no shape with at most {library.lang.max_prims} primitives")
@@ -291,7 +292,7 @@ def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
            progress: Callable[[str], None] | None = None, network=None, **limits) -> list:
     """The two post hoc inference rows: the first ``train`` discovery shapes and the first ``heldout``
     held-out shapes (``limits``: ``iterations``, ``max_nodes``, ``time_limit``, ``values``, ``passes``, and
-    ``network``, ``search_seconds``, ``search_batches`` as :func:`phi`)."""
+    ``network``, ``search_seconds``, ``search_batches``, ``search_step_budget`` as :func:`phi`)."""
     rows = []
     for split, recs in (("train-PHI", data.load(run.category)[:train]),
                         ("validation-PHI", data.load(run.category, "heldout")[:heldout])):
@@ -304,7 +305,8 @@ def table3(run: Run, *, train: int = 100, heldout: int = 100, executor=None,
 def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = MAX_ITERATIONS,
                   max_nodes: int = MAX_ENODES, time_limit: float = TIME_LIMIT, values: str = VALUES,
                   network: bool = False, search_seconds: float = WAKE_SECONDS, search_batches: int = WAKE_BATCHES,
-                  baselines: Sequence[tuple] = (), passes: int = PASSES) -> str:
+                  search_step_budget: int = WAKE_STEP_BUDGET, baselines: Sequence[tuple] = (),
+                  passes: int = PASSES) -> str:
     """Markdown of Tables 2 and 3 for one run, the paper's rows beside ours; ``baselines``, ``[(kind,
     Table2)]`` with kind ``"input"`` or ``"wake"`` (:func:`baseline`), add the structure-only rows to Table 2."""
     cat = run.category
@@ -319,15 +321,19 @@ def format_tables(run: Run, t2: Table2, t3: Sequence[Phi], *, iterations: int = 
     out.append(f"| ShapeCoder (ours) | {t2.ours.F:.1f} | {t2.ours.library_size} | {t2.ours.num_struct:.1f} | "
                f"{t2.ours.num_param:.1f} |")
     out += [f"| {name} (paper, 400 shapes) | {f} | {size} | {ns} | {npar} |" for name, f, size, ns, npar in PAPER_TABLE2[cat]]
-    paper_limits = (iterations, max_nodes, time_limit) == (MAX_ITERATIONS, MAX_ENODES, TIME_LIMIT)
+    paper_limits = (iterations, max_nodes) == (MAX_ITERATIONS, MAX_ENODES)
     which = "the paper's" if paper_limits else "ours, not the paper's"
     how = "the recognition network's search and refactoring" if network else "refactoring only"
     if network:
-        paper_budget = (search_seconds, search_batches) == (WAKE_SECONDS, WAKE_BATCHES)
-        how += (f", the search's budget {search_seconds:g} s / {search_batches} batches of {WAKE_BATCH} per step: "
-                + ("the wake's" if paper_budget else "ours, not the paper's 1 s"))
+        paper_budget = (search_batches, search_step_budget) == (WAKE_BATCHES, WAKE_STEP_BUDGET)
+        how += (f", the search's budget {search_step_budget} units / at most {search_batches} batches of {WAKE_BATCH} "
+                "per step: " + ("the wake's, standing for the paper's 1 s" if paper_budget
+                                else "ours, not the wake's"))
+        if search_seconds != WAKE_SECONDS:
+            how += f", safety cap {search_seconds:g} s per step"
+    cap = "" if time_limit == TIME_LIMIT else f", safety cap {time_limit:g} s per call"
     out += ["", f"## Table 3 ({cat}, post hoc inference with the {len(run.library)} abstractions by {how}; e-graph limits "
-            f"{iterations} iterations / {max_nodes} e-nodes / {time_limit:g} s: {which}"
+            f"{iterations} iterations / {max_nodes} e-nodes: {which}{cap}"
             + ("" if values == VALUES else f"; e-graph values {values}")
             + ("" if passes == PASSES else f"; {passes} refactor call{'s' if passes > 1 else ''} per shape, not {PASSES}")
             + ")", "",

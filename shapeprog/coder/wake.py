@@ -23,8 +23,9 @@ from .execute import execute
 from .lang import Expr, Library, Num, ProgramError, expand, substitute, to_text
 from .objective import WEIGHTS, match, naive_program, program_cost
 from .refactor import RefactorError, refactor
-from .rules import egglog_program
-from .search import Store, WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS, naive_piece, search_shape, union
+from .rules import egglog_program, naive_egglog_program
+from .search import (Store, WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS, WAKE_STEP_BUDGET, naive_piece, search_shape,
+                     union)
 from .config import Config
 from .dream import dream
 from .recnet import NetConfig, RecognitionNet, load_checkpoint, save_checkpoint
@@ -57,18 +58,27 @@ def evaluate(expr: Expr, library: Library, prims) -> tuple | None:
 
 
 @functools.lru_cache(maxsize=8)
-def _rules(library: Library, semantic: bool = True) -> str:
+def _rules(library: Library, semantic: bool = True, scheme: str = "conditional") -> str:
+    if scheme == "naive":
+        return naive_egglog_program(library)
     return egglog_program(library, None if semantic else [])
+
+
+def _split(limits: dict) -> tuple:
+    """``(refactor keywords, semantic, scheme)`` of a worker's limits (``semantic`` and ``scheme`` choose the
+    rules; ``scheme`` is a keyword of the refactor as well)."""
+    lim = dict(limits)
+    semantic, scheme = lim.pop("semantic", True), lim.get("scheme", "conditional")
+    return lim, semantic, scheme
 
 
 def _best_of(task) -> tuple:
     """Worker: refactor each candidate program with the library; the cheapest valid one (or the current)."""
     current, candidates, library, prims, limits = task
-    limits = dict(limits)
-    semantic = limits.pop("semantic", True)
+    limits, semantic, scheme = _split(limits)
     best = evaluate(current, library, prims)
     best_expr = current
-    rules = _rules(library, semantic)
+    rules = _rules(library, semantic, scheme)
     for cand in candidates:
         try:
             r = refactor(cand, library, rules=rules, **limits)
@@ -83,7 +93,7 @@ def _best_of(task) -> tuple:
 
 def _limits(cfg: Config) -> dict:
     return {"iterations": cfg.iterations, "max_nodes": cfg.max_nodes, "time_limit": cfg.time_limit,
-            "values": cfg.egraph_values, "semantic": cfg.semantic_rewrites}
+            "values": cfg.egraph_values, "semantic": cfg.semantic_rewrites, "scheme": cfg.scheme}
 
 
 def _map(executor, fn, tasks, progress: Callable | None, desc: str):
@@ -153,9 +163,11 @@ def network_best(current: Expr, library: Library, prims, payload, limits: dict, 
 
     Args:
         payload: from :func:`network_payload`. limits: ``iterations``, ``max_nodes``, ``time_limit``.
-        search: ``batch``, ``batches``, ``seconds`` of the search (default the wake's).
+        search: ``batch``, ``batches``, ``step_budget``, ``seconds`` of the search (default the wake's;
+            :func:`~shapeprog.coder.search.search_shape`).
     """
-    search = search or {"batch": WAKE_BATCH, "batches": WAKE_BATCHES, "seconds": WAKE_SECONDS}
+    search = search or {"batch": WAKE_BATCH, "batches": WAKE_BATCHES, "step_budget": WAKE_STEP_BUDGET,
+                        "seconds": WAKE_SECONDS}
     expr, cost, error, _, source = _network_best((current, library, prims, payload, {}, dict(limits), search, seed))
     return expr, cost, error, source
 
@@ -189,8 +201,8 @@ def _network_best(task) -> tuple:
             seen.add(key)
             uniq.append((name, c))
     best, best_expr, source = evaluate(current, library, prims), current, "current"
-    rules = _rules(library, limits.get("semantic", True))
-    lim = {k: v for k, v in limits.items() if k != "semantic"}
+    lim, semantic, scheme = _split(limits)
+    rules = _rules(library, semantic, scheme)
     for name, cand in uniq:
         outs = [cand]
         try:
@@ -264,7 +276,8 @@ def wake_network(shapes: Sequence, programs: Sequence[Expr] | None, library: Lib
     prims = [getattr(s, "prims", s) for s in shapes]
     stores = [dict() for _ in prims] if stores is None else stores
     payload = network_payload(model, vocab)
-    search = {"batch": cfg.wake_batch, "batches": cfg.wake_batches, "seconds": cfg.wake_seconds}
+    search = {"batch": cfg.wake_batch, "batches": cfg.wake_batches, "step_budget": cfg.wake_step_budget,
+              "seconds": cfg.wake_seconds}
     tasks = []
     for k, p in enumerate(prims):
         if programs is None:

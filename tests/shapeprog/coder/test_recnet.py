@@ -290,8 +290,7 @@ def test_post_hoc_inference_with_the_shipped_network_is_never_dearer_and_re_cove
     assert with_net.cost <= plain.cost + 1e-9
     got = evaluate(parse(with_net.text, lib), lib, rec.prims)
     assert got is not None and abs(got[0] - with_net.cost) < 1e-9
-    # Table 3's row with the network: never above the refactor-only row (the search stops on a 1 s budget
-    # per step, so the two runs need not find the same program)
+    # Table 3's row with the network: never above the refactor-only row
     row = tables.phi("validation-PHI", [rec], lib, network=net)
     assert row.F <= tables.phi("x", [rec], lib).F + 1e-9 and row.shapes == 1
     with pytest.raises(ValueError, match="no shipped recognition network for 'sofa'"):
@@ -304,7 +303,7 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     from shapeprog.__main__ import main
     from shapeprog.coder import data, tables
     from shapeprog.coder.infer import infer, load_library, load_network
-    from shapeprog.coder.search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS
+    from shapeprog.coder.search import WAKE_BATCH, WAKE_BATCHES, WAKE_SECONDS, WAKE_STEP_BUDGET
 
     coder_infer = importlib.import_module("shapeprog.coder.infer")  # the attribute infer is the function
     seen = []
@@ -318,24 +317,28 @@ def test_the_post_hoc_search_budget_reaches_the_network_search_and_bad_budgets_a
     lib, net = load_library("chair"), load_network("chair")
     rec = data.load("chair", "heldout")[1]
     infer(rec.prims, lib, network=net)
-    infer(rec.prims, lib, network=net, search_seconds=3.5, search_batches=40)
-    assert seen == [{"batch": WAKE_BATCH, "batches": WAKE_BATCHES, "seconds": WAKE_SECONDS},
-                    {"batch": WAKE_BATCH, "batches": 40, "seconds": 3.5}]
+    infer(rec.prims, lib, network=net, search_seconds=3.5, search_batches=40, search_step_budget=300)
+    assert seen == [{"batch": WAKE_BATCH, "batches": WAKE_BATCHES, "step_budget": WAKE_STEP_BUDGET,
+                     "seconds": WAKE_SECONDS},
+                    {"batch": WAKE_BATCH, "batches": 40, "step_budget": 300, "seconds": 3.5}]
     for bad in ({"search_seconds": 0}, {"search_seconds": float("nan")}, {"search_batches": 0},
-                {"search_batches": 2.0}, {"search_seconds": True}):
+                {"search_batches": 2.0}, {"search_seconds": True}, {"search_step_budget": 0}):
         with pytest.raises(ValueError, match="search_"):
             infer(rec.prims, lib, network=net, **bad)
     # Table 3 labels a larger budget as ours
-    row = tables.phi("validation-PHI", [rec], lib, network=net, search_seconds=2.0, search_batches=20)
-    assert seen[-1] == {"batch": WAKE_BATCH, "batches": 20, "seconds": 2.0} and row.shapes == 1
+    row = tables.phi("validation-PHI", [rec], lib, network=net, search_seconds=200.0, search_batches=20)
+    assert seen[-1] == {"batch": WAKE_BATCH, "batches": 20, "step_budget": WAKE_STEP_BUDGET, "seconds": 200.0}
+    assert row.shapes == 1
     run = tables.shipped("chair")
-    text = tables.format_tables(run, tables.table2(run), [row], network=True, search_seconds=2.0, search_batches=20)
-    assert "the search's budget 2 s / 20 batches of 64 per step: ours, not the paper's 1 s" in text
-    assert "the wake's" in tables.format_tables(run, tables.table2(run), [row], network=True)
+    text = tables.format_tables(run, tables.table2(run), [row], network=True, search_seconds=200.0, search_batches=20)
+    assert (f"the search's budget {WAKE_STEP_BUDGET} units / at most 20 batches of 64 per step: ours, not the "
+            "wake's, safety cap 200 s per step") in text
+    assert "the wake's, standing for the paper's 1 s" in tables.format_tables(run, tables.table2(run), [row],
+                                                                             network=True)
     # the commands pass it on, and refuse it without the network
     assert main(["coder", "infer", "coder-chair:402", "--library", "chair", "--network", "--search-seconds", "2.5",
-                 "--search-batches", "8"]) == 0
-    assert seen[-1] == {"batch": WAKE_BATCH, "batches": 8, "seconds": 2.5}
+                 "--search-batches", "8", "--search-step-budget", "50"]) == 0
+    assert seen[-1] == {"batch": WAKE_BATCH, "batches": 8, "step_budget": 50, "seconds": 2.5}
     with pytest.raises(SystemExit, match="need --network"):
         main(["coder", "infer", "coder-chair:402", "--library", "chair", "--search-seconds", "2"])
     with pytest.raises(SystemExit, match="need --phi-network"):

@@ -145,7 +145,7 @@ def test_cli_table2_coder(tmp_path, capsys):
     assert "# command: python -m shapeprog coder tables" in text
     assert "| ShapeCoder (paper, 400 shapes) | 63.6 |" in text and "| validation-PHI | 2 |" in text
     assert "| train (discovery programs) | 2 |" in text
-    assert "e-graph limits 5 iterations / 10000 e-nodes / 5 s: the paper's" in text
+    assert "e-graph limits 5 iterations / 10000 e-nodes: the paper's)" in text
     with pytest.raises(SystemExit, match="table is not among --category"):
         main(["coder", "tables", "--category", "chair", "--library", f"table={run}"])
     with pytest.raises(SystemExit, match="expected CATEGORY=FOLDER"):
