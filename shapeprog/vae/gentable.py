@@ -31,7 +31,7 @@ from ..lang import Program
 from .. import corpus
 from ..corpus import data_digest
 from ..physics import CODE_STABILITY_TOLERANCE, PAPER_STABILITY_TOLERANCE, rootedness, stability_displacement
-from .structure import structural_novelty
+from .structure import structure_key
 from .pointnet import accuracy, fit_classifier, PRETRAINED_SHA256, load_classifier
 
 __all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_result",
@@ -148,6 +148,7 @@ class References:
         train_fit: Gaussian fit ``(mu, cov)`` of the train shapes' classifier features (FD).
         train_chamfer, val_chamfer: :func:`~shapeprog.vae.genmetrics.chamfer_clouds` of both splits.
         seed: the sampling seed (train clouds use ``seed``, val ``seed + 1``).
+        train_structures: the train programs' structure keys (:meth:`structures` makes them when None).
     """
 
     category: str
@@ -160,6 +161,13 @@ class References:
     train_chamfer: torch.Tensor
     val_chamfer: torch.Tensor
     seed: int = 0
+    train_structures: Optional[frozenset] = None
+
+    def structures(self) -> frozenset:
+        """The structure keys of the train programs (:func:`~shapeprog.vae.structure.structure_key`), made once."""
+        if self.train_structures is None:
+            self.train_structures = frozenset(structure_key(p) for p in self.train_programs)
+        return self.train_structures
 
     @classmethod
     def build(cls, category: str, model=None, seed: int = 0, chamfer_points: int = CHAMFER_POINTS,
@@ -285,7 +293,8 @@ def evaluate_generation(
     row.leaf_parts = float(np.mean([leaf_parts(c) for c in shapes]))
     progs = [samples[i] for i in valid]
     row.novelty = timed("novelty", lambda: novelty(progs, references.train_programs))
-    row.novelty_structure = 100.0 * structural_novelty(progs, references.category)
+    known = references.structures()
+    row.novelty_structure = 100.0 * float(np.mean([structure_key(p) not in known for p in progs]))
     phys = timed("physics", lambda: _map(executor, _physics_job, [(c.double().numpy(), stability) for c in shapes]))
     row.rooted = 100.0 * float(np.mean([r for r, _ in phys]))
     if stability:
