@@ -19,7 +19,7 @@ GENERATION_SAMPLES = 200
 #: Samples per category of the structural novelty and editability measurements (the paper's 1,000).
 NOVELTY_SAMPLES = 1000
 #: Interpolation lines per category of sa-t6 (the paper: 100), each of the paper's 100 steps.
-SMOOTHNESS_SEQUENCES, SMOOTHNESS_STEPS = 30, 100
+SMOOTHNESS_SEQUENCES, SMOOTHNESS_STEPS = 50, 100
 _CATEGORIES = ("chair", "table", "storage")
 _GENERATION = Step(("vae", "evaluate", "--category", *_CATEGORIES, "-n", str(GENERATION_SAMPLES), "--max-tries", "10",
                     "1", "--paper-decoding", "--workers", "2", "--quiet", "--json", "{out}", "--overwrite"))
