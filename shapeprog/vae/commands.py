@@ -303,13 +303,14 @@ def cmd_evaluate(args) -> int:
     if args.workers > 1:
         pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"))
     t0 = time.perf_counter()
-    texts, tables, notes, sampling = [], [], [], []
+    texts, tables, notes, sampling, papers = [], [], [], [], set()
     try:
         for category in categories:
             one = argparse.Namespace(**{**vars(args), "category": category})
-            header, sets = "", []
+            header, sets, paper = "", [], "shapeassembly"
             if args.n:
                 vae = load_vae(one, category, macro=True)
+                paper = "shapemod" if isinstance(vae, MacroVAE) else "shapeassembly"
                 for k in dict.fromkeys(args.max_tries):
                     samples, name, line = vae_samples(one, vae, k)
                     sets.append((name, samples))
@@ -328,17 +329,18 @@ def cmd_evaluate(args) -> int:
                 fool_average_last=args.fool_average_last, fool_points=args.fool_points,
                 candidates=args.candidates or None, seed=args.seed,
                 log=None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True)))
-            table = header + format_table(rows, category, notes)
+            table = header + format_table(rows, category, notes, paper=paper)
             sys.stdout.write(table)
             texts.append(table)
             tables.append((category, rows))
+            papers.add(paper)
     finally:
         if pool is not None:
             pool.shutdown()
     if args.out:
         atomic_write(args.out, "\n".join(texts))
         print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s)")
-    write_json(args, generation_result(tables, [*sampling, *notes], command_line(args)))
+    write_json(args, generation_result(tables, [*sampling, *notes], command_line(args), paper=papers.pop()))
     return 0
 
 

@@ -34,7 +34,7 @@ from ..physics import CODE_STABILITY_TOLERANCE, PAPER_STABILITY_TOLERANCE, roote
 from .structure import structure_key
 from .pointnet import accuracy, fit_classifier, PRETRAINED_SHA256, load_classifier
 
-__all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_result",
+__all__ = ["PAPER", "PAPER_SHAPEMOD", "PAPERS", "GenerationRow", "paper_rows", "References", "evaluate_generation", "format_table", "generation_result",
            "generation_rows", "generation_table", "table_notes", "train_category_classifier"]
 
 #: The ShapeAssembly paper's figures for its model (Tables 2, 4 and 5) and the ground truth's leaf parts. Its
@@ -56,6 +56,16 @@ _HEADERS = ("% rooted", f"% stable (code rule, {100 * CODE_STABILITY_TOLERANCE:g
             "generalization", "coverage", "variety", "% novel (text)", "% novel (structure)")
 _DIGITS = {"rooted": 1, "stable": 1, "stable_paper": 1, "fool": 2, "fd": 2, "leaf_parts": 2, "generalization": 3,
            "coverage": 3, "variety": 3, "novelty": 1, "novelty_structure": 1}
+#: The ShapeMOD paper's Table 2 (chairs; generation with and without macros): the rows printed under a macro
+#: model's table instead of the ShapeAssembly paper's. Its FD is not comparable with either other FD, and its
+#: stability rule is not in the specification (placed beside the ShapeAssembly paper's, in the 10 % column).
+PAPER_SHAPEMOD = {
+    "chair": {"No Macros": {"fool": 21.2, "fd": 17.8, "leaf_parts": 7.6, "rooted": 93.9, "stable": 82.3},
+              "ShapeMOD": {"fool": 25.6, "fd": 16.7, "leaf_parts": 8.6, "rooted": 92.7, "stable": 79.5}},
+}
+#: Which paper's rows a table prints (``format_table(paper=...)``).
+PAPERS = ("shapeassembly", "shapemod")
+
 #: Where the paper's row takes its figures from: our column -> the key of :data:`PAPER` (the paper's stability
 #: is under its 10 % rule, so it sits in the paper-rule column).
 _PAPER_KEYS = {"stable": None, "stable_paper": "stable"}
@@ -324,19 +334,39 @@ def _cell(value, digits: int) -> str:
     return "—" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}f}"
 
 
-def format_table(rows: Sequence[GenerationRow], category: str, notes: Sequence[str] = (), paper: bool = True) -> str:
-    """A markdown table of ``rows`` (and the paper's rows for ``category`` when ``paper``), then ``notes``."""
+def paper_rows(category: str, paper="shapeassembly") -> list[tuple[str, dict]]:
+    """The paper rows of a table: ``(name, {column: value or None})`` for each. ``paper``: ``"shapeassembly"``
+    (or True; its model and ground-truth rows, :data:`PAPER`), ``"shapemod"`` (the ShapeMOD paper's Table 2 rows,
+    :data:`PAPER_SHAPEMOD`, for a model of macro programs), or None / False (none)."""
+    if paper is True:
+        paper = "shapeassembly"
+    if not paper:
+        return []
+    if paper not in PAPERS:
+        raise ValueError(f"unknown paper {paper!r}; expected one of {', '.join(PAPERS)}")
+    if paper == "shapemod":
+        return [(f"paper: ShapeMOD Table 2, {name}", {c: p.get(_PAPER_KEYS.get(c, c)) for c in _COLUMNS})
+                for name, p in PAPER_SHAPEMOD.get(category, {}).items()]
+    if category not in PAPER:
+        return []
+    p = PAPER[category]
+    return [("paper: ShapeAssembly", {c: p.get(_PAPER_KEYS.get(c, c)) for c in _COLUMNS}),
+            ("paper: ground truth", {c: p["gt_leaf_parts"] if c == "leaf_parts" else None for c in _COLUMNS})]
+
+
+def format_table(rows: Sequence[GenerationRow], category: str, notes: Sequence[str] = (),
+                 paper="shapeassembly") -> str:
+    """A markdown table of ``rows`` and the paper's rows for ``category`` (:func:`paper_rows`), then ``notes``."""
     lines = [f"Generation metrics, {category}", "",
              "| | " + " | ".join(_HEADERS) + " |", "|---" * (len(_HEADERS) + 1) + "|"]
     for r in rows:
         label = f"{r.name} ({r.valid} of {r.samples} programs)" if r.valid != r.samples else f"{r.name} ({r.samples})"
         lines.append(f"| {label} | " + " | ".join(_cell(getattr(r, c), _DIGITS[c]) for c in _COLUMNS) + " |")
-    if paper and category in PAPER:
-        p = PAPER[category]
-        lines.append("| paper: ShapeAssembly | " + " | ".join(_cell(p.get(_PAPER_KEYS.get(c, c)), _DIGITS[c])
-                                                            for c in _COLUMNS) + " |")
-        lines.append("| paper: ground truth | " + " | ".join(
-            _cell(p["gt_leaf_parts"] if c == "leaf_parts" else None, _DIGITS[c]) for c in _COLUMNS) + " |")
+    for name, values in paper_rows(category, paper):
+        lines.append(f"| {name} | " + " | ".join(_cell(values[c], _DIGITS[c]) for c in _COLUMNS) + " |")
+    if paper == "shapemod":
+        notes = [*notes, "The paper rows are the ShapeMOD paper's Table 2 (chairs only in the specification; its "
+                 "stability rule is not specified); its FD used another classifier."]
     if notes:
         lines += [""] + [f"* {n}" for n in notes]
     return "\n".join(lines) + "\n"
@@ -487,10 +517,10 @@ def generation_table(
 
 
 def generation_result(tables: Sequence[tuple[str, Sequence[GenerationRow]]], notes: Sequence[str] = (),
-                      command: Optional[str] = None, paper: bool = True) -> dict:
+                      command: Optional[str] = None, paper="shapeassembly") -> dict:
     """The rows of one or more categories (``(category, rows)`` pairs) as a result file's content
-    (:func:`shapeio.results.make_result`): one row per table row (with the paper's rows of each category when
-    ``paper``), a column per metric, the samples and valid counts."""
+    (:func:`shapeio.results.make_result`): one row per table row, then the paper's rows of each category
+    (:func:`paper_rows`), a column per metric, the samples and valid counts."""
     from shapeio.results import column, make_result  # lazy: the result format is needed only when written
 
     cols = [column("category", "category"), column("row", "row"), column("samples", "programs"),
@@ -501,10 +531,6 @@ def generation_result(tables: Sequence[tuple[str, Sequence[GenerationRow]]], not
         for r in rows:
             out.append({"category": category, "row": r.name, "samples": r.samples, "valid": r.valid,
                         **{c: getattr(r, c) for c in _COLUMNS}})
-        if paper and category in PAPER:
-            p = PAPER[category]
-            out.append({"category": category, "row": "paper: ShapeAssembly", "samples": 1000, "valid": None,
-                        **{c: p.get(_PAPER_KEYS.get(c, c)) for c in _COLUMNS}})
-            out.append({"category": category, "row": "paper: ground truth", "samples": None, "valid": None,
-                        **{c: p["gt_leaf_parts"] if c == "leaf_parts" else None for c in _COLUMNS}})
+        for name, values in paper_rows(category, paper):
+            out.append({"category": category, "row": name, "samples": None, "valid": None, **values})
     return make_result("Generation metrics (ShapeAssembly Tables 2, 4, 5)", cols, out, notes, command)

@@ -27,7 +27,7 @@ from shapeprog.vae.genmetrics import (
     variety,
 )
 from shapeprog.vae.gentable import (PAPER, GenerationRow, References, evaluate_generation, format_table,
-                                    generation_result, table_notes)
+                                    generation_result, paper_rows, table_notes)
 from shapeprog.vae.structure import structure_key
 from shapeprog.metrics import chamfer
 from shapeprog.vae.pointnet import (PRETRAINED, PRETRAINED_SHA256, PointNetCls, accuracy, fit_classifier,
@@ -302,6 +302,18 @@ def test_paper_figures():
     assert format_table([GenerationRow("x", 3, 3, leaf_parts=2.0)], "storage").count("\n| ") == 4
 
 
+def test_paper_rows_of_either_paper():
+    assert [n for n, _ in paper_rows("chair")] == ["paper: ShapeAssembly", "paper: ground truth"]
+    (no_macros, nm), (_, mod) = paper_rows("chair", "shapemod")
+    assert no_macros == "paper: ShapeMOD Table 2, No Macros" and (nm["fool"], nm["stable_paper"], nm["stable"]) == (
+        21.2, 82.3, None)
+    assert mod["leaf_parts"] == 8.6 and paper_rows("table", "shapemod") == [] and paper_rows("chair", None) == []
+    table = format_table([GenerationRow("x", 3, 3, leaf_parts=2.0)], "chair", paper="shapemod")
+    assert "ShapeAssembly" not in table and "| paper: ShapeMOD Table 2, ShapeMOD | 92.7 | — | 79.5 | 25.60 |" in table
+    with pytest.raises(ValueError, match="unknown paper 'csgnet'"):
+        paper_rows("chair", "csgnet")
+
+
 def test_generation_result_rows():
     row = GenerationRow("x", 3, 2, rooted=50.0, stable=50.0, stable_paper=100.0, leaf_parts=2.0, novelty=100.0,
                         novelty_structure=50.0)
@@ -341,7 +353,7 @@ def test_evaluate_generation_command(tmp_path, monkeypatch, capsys):
         return [], []
 
     monkeypatch.setattr(cli, "generation_rows", fake_rows)
-    monkeypatch.setattr(cli, "format_table", lambda rows, category, notes: "| table |\n")
+    monkeypatch.setattr(cli, "format_table", lambda rows, category, notes, paper: "| table |\n")
     folder = tmp_path / "samples"
     folder.mkdir()
     (folder / "a.txt").write_text(FLAT)
