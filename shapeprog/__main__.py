@@ -9,6 +9,7 @@ modules (:data:`SYSTEMS`).
     python -m shapeprog vae interpolate chair/173 chair/44017 --steps 8 --png interp.png
     python -m shapeprog vae reconstruct chair/173 -o recon.txt
     python -m shapeprog vae evaluate --category chair -n 1000 --out table.md --json table.json
+    python -m shapeprog vae novelty --category chair table storage -n 1000 --json novelty.json
     python -m shapeprog vae train-classifier --out runs/pointnet_cls.pt
     python -m shapeprog vae export-weights runs/vae_chair/checkpoints/last.ckpt --out vae_chair.pt
     python -m shapeprog pointcloud make-clouds --category chair --points 10000 --workers 2 --out clouds
@@ -47,7 +48,8 @@ from .errors import ExecutionError, ParseError, RefactorError
 SYSTEMS = {
     "assembly": ("shapeprog.commands", "ShapeAssembly programs: run, fit, silhouettes, edit"),
     "vae": ("shapeprog.vae.commands",
-            "the ShapeAssembly VAE: sample, interpolate, reconstruct, evaluate, train-classifier, export-weights"),
+            "the ShapeAssembly VAE: sample, interpolate, reconstruct, evaluate, novelty, smoothness, editability, "
+            "train-classifier, export-weights"),
     "pointcloud": ("shapeprog.pointcloud.commands", "point clouds to programs: infer, tables, make-clouds, "
                                                     "export-weights"),
     "macros": ("shapeprog.macros.commands", "ShapeMOD macros: discover, refactor, refactor-corpus, tables"),

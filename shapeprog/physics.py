@@ -15,6 +15,7 @@ Example:
 """
 from __future__ import annotations
 
+import math
 from typing import List, Tuple
 
 import numpy as np
@@ -23,7 +24,13 @@ import torch
 from shapeio.files import c_output_silenced
 from shapeprog.geometry import CORNER_SIGNS, numpy_corners
 
-__all__ = ["box_distances", "contact_graph", "rooted_parts", "rootedness", "stability"]
+__all__ = ["CODE_STABILITY_TOLERANCE", "PAPER_STABILITY_TOLERANCE", "box_distances", "contact_graph", "rooted_parts",
+           "rootedness", "stability", "stability_displacement"]
+
+#: The stability rule of the reference code: a group's base may move vertically by 2.5 % of its height.
+CODE_STABILITY_TOLERANCE = 0.025
+#: The rule the ShapeAssembly paper's appendix E describes: 10 % of the height.
+PAPER_STABILITY_TOLERANCE = 0.10
 
 
 # --------------------------------------------------------------------------------------------------
@@ -243,7 +250,7 @@ def _quat(m: np.ndarray) -> List[float]:
 
 def stability(
     corners,
-    tolerance: float = 0.025,
+    tolerance: float = CODE_STABILITY_TOLERANCE,
     steps: int = 10000,
     contact_tolerance: float = 0.02,
     surface: bool = True,
@@ -262,7 +269,9 @@ def stability(
     group gets an upward force ``(0, 0, 1000 v)`` at its base position and torques ``(0, 4 v, 0)``,
     ``(4 v, 0, 0)``, ``(0, 0, 80 v)`` for the first step, then ``steps`` steps of 1/240 s run under
     gravity ``-9.8 z``. The shape is unstable when some group's base moved vertically by more than
-    ``tolerance`` (2.5 %; the paper says 10 %) of the group's height.
+    ``tolerance`` (:data:`CODE_STABILITY_TOLERANCE`, 2.5 %; the paper says 10 %,
+    :data:`PAPER_STABILITY_TOLERANCE`) of the group's height: ``stability_displacement(...) <= tolerance``
+    (:func:`stability_displacement`, one simulation for any number of rules).
 
     Deterministic: the same input gives the same answer. Headless, writes no files.
 
@@ -281,12 +290,27 @@ def stability(
     Raises:
         ImportError: if pybullet is not installed.
     """
+    return stability_displacement(corners, steps, contact_tolerance, surface, inertia) <= tolerance
+
+
+def stability_displacement(
+    corners,
+    steps: int = 10000,
+    contact_tolerance: float = 0.02,
+    surface: bool = True,
+    inertia: str = "identity",
+) -> float:
+    """The simulation of :func:`stability`: the largest vertical displacement of a group's base as a fraction of
+    the group's height (``inf`` for a shape that is not rooted). A shape is stable under a rule ``tolerance``
+    when the displacement is at most ``tolerance``, so one simulation answers the code's 2.5 % and the paper's
+    10 % rules (:data:`CODE_STABILITY_TOLERANCE`, :data:`PAPER_STABILITY_TOLERANCE`). Arguments as
+    :func:`stability`."""
     if inertia not in ("identity", "box"):
         raise ValueError(f"`inertia` must be 'identity' or 'box', got {inertia!r}")
     corners = numpy_corners(corners)
     adj = contact_graph(corners, contact_tolerance, surface)
     if not _rooted(adj).all():
-        return False
+        return math.inf
 
     try:
         with c_output_silenced():  # pybullet prints its build banner from C on import and connect
@@ -300,6 +324,7 @@ def stability(
     half = np.maximum(half, 1e-4)
     volume = 8.0 * half.prod(-1)
     groups = _groups(adj)
+    worst = 0.0
     with c_output_silenced():
         client = pb.connect(pb.DIRECT)
     try:
@@ -361,8 +386,7 @@ def stability(
             for _ in range(int(steps)):
                 pb.stepSimulation(physicsClientId=client)
             end = np.array(pb.getBasePositionAndOrientation(body, physicsClientId=client)[0])
-            if abs(end[2] - start[2]) > tolerance * height:
-                return False
-        return True
+            worst = max(worst, abs(float(end[2] - start[2])) / height if height > 0 else math.inf)
+        return worst
     finally:
         pb.disconnect(physicsClientId=client)

@@ -49,7 +49,8 @@ COMMANDS = sorted(set(re.findall(r"python -m (csgnet) ([a-z][\w-]*)", README))
 # one line naming its new form). A change here is a change of the command line: make it on purpose.
 SHAPEPROG_COMMANDS = {
     "assembly": {"run", "fit", "silhouettes", "edit"},
-    "vae": {"sample", "interpolate", "reconstruct", "evaluate", "train-classifier", "export-weights"},
+    "vae": {"sample", "interpolate", "reconstruct", "evaluate", "novelty", "smoothness", "editability",
+            "train-classifier", "export-weights"},
     "pointcloud": {"infer", "tables", "make-clouds", "export-weights"},
     "macros": {"discover", "refactor", "refactor-corpus", "tables"},
     "coder": {"discover", "infer", "tables"},
@@ -83,7 +84,7 @@ PUBLIC = {
                       "load_pretrained", "program_loss", "program_to_tree", "sample", "tree_to_program",
                       "LineLayout", "MACRO_LOSS_WEIGHTS", "MacroDecoded", "MacroNode", "MacroVAE", "decode_macro",
                       "encode_macro", "macro_program_loss", "macro_program_to_tree", "sample_macro",
-                      "tree_to_macro_program"},
+                      "tree_to_macro_program", "structural_novelty", "structure_key", "edit_distance"},
     "shapeprog.pointcloud": {"CANONICAL_DIAGONAL", "CloudDataset", "CloudModel", "Inference", "Match", "PointCloudError", "PointNet2SSG",
                              "RetrievalIndex", "SetAbstraction", "Transform", "ball_query", "collate_clouds",
                              "corpus_cloud", "farthest_point_sample", "gather_points", "group_all", "group_points",

@@ -46,7 +46,7 @@ from .normalize import _corners_of, normalize
 from .retrieval import RetrievalIndex
 from .search import QUICK_SEARCH_SCHEDULE, SEARCH_SCHEDULE
 
-__all__ = ["INPUT_POINTS", "NOISE", "PAPER_TABLE3", "PAPER_TABLE3_MACROS", "PAPER_TABLE7", "ROWS", "TableResult", "evaluate",
+__all__ = ["INPUT_POINTS", "NOISE", "PAPER_TABLE3", "PAPER_TABLE3_MACROS", "PAPER_TABLE7", "PAPER_TABLE7_NAMES", "ROWS", "TableResult", "evaluate",
            "fit_cuboids", "write_tables"]
 
 #: Points per input cloud, and the Gaussian noise added to them (canonical units): the issue's test condition.
@@ -65,8 +65,11 @@ PAPER_TABLE3 = {"chair": (44.2, 54.8, 93.7, 83.6), "table": (41.1, 64.0, 92.8, 7
 #: The same table's ShapeMOD row (the model trained on macro programs).
 PAPER_TABLE3_MACROS = {"chair": (41.7, 56.1, 96.9, 88.0), "table": (36.7, 68.7, 95.2, 88.5),
                        "storage": (47.0, 53.0, 97.6, 92.6)}
-#: ShapeAssembly Table 7 (chairs): F1, rooted, stable of the latent projection and of "Opt Program".
-PAPER_TABLE7 = {"model": (31.1, 95.5, 84.4), "opt_program": (75.8, 95.3, 80.2)}
+#: ShapeAssembly Table 7 (chairs): F1, rooted, stable of the latent projection, "Opt Program" and "Opt Cuboids".
+PAPER_TABLE7 = {"model": (31.1, 95.5, 84.4), "opt_program": (75.8, 95.3, 80.2), "opt_cuboids": (77.6, 93.1, 72.9)}
+#: The names of the paper's Table 7 rows.
+PAPER_TABLE7_NAMES = {"model": "ShapeAssembly paper", "opt_program": "ShapeAssembly paper, Opt Program",
+                      "opt_cuboids": "ShapeAssembly paper, Opt Cuboids"}
 
 
 def fit_cuboids(corners: torch.Tensor, target: torch.Tensor, steps: int = FIT_STEPS, lr: float = 5e-3,
@@ -340,15 +343,15 @@ def write_tables(result: TableResult, out, command: str = "") -> Path:
         lines += ["", "The model decodes ShapeAssembly programs (No Macros); a model trained on macro programs "
                   "(`--weights` of one) gives the ShapeMOD row.", ""]
     if cat == "chair":
-        lines += ["## ShapeAssembly Table 7 layout (chairs)", "", "| Method | F1 | % rooted | % stable |", "|---|---|---|---|",
-                  f"| ShapeAssembly paper | {PAPER_TABLE7['model'][0]} | {PAPER_TABLE7['model'][1]} | {PAPER_TABLE7['model'][2]} |",
-                  f"| ShapeAssembly paper, Opt Program | {PAPER_TABLE7['opt_program'][0]} | "
-                  f"{PAPER_TABLE7['opt_program'][1]} | {PAPER_TABLE7['opt_program'][2]} |"]
+        lines += ["## ShapeAssembly Table 7 layout (chairs)", "", "| Method | F1 | % rooted | % stable |", "|---|---|---|---|"]
+        lines += [f"| {PAPER_TABLE7_NAMES[k]} | {f} | {ro} | {st} |" for k, (f, ro, st) in PAPER_TABLE7.items()]
         for row in ROWS:
             if row in r:
                 m = r[row]
                 lines.append(f"| {names[row]} | {_f(m['fscore'])} | {_f(m['rooted'])} | {_f(m['stable'])} |")
-        lines.append("")
+        lines += ["", "Our F1 is the F-score at 0.03 (canonical units, bounding-box diagonal 2) against the clean cloud; "
+                  "the paper's Table 7 used its adaptive F-score threshold against PartNet mesh samples. Our stable "
+                  "column follows the reference code's 2.5 % rule; the paper's appendix describes 10 %.", ""]
     if "retrieval" in r and "model" in r and r["model"]["fscore"] < r["retrieval"]["fscore"]:
         lines += [f"**The learned model loses to retrieval** on F-score ({_f(r['model']['fscore'])} against "
                   f"{_f(r['retrieval']['fscore'])}) without fitting.", ""]

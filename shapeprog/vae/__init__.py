@@ -10,8 +10,9 @@ validity-checked decoding with the model's entry points (:func:`sample`, :func:`
 the trees of :mod:`~shapeprog.vae.data` and scores reconstructions with :mod:`~shapeprog.vae.reconstruct`.
 Generation evaluation (not imported here): :mod:`~shapeprog.vae.genmetrics` the metrics of generated
 programs, :mod:`~shapeprog.vae.gentable` their table, :mod:`~shapeprog.vae.pointnet` the PointNet
-classifier they use.
-See ``docs/shapeassembly_vae.md``.
+classifier they use; :mod:`~shapeprog.vae.structure` program structure (:func:`structural_novelty`,
+editability counts, the token :func:`edit_distance`) and :mod:`~shapeprog.vae.smoothness` interpolation
+smoothness. See ``docs/shapeassembly_vae.md``.
 
 Macro programs (ShapeMOD, Appendix C): :mod:`~shapeprog.vae.layout` computes a :class:`LineLayout` from a
 macro library and turns hierarchical macro programs into trees and back, :mod:`~shapeprog.vae.macro_model`
@@ -29,10 +30,12 @@ from .macro_decode import MacroDecoded, decode_macro, encode_macro, sample_macro
 from .macro_model import MacroVAE
 from .model import VAE, Decoder, Encoder
 from .pretrained import load_pretrained
+from .structure import edit_distance, structural_novelty, structure_key
 from .vectors import VectorNode, program_to_tree, tree_to_program
 
 __all__ = ["LOSS_WEIGHTS", "VAE", "Decoded", "Decoder", "Encoder", "InvalidSample", "TreeBatch", "VectorNode",
            "batch_forward", "batch_loss", "decode", "decode_latent", "encode", "interpolate", "load_pretrained",
-           "program_loss", "program_to_tree", "sample", "tree_to_program",
+           "program_loss", "program_to_tree", "sample", "tree_to_program", "structural_novelty", "structure_key",
+           "edit_distance",
            "LineLayout", "MACRO_LOSS_WEIGHTS", "MacroDecoded", "MacroNode", "MacroVAE", "decode_macro", "encode_macro",
            "macro_program_loss", "macro_program_to_tree", "sample_macro", "tree_to_macro_program"]

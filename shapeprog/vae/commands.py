@@ -4,6 +4,7 @@ generated programs (the generation tables), train the metrics' classifier, expor
 """
 from __future__ import annotations
 
+import argparse
 import multiprocessing
 import sys
 import time
@@ -17,7 +18,7 @@ from shapeio import atomic_write, write_new
 from shapeio.results import column, make_result
 from shapeio.weights import load_payload
 
-from .. import io
+from .. import corpus, io
 from ..cli import (DEFAULT_CATEGORY, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
                    add_quiet, category_of, check_outputs, command_line, emit_text, int_at_least, markdown_result,
                    refuse_existing, refuse_inputs, seed, write_json, write_mesh)
@@ -33,7 +34,10 @@ from ..sampling import sample_surface
 from .decode import MAX_SAMPLES, MAX_TRIES
 from .decode import decode as decode_latent
 from .decode import encode, interpolate, sample
-from .gentable import generation_table, train_category_classifier
+from .genmetrics import novelty
+from .gentable import format_table, generation_result, generation_rows, train_category_classifier
+from .smoothness import MAX_SEQUENCES, MAX_STEPS, interpolation_smoothness
+from .structure import mean_editability, structural_novelty
 from .macro_decode import sample_macro
 from .macro_model import MacroVAE
 from .pointnet import load_classifier, save_classifier, sha256_file
@@ -237,64 +241,201 @@ def read_programs(folder: str) -> list:
     return out
 
 
-def vae_samples(args) -> tuple[list, str, str]:
-    """``-n`` programs sampled from the VAE (``--weights`` or the shipped model), the row name and a line
-    on how often sampling was refused."""
-    vae = load_vae(args, args.category, macro=True)
+#: The decoding options of the paper's rules (its text: every cuboid within 1.1 times the bbox; an attach to the
+#: bbox within 0.05 of its bottom or top) where the reference code has 1.5 times and snapping
+#: (:class:`shapeprog.vae.validity.DecodeOptions`).
+PAPER_DECODING = {"bbox_margin": 1.1, "bbox_attach": "tolerance"}
+
+
+def vae_samples(args, vae=None, max_tries: int = EVALUATE_TRIES, paper_rules: bool = False) -> tuple[list, str, str]:
+    """``-n`` programs sampled from the VAE (``--weights`` or the shipped model of ``args.category``), at most
+    ``max_tries`` draws each (1: the No Reject ablation, a refused draw decoded without rejection), under the
+    paper's decoding rules (:data:`PAPER_DECODING`) when ``paper_rules``; the row name and a line on how often
+    sampling was refused."""
+    vae = vae or load_vae(args, args.category, macro=True)
+    options = PAPER_DECODING if paper_rules else {}
+    if options and isinstance(vae, MacroVAE):
+        raise SystemExit("error: --paper-decoding: the macro-program decoder has no such options; leave it out "
+                         "with a ShapeMOD model")
     t0 = time.perf_counter()
-    results = draw(vae, args.n, args.seed, EVALUATE_TRIES)
+    if options:
+        results = sample(vae, args.n, seed=args.seed, max_tries=max_tries, **options)
+    else:
+        results = draw(vae, args.n, args.seed, max_tries)
     seconds = time.perf_counter() - t0
     where = args.weights or f"the shipped {args.category} model"
     meta = getattr(vae, "meta", {}) or {}
     epoch = f", epoch {meta['epoch']}" if "epoch" in meta else ""
-    line = (f"Samples: {len(results)} from {where}{epoch} (seed {args.seed}, validity-checked decoding with "
-            f"rejection, at most {EVALUATE_TRIES} draws each): {sampling_report(results, EVALUATE_TRIES, seconds)}. "
-            f"A sample refused {EVALUATE_TRIES} times is decoded without rejection and kept."
+    if max_tries == 1:
+        how = "No Reject: one draw each, a refused draw decoded without rejection"
+    else:
+        how = f"rejection, at most {max_tries} draws each"
+    rules = "; the paper's rules: bbox 1.1x, attach to bbox within 0.05 of its bottom or top" if options else ""
+    name = f"VAE samples ({where}; {how}{rules})"
+    line = (f"{name}: {len(results)} samples{epoch}, seed {args.seed}: "
+            f"{sampling_report(results, max_tries, seconds)}. A sample refused {max_tries} times is decoded without "
+            "rejection and kept."
             + (" The samples are macro programs; the metrics read their expansions (% novel compares those "
                "with the corpus's ShapeAssembly programs)." if isinstance(vae, MacroVAE) else "") + "\n\n")
-    return [r.program for r in results], f"VAE samples ({where})", line
+    return [r.program for r in results], name, line
 
 
 def cmd_evaluate(args) -> int:
     check_outputs(others=[args.out, args.json])
     refuse_inputs([args.out, args.json], [args.classifier])
     refuse_existing([args.out, args.json], args.overwrite)
+    categories = list(dict.fromkeys(args.category))
     if args.programs and args.n:
         raise SystemExit("error: give either --programs DIR or -n N (samples of the VAE), not both")
+    if len(categories) > 1 and (args.programs or args.weights):
+        raise SystemExit("error: --programs and --weights belong to one category: give one --category with them")
+    if (args.paper_decoding or args.max_tries != [EVALUATE_TRIES]) and not args.n:
+        raise SystemExit("error: --max-tries and --paper-decoding choose how VAE samples are decoded: give -n N")
+    if not args.n and not args.programs and args.no_ground_truth:
+        raise SystemExit("error: nothing to evaluate: give --programs or -n, or leave out --no-ground-truth")
     model = None
     if args.classifier:
         try:
             model = load_classifier(args.classifier)[0]
         except (FileNotFoundError, ValueError) as e:
             raise SystemExit(f"error: {e}") from None
-    header, name = "", f"programs in {args.programs}" if args.programs else "generated"
-    if args.n:
-        samples, name, header = vae_samples(args)
-    else:
-        samples = read_programs(args.programs) if args.programs else []
-    if not samples and args.no_ground_truth:
-        raise SystemExit("error: nothing to evaluate: give --programs or -n, or leave out --no-ground-truth")
     pool = None
     if args.workers > 1:
         pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"))
     t0 = time.perf_counter()
+    texts, tables, notes, sampling, papers = [], [], [], [], set()
     try:
-        table = generation_table(samples, args.category, ground_truth=not args.no_ground_truth, executor=pool,
-                                 model=model,
-                                 stability=not args.no_stability, fool=not args.no_fool, fool_epochs=args.fool_epochs,
-                                 fool_average_last=args.fool_average_last, fool_points=args.fool_points,
-                                 candidates=args.candidates or None, seed=args.seed,
-                                 name=name,
-                                 log=None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True)))
+        for category in categories:
+            one = argparse.Namespace(**{**vars(args), "category": category})
+            header, sets, paper = "", [], "shapeassembly"
+            if args.n:
+                vae = load_vae(one, category, macro=True)
+                paper = "shapemod" if isinstance(vae, MacroVAE) else "shapeassembly"
+                for k in dict.fromkeys(args.max_tries):
+                    samples, name, line = vae_samples(one, vae, k)
+                    sets.append((name, samples))
+                    header += line
+                    sampling.append(line.strip())
+                if args.paper_decoding:
+                    samples, name, line = vae_samples(one, vae, args.max_tries[0], paper_rules=True)
+                    sets.append((name, samples))
+                    header += line
+                    sampling.append(line.strip())
+            elif args.programs:
+                sets.append((f"programs in {args.programs}", read_programs(args.programs)))
+            rows, notes = generation_rows(
+                sets, category, ground_truth=not args.no_ground_truth, executor=pool, model=model,
+                stability=not args.no_stability, fool=not args.no_fool, fool_epochs=args.fool_epochs,
+                fool_average_last=args.fool_average_last, fool_points=args.fool_points,
+                candidates=args.candidates or None, seed=args.seed,
+                log=None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True)))
+            table = header + format_table(rows, category, notes, paper=paper)
+            sys.stdout.write(table)
+            texts.append(table)
+            tables.append((category, rows))
+            papers.add(paper)
     finally:
         if pool is not None:
             pool.shutdown()
-    table = header + table
-    sys.stdout.write(table)
     if args.out:
-        atomic_write(args.out, table)
+        atomic_write(args.out, "\n".join(texts))
         print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s)")
-    write_json(args, markdown_result(table, f"generation metrics ({args.category})", command_line(args)))
+    write_json(args, generation_result(tables, [*sampling, *notes], command_line(args), paper=papers.pop()))
+    return 0
+
+
+def cmd_novelty(args) -> int:
+    check_outputs(others=[args.json])
+    refuse_existing([args.json], args.overwrite)
+    rows = []
+    for category in dict.fromkeys(args.category):
+        one = argparse.Namespace(**{**vars(args), "category": category, "weights": None})
+        vae = load_vae(one, category, macro=False)
+        t0 = time.perf_counter()
+        samples = [r.program for r in sample(vae, args.n, seed=args.seed, max_tries=args.max_tries)]
+        val = [p for _, p in corpus.load(category, "val")]
+        for name, progs in ((f"VAE samples (shipped {category} model, at most {args.max_tries} draws)", samples),
+                            ("corpus val split", val)):
+            rows.append({"category": category, "row": name, "programs": len(progs),
+                         "structure": 100.0 * structural_novelty(progs, category),
+                         "text": novelty(progs, [p for _, p in corpus.load(category, "train")])})
+            print(f"{category}: {name}: {len(progs)} programs, {rows[-1]['structure']:.1f} % novel structure, "
+                  f"{rows[-1]['text']:.1f} % novel text ({time.perf_counter() - t0:.1f} s)")
+    write_json(args, make_result(
+        "Structural novelty (ShapeAssembly §7.1.3)",
+        [column("category", "category"), column("row", "programs of"), column("programs", "programs"),
+         column("structure", "% novel (structure)", 1), column("text", "% novel (text)", 1)], rows,
+        ["% novel (structure): programs whose structure (every continuous number abstracted; names, faces, axes, "
+         "aligned flags, translate counts and hierarchy kept) no program of the category's corpus train split has "
+         "(`shapeprog.vae.structural_novelty`). % novel (text): whose text with numbers to 3 decimals none has.",
+         "The paper's figures for this measure are not in the specification; its samples were 1,000 per category.",
+         f"Samples: seed {args.seed}, decoded with validity checks and rejection."], command_line(args)))
+    return 0
+
+
+def cmd_smoothness(args) -> int:
+    check_outputs(others=[args.json])
+    refuse_existing([args.json], args.overwrite)
+    rows = []
+    for category in dict.fromkeys(args.category):
+        vae = load_vae(argparse.Namespace(**{**vars(args), "category": category, "weights": None}), category)
+        log = None if args.quiet else (lambda s, c=category: print(f"{c}: {s}", file=sys.stderr, flush=True))
+        r = interpolation_smoothness(vae, args.sequences, args.steps, seed=args.seed, log=log)
+        rows.append({"category": category, **r})
+        print(f"{category}: {args.sequences} sequences x {args.steps} steps: geometric step {r['geometric']:.4f}, "
+              f"program step {r['program']:.1f} tokens, structure step {r['structure']:.2f} tokens "
+              f"(ends: {r['geometric_ends']:.4f}, {r['program_ends']:.1f}, {r['structure_ends']:.1f}) in "
+              f"{r['seconds']:.0f} s")
+    write_json(args, make_result(
+        "Interpolation smoothness (ShapeAssembly Table 6)",
+        [column("category", "category"), column("sequences", "sequences"), column("steps", "steps"),
+         column("geometric", "geometric step (chamfer)", 4), column("program", "program step (token edits)", 2),
+         column("structure", "structure step (token edits)", 2),
+         column("unchanged", "% steps with unchanged structure", 1),
+         column("geometric_ends", "chamfer between the ends", 4),
+         column("program_ends", "token edits between the ends", 1), column("tokens", "tokens per program", 1)], rows,
+        ["Each sequence: two latents drawn from N(0, I), decoded at `steps` evenly spaced points of the line between "
+         "them, ends included (non-rejecting decoding). Geometric step: chamfer distance between consecutive "
+         "executed shapes, each scaled to unit bounding-box diagonal and sampled (1,024 points) with the same seed, "
+         "so equal shapes score 0. Program step: Levenshtein distance between the consecutive program texts' "
+         "tokens (names, keywords, numbers to 3 decimals, punctuation), so each changed number is one edit. "
+         "Structure step: the same on the programs with every number abstracted. Lower is smoother.",
+         "The paper's Table 6 figures are not in the specification (it gives the protocol: 100 sequences of 100 "
+         "steps), and its tokenisation is not specified: compare categories and models here, not values with the "
+         "paper's.", f"Seed {args.seed}; the shipped models."], command_line(args)))
+    return 0
+
+
+def cmd_editability(args) -> int:
+    check_outputs(others=[args.json])
+    refuse_existing([args.json], args.overwrite)
+    rows = []
+    for category in dict.fromkeys(args.category):
+        vae = load_vae(argparse.Namespace(**{**vars(args), "category": category, "weights": None}), category)
+        samples = [r.program for r in sample(vae, args.n, seed=args.seed, max_tries=EVALUATE_TRIES)]
+        for name, progs in (("corpus val split", [p for _, p in corpus.load(category, "val")]),
+                            (f"VAE samples (shipped {category} model)", samples)):
+            rows.append({"category": category, "row": name, **mean_editability(progs)})
+            r = rows[-1]
+            print(f"{category}: {name}: {r['programs']} programs, {r['lines']:.1f} lines, {r['macro_lines']:.1f} % "
+                  f"squeeze / reflect / translate lines, {r['macro_parts']:.1f} % of parts made by reflect / "
+                  "translate")
+    write_json(args, make_result(
+        "Editability (ShapeAssembly Table 3)",
+        [column("category", "category"), column("row", "programs of"), column("programs", "programs"),
+         column("lines", "lines per program", 1), column("blocks", "blocks", 2),
+         column("cuboid_lines", "Cuboid lines", 1), column("attach_lines", "attach lines", 1),
+         column("squeeze_lines", "squeeze lines", 2), column("reflect_lines", "reflect lines", 2),
+         column("translate_lines", "translate lines", 2),
+         column("macro_lines", "% squeeze / reflect / translate lines", 1),
+         column("macro_parts", "% parts made by reflect / translate", 1)], rows,
+        ["Lines: statements over all blocks, each block's bbox line included (`shapeprog.vae.structure.editability`). "
+         "Squeeze, reflect and translate are the language's macro-like lines: one line places a part between two "
+         "others or copies it, where attach lines would spell it out. Parts: each block's non-bbox Cuboid lines "
+         "plus the copies that reflect (1) and translate (n) make.",
+         "The paper's Table 3 figures are not in the specification.",
+         f"Samples: {args.n} per category, seed {args.seed}, validity-checked decoding with rejection (at most "
+         f"{EVALUATE_TRIES} draws)."], command_line(args)))
     return 0
 
 
@@ -373,14 +514,21 @@ def register(sub) -> None:
                                 "(% rooted, % stable, % fool, FD, leaf parts, generalization, coverage, variety, "
                                 "% novel) against the corpus train split, beside the ground truth (the val split) "
                                 "and the paper's figures; print a markdown table.",
-                    example="vae evaluate --category chair -n 1000 --out table.md --json table.json",
+                    example="vae evaluate --category chair table -n 300 --max-tries 10 1 --paper-decoding --json table.json",
                     outputs={"out": "file", "json": "file"})
-    add_category(e, help="the category the programs belong to")
+    add_category(e, multiple=True, help="the categories (one table each; --programs and --weights: one)")
     e.add_argument("--programs", help="folder of program files (*.txt, one program each); without it and -n, the "
                                       "ground-truth row alone")
     e.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), help="evaluate N samples of the VAE (the shipped model "
                                                                  "of the category, or --weights) instead of a folder")
     e.add_argument("--weights", help=WEIGHTS_HELP)
+    e.add_argument("--max-tries", type=int_at_least(1, MAX_TRIES), nargs="+", default=[EVALUATE_TRIES],
+                   metavar="K", help=f"with -n: draws per sample before a sample is decoded without rejection; "
+                                     f"several give one row each (1: the No Reject ablation; default "
+                                     f"{EVALUATE_TRIES})")
+    e.add_argument("--paper-decoding", action="store_true",
+                   help="with -n: one more row decoded under the paper's rules (cuboids within 1.1x the bbox, "
+                        "attach to the bbox within 0.05 of its bottom or top; the code: 1.5x and snapping)")
     e.add_argument("--classifier", help="PointNet weights for FD and the features (a train-classifier output; "
                                         "default: the shipped shapeprog/weights/pointnet_cls.pt)")
     e.add_argument("--out", help="also write the table to this markdown file")
@@ -397,6 +545,48 @@ def register(sub) -> None:
     e.add_argument("--seed", type=seed, default=0, help="seed of the sampling and of the %% fool training")
     add_quiet(e, "progress lines on stderr")
     add_overwrite(e)
+    nv = add_command(sub, "novelty", cmd_novelty,
+                     help="structural novelty of VAE samples and of the val split against the train split",
+                     description="Sample the shipped VAE of each category and measure the share of samples, and of "
+                                 "the corpus val split, whose structure (the program with its continuous numbers "
+                                 "abstracted) no training program has (ShapeAssembly §7.1.3), beside the text "
+                                 "novelty.",
+                     example="vae novelty --category chair table storage -n 1000 --json novelty.json",
+                     outputs={"json": "file"})
+    add_category(nv, multiple=True)
+    nv.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=1000, help="samples per category")
+    nv.add_argument("--max-tries", type=int_at_least(1, MAX_TRIES), default=EVALUATE_TRIES,
+                    help="draws per sample before a sample is decoded without rejection")
+    nv.add_argument("--seed", type=seed, default=0, help="seed of the latents")
+    add_json(nv, "the novelty table")
+    add_overwrite(nv)
+    sm = add_command(sub, "smoothness", cmd_smoothness,
+                     help="interpolation smoothness: geometric and program steps between random latents",
+                     description="Decode programs along lines between random latents of the shipped VAE of each "
+                                 "category and measure consecutive steps: the chamfer distance of their shapes "
+                                 "(same sampling seed) and the token edit distance of their programs "
+                                 "(ShapeAssembly Table 6).",
+                     example="vae smoothness --category chair --sequences 100 --steps 100 --json smooth.json",
+                     outputs={"json": "file"})
+    add_category(sm, multiple=True)
+    sm.add_argument("--sequences", type=int_at_least(1, MAX_SEQUENCES), default=100, help="lines between latents")
+    sm.add_argument("--steps", type=int_at_least(2, MAX_STEPS), default=100, help="decodes per line, ends included")
+    sm.add_argument("--seed", type=seed, default=0, help="seed of the latents and the surface samples")
+    add_json(sm, "the smoothness table")
+    add_quiet(sm, "progress lines on stderr")
+    add_overwrite(sm)
+    ed = add_command(sub, "editability", cmd_editability,
+                     help="lines per program and the share of macro-like lines, of the val split and VAE samples",
+                     description="Count the lines of the corpus val split's programs and of VAE samples per "
+                                 "category: lines per program, per statement kind, the share of squeeze / reflect "
+                                 "/ translate lines and of the parts they make (ShapeAssembly Table 3).",
+                     example="vae editability --category chair table storage -n 300 --json edit.json",
+                     outputs={"json": "file"})
+    add_category(ed, multiple=True)
+    ed.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=300, help="samples per category")
+    ed.add_argument("--seed", type=seed, default=0, help="seed of the latents")
+    add_json(ed, "the editability table")
+    add_overwrite(ed)
     t = add_command(sub, "train-classifier", cmd_train_classifier,
                     help="train the PointNet classifier of the generation metrics",
                     description="Train the chair / table / storage PointNet classifier on the corpus train "

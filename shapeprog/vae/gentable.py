@@ -2,9 +2,11 @@
 
 :func:`generation_table` measures generated programs of one category with every metric of
 :mod:`shapeprog.vae.genmetrics` (the paper's Table 2: % rooted, % stable, % fool, FD; Table 5: leaf parts;
-Table 4: generalization, coverage, variety; and % novel programs) against the corpus train split, adds a
-ground-truth row (the corpus val split through the same metrics) and the paper's figures, and returns
-a markdown table. :func:`evaluate_generation` gives one row as numbers. :func:`train_category_classifier`
+Table 4: generalization, coverage, variety; and % novel programs, by text and by structure) against the
+corpus train split, adds a ground-truth row (the corpus val split through the same metrics) and the paper's
+figures, and returns a markdown table. :func:`evaluate_generation` gives one row as numbers,
+:func:`generation_rows` the rows of several sample sets against one category's references and
+:func:`generation_result` rows of one or more categories as a result file's content. :func:`train_category_classifier`
 trains the PointNet whose features the Fréchet distance uses (``python -m shapeprog vae train-classifier``).
 Definitions and decisions: ``docs/generation_metrics.md``.
 """
@@ -28,13 +30,16 @@ from .genmetrics import (CHAMFER_POINTS, CLASSIFIER_POINTS, FoolResult, chamfer_
 from ..lang import Program
 from .. import corpus
 from ..corpus import data_digest
-from ..physics import rootedness, stability
+from ..physics import CODE_STABILITY_TOLERANCE, PAPER_STABILITY_TOLERANCE, rootedness, stability_displacement
+from .structure import structure_key
 from .pointnet import accuracy, fit_classifier, PRETRAINED_SHA256, load_classifier
 
-__all__ = ["PAPER", "GenerationRow", "References", "evaluate_generation", "format_table", "generation_table",
-           "table_notes", "train_category_classifier"]
+__all__ = ["PAPER", "PAPER_SHAPEMOD", "PAPERS", "GenerationRow", "paper_rows", "References", "evaluate_generation", "format_table", "generation_result",
+           "generation_rows", "generation_table", "table_notes", "train_category_classifier"]
 
-#: The ShapeAssembly paper's figures for its model (Tables 2, 4 and 5) and the ground truth's leaf parts.
+#: The ShapeAssembly paper's figures for its model (Tables 2, 4 and 5) and the ground truth's leaf parts. Its
+#: stability figure is under the 10 % rule of its appendix E (our column ``stable_paper``); its structural novelty
+#: (§7.1.3) is not in the specification.
 PAPER = {
     "chair": {"rooted": 94.5, "stable": 84.7, "fool": 25.06, "fd": 22.34, "leaf_parts": 7.9,
               "generalization": 0.108, "coverage": 0.118, "variety": 0.104, "gt_leaf_parts": 9.7},
@@ -44,11 +49,26 @@ PAPER = {
                 "generalization": 0.125, "coverage": 0.129, "variety": 0.119, "gt_leaf_parts": 10.8},
 }
 
-_COLUMNS = ("rooted", "stable", "fool", "fd", "leaf_parts", "generalization", "coverage", "variety", "novelty")
-_HEADERS = ("% rooted", "% stable", "% fool", "FD", "leaf parts", "generalization", "coverage", "variety",
-            "% novel")
-_DIGITS = {"rooted": 1, "stable": 1, "fool": 2, "fd": 2, "leaf_parts": 2, "generalization": 3,
-           "coverage": 3, "variety": 3, "novelty": 1}
+_COLUMNS = ("rooted", "stable", "stable_paper", "fool", "fd", "leaf_parts", "generalization", "coverage", "variety",
+            "novelty", "novelty_structure")
+_HEADERS = ("% rooted", f"% stable (code rule, {100 * CODE_STABILITY_TOLERANCE:g} %)",
+            f"% stable (paper rule, {100 * PAPER_STABILITY_TOLERANCE:g} %)", "% fool", "FD", "leaf parts",
+            "generalization", "coverage", "variety", "% novel (text)", "% novel (structure)")
+_DIGITS = {"rooted": 1, "stable": 1, "stable_paper": 1, "fool": 2, "fd": 2, "leaf_parts": 2, "generalization": 3,
+           "coverage": 3, "variety": 3, "novelty": 1, "novelty_structure": 1}
+#: The ShapeMOD paper's Table 2 (chairs; generation with and without macros): the rows printed under a macro
+#: model's table instead of the ShapeAssembly paper's. Its FD is not comparable with either other FD, and its
+#: stability rule is not in the specification (placed beside the ShapeAssembly paper's, in the 10 % column).
+PAPER_SHAPEMOD = {
+    "chair": {"No Macros": {"fool": 21.2, "fd": 17.8, "leaf_parts": 7.6, "rooted": 93.9, "stable": 82.3},
+              "ShapeMOD": {"fool": 25.6, "fd": 16.7, "leaf_parts": 8.6, "rooted": 92.7, "stable": 79.5}},
+}
+#: Which paper's rows a table prints (``format_table(paper=...)``).
+PAPERS = ("shapeassembly", "shapemod")
+
+#: Where the paper's row takes its figures from: our column -> the key of :data:`PAPER` (the paper's stability
+#: is under its 10 % rule, so it sits in the paper-rule column).
+_PAPER_KEYS = {"stable": None, "stable_paper": "stable"}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -138,6 +158,7 @@ class References:
         train_fit: Gaussian fit ``(mu, cov)`` of the train shapes' classifier features (FD).
         train_chamfer, val_chamfer: :func:`~shapeprog.vae.genmetrics.chamfer_clouds` of both splits.
         seed: the sampling seed (train clouds use ``seed``, val ``seed + 1``).
+        train_structures: the train programs' structure keys (:meth:`structures` makes them when None).
     """
 
     category: str
@@ -150,6 +171,13 @@ class References:
     train_chamfer: torch.Tensor
     val_chamfer: torch.Tensor
     seed: int = 0
+    train_structures: Optional[frozenset] = None
+
+    def structures(self) -> frozenset:
+        """The structure keys of the train programs (:func:`~shapeprog.vae.structure.structure_key`), made once."""
+        if self.train_structures is None:
+            self.train_structures = frozenset(structure_key(p) for p in self.train_programs)
+        return self.train_structures
 
     @classmethod
     def build(cls, category: str, model=None, seed: int = 0, chamfer_points: int = CHAMFER_POINTS,
@@ -179,7 +207,10 @@ class GenerationRow:
     """One row of the generation table (percentages 0-100; None where a metric was not computed).
 
     ``samples`` programs were given, ``valid`` of them parsed and executed to at least one leaf cuboid;
-    every metric is over the valid ones. ``fool_detail`` keeps the % fool breakdown, ``errors`` the
+    every metric is over the valid ones. ``stable`` is under the reference code's rule (a base may move 2.5 % of
+    its height), ``stable_paper`` under the paper's (10 %), both from one simulation per shape; ``novelty`` is
+    the text novelty (numbers to 3 decimals), ``novelty_structure`` the structural one (numbers abstracted,
+    :func:`~shapeprog.vae.structure.structural_novelty`). ``fool_detail`` keeps the % fool breakdown, ``errors`` the
     failures, ``seconds`` the time per metric.
     """
 
@@ -188,6 +219,7 @@ class GenerationRow:
     valid: int
     rooted: Optional[float] = None
     stable: Optional[float] = None
+    stable_paper: Optional[float] = None
     fool: Optional[float] = None
     fd: Optional[float] = None
     leaf_parts: Optional[float] = None
@@ -195,17 +227,20 @@ class GenerationRow:
     coverage: Optional[float] = None
     variety: Optional[float] = None
     novelty: Optional[float] = None
+    novelty_structure: Optional[float] = None
     fool_detail: Optional[FoolResult] = None
     errors: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
 
 
-def _physics_job(job) -> tuple[bool, Optional[bool]]:
+def _physics_job(job) -> tuple[bool, Optional[float]]:
+    """``(corners, stability)`` -> rooted, and the base displacement (a fraction of the height; ``inf`` when not
+    rooted) when ``stability``."""
     corners, stable = job
     rooted = rootedness(corners)
     if not stable:
         return rooted, None
-    return rooted, rooted and stability(corners)
+    return rooted, stability_displacement(corners) if rooted else float("inf")
 
 
 def _map(executor, fn, jobs) -> list:
@@ -268,10 +303,13 @@ def evaluate_generation(
     row.leaf_parts = float(np.mean([leaf_parts(c) for c in shapes]))
     progs = [samples[i] for i in valid]
     row.novelty = timed("novelty", lambda: novelty(progs, references.train_programs))
+    known = references.structures()
+    row.novelty_structure = 100.0 * float(np.mean([structure_key(p) not in known for p in progs]))
     phys = timed("physics", lambda: _map(executor, _physics_job, [(c.double().numpy(), stability) for c in shapes]))
     row.rooted = 100.0 * float(np.mean([r for r, _ in phys]))
     if stability:
-        row.stable = 100.0 * float(np.mean([s for _, s in phys]))
+        row.stable = 100.0 * float(np.mean([s <= CODE_STABILITY_TOLERANCE for _, s in phys]))
+        row.stable_paper = 100.0 * float(np.mean([s <= PAPER_STABILITY_TOLERANCE for _, s in phys]))
     clouds = classifier_clouds(shapes, seed=seed + 2)
     row.fd = timed("fd", lambda: frechet_distance(classifier_features(clouds, model), references.train_fit))
     if fool:
@@ -296,18 +334,39 @@ def _cell(value, digits: int) -> str:
     return "—" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}f}"
 
 
-def format_table(rows: Sequence[GenerationRow], category: str, notes: Sequence[str] = (), paper: bool = True) -> str:
-    """A markdown table of ``rows`` (and the paper's rows for ``category`` when ``paper``), then ``notes``."""
+def paper_rows(category: str, paper="shapeassembly") -> list[tuple[str, dict]]:
+    """The paper rows of a table: ``(name, {column: value or None})`` for each. ``paper``: ``"shapeassembly"``
+    (or True; its model and ground-truth rows, :data:`PAPER`), ``"shapemod"`` (the ShapeMOD paper's Table 2 rows,
+    :data:`PAPER_SHAPEMOD`, for a model of macro programs), or None / False (none)."""
+    if paper is True:
+        paper = "shapeassembly"
+    if not paper:
+        return []
+    if paper not in PAPERS:
+        raise ValueError(f"unknown paper {paper!r}; expected one of {', '.join(PAPERS)}")
+    if paper == "shapemod":
+        return [(f"paper: ShapeMOD Table 2, {name}", {c: p.get(_PAPER_KEYS.get(c, c)) for c in _COLUMNS})
+                for name, p in PAPER_SHAPEMOD.get(category, {}).items()]
+    if category not in PAPER:
+        return []
+    p = PAPER[category]
+    return [("paper: ShapeAssembly", {c: p.get(_PAPER_KEYS.get(c, c)) for c in _COLUMNS}),
+            ("paper: ground truth", {c: p["gt_leaf_parts"] if c == "leaf_parts" else None for c in _COLUMNS})]
+
+
+def format_table(rows: Sequence[GenerationRow], category: str, notes: Sequence[str] = (),
+                 paper="shapeassembly") -> str:
+    """A markdown table of ``rows`` and the paper's rows for ``category`` (:func:`paper_rows`), then ``notes``."""
     lines = [f"Generation metrics, {category}", "",
              "| | " + " | ".join(_HEADERS) + " |", "|---" * (len(_HEADERS) + 1) + "|"]
     for r in rows:
         label = f"{r.name} ({r.valid} of {r.samples} programs)" if r.valid != r.samples else f"{r.name} ({r.samples})"
         lines.append(f"| {label} | " + " | ".join(_cell(getattr(r, c), _DIGITS[c]) for c in _COLUMNS) + " |")
-    if paper and category in PAPER:
-        p = PAPER[category]
-        lines.append("| paper: ShapeAssembly | " + " | ".join(_cell(p.get(c), _DIGITS[c]) for c in _COLUMNS) + " |")
-        lines.append("| paper: ground truth | " + " | ".join(
-            _cell(p["gt_leaf_parts"] if c == "leaf_parts" else None, _DIGITS[c]) for c in _COLUMNS) + " |")
+    for name, values in paper_rows(category, paper):
+        lines.append(f"| {name} | " + " | ".join(_cell(values[c], _DIGITS[c]) for c in _COLUMNS) + " |")
+    if paper == "shapemod":
+        notes = [*notes, "The paper rows are the ShapeMOD paper's Table 2 (chairs only in the specification; its "
+                 "stability rule is not specified); its FD used another classifier."]
     if notes:
         lines += [""] + [f"* {n}" for n in notes]
     return "\n".join(lines) + "\n"
@@ -331,8 +390,17 @@ def table_notes(model_meta: dict, sha: Optional[str], fool_epochs: int, fool_ave
         "diagonal; the sum of both directions' mean nearest-point distances; nearest shapes by a grid estimate "
         + ("and exact chamfer on every pair." if candidates is None else f"and exact chamfer on its {candidates} best candidates.")
         + " Coverage is over the val split, so the ground-truth row has none.",
-        "Rooted and stable follow the reference code (2 % contact rule; stability: 2.5 % of the height, the "
-        "code's forces)" + ("." if stability else "; stability was not run."),
+        "Rooted follows the reference code (2 % contact rule). Stable: one pybullet simulation per shape with the "
+        "code's forces, scored under two rules: a group's base may move 2.5 % of its height (the reference code) "
+        "or 10 % (the paper's appendix E, whose force is proportional to mass instead); the paper's % stable is "
+        "printed in the 10 % column" + ("." if stability else "; stability was not run."),
+        "The paper's generalization, coverage and variety are chamfer distances on another normalisation (its "
+        "shapes and point counts; ours: unit bounding-box diagonal, so two samplings of one shape already differ "
+        "by about 0.035): compare orderings between rows, not values with the paper's.",
+        "% novel (text): programs whose text (numbers to 3 decimals) is no training program's, so a changed number "
+        "is novel. % novel (structure): programs whose structure (every continuous number abstracted; names, "
+        "faces, axes, aligned flags, translate counts and hierarchy kept) is no training program's, the paper's "
+        "§7.1.3 measure; the paper's figures for it are not in the specification.",
         "Ground truth: the corpus val split through the same metrics (FD, % fool, generalization against "
         "the train split). Leaf parts: leaf cuboids per executed program (= the reference's vertices / 8).",
     ]
@@ -364,7 +432,7 @@ def train_feature_fit(category: str, train_clouds, model, seed: int, classifier_
 
 
 #: Bumped when a generation metric changes: cached ground-truth rows of other versions are not read.
-GROUND_TRUTH_CACHE_VERSION = 1
+GROUND_TRUTH_CACHE_VERSION = 2
 
 
 def ground_truth_row(refs: References, classifier_sha: Optional[str], **kw) -> GenerationRow:
@@ -390,8 +458,8 @@ def ground_truth_row(refs: References, classifier_sha: Optional[str], **kw) -> G
     return GenerationRow(**data, fool_detail=None if detail is None else FoolResult(**detail))
 
 
-def generation_table(
-    samples: Sequence,
+def generation_rows(
+    sample_sets: Sequence[tuple[str, Sequence]],
     category: str,
     ground_truth: bool = True,
     model=None,
@@ -405,17 +473,11 @@ def generation_table(
     candidates: Optional[int] = 16,
     chamfer_points: int = CHAMFER_POINTS,
     seed: int = 0,
-    name: str = "generated",
     log=None,
-) -> str:
-    """The paper's generation tables for ``samples`` of ``category``, as markdown.
-
-    Rows: the samples, the ground truth (the corpus val split, when ``ground_truth``), and the paper's
-    ShapeAssembly and ground-truth figures. Columns: % rooted, % stable, % fool, FD (Table 2), leaf parts
-    (Table 5), generalization, coverage, variety (Table 4), % novel programs. The notes under the table
-    say how each was measured. Arguments as :func:`evaluate_generation`; ``samples`` may be empty
-    (``[]``) with ``ground_truth=True`` for the ground-truth row alone.
-    """
+) -> tuple[list[GenerationRow], list[str]]:
+    """One :class:`GenerationRow` per ``(name, programs)`` of ``sample_sets`` against the category's references
+    (built once), then the ground-truth row when ``ground_truth``; and the notes under the table. Arguments as
+    :func:`evaluate_generation`."""
     if category not in PAPER:
         raise ValueError(f"unknown category {category!r}; expected one of {', '.join(PAPER)}")
     meta, sha = {}, None
@@ -426,11 +488,49 @@ def generation_table(
     kw = dict(model=model, executor=executor, stability=stability, fool=fool, fool_epochs=fool_epochs,
               fool_average_last=fool_average_last, fool_points=fool_points, candidates=candidates,
               chamfer_points=chamfer_points, seed=seed, log=log)
-    rows = []
-    samples = list(samples)
-    if samples:
-        rows.append(evaluate_generation(samples, refs, name=name, **kw))
+    rows = [evaluate_generation(list(samples), refs, name=name, **kw) for name, samples in sample_sets]
     if ground_truth:
         rows.append(ground_truth_row(refs, sha, **kw))
     notes = table_notes(meta, sha, fool_epochs, fool_average_last, fool_points, chamfer_points, candidates, stability)
+    return rows, notes
+
+
+def generation_table(
+    samples: Sequence,
+    category: str,
+    ground_truth: bool = True,
+    name: str = "generated",
+    **kw,
+) -> str:
+    """The paper's generation tables for ``samples`` of ``category``, as markdown.
+
+    Rows: the samples, the ground truth (the corpus val split, when ``ground_truth``), and the paper's
+    ShapeAssembly and ground-truth figures. Columns: % rooted, % stable under the code's and the paper's rule
+    (Table 2), % fool, FD (Table 2), leaf parts (Table 5), generalization, coverage, variety (Table 4), % novel
+    programs by text and by structure. The notes under the table say how each was measured. Other arguments as
+    :func:`generation_rows`; ``samples`` may be empty (``[]``) with ``ground_truth=True`` for the ground-truth
+    row alone.
+    """
+    samples = list(samples)
+    rows, notes = generation_rows([(name, samples)] if samples else [], category, ground_truth, **kw)
     return format_table(rows, category, notes)
+
+
+def generation_result(tables: Sequence[tuple[str, Sequence[GenerationRow]]], notes: Sequence[str] = (),
+                      command: Optional[str] = None, paper="shapeassembly") -> dict:
+    """The rows of one or more categories (``(category, rows)`` pairs) as a result file's content
+    (:func:`shapeio.results.make_result`): one row per table row, then the paper's rows of each category
+    (:func:`paper_rows`), a column per metric, the samples and valid counts."""
+    from shapeio.results import column, make_result  # lazy: the result format is needed only when written
+
+    cols = [column("category", "category"), column("row", "row"), column("samples", "programs"),
+            column("valid", "valid")]
+    cols += [column(c, h, _DIGITS[c]) for c, h in zip(_COLUMNS, _HEADERS)]
+    out = []
+    for category, rows in tables:
+        for r in rows:
+            out.append({"category": category, "row": r.name, "samples": r.samples, "valid": r.valid,
+                        **{c: getattr(r, c) for c in _COLUMNS}})
+        for name, values in paper_rows(category, paper):
+            out.append({"category": category, "row": name, "samples": None, "valid": None, **values})
+    return make_result("Generation metrics (ShapeAssembly Tables 2, 4, 5)", cols, out, notes, command)

@@ -134,19 +134,27 @@ def test_evaluate_generation_of_vae_samples(weights, tmp_path, monkeypatch):
     monkeypatch.setattr(corpus, "load", lambda *a, **k: load(*a, **k)[:6])  # 6 reference shapes per split
     out = tmp_path / "table.md"
     assert main(["vae", "evaluate", "--category", "chair", "-n", "2", "--weights", weights, "--no-ground-truth",
-                 "--no-stability", "--no-fool", "--quiet", "--out", str(out), "--json", str(tmp_path / "t.json")]) == 0
+                 "--no-stability", "--no-fool", "--quiet", "--max-tries", "10", "1", "--paper-decoding",
+                 "--out", str(out), "--json", str(tmp_path / "t.json")]) == 0
     text = out.read_text()
-    assert text.startswith(f"Samples: 2 from {weights}") and "valid on the first draw" in text
-    assert "VAE samples" in text
+    assert text.startswith(f"VAE samples ({weights}; rejection, at most 10 draws each): 2 samples")
+    assert "valid on the first draw" in text and "No Reject: one draw each" in text and "the paper's rules" in text
     from shapeio.results import read_result
 
     result = read_result(tmp_path / "t.json")  # the table's figures as data: one row per row of the table
-    rows = [ln for ln in text.splitlines() if ln.startswith("| ") and "VAE samples" in ln]
-    assert len(rows) == 1 and len(result["rows"]) == len([ln for ln in text.splitlines() if ln.startswith("| ")]) - 1
-    cells = [c.strip() for c in rows[0].strip("|").split("|")]
-    row = next(r for r in result["rows"] if any(str(v).startswith("VAE samples") for v in r.values()))
-    assert [str(v) for v in list(row.values())[1:]] == [c if not c.replace(".", "", 1).isdigit() else str(
-        float(c) if "." in c else int(c)) for c in cells]
+    rows = [ln for ln in text.splitlines() if ln.startswith("| VAE samples")]
+    ours = [r for r in result["rows"] if r["row"].startswith("VAE samples")]
+    assert len(rows) == len(ours) == 3 and [r["category"] for r in ours] == ["chair"] * 3
+    assert [r["row"] for r in result["rows"][3:]] == ["paper: ShapeAssembly", "paper: ground truth"]
+    def cell(v, digits):
+        return "—" if v is None else f"{v:.{digits}f}"
+
+    for line, r in zip(rows, ours):
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[0].startswith(f"{r['row']} (") and r["samples"] == 2 and r["stable"] is None and r["fool"] is None
+        assert cells[1] == cell(r["rooted"], 1) and cells[-1] == cell(r["novelty_structure"], 1)
+        assert cells[6] == cell(r["leaf_parts"], 2)
+    assert any("No Reject" in n for n in result["notes"])
     with pytest.raises(SystemExit, match=r"missing\.pt: no such weights file"):
         main(["vae", "evaluate", "--category", "chair", "--classifier", str(tmp_path / "missing.pt")])
     with pytest.raises(SystemExit, match="not both"):

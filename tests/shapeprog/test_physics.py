@@ -9,7 +9,8 @@ from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
 from sa_testutil import boxes, rot_y
-from shapeprog.physics import box_distances, rooted_parts, rootedness, stability
+from shapeprog.physics import (CODE_STABILITY_TOLERANCE, PAPER_STABILITY_TOLERANCE, box_distances, rooted_parts,
+                               rootedness, stability, stability_displacement)
 
 
 def table(top_y=0.95, leg_h=0.9):
@@ -118,6 +119,21 @@ def test_stability(tmp_path, monkeypatch):
         stability(balanced, inertia="unit")
     # headless and file-free
     assert os.listdir(tmp_path) == []
+
+
+def test_stability_displacement_answers_both_rules():
+    """One simulation: the displacement decides the code's 2.5 % and the paper's 10 % rules as stability() does."""
+    tiny_base = boxes([[0.12, 0.025, 0], [0, 1.05, 0]], [[0.05, 0.05, 0.05], [0.3, 2.0, 0.3]])
+    shapes = [boxes([0, 0.5, 0], [1, 1, 1]), table(), tiny_base,
+              boxes([[0, 0.5, 0], [0.8, 1.05, 0]], [[0.1, 1.0, 0.1], [1.6, 0.1, 0.5]])]
+    moved = [stability_displacement(s, steps=2000) for s in shapes]
+    assert moved[0] < CODE_STABILITY_TOLERANCE and moved[2] > PAPER_STABILITY_TOLERANCE
+    for s, d in zip(shapes, moved):
+        for rule in (CODE_STABILITY_TOLERANCE, PAPER_STABILITY_TOLERANCE, 0.3):
+            assert stability(s, tolerance=rule, steps=2000) == (d <= rule)
+    assert (CODE_STABILITY_TOLERANCE, PAPER_STABILITY_TOLERANCE) == (0.025, 0.10)
+    floating = torch.cat([table(), boxes([0, 1.6, 0], [0.2, 0.2, 0.2])])
+    assert stability_displacement(floating) == math.inf  # not rooted: unstable under every rule
 
 
 def test_stability_is_deterministic():

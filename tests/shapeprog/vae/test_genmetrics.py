@@ -26,7 +26,9 @@ from shapeprog.vae.genmetrics import (
     program_key,
     variety,
 )
-from shapeprog.vae.gentable import PAPER, GenerationRow, References, evaluate_generation, format_table
+from shapeprog.vae.gentable import (PAPER, GenerationRow, References, evaluate_generation, format_table,
+                                    generation_result, paper_rows, table_notes)
+from shapeprog.vae.structure import structure_key
 from shapeprog.metrics import chamfer
 from shapeprog.vae.pointnet import (PRETRAINED, PRETRAINED_SHA256, PointNetCls, accuracy, fit_classifier,
                                 load_classifier, save_classifier, sha256_file)
@@ -279,18 +281,53 @@ def test_evaluate_generation_end_to_end_on_a_small_reference(classifier, val_sha
     row = evaluate_generation(samples, refs, model=model, stability=False, fool_epochs=1, fool_average_last=1,
                               fool_points=32, chamfer_points=128)
     assert (row.samples, row.valid) == (5, 4) and len(row.errors) == 1
-    assert row.novelty == 75.0 and row.stable is None and 0 <= row.rooted <= 100
+    assert row.novelty == 75.0 and row.stable is None and row.stable_paper is None and 0 <= row.rooted <= 100
+    known = {structure_key(p) for p in train_programs}
+    valid = [train_programs[0], val_programs[1], val_programs[2], FLAT]
+    assert row.novelty_structure == 100.0 * sum(structure_key(p) not in known for p in valid) / 4 < 100.0
     assert 0 <= row.fool <= 100 and row.fd > 0 and row.leaf_parts > 0
     assert row.generalization >= 0 and row.coverage > 0 and row.variety > 0
     table = format_table([row], "chair", ["FD values are comparable only within one classifier."])
-    assert "| % rooted | % stable | % fool | FD | leaf parts |" in table
-    assert "generated (4 of 5 programs)" in table and "| paper: ShapeAssembly | 94.5 | 84.7 | 25.06 | 22.34 |" in table
+    assert ("| % rooted | % stable (code rule, 2.5 %) | % stable (paper rule, 10 %) | % fool | FD | leaf parts |"
+            in table and "| % novel (text) | % novel (structure) |" in table)
+    # the paper's stability is under its 10 % rule: its figure sits in that column, the code-rule cell is empty
+    assert "generated (4 of 5 programs)" in table and "| paper: ShapeAssembly | 94.5 | — | 84.7 | 25.06 | 22.34 |" in table
+    notes = " ".join(table_notes({}, None, 12, 4, 512, 1024, 16, True))
+    assert "compare orderings between rows, not values with the paper's" in notes and "10 % column" in notes
     assert "FD values are comparable only within one classifier." in table and "| — |" in table
 
 
 def test_paper_figures():
     assert PAPER["table"]["fd"] == 49.07 and PAPER["storage"]["gt_leaf_parts"] == 10.8
     assert format_table([GenerationRow("x", 3, 3, leaf_parts=2.0)], "storage").count("\n| ") == 4
+
+
+def test_paper_rows_of_either_paper():
+    assert [n for n, _ in paper_rows("chair")] == ["paper: ShapeAssembly", "paper: ground truth"]
+    (no_macros, nm), (_, mod) = paper_rows("chair", "shapemod")
+    assert no_macros == "paper: ShapeMOD Table 2, No Macros" and (nm["fool"], nm["stable_paper"], nm["stable"]) == (
+        21.2, 82.3, None)
+    assert mod["leaf_parts"] == 8.6 and paper_rows("table", "shapemod") == [] and paper_rows("chair", None) == []
+    table = format_table([GenerationRow("x", 3, 3, leaf_parts=2.0)], "chair", paper="shapemod")
+    assert "ShapeAssembly" not in table and "| paper: ShapeMOD Table 2, ShapeMOD | 92.7 | — | 79.5 | 25.60 |" in table
+    with pytest.raises(ValueError, match="unknown paper 'csgnet'"):
+        paper_rows("chair", "csgnet")
+
+
+def test_generation_result_rows():
+    row = GenerationRow("x", 3, 2, rooted=50.0, stable=50.0, stable_paper=100.0, leaf_parts=2.0, novelty=100.0,
+                        novelty_structure=50.0)
+    result = generation_result([("storage", [row]), ("chair", [])], ["a note"], command="cmd")
+    assert [(r["category"], r["row"]) for r in result["rows"]] == [
+        ("storage", "x"), ("storage", "paper: ShapeAssembly"), ("storage", "paper: ground truth"),
+        ("chair", "paper: ShapeAssembly"), ("chair", "paper: ground truth")]
+    mine, paper, truth = result["rows"][:3]
+    assert (mine["stable"], mine["stable_paper"], mine["novelty_structure"], mine["valid"]) == (50.0, 100.0, 50.0, 2)
+    assert (paper["stable"], paper["stable_paper"], paper["rooted"]) == (None, 83.7, 95.3)
+    assert truth["leaf_parts"] == 10.8 and truth["fd"] is None
+    labels = [c["label"] for c in result["columns"]]
+    assert "% stable (paper rule, 10 %)" in labels and "% novel (structure)" in labels
+    assert result["notes"] == ["a note"] and result["command"] == "cmd"
 
 
 def test_pointnet_with_input_transform_and_bad_input():
@@ -311,11 +348,12 @@ def test_evaluate_generation_command(tmp_path, monkeypatch, capsys):
 
     calls = []
 
-    def fake_table(samples, category, **kw):
-        calls.append((samples, category, kw))
-        return "| table |\n"
+    def fake_rows(sets, category, **kw):
+        calls.append((sets[0][1], category, kw))
+        return [], []
 
-    monkeypatch.setattr(cli, "generation_table", fake_table)
+    monkeypatch.setattr(cli, "generation_rows", fake_rows)
+    monkeypatch.setattr(cli, "format_table", lambda rows, category, notes, paper: "| table |\n")
     folder = tmp_path / "samples"
     folder.mkdir()
     (folder / "a.txt").write_text(FLAT)
@@ -335,3 +373,9 @@ def test_evaluate_generation_command(tmp_path, monkeypatch, capsys):
         main(["vae", "evaluate", "--category", "chair", "--programs", str(tmp_path)])
     with pytest.raises(SystemExit, match="nothing to evaluate"):
         main(["vae", "evaluate", "--category", "chair", "--no-ground-truth"])
+    with pytest.raises(SystemExit, match="belong to one category"):
+        main(["vae", "evaluate", "--category", "chair", "table", "--programs", str(folder)])
+    with pytest.raises(SystemExit, match="give -n N"):
+        main(["vae", "evaluate", "--category", "chair", "--max-tries", "1"])
+    with pytest.raises(SystemExit, match="give -n N"):
+        main(["vae", "evaluate", "--category", "chair", "--programs", str(folder), "--paper-decoding"])
