@@ -11,7 +11,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from shapeio import atomic_write
-from shapeio.results import column, make_result
+from shapeio.results import column, make_result, markdown
 
 from .. import corpus
 from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
@@ -24,9 +24,17 @@ from .state import Discovery
 from .config import load_config
 from .lang import from_lines, to_text
 from .refactored import check_target, refactor_corpus, write_refactored
-from .table1 import table1
+from .table1 import table1_result, table1_rows
 
 SPLITS = ("train", "val", "all")
+#: Table 5's variants (``shapeprog.macros.ablation.VARIANTS``'s keys, repeated so that ``--help`` stays light).
+ABLATION_VARIANTS = ("full", "no P_matches-dist weighting", "no beam", "no bad-order filter", "no generalize",
+                     "no valid-macro criteria")
+#: Largest noise sigma accepted by ``perturbation`` (the shapes are about one unit tall).
+MAX_SIGMA = 10.0
+#: The full study's noise levels (``shapeprog.macros.perturb_study.SIGMAS``, repeated here so that ``--help``
+#: imports no torch model).
+SIGMAS = (0.0, 0.01, 0.025, 0.05, 0.1, 0.15, 0.2)
 SEARCHES = ("beam", "exact")
 
 
@@ -149,21 +157,81 @@ def cmd_refactor_corpus(args) -> int:
 
 def cmd_tables(args) -> int:
     library_files = category_pairs(args.library, "CATEGORY=FILE")
-    refuse_inputs([args.out, args.json], library_files.values())
+    extra_files = category_pairs(args.extra, "NAME=FILE", "--extra")
+    refuse_inputs([args.out, args.json], [*library_files.values(), *extra_files.values()])
     refuse_existing([args.out, args.json], args.overwrite)
+    extra = {name: macro_library(f, f"--extra {name}=") for name, f in extra_files.items()}
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     try:
-        text = table1(args.category, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
-                      library_files=library_files,
-                      log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+        rows = table1_rows(args.category, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
+                           library_files=library_files, extra=extra,
+                           log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
     finally:
         if pool is not None:
             pool.shutdown()
+    result = table1_result(rows, command_line(args), args.limit, args.seed)
+    text = markdown(result)
     print(text)
     if args.out:
-        atomic_write(args.out, text + "\n")
+        atomic_write(args.out, text)
         print(f"wrote {args.out}")
-    write_json(args, markdown_result(text, "ShapeMOD Table 1", command_line(args)))
+    write_json(args, result)
+    return 0
+
+
+def cmd_perturbation(args) -> int:
+    from .perturb_study import perturbation_result, perturbation_study, plot  # lazy: torch models on use
+
+    refuse_existing([args.json, args.png], args.overwrite)
+    name = args.library or args.category
+    lib = macro_library(name, "--library ")
+    log = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    try:
+        study = perturbation_study(args.category, lib, name, n=args.n, sigmas=args.sigmas, repeats=args.repeats,
+                                   seed=args.seed, log=log)
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
+    for ident, reason in study["left_out"]:
+        print(f"left out: {args.category}/{ident}: {reason}", file=sys.stderr)
+    result = perturbation_result(study, command_line(args))
+    print(markdown(result))
+    write_json(args, result)
+    if args.png:
+        plot(study, args.png)
+        print(f"wrote {args.png}")
+    return 0
+
+
+def cmd_ablation(args) -> int:
+    from .ablation import VARIANTS, ablation_result, run_ablation
+
+    refuse_existing([args.json], args.overwrite)
+    unknown = [v for v in args.variants if v not in VARIANTS]
+    if unknown:
+        raise SystemExit(f"error: --variants: unknown variant {unknown[0]!r}; expected some of "
+                         + ", ".join(repr(v) for v in VARIANTS))
+    base = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
+                       abs_shape_num=args.subsample)
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    t0 = time.time()
+    log = None if args.quiet else (lambda m: print(f"[{time.time() - t0:7.1f} s] {m}", file=sys.stderr, flush=True))
+    try:
+        nodes, ids = collection(args.category, "all", args.limit, args.seed, executor=pool,
+                                max_orders=base["abs_order_num"])
+        if log:
+            log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
+        rows = run_ablation(nodes, args.variants, base, seed=args.seed, executor=pool, log=log)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    scale = (f"{args.category}: {len(ids)} shapes ({len(nodes.keys)} sub-programs; "
+             + ("all" if args.limit is None else f"a random subset, seed {args.seed}") + f"), {base['num_rounds']} "
+             f"round(s) of {base['cand_cluster_num']} proposal steps, subsample {base['abs_shape_num']} sub-programs")
+    result = ablation_result(rows, command_line(args), scale)
+    print(markdown(result))
+    write_json(args, result)
     return 0
 
 
@@ -228,16 +296,63 @@ def register(sub) -> None:
     rc.add_argument("--no-check", action="store_true", help="skip reading back and executing every result")
     tb = add_command(sub, "tables", cmd_tables, help="ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows",
                      description="Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the "
-                                 "given categories beside the paper's rows.",
+                                 "given categories; f also as a ratio to the same run's No Macros f, beside the "
+                                 "paper's ratio (the paper's absolute f is on another scale).",
                      example="macros tables --category chair --limit 200 --out table1.md --json table1.json",
-                     outputs={"out": "file", "json": "file"})
+                     outputs={"out": "file", "json": "file+"})
     add_category(tb, multiple=True)
     tb.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes per category")
     tb.add_argument("--seed", type=seed, default=0, help="seed of --limit's subset")
     tb.add_argument("--library", action="append", help="CATEGORY=FILE: a library file instead of the shipped one")
+    tb.add_argument("--extra", action="append", metavar="NAME=FILE",
+                    help="a further library (file or shipped category) applied to every category, as a row NAME "
+                         "(e.g. one discovered over several categories)")
     tb.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
     tb.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
     tb.add_argument("--out", help="also write the table (markdown) here")
     add_json(tb, "the table")
     add_quiet(tb, "progress lines")
     add_overwrite(tb)
+    ab = add_command(sub, "ablation", cmd_ablation,
+                     help="ShapeMOD Table 5: discovery with one part switched off per variant, on the same shapes",
+                     description="Run discovery once per variant (the full method, and each with one part switched "
+                                 "off: P_matches-dist weighting, beam search, the bad-order filter, generalisation, "
+                                 "the valid-macro criteria) on the same shapes and seed; report f per sub-program "
+                                 "after each round and of each final library over all the sub-programs.",
+                     example="macros ablation --category chair --limit 30 --rounds 1 --proposal-steps 20 "
+                             "--json t5.json",
+                     outputs={"json": "file+"})
+    add_category(ab)
+    ab.add_argument("--variants", nargs="+", default=list(ABLATION_VARIANTS), metavar="VARIANT",
+                    help="the variants run, quoted: " + ", ".join(f"'{v}'" for v in ABLATION_VARIANTS))
+    ab.add_argument("--config", help="settings YAML of the full method (default: configs/shapemod/default.yaml's)")
+    ab.add_argument("--rounds", type=int_at_least(1), default=2, help="rounds per variant")
+    ab.add_argument("--proposal-steps", type=int_at_least(1), default=300, help="proposal steps per round")
+    ab.add_argument("--subsample", type=int_at_least(1), default=1000, help="sub-programs of the integration "
+                                                                            "subsample")
+    ab.add_argument("--limit", type=int_at_least(1), default=80, help="a random subset of N shapes")
+    ab.add_argument("--seed", type=seed, default=0, help="seed of the subset and of the searches")
+    ab.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
+    add_json(ab, "f per variant")
+    add_quiet(ab, "progress lines")
+    add_overwrite(ab)
+    pt = add_command(sub, "perturbation", cmd_perturbation,
+                     help="ShapeMOD Fig. 7: FD of perturbed programs without and with macros",
+                     description="Refactor N random train shapes without macros and with a ShapeMOD library, add "
+                                 "sigma * N(0, 1) to every continuous parameter, and measure the Frechet distance of "
+                                 "the perturbed shapes' classifier features to the val split's, per sigma (mean, "
+                                 "min and max over the noise draws).",
+                     example="macros perturbation --category chair --n 100 --repeats 1 --sigmas 0 0.05 0.1 "
+                             "--json fig7.json",
+                     outputs={"json": "file+", "png": "file+"})
+    add_category(pt)
+    pt.add_argument("--library", help="a shipped library's category or a library file (default: --category)")
+    pt.add_argument("--n", type=int_at_least(1), default=500, help="train shapes perturbed (a random subset)")
+    pt.add_argument("--sigmas", type=float_in(0, MAX_SIGMA), nargs="+", default=list(SIGMAS),
+                    help="noise levels (absolute, in the programs' units)")
+    pt.add_argument("--repeats", type=int_at_least(1), default=3, help="noise draws per sigma above 0")
+    pt.add_argument("--seed", type=seed, default=0, help="seed of the subset and of the noise")
+    pt.add_argument("--png", help="also write the plot here")
+    add_json(pt, "the FD per sigma")
+    add_quiet(pt, "progress lines")
+    add_overwrite(pt)
