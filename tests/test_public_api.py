@@ -51,7 +51,8 @@ SHAPEPROG_COMMANDS = {
     "assembly": {"run", "fit", "silhouettes", "edit"},
     "vae": {"sample", "interpolate", "reconstruct", "evaluate", "train-classifier", "export-weights"},
     "pointcloud": {"infer", "tables", "make-clouds", "export-weights"},
-    "macros": {"discover", "refactor", "refactor-corpus", "tables"},
+    "macros": {"discover", "refactor", "refactor-corpus", "tables", "ablation", "generation", "perturbation",
+               "pointcloud"},
     "coder": {"discover", "infer", "tables"},
 }
 SHAPEPROG_ALIASES = {

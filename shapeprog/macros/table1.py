@@ -136,10 +136,11 @@ def table1_rows(categories: Sequence[str] = ("chair",), limit: int | None = None
     return rows
 
 
-def table1_result(rows: Sequence[dict], command: str, limit: int | None = None, seed: int = 0) -> dict:
+def table1_result(rows: Sequence[dict], command: str, limit: int | None = None, seed: int = 0,
+                  notes: Sequence[str] = ()) -> dict:
     """``rows`` (:func:`table1_rows`) as a result file's content (:mod:`shapeio.results`): f absolute and as a
     ratio to the same run's No Macros, beside the paper's ratio; the paper's absolute rows are on another
-    scale (its No Macros f is 12-17 % above ours) and are given in a note only."""
+    scale (its No Macros f is 12-17 % above ours) and are given in a note only; ``notes`` are added."""
     from shapeio.results import column, make_result  # lazy: loaded when a result is written
 
     cols = [column("category", "category"), column("method", "method"), column("f", "f", 1),
@@ -154,7 +155,7 @@ def table1_result(rows: Sequence[dict], command: str, limit: int | None = None, 
              "Compare the ratios: the paper's absolute rows are on another scale (its No Macros f is "
              + ", ".join(f"{PAPER[c]['No Macros'][0]} for {c}" for c in PAPER) + "; ours "
              + ", ".join(f"{r['f']:.1f}" + f" for {r['category']}" for r in rows if r["method"] == "No Macros")
-             + "), so only f over the same run's No Macros f is like for like."]
+             + "), so only f over the same run's No Macros f is like for like.", *notes]
     return make_result("ShapeMOD Table 1: the objective f per shape, absolute and as a ratio to No Macros",
                        cols, rows, notes, command)
 

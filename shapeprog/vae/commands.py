@@ -268,8 +268,12 @@ def cmd_evaluate(args) -> int:
         except (FileNotFoundError, ValueError) as e:
             raise SystemExit(f"error: {e}") from None
     header, name = "", f"programs in {args.programs}" if args.programs else "generated"
+    paper_rows = None  # a model of macro programs: the ShapeMOD paper's Table 2 rows, not ShapeAssembly's
     if args.n:
         samples, name, header = vae_samples(args)
+        if args.weights and isinstance(load_vae(args, args.category, macro=True), MacroVAE):
+            from ..macros.table2 import paper_rows as shapemod_rows  # lazy: the macros package on use
+            paper_rows = shapemod_rows(args.category)
     else:
         samples = read_programs(args.programs) if args.programs else []
     if not samples and args.no_ground_truth:
@@ -284,7 +288,7 @@ def cmd_evaluate(args) -> int:
                                  stability=not args.no_stability, fool=not args.no_fool, fool_epochs=args.fool_epochs,
                                  fool_average_last=args.fool_average_last, fool_points=args.fool_points,
                                  candidates=args.candidates or None, seed=args.seed,
-                                 name=name,
+                                 name=name, paper_rows=paper_rows,
                                  log=None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True)))
     finally:
         if pool is not None:

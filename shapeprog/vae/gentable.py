@@ -15,7 +15,7 @@ import json
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 import torch
@@ -296,14 +296,19 @@ def _cell(value, digits: int) -> str:
     return "—" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}f}"
 
 
-def format_table(rows: Sequence[GenerationRow], category: str, notes: Sequence[str] = (), paper: bool = True) -> str:
-    """A markdown table of ``rows`` (and the paper's rows for ``category`` when ``paper``), then ``notes``."""
+def format_table(rows: Sequence[GenerationRow], category: str, notes: Sequence[str] = (), paper: bool = True,
+                 paper_rows: Optional[Mapping[str, Mapping]] = None) -> str:
+    """A markdown table of ``rows`` (and the paper's rows for ``category`` when ``paper``: the ShapeAssembly
+    paper's, or ``paper_rows``, label -> column values, e.g. ShapeMOD's for a macro model), then ``notes``."""
     lines = [f"Generation metrics, {category}", "",
              "| | " + " | ".join(_HEADERS) + " |", "|---" * (len(_HEADERS) + 1) + "|"]
     for r in rows:
         label = f"{r.name} ({r.valid} of {r.samples} programs)" if r.valid != r.samples else f"{r.name} ({r.samples})"
         lines.append(f"| {label} | " + " | ".join(_cell(getattr(r, c), _DIGITS[c]) for c in _COLUMNS) + " |")
-    if paper and category in PAPER:
+    if paper and paper_rows is not None:
+        lines += [f"| {k} | " + " | ".join(_cell(v.get(c), _DIGITS[c]) for c in _COLUMNS) + " |"
+                  for k, v in paper_rows.items()]
+    elif paper and category in PAPER:
         p = PAPER[category]
         lines.append("| paper: ShapeAssembly | " + " | ".join(_cell(p.get(c), _DIGITS[c]) for c in _COLUMNS) + " |")
         lines.append("| paper: ground truth | " + " | ".join(
@@ -407,6 +412,7 @@ def generation_table(
     seed: int = 0,
     name: str = "generated",
     log=None,
+    paper_rows: Optional[Mapping[str, Mapping]] = None,
 ) -> str:
     """The paper's generation tables for ``samples`` of ``category``, as markdown.
 
@@ -433,4 +439,4 @@ def generation_table(
     if ground_truth:
         rows.append(ground_truth_row(refs, sha, **kw))
     notes = table_notes(meta, sha, fool_epochs, fool_average_last, fool_points, chamfer_points, candidates, stability)
-    return format_table(rows, category, notes)
+    return format_table(rows, category, notes, paper_rows=paper_rows)

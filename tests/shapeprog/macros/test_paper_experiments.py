@@ -190,3 +190,94 @@ def test_the_commands_copies_of_the_defaults_agree():
 
     assert commands.SIGMAS == SIGMAS
     assert commands.ABLATION_VARIANTS == tuple(VARIANTS)
+
+
+# ----------------------------------------------------------------------------- cross-category discovery
+
+
+def test_discover_merges_the_programs_of_several_categories():
+    from shapeprog.macros.commands import merged_collection
+
+    nodes, ids = merged_collection(["chair", "storage"], limit=3)
+    chair, chair_ids = collection("chair", limit=3)
+    storage, storage_ids = collection("storage", limit=3)
+    assert nodes.keys == chair.keys + storage.keys and nodes.sigs == chair.sigs + storage.sigs
+    assert ids == [f"chair/{i}" for i in chair_ids] + [f"storage/{i}" for i in storage_ids]
+    with pytest.raises(SystemExit, match="named twice"):
+        merged_collection(["chair", "chair"], limit=3)
+
+
+def test_tables_note_option_and_extra_library(tmp_path, capsys):
+    out = tmp_path / "t.json"
+    assert main(["macros", "tables", "--category", "storage", "--limit", "2", "--extra", "chair lib=chair",
+                 "--note", "a note", "--quiet", "--json", str(out)]) == 0
+    data = read_result(out)
+    assert [r["method"] for r in data["rows"]][-1] == "chair lib" and data["notes"][-1] == "a note"
+    with pytest.raises(SystemExit, match="--extra 'x': expected NAME=FILE"):
+        main(["macros", "tables", "--category", "storage", "--limit", "2", "--extra", "x", "--quiet"])
+
+
+# ----------------------------------------------------------------------------- Tables 2 and 3
+
+
+def test_table2_paper_rows_are_the_shapemod_papers():
+    from shapeprog.macros.table2 import paper_rows
+    from shapeprog.vae.gentable import GenerationRow, format_table
+
+    rows = paper_rows("chair")
+    assert rows == {"paper (ShapeMOD Table 2): No Macros": {"fool": 21.2, "fd": 17.8, "leaf_parts": 7.6,
+                                                            "rooted": 93.9, "stable": 82.3},
+                    "paper (ShapeMOD Table 2): ShapeMOD": {"fool": 25.6, "fd": 16.7, "leaf_parts": 8.6,
+                                                           "rooted": 92.7, "stable": 79.5}}
+    assert paper_rows("table") == {}
+    text = format_table([GenerationRow("m", 3, 3, rooted=100.0)], "chair", paper_rows=rows)
+    assert "| paper (ShapeMOD Table 2): ShapeMOD | 92.7 | 79.5 | 25.60 | 16.70 | 8.60 |" in text
+    assert "ShapeAssembly" not in text
+    assert "| paper: ShapeAssembly | 94.5 |" in format_table([], "chair")
+
+
+def test_table2_result_rows():
+    from shapeprog.macros.table2 import table2_result
+    from shapeprog.vae.gentable import GenerationRow
+
+    rows = [GenerationRow("No Macros", 10, 9, rooted=90.0, stable=80.0, fool=20.0, fd=30.0, leaf_parts=7.0),
+            GenerationRow("ShapeMOD", 10, 10, rooted=95.0, stable=85.0, fool=25.0, fd=28.0, leaf_parts=8.0)]
+    res = table2_result("chair", rows, {"meta": {}, "sha": "ab" * 32, "sampling": ["x"], "fool_epochs": 12,
+                                        "stability": True}, 10, 0, "cmd")
+    assert [r["method"] for r in res["rows"]] == ["No Macros", "ShapeMOD", "paper (ShapeMOD Table 2): No Macros",
+                                                  "paper (ShapeMOD Table 2): ShapeMOD", "Baseline Macros"]
+    assert res["rows"][0]["samples"] == "9 of 10" and res["rows"][3]["fd"] == 16.7
+    assert res["rows"][4]["rooted"] is None
+    res = table2_result("storage", rows, {"meta": {}, "sha": None, "sampling": [], "fool_epochs": 12,
+                                          "stability": False}, 10, 0, "cmd")
+    assert len(res["rows"]) == 3 and "storage: not in the specification" in res["notes"][1]
+
+
+def test_table3_result_and_weights():
+    from shapeprog.macros.table3 import shipped_weights, table3_result
+
+    w = shipped_weights("table")
+    assert w["No Macros"].endswith("pointcloud_e2e_table.pt") and w["ShapeMOD"].endswith("pointcloud_e2e_table_macros.pt")
+    rows = [{"category": "chair", "method": "No Macros", "cd": 50.0, "fscore": 60.0, "rooted": 90.0, "stable": 80.0,
+             "shapes": 5, "failed": 0}]
+    res = table3_result(rows, "cmd", 5, 0)
+    assert res["rows"] == rows and "the first 5 test shapes" in res["notes"][0]
+
+
+def test_pointcloud_command_refuses_a_missing_cache(tmp_path):
+    with pytest.raises(SystemExit, match="no such folder"):
+        main(["macros", "pointcloud", "--clouds", f"chair={tmp_path / 'none'}", "--quiet"])
+    with pytest.raises(SystemExit, match="unknown category"):
+        main(["macros", "pointcloud", "--clouds", f"sofa={tmp_path}", "--quiet"])
+
+
+def test_experiment_list_entries():
+    from shapeprog.macros.paper import EXPERIMENTS
+
+    by = {e.id: e for e in EXPERIMENTS}
+    assert set(by) == {"mod-t1", "mod-t2", "mod-t3", "mod-t5", "mod-f7", "mod-s65"}
+    for e in EXPERIMENTS:
+        if e.status in ("done", "partial"):
+            assert e.result.startswith("docs/results/shapemod/") and e.steps and e.quick and e.scale
+            assert all(a == "{out}" for s in e.steps for a in s.argv if "{out}" in a)
+    assert by["mod-t2"].status == "partial" and "Baseline Macros" in by["mod-t2"].why
