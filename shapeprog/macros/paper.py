@@ -18,11 +18,9 @@ _CLOUDS = tuple(Step(("pointcloud", "make-clouds", "--category", c, "--limit", "
                       "--out", CLOUDS), creates=f"{CLOUDS}/{c}_split.json") for c in CATEGORIES)
 _CLOUD_ARGS = tuple(a for c in CATEGORIES for a in ("--clouds", f"{c}={CLOUDS}"))
 
-_S65_NOTE = ("ShapeMOD rows: each category's own library discovered at this scale ({root}/CATEGORY/library.txt), "
-             "not the shipped one; cross-category: one library discovered over the three categories' shapes "
-             "({root}/cross/library.txt) with the same settings, scored on each category's shapes. The paper "
-             "reports only its cross-category library's size (12 macros, |L| 17), no f; its ratio column is for "
-             "its full-scale per-category libraries.")
+_S65_NOTE = ("ShapeMOD rows: each category's own library discovered at this scale, not the shipped one; "
+             "cross-category: one library over the three categories' shapes, the same settings. The paper gives "
+             "only its cross-category library's size (12 macros).")
 
 
 def _cross_steps(root: str, limit: int, rounds: int, steps: int, out: str) -> tuple[Step, ...]:
@@ -36,7 +34,7 @@ def _cross_steps(root: str, limit: int, rounds: int, steps: int, out: str) -> tu
                    creates=f"{root}/{c}/library.txt") for c in CATEGORIES]
     libs = tuple(a for c in CATEGORIES for a in ("--library", f"{c}={root}/{c}/library.txt"))
     return (*found, Step(("macros", "tables", "--category", *CATEGORIES, "--limit", str(limit), *libs, "--extra",
-                          f"cross-category={root}/cross/library.txt", "--note", _S65_NOTE.format(root=root),
+                          f"cross-category={root}/cross/library.txt", "--note", _S65_NOTE,
                           "--workers", "2", "--quiet", "--overwrite", "--json", out)))
 
 
