@@ -90,7 +90,7 @@ def ablation_result(rows: Sequence[dict], command: str, scale: str) -> dict:
     cols = ([column("variant", "variant")]
             + [column(f"round{k + 1}", f"f after round {k + 1} (subsample)", 2) for k in range(n_rounds)]
             + [column("L", "\\|L\\|"), column("f_all", "f, all sub-programs", 2),
-               column("vs_full", "minus full", 2), column("candidates", "candidates"),
+               column("vs_full", "minus full", 2), column("candidates", "candidates kept (all rounds)"),
                column("seconds", "seconds", 0)])
     notes = [f"{scale}. f is per sub-program (ShapeMOD.py's scale, |L| included), lower is better; 'f, all "
              "sub-programs' scores each final library on every sub-program and ordering with the full method's "
