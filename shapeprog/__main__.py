@@ -52,7 +52,8 @@ SYSTEMS = {
             "train-classifier, export-weights"),
     "pointcloud": ("shapeprog.pointcloud.commands", "point clouds to programs: infer, tables, make-clouds, "
                                                     "export-weights"),
-    "macros": ("shapeprog.macros.commands", "ShapeMOD macros: discover, refactor, refactor-corpus, tables"),
+    "macros": ("shapeprog.macros.commands", "ShapeMOD macros: discover, refactor, refactor-corpus, tables, "
+                                            "generation, pointcloud, ablation, perturbation"),
     "coder": ("shapeprog.coder.commands", "ShapeCoder abstractions: discover, infer, tables"),
 }
 

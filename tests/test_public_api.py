@@ -52,7 +52,8 @@ SHAPEPROG_COMMANDS = {
     "vae": {"sample", "interpolate", "reconstruct", "evaluate", "novelty", "smoothness", "editability",
             "train-classifier", "export-weights"},
     "pointcloud": {"infer", "tables", "make-clouds", "export-weights"},
-    "macros": {"discover", "refactor", "refactor-corpus", "tables"},
+    "macros": {"discover", "refactor", "refactor-corpus", "tables", "ablation", "generation", "perturbation",
+               "pointcloud"},
     "coder": {"discover", "infer", "tables"},
 }
 SHAPEPROG_ALIASES = {

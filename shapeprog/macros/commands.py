@@ -11,7 +11,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from shapeio import atomic_write
-from shapeio.results import column, make_result
+from shapeio.results import column, make_result, markdown
 
 from .. import corpus
 from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
@@ -20,14 +20,41 @@ from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, Program, add_category, add_c
 from .api import collection
 from .api import refactor
 from .discover import discover, prior_rounds, rounds_line
-from .state import Discovery
+from .state import Discovery, Nodes
 from .config import load_config
 from .lang import from_lines, to_text
 from .refactored import check_target, refactor_corpus, write_refactored
-from .table1 import table1
+from .table1 import table1_result, table1_rows
 
 SPLITS = ("train", "val", "all")
+#: Table 5's variants (``shapeprog.macros.ablation.VARIANTS``'s keys, repeated so that ``--help`` stays light).
+ABLATION_VARIANTS = ("full", "no P_matches-dist weighting", "no beam", "no bad-order filter", "no generalize",
+                     "no valid-macro criteria")
+#: Most samples per model of ``generation`` (the paper: 1,000).
+MAX_GENERATION_SAMPLES = 10_000
+#: Largest noise sigma accepted by ``perturbation`` (the shapes are about one unit tall).
+MAX_SIGMA = 10.0
+#: The full study's noise levels (``shapeprog.macros.perturb_study.SIGMAS``, repeated here so that ``--help``
+#: imports no torch model).
+SIGMAS = (0.0, 0.01, 0.025, 0.05, 0.1, 0.15, 0.2)
 SEARCHES = ("beam", "exact")
+
+
+def merged_collection(categories, split: str = "all", limit: int | None = None, seed: int = 0, executor=None,
+                      max_orders: int = 1000):
+    """The sub-programs of several categories as one collection (:func:`~.api.collection` of each, ``limit``
+    shapes per category, joined in the given order; keys carry the category) and the shapes' keys
+    (``category/id``)."""
+    if len(set(categories)) != len(categories):
+        raise SystemExit(f"error: --category: a category is named twice ({' '.join(categories)})")
+    keys, lines, sigs, ids = [], [], [], []
+    for cat in categories:
+        nodes, cat_ids = collection(cat, split, limit, seed, executor=executor, max_orders=max_orders)
+        keys += nodes.keys
+        lines += nodes.lines
+        sigs += nodes.sigs
+        ids += [f"{cat}/{i}" for i in cat_ids]
+    return Nodes(keys, lines, sigs), ids
 
 
 def cmd_discover(args) -> int:
@@ -46,9 +73,9 @@ def cmd_discover(args) -> int:
     t0 = time.time()
     log = (lambda m: None) if args.quiet else (lambda m: print(f"[{time.time() - t0:7.1f} s] {m}", flush=True))
     try:
-        nodes, ids = collection(args.category, args.split, args.limit, args.seed, executor=pool,
-                                max_orders=cfg["abs_order_num"])
-        log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
+        nodes, ids = merged_collection(args.category, args.split, args.limit, args.seed, executor=pool,
+                                       max_orders=cfg["abs_order_num"])
+        log(f"{', '.join(args.category)}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
         start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior, args.start_from)
         state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
                          stop_after=args.stop_after, start=start)
@@ -56,9 +83,11 @@ def cmd_discover(args) -> int:
         if pool is not None:
             pool.shutdown()
     lib = state.library()
-    header = (f"# ShapeMOD library ({args.category}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
+    header = (f"# ShapeMOD library ({', '.join(args.category)}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
               f"# command: {command}\n"
-              f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}), sub-programs: {len(nodes.keys)}\n"
+              f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}"
+              + (f", up to {args.limit} per category" if len(args.category) > 1 and args.limit else "")
+              + f"), sub-programs: {len(nodes.keys)}\n"
               f"{rounds_line(state, cfg)}\n"
               f"# time: {time.time() - t0:.0f} s on {platform.machine()}, {os.cpu_count()} CPUs, "
               f"{args.workers} worker(s)\n")
@@ -149,21 +178,137 @@ def cmd_refactor_corpus(args) -> int:
 
 def cmd_tables(args) -> int:
     library_files = category_pairs(args.library, "CATEGORY=FILE")
-    refuse_inputs([args.out, args.json], library_files.values())
+    extra_files = category_pairs(args.extra, "NAME=FILE", "--extra")
+    refuse_inputs([args.out, args.json], [*library_files.values(), *extra_files.values()])
     refuse_existing([args.out, args.json], args.overwrite)
+    extra = {name: macro_library(f, f"--extra {name}=") for name, f in extra_files.items()}
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     try:
-        text = table1(args.category, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
-                      library_files=library_files,
-                      log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+        rows = table1_rows(args.category, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
+                           library_files=library_files, extra=extra,
+                           log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
     finally:
         if pool is not None:
             pool.shutdown()
+    result = table1_result(rows, command_line(args), args.limit, args.seed, args.note or ())
+    text = markdown(result)
     print(text)
     if args.out:
-        atomic_write(args.out, text + "\n")
+        atomic_write(args.out, text)
         print(f"wrote {args.out}")
-    write_json(args, markdown_result(text, "ShapeMOD Table 1", command_line(args)))
+    write_json(args, result)
+    return 0
+
+
+def cmd_perturbation(args) -> int:
+    from .perturb_study import perturbation_result, perturbation_study, plot  # lazy: torch models on use
+
+    refuse_existing([args.json, args.png], args.overwrite)
+    name = args.library or args.category
+    lib = macro_library(name, "--library ")
+    log = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    try:
+        study = perturbation_study(args.category, lib, name, n=args.n, sigmas=args.sigmas, repeats=args.repeats,
+                                   seed=args.seed, log=log)
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
+    for ident, reason in study["left_out"]:
+        print(f"left out: {args.category}/{ident}: {reason}", file=sys.stderr)
+    result = perturbation_result(study, command_line(args))
+    print(markdown(result))
+    write_json(args, result)
+    if args.png:
+        plot(study, args.png)
+        print(f"wrote {args.png}")
+    return 0
+
+
+def cmd_ablation(args) -> int:
+    from .ablation import VARIANTS, ablation_result, run_ablation
+
+    refuse_existing([args.json], args.overwrite)
+    unknown = [v for v in args.variants if v not in VARIANTS]
+    if unknown:
+        raise SystemExit(f"error: --variants: unknown variant {unknown[0]!r}; expected some of "
+                         + ", ".join(repr(v) for v in VARIANTS))
+    base = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
+                       abs_shape_num=args.subsample)
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    t0 = time.time()
+    log = None if args.quiet else (lambda m: print(f"[{time.time() - t0:7.1f} s] {m}", file=sys.stderr, flush=True))
+    try:
+        nodes, ids = collection(args.category, "all", args.limit, args.seed, executor=pool,
+                                max_orders=base["abs_order_num"])
+        if log:
+            log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
+        rows = run_ablation(nodes, args.variants, base, seed=args.seed, executor=pool, log=log)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    scale = (f"{args.category}: {len(ids)} shapes ({len(nodes.keys)} sub-programs; "
+             + ("all" if args.limit is None else f"a random subset, seed {args.seed}") + f"), {base['num_rounds']} "
+             f"round(s) of {base['cand_cluster_num']} proposal steps, subsample {base['abs_shape_num']} sub-programs")
+    result = ablation_result(rows, command_line(args), scale)
+    print(markdown(result))
+    write_json(args, result)
+    return 0
+
+
+def cmd_generation(args) -> int:
+    # lazy: the VAE models and the generation metrics only when the command runs
+    from ..vae.pretrained import load_model, load_pretrained
+    from .table2 import generation_rows, table2_result
+
+    refuse_existing([args.json], args.overwrite)
+    models = {}
+    weights = args.weights or str(Path(__file__).resolve().parents[1] / "weights" / f"vae_{args.category}_macros.pt")
+    for name, path in (("No Macros", args.base_weights), ("ShapeMOD", weights)):
+        try:
+            models[name] = load_model(path, category=args.category) if path else load_pretrained(args.category)
+        except (FileNotFoundError, ValueError) as e:
+            raise SystemExit(f"error: {e}") from None
+    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
+            if args.workers > 1 else None)
+    try:
+        rows, settings = generation_rows(args.category, models, args.n, args.seed, stability=not args.no_stability,
+                                         fool_epochs=args.fool_epochs, executor=pool,
+                                         log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    result = table2_result(args.category, rows, settings, args.n, args.seed, command_line(args))
+    print(markdown(result))
+    write_json(args, result)
+    return 0
+
+
+def cmd_pointcloud(args) -> int:
+    from .table3 import pointcloud_rows, table3_result  # lazy: torch models on use
+
+    refuse_existing([args.json], args.overwrite)
+    pairs = category_pairs(args.clouds, "CATEGORY=FOLDER", "--clouds")
+    bad = [c for c in pairs if c not in corpus.CATEGORIES]
+    if bad:
+        raise SystemExit(f"error: --clouds {bad[0]}=...: unknown category; expected {', '.join(corpus.CATEGORIES)}")
+    missing = [f for f in pairs.values() if not Path(f).is_dir()]
+    if missing:
+        raise SystemExit(f"error: --clouds: {missing[0]}: no such folder (make it with `python -m shapeprog "
+                         "pointcloud make-clouds`)")
+    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
+            if args.workers > 1 else None)
+    try:
+        rows = pointcloud_rows(pairs, args.limit, args.seed, stability=not args.no_stability, executor=pool,
+                               log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    result = table3_result(rows, command_line(args), args.limit, args.seed)
+    print(markdown(result))
+    write_json(args, result)
     return 0
 
 
@@ -176,7 +321,8 @@ def register(sub) -> None:
                                 "overwritten); library.txt holds the result.",
                     example="macros discover --category chair --rounds 5 --workers 2 --out runs/shapemod_chair",
                     outputs={"out": "folder"})
-    add_category(d)
+    add_category(d, multiple=True, help="the categories (several: one library over all their programs, "
+                                        "--limit shapes of each)")
     d.add_argument("--out", required=True, help="output folder (state.json, library.txt)")
     d.add_argument("--config", help="settings YAML (default: configs/shapemod/default.yaml's values)")
     d.add_argument("--rounds", type=int_at_least(1), help="rounds (default: the settings', 5)")
@@ -186,7 +332,7 @@ def register(sub) -> None:
     d.add_argument("--selection", choices=("greedy", "milp"), help="greedy (the reference) or milp (exact)")
     d.add_argument("--search", choices=SEARCHES, help="best-program search: beam (reference) or exact")
     d.add_argument("--split", default="all", choices=SPLITS, help="the corpus split whose shapes are used")
-    d.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes")
+    d.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes (per category)")
     d.add_argument("--seed", type=seed, default=0, help="seed of --limit's subset and of the searches")
     d.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1,
                    help="processes for the searches (1: none)")
@@ -228,16 +374,99 @@ def register(sub) -> None:
     rc.add_argument("--no-check", action="store_true", help="skip reading back and executing every result")
     tb = add_command(sub, "tables", cmd_tables, help="ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows",
                      description="Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the "
-                                 "given categories beside the paper's rows.",
+                                 "given categories; f also as a ratio to the same run's No Macros f, beside the "
+                                 "paper's ratio (the paper's absolute f is on another scale).",
                      example="macros tables --category chair --limit 200 --out table1.md --json table1.json",
-                     outputs={"out": "file", "json": "file"})
+                     outputs={"out": "file", "json": "file+"})
     add_category(tb, multiple=True)
     tb.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes per category")
     tb.add_argument("--seed", type=seed, default=0, help="seed of --limit's subset")
     tb.add_argument("--library", action="append", help="CATEGORY=FILE: a library file instead of the shipped one")
+    tb.add_argument("--extra", action="append", metavar="NAME=FILE",
+                    help="a further library (file or shipped category) applied to every category, as a row NAME "
+                         "(e.g. one discovered over several categories)")
+    tb.add_argument("--note", action="append", help="a line added to the result's notes (repeatable)")
     tb.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
     tb.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
     tb.add_argument("--out", help="also write the table (markdown) here")
     add_json(tb, "the table")
     add_quiet(tb, "progress lines")
     add_overwrite(tb)
+    ab = add_command(sub, "ablation", cmd_ablation,
+                     help="ShapeMOD Table 5: discovery with one part switched off per variant, on the same shapes",
+                     description="Run discovery once per variant (the full method, and each with one part switched "
+                                 "off: P_matches-dist weighting, beam search, the bad-order filter, generalisation, "
+                                 "the valid-macro criteria) on the same shapes and seed; report f per sub-program "
+                                 "after each round and of each final library over all the sub-programs.",
+                     example="macros ablation --category chair --limit 30 --rounds 1 --proposal-steps 20 "
+                             "--json t5.json",
+                     outputs={"json": "file+"})
+    add_category(ab)
+    ab.add_argument("--variants", nargs="+", default=list(ABLATION_VARIANTS), metavar="VARIANT",
+                    help="the variants run, quoted: " + ", ".join(f"'{v}'" for v in ABLATION_VARIANTS))
+    ab.add_argument("--config", help="settings YAML of the full method (default: configs/shapemod/default.yaml's)")
+    ab.add_argument("--rounds", type=int_at_least(1), default=2, help="rounds per variant")
+    ab.add_argument("--proposal-steps", type=int_at_least(1), default=300, help="proposal steps per round")
+    ab.add_argument("--subsample", type=int_at_least(1), default=1000, help="sub-programs of the integration "
+                                                                            "subsample")
+    ab.add_argument("--limit", type=int_at_least(1), default=80, help="a random subset of N shapes")
+    ab.add_argument("--seed", type=seed, default=0, help="seed of the subset and of the searches")
+    ab.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
+    add_json(ab, "f per variant")
+    add_quiet(ab, "progress lines")
+    add_overwrite(ab)
+    gn = add_command(sub, "generation", cmd_generation,
+                     help="ShapeMOD Table 2: generation by the VAE without and with macros, beside the paper's rows",
+                     description="Sample N programs from the VAE over ShapeAssembly programs (No Macros) and from the "
+                                 "VAE over macro programs (ShapeMOD), measure both with the generation metrics "
+                                 "against the same corpus references, and print the ShapeMOD paper's Table 2 rows "
+                                 "beside them.",
+                     example="macros generation --category chair -n 20 --no-stability --fool-epochs 4 --json t2.json",
+                     outputs={"json": "file+"})
+    add_category(gn)
+    gn.add_argument("--weights", help="the VAE over macro programs (default: shapeprog/weights/vae_CATEGORY_macros.pt)")
+    gn.add_argument("--base-weights", help="the VAE over ShapeAssembly programs (default: the shipped one)")
+    gn.add_argument("-n", type=int_at_least(2, MAX_GENERATION_SAMPLES), default=100, help="samples per model")
+    gn.add_argument("--seed", type=seed, default=0, help="seed of the samples and the metrics")
+    gn.add_argument("--fool-epochs", type=int_at_least(4), default=12, help="epochs of the %% fool classifier")
+    gn.add_argument("--no-stability", action="store_true", help="skip the physics stability test")
+    gn.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
+    add_json(gn, "the table")
+    add_quiet(gn, "progress lines")
+    add_overwrite(gn)
+    pc = add_command(sub, "pointcloud", cmd_pointcloud,
+                     help="ShapeMOD Table 3: point cloud to program without and with macros, beside the paper's rows",
+                     description="Decode the test clouds of make-clouds caches with the shipped end-to-end point-cloud "
+                                 "models without macros and with the ShapeMOD library (one decode, no fitting) and "
+                                 "measure CD, F-score, rooted and stable beside the paper's Table 3.",
+                     example="macros pointcloud --clouds chair=clouds --limit 20 --json t3.json",
+                     outputs={"json": "file+"})
+    pc.add_argument("--clouds", action="append", required=True, metavar="CATEGORY=FOLDER",
+                    help="a category and its make-clouds folder (repeat for several categories)")
+    pc.add_argument("--limit", type=int_at_least(1), help="the first N test shapes of each category")
+    pc.add_argument("--seed", type=seed, default=0, help="seed of the inputs' noise, scales and positions")
+    pc.add_argument("--no-stability", action="store_true", help="skip the stability test")
+    pc.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
+    add_json(pc, "the table")
+    add_quiet(pc, "progress lines")
+    add_overwrite(pc)
+    pt = add_command(sub, "perturbation", cmd_perturbation,
+                     help="ShapeMOD Fig. 7: FD of perturbed programs without and with macros",
+                     description="Refactor N random train shapes without macros and with a ShapeMOD library, add "
+                                 "sigma * N(0, 1) to every continuous parameter, and measure the Frechet distance of "
+                                 "the perturbed shapes' classifier features to the val split's, per sigma (mean, "
+                                 "min and max over the noise draws).",
+                     example="macros perturbation --category chair --n 100 --repeats 1 --sigmas 0 0.05 0.1 "
+                             "--json fig7.json",
+                     outputs={"json": "file+", "png": "file+"})
+    add_category(pt)
+    pt.add_argument("--library", help="a shipped library's category or a library file (default: --category)")
+    pt.add_argument("--n", type=int_at_least(1), default=500, help="train shapes perturbed (a random subset)")
+    pt.add_argument("--sigmas", type=float_in(0, MAX_SIGMA), nargs="+", default=list(SIGMAS),
+                    help="noise levels (absolute, in the programs' units)")
+    pt.add_argument("--repeats", type=int_at_least(1), default=3, help="noise draws per sigma above 0")
+    pt.add_argument("--seed", type=seed, default=0, help="seed of the subset and of the noise")
+    pt.add_argument("--png", help="also write the plot here")
+    add_json(pt, "the FD per sigma")
+    add_quiet(pt, "progress lines")
+    add_overwrite(pt)

@@ -10,6 +10,7 @@ from ..limits import decode
 
 __all__ = [
     "DEFAULTS",
+    "SWITCHES",
     "load_config",
 ]
 
@@ -22,7 +23,13 @@ DEFAULTS: dict = {
     "order_thresh": 1.0, "func_change_thresh": 0.5, "err_shape_perc": 0.7, "err_const_perc": 0.9, "prec": 2,
     "scale_prec": 20, "cluster_eps": 0.05, "gen_limit": 300, "selection": "greedy", "search": "beam",
     "milp_pool": 60, "milp_time_limit": 120, "milp_warm": True, "chunk": 50,
+    "cluster_weighting": True, "generalise": True, "valid_rules": True, "order_filter": True,
 }
+#: The switches of the paper's Table 5 ablations (each True in the full method): clusters drawn with weights
+#: ``1 - d / max d`` (False: uniformly), generalisation (snapping and edits; False: none), the valid-macro rules
+#: i-iv of a candidate (False: every prefix the language accepts), filterBadOrders after each round (False:
+#: every ordering stays). "No beam" is ``abs_beam_size: 1``.
+SWITCHES = ("cluster_weighting", "generalise", "valid_rules", "order_filter")
 _CHOICES = {"selection": ("greedy", "milp"), "search": ("beam", "exact")}
 #: The range of every numeric setting (inclusive): a value outside is refused when the config is loaded.
 LIMITS: dict = {

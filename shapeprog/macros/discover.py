@@ -51,7 +51,7 @@ from .lang import BASE, MacroDef, check_def, def_text
 from .library import Library
 from .objective import templates
 from .proposal import PROPOSAL_TRIES, Candidate, gain, generalise, heur_score, propose_step
-from .config import DEFAULTS
+from .config import DEFAULTS, SWITCHES
 from .state import Discovery, Nodes, _map, _options_chunk, evaluate
 
 __all__ = [
@@ -366,14 +366,15 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
     if stop_after is not None and (isinstance(stop_after, bool) or not isinstance(stop_after, (int, float))
                                    or not stop_after >= 0):
         raise ValueError(f"stop_after must be a number of seconds >= 0, got {stop_after!r}")
-    cfg = dict(DEFAULTS if cfg is None else cfg)
+    cfg = {**DEFAULTS, **(cfg or {})}
     digest = nodes.digest()
     start_digest = None if start is None else start.digest()
     state = Discovery([], [], [list(range(len(ls))) for ls in nodes.lines])
     path = None if out is None else Path(out) / "state.json"
     if path is not None and path.exists():
         state, raw = Discovery.from_json(path.read_text(encoding="utf-8"), str(path))
-        same = {k: v for k, v in raw["config"].items() if k != "num_rounds"} == {
+        saved = {**{k: DEFAULTS[k] for k in SWITCHES}, **raw["config"]}  # states written before the switches
+        same = {k: v for k, v in saved.items() if k != "num_rounds"} == {
             k: v for k, v in cfg.items() if k != "num_rounds"}
         if raw["nodes"] != digest or raw["seed"] != seed or not same:
             raise ParseError("the state was written for another collection, seed or configuration", str(path), 1, 1,
@@ -409,7 +410,7 @@ def discover(nodes: Nodes, cfg: Mapping | None = None, seed: int = 0, executor: 
             lib, f0, f1, tries, acc = _milp(nodes, state, lib, cands, comp, sub, cfg, executor, log)
         f2 = _removal(state, lib, sub, f1, cfg, executor, log)
         t2 = time.time()
-        dropped = _filter_orders(nodes, state, lib, cfg, executor)
+        dropped = _filter_orders(nodes, state, lib, cfg, executor) if cfg["order_filter"] else 0
         state.history.append({"round": rnd + 1, "f_before": f0, "f_after": f2, "L": 5 + len(state.active),
                               "candidates": len(cands), "tries": tries, "accepted": acc, "orders_dropped": dropped,
                               "seconds_proposal": round(t1 - t0, 1), "seconds_integration": round(t2 - t1, 1),

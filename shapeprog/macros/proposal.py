@@ -74,13 +74,15 @@ def gain(defn: MacroDef, library: Library, weights: Mapping[str, float] = WEIGHT
     return heur_score(info.structure, info.params, weights)
 
 
-def cluster(members: Sequence[tuple[int, int]], vectors: np.ndarray, size: int, rng: np.random.Generator) -> list[int]:
+def cluster(members: Sequence[tuple[int, int]], vectors: np.ndarray, size: int, rng: np.random.Generator,
+            weighted: bool = True) -> list[int]:
     """Indices into ``members`` of a cluster: a random seed, then ``size`` members drawn without
-    replacement with weights ``1 - d / max d`` (L2 distance of ``vectors`` to the seed's)."""
+    replacement with weights ``1 - d / max d`` (L2 distance of ``vectors`` to the seed's; ``weighted=False``:
+    uniformly, the Table 5 ablation)."""
     q = int(rng.integers(len(members)))
     d = np.linalg.norm(vectors - vectors[q], axis=1)
     m = float(d.max())
-    w = 1.0 - d / m if m > 0 else np.ones(len(d))
+    w = 1.0 - d / m if m > 0 and weighted else np.ones(len(d))
     w = np.maximum(w, 1e-9)
     return sorted(rng.choice(len(members), size=size, replace=False, p=w / w.sum()).tolist())
 
@@ -284,14 +286,15 @@ def _has_constant(defn: MacroDef, library: Library) -> bool:
 
 
 def candidates(steps: Sequence[_Step], library: Library, member_ids: Sequence[tuple[int, int]],
-               cube_start: int, max_lines: int = 4) -> list[Candidate]:
-    """The valid prefixes of an abstracted program (rules i-iv of the spec) with their coverage."""
+               cube_start: int, max_lines: int = 4, rules: bool = True) -> list[Candidate]:
+    """The valid prefixes of an abstracted program (rules i-iv of the spec) with their coverage; with
+    ``rules=False`` (the Table 5 ablation) every prefix the macro language accepts."""
     out = []
     if not steps:
         return out
     first_cmd = library[steps[0].func].structure[0]
     for n in range(1, len(steps) + 1):
-        if n >= 2:
+        if n >= 2 and rules:
             if n > max_lines:
                 break
             if first_cmd != "Cuboid" and "Cuboid" in library[steps[n - 1].func].structure:
@@ -299,9 +302,8 @@ def candidates(steps: Sequence[_Step], library: Library, member_ids: Sequence[tu
             if library[steps[n - 1].func].structure[-1] == "Cuboid":
                 continue
         d = _make_def(steps[:n], library, cube_start)
-        if n == 1:
-            if not _has_constant(d, library):
-                continue
+        if n == 1 and rules and not _has_constant(d, library):
+            continue
         try:
             check_def(d, library.infos())
         except MacroError:  # an invalid prefix is skipped
@@ -340,7 +342,7 @@ def propose_step(nodes, current: Sequence[Sequence[int]], index: Mapping, librar
         if len(members) < size:
             continue
         vecs = np.array([float_params(nodes.lines[a][b]) for a, b in members], dtype=float)
-        pick = cluster(members, vecs, size, rng)
+        pick = cluster(members, vecs, size, rng, cfg.get("cluster_weighting", True))
         ids = [members[j] for j in pick]
         progs = [nodes.lines[a][b] for a, b in ids]
         out: list[Candidate] = []
@@ -351,7 +353,7 @@ def propose_step(nodes, current: Sequence[Sequence[int]], index: Mapping, librar
             if not steps:
                 break
             cstart = sum(type(x) is CuboidLine for x in progs[0][1:start])
-            out += candidates(steps, library, ids, cstart, cfg["cand_max_lines"])
+            out += candidates(steps, library, ids, cstart, cfg["cand_max_lines"], cfg.get("valid_rules", True))
             start += steps[0].k
         return out
     if missed is not None:
@@ -457,8 +459,11 @@ def generalise(cands: Mapping[str, Candidate], library: Library, cfg: Mapping):
     """Snap coefficients and add generalisations within ``cand_max_changes`` edits.
 
     Returns ``(candidates by key, edges)`` where an edge ``(a, b)`` says that ``b`` generalises ``a``;
-    a generalisation's coverage is the union of the coverages of what it generalises.
+    a generalisation's coverage is the union of the coverages of what it generalises. With the setting
+    ``generalise`` False (the Table 5 ablation) the candidates come back as they are, without edges.
     """
+    if not cfg.get("generalise", True):
+        return {k: Candidate(c.definition, set(c.coverage)) for k, c in cands.items()}, []
     # (a) coefficient snapping inside groups of equal shape
     infos = library.infos()
     groups: dict[str, list[Candidate]] = {}

@@ -15,7 +15,9 @@ the paper's No-Macros row best (spec (c)):
 * **b**: boolean parameters including each bbox line's.
 
 The alternative definitions (lines without bbox/START/STOP, floats and bools without the bbox line's) are
-printed in a second table. The paper's rows are printed beside ours.
+kept in the rows (``fn_calls``, ``i``, ``c``, ``floats_no_bbox``, ``b_no_bbox``). Beside the absolute f, its
+ratio to the same run's No Macros f is compared with the paper's ratio: the paper's absolute f is on another
+scale (spec (c): its No Macros rows are 12-17 % above these definitions'), so only the ratio is like for like.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ from .lang import BOOL, CUBE, FLOAT
 from .library import Library
 from .objective import beam_search, exact_search, fit_options, templates
 
-__all__ = ["PAPER", "table1", "library_rows"]
+__all__ = ["PAPER", "library_rows", "table1", "table1_result", "table1_rows"]
 
 #: The paper's Table 1 (f, |L|, fn, d, f, b) per category and method.
 PAPER = {
@@ -94,19 +96,21 @@ def library_rows(library: Library, items: Sequence[Sequence], shapes: Sequence[s
     }
 
 
-def table1(categories: Sequence[str] = ("chair",), limit: int | None = None, seed: int = 0,
-           executor: Executor | None = None, mode: str = "beam", library_files: Mapping[str, str] | None = None,
-           max_orders: int = 1000, log: Callable[[str], None] | None = None) -> str:
-    """Table 1 as markdown (see the module docstring). A category without a shipped library and without a
-    file in ``library_files`` gets no ShapeMOD row."""
-    out = []
-    alt = []
+def table1_rows(categories: Sequence[str] = ("chair",), limit: int | None = None, seed: int = 0,
+                executor: Executor | None = None, mode: str = "beam",
+                library_files: Mapping[str, str] | None = None, extra: Mapping[str, Library] | None = None,
+                max_orders: int = 1000, log: Callable[[str], None] | None = None) -> list[dict]:
+    """Table 1 as rows, one per category and method (see the module docstring): the :func:`library_rows`
+    figures, ``category`` and ``method``, ``f_ratio`` (f over the same run's No Macros f) and the paper's
+    ``paper_f_ratio`` and ``paper_L`` (None where the paper has no such row). A category without a shipped
+    library and without a file in ``library_files`` gets no ShapeMOD row; every library of ``extra`` (a
+    row name to a library) is applied to every category after it."""
+    rows = []
     for cat in categories:
         t0 = time.time()
         nodes, ids = collection(cat, "all", limit, seed, max_orders=max_orders)
         shapes = [k.rsplit("/", 1)[0] for k in nodes.keys]
-        libs = {"No Macros": Library(),
-                "Baseline": baseline_library([ls[0] for ls in nodes.lines])}
+        libs = {"No Macros": Library(), "Baseline": baseline_library([ls[0] for ls in nodes.lines])}
         files = dict(library_files or {})
         if cat in files:
             libs["ShapeMOD"] = Library.from_text(Path(files[cat]).read_text(encoding="utf-8"), files[cat])
@@ -115,20 +119,52 @@ def table1(categories: Sequence[str] = ("chair",), limit: int | None = None, see
                 libs["ShapeMOD"] = load_library(cat)
             except ValueError:
                 pass
+        for name, lib in (extra or {}).items():
+            if name in libs:
+                raise ValueError(f"an extra library may not be named {name!r} (a row of Table 1 already)")
+            libs[name] = lib
+        base_f = None
         for name, lib in libs.items():
             r = library_rows(lib, nodes.lines, shapes, mode, executor)
-            p = PAPER[cat][name]
-            out.append(f"| {cat} | {name} | {r['f']:.1f} ({p[0]}) | {r['L']} ({p[1]}) | {r['fn']:.1f} ({p[2]}) | "
-                       f"{r['d']:.1f} ({p[3]}) | {r['floats']:.1f} ({p[4]}) | {r['b']:.1f} ({p[5]}) | {r['f_sub']:.2f} |")
-            alt.append(f"| {cat} | {name} | {r['fn_calls']:.1f} | {r['i']:.1f} | {r['c']:.1f} | "
-                       f"{r['floats_no_bbox']:.1f} | {r['b_no_bbox']:.1f} |")
+            base_f = r["f"] if base_f is None else base_f
+            p = PAPER[cat].get(name)
+            rows.append({"category": cat, "method": name, **r, "f_ratio": r["f"] / base_f,
+                         "paper_f_ratio": None if p is None else p[0] / PAPER[cat]["No Macros"][0],
+                         "paper_L": None if p is None else p[1]})
             if log:
                 log(f"{cat} {name}: done ({time.time() - t0:.0f} s)")
-        n = f"{len(ids)} shapes, {len(nodes.keys)} sub-programs" + ("" if limit is None else f" (random subset, seed {seed})")
-        out.append(f"| {cat} | *{n}* | | | | | | | |")
-    head = ("| category | method | f (paper) | \\|L\\| (paper) | fn (paper) | d (paper) | f floats (paper) | "
-            "b (paper) | f per sub-program |\n|---|---|---|---|---|---|---|---|---|\n")
-    head2 = ("\nAlternative definitions (per shape): lines after the bbox lines, cuboid ids, categoricals, floats "
-             "and booleans without the bbox lines'.\n\n| category | method | calls | i | c | floats | b |\n"
-             "|---|---|---|---|---|---|---|\n")
-    return head + "\n".join(out) + "\n" + head2 + "\n".join(alt)
+    return rows
+
+
+def table1_result(rows: Sequence[dict], command: str, limit: int | None = None, seed: int = 0,
+                  notes: Sequence[str] = ()) -> dict:
+    """``rows`` (:func:`table1_rows`) as a result file's content (:mod:`shapeio.results`): f absolute and as a
+    ratio to the same run's No Macros, beside the paper's ratio; the paper's absolute rows are on another
+    scale (its No Macros f is 12-17 % above ours) and are given in a note only; ``notes`` are added."""
+    from shapeio.results import column, make_result  # lazy: loaded when a result is written
+
+    cols = [column("category", "category"), column("method", "method"), column("f", "f", 1),
+            column("f_ratio", "f / No Macros", 3), column("paper_f_ratio", "paper: f / No Macros", 3),
+            column("L", "\\|L\\|"), column("paper_L", "paper \\|L\\|"), column("fn", "fn", 1),
+            column("d", "d", 1), column("floats", "f (floats)", 1), column("b", "b", 1),
+            column("f_sub", "f per sub-program", 2), column("shapes", "shapes"),
+            column("subprograms", "sub-programs")]
+    scale = "all shapes" if limit is None else f"a random subset of {limit} shapes per category (seed {seed})"
+    notes = [f"Per shape, summed over its sub-programs; {scale}. The column definitions: "
+             "docs/shapemod.md, 'Table 1'.",
+             "Compare the ratios: the paper's absolute rows are on another scale (its No Macros f is "
+             + ", ".join(f"{PAPER[c]['No Macros'][0]} for {c}" for c in PAPER) + "; ours "
+             + ", ".join(f"{r['f']:.1f}" + f" for {r['category']}" for r in rows if r["method"] == "No Macros")
+             + "), so only f over the same run's No Macros f is like for like.", *notes]
+    return make_result("ShapeMOD Table 1: the objective f per shape, absolute and as a ratio to No Macros",
+                       cols, rows, notes, command)
+
+
+def table1(categories: Sequence[str] = ("chair",), limit: int | None = None, seed: int = 0,
+           executor: Executor | None = None, mode: str = "beam", library_files: Mapping[str, str] | None = None,
+           max_orders: int = 1000, log: Callable[[str], None] | None = None) -> str:
+    """Table 1 as markdown (the result of :func:`table1_result`)."""
+    from shapeio.results import markdown  # lazy: as above
+
+    rows = table1_rows(categories, limit, seed, executor, mode, library_files, max_orders=max_orders, log=log)
+    return markdown(table1_result(rows, "shapeprog.macros.table1.table1", limit, seed))
