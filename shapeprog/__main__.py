@@ -54,7 +54,8 @@ SYSTEMS = {
                                                     "export-weights"),
     "macros": ("shapeprog.macros.commands", "ShapeMOD macros: discover, refactor, refactor-corpus, tables, "
                                             "generation, pointcloud, ablation, perturbation"),
-    "coder": ("shapeprog.coder.commands", "ShapeCoder abstractions: discover, infer, tables"),
+    "coder": ("shapeprog.coder.commands",
+              "ShapeCoder abstractions: discover, infer, tables, ablation, perturbation, noise, sample"),
 }
 
 _CATEGORIES = ("chair", "table", "storage")

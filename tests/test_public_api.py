@@ -54,7 +54,7 @@ SHAPEPROG_COMMANDS = {
     "pointcloud": {"infer", "tables", "make-clouds", "export-weights"},
     "macros": {"discover", "refactor", "refactor-corpus", "tables", "ablation", "generation", "perturbation",
                "pointcloud"},
-    "coder": {"discover", "infer", "tables"},
+    "coder": {"discover", "infer", "tables", "ablation", "perturbation", "noise", "sample"},
 }
 SHAPEPROG_ALIASES = {
     "run": "assembly run", "fit": "assembly fit", "silhouettes": "assembly silhouettes", "edit": "assembly edit",
