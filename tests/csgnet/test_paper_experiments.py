@@ -43,12 +43,12 @@ def test_check_experiments_refuses_malformed_lists():
 
 
 def test_paper_run_quick_writes_its_result_file(tmp_path, capsys):
-    out = tmp_path / "t6.json"
-    assert main(["paper", "run", "csg-t6", "--quick", "--out", str(out)]) == 0
+    out = tmp_path / "t4.json"
+    assert main(["paper", "run", "csg-t4", "--quick", "--out", str(out)]) == 0
     result = read_result(out)
-    assert [r["k"] for r in result["rows"]] == [10]
-    assert result["command"] == f"python -m csgnet table6 --data data/synthetic2d --per-length 3 --beams 10 --out {out}"
-    assert 0.0 <= result["rows"][0]["map"] <= 1.0
+    assert result["command"] == f"python -m csgnet table4 --images 10 --iterations 0 2 --out {out}"
+    assert [r["protocol"] for r in result["rows"]][0] == "training silhouette, max IoU"
+    assert all(r["cd_0"] >= 0 for r in result["rows"])
 
 
 def test_paper_run_refuses_what_cannot_run(capsys):
@@ -108,11 +108,21 @@ def test_table1_writes_a_result_with_the_start_and_one_block_per_gamma(tmp_path,
     assert all(r["cd_0"] >= 0 for r in result["rows"])
 
 
-def test_train_fraction_keeps_the_first_share_of_each_length():
+@pytest.fixture(scope="module")
+def small2d(tmp_path_factory):
+    """A small 2D synthetic set (scale 0.001) written by csgnet's generator."""
+    from csgnet.data import generate_dataset
+
+    out = tmp_path_factory.mktemp("synth2d")
+    generate_dataset(out, dim=2, scale=0.001, seed=0, workers=1)
+    return out
+
+
+def test_train_fraction_keeps_the_first_share_of_each_length(small2d):
     from csgnet.train.supervised import CSGDataModule
 
-    full = CSGDataModule(dim=2, data_dir="data/synthetic2d", batch_size=12)
-    part = CSGDataModule(dim=2, data_dir="data/synthetic2d", batch_size=12, train_fraction=0.1)
+    full = CSGDataModule(dim=2, data_dir=str(small2d), batch_size=12)
+    part = CSGDataModule(dim=2, data_dir=str(small2d), batch_size=12, train_fraction=0.1)
     full.setup("fit")
     part.setup("fit")
     for n, t in full.train_tables.items():
@@ -120,21 +130,26 @@ def test_train_fraction_keeps_the_first_share_of_each_length():
         assert torch.equal(part.train_tables[n], t[:k])
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(ValueError, match="train_fraction must lie in"):
-            CSGDataModule(dim=2, data_dir="data/synthetic2d", train_fraction=bad)
+            CSGDataModule(dim=2, data_dir=str(small2d), train_fraction=bad)
     with pytest.raises(ValueError, match="train_fraction needs a data_dir"):
         CSGDataModule(dim=2, data_dir=None, train_fraction=0.5)
 
 
-def test_datasize_writes_one_block_per_share(tmp_path):
+def test_datasize_writes_one_block_per_share(tmp_path, small2d):
+    import math
+
+    from csgnet.data import load_dataset
     from csgnet.train.datasize import MAX_DATASIZE_STEPS
 
     assert MAX_DATASIZE_STEPS == MAX_SWEEP_STEPS_CLI
     out = tmp_path / "ds.json"
-    assert main(["datasize", "--data", "data/synthetic2d", "--steps", "2", "--batch", "12", "--fractions", "0.1",
+    assert main(["datasize", "--data", str(small2d), "--steps", "2", "--batch", "12", "--fractions", "0.1",
                  "1", "--per-length", "1", "--beams", "1", "--out", str(out)]) == 0
     rows = read_result(out)["rows"]
-    assert [r["method"] for r in rows] == ["1225 training programs (10 %) k=1 top-1",
-                                           "12250 training programs (100 %) k=1 top-1"]
+    counts = [len(p) for p in load_dataset(small2d, 2, "train").values()]
+    tenth = sum(max(1, math.ceil(0.1 * c)) for c in counts)
+    assert [r["method"] for r in rows] == [f"{tenth} training programs (10 %) k=1 top-1",
+                                           f"{sum(counts)} training programs (100 %) k=1 top-1"]
 
 
 def test_the_docs_list_of_experiments_is_the_code_list():
