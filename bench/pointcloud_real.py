@@ -23,7 +23,8 @@ import numpy as np
 import torch
 
 from shapeprog import corpus
-from shapeprog.pointcloud.infer import WEIGHTS, infer, load_model
+from shapeprog.pointcloud.infer import infer, load_model
+from shapeprog.pointcloud.model import WEIGHTS
 
 MODELS = {"e2e (default)": "pointcloud_e2e_{}.pt", "latent": "pointcloud_latent_{}.pt",
           "e2e, ShapeMOD macros": "pointcloud_e2e_{}_macros.pt"}

@@ -1,4 +1,6 @@
-"""Point cloud -> ShapeAssembly program: the model files, :func:`infer` and the polish by fitting.
+"""Point cloud -> ShapeAssembly program: :func:`infer` (the robust method and the papers' single decode) and the
+polish by fitting. The models and their weights files are in :mod:`shapeprog.pointcloud.model`, how candidates and
+up axes are scored in :mod:`shapeprog.pointcloud.selection`; both are re-exported here.
 
 :func:`infer` takes a cloud ``(N, 3)`` (NumPy or torch) in any position and scale, maps it into the canonical
 frame the training clouds are in (:func:`~shapeprog.pointcloud.normalize.normalize`), encodes
@@ -14,10 +16,7 @@ differentiable executor (:func:`shapeprog.fit.fit`), keeping the structure. With
 :class:`~shapeprog.pointcloud.retrieval.RetrievalIndex`; ours, not the papers') the decoded program competes
 with the training programs nearest to the cloud, and the one closest to the input is kept.
 
-:class:`CloudModel` is a trained encoder with its decoder; :func:`load_model` reads a weights file written by
-:func:`shapeprog.pointcloud.train.export_weights` (``torch.load(weights_only=True)``), :func:`load_pretrained`
-the file shipped for a category (:data:`PRETRAINED`). Only this module's callers pay for Lightning: this
-module does not import it.
+This module does not import Lightning.
 
 Example:
     >>> import numpy as np
@@ -32,35 +31,26 @@ from __future__ import annotations
 import functools
 import math
 import time
-import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Optional
 
 import numpy as np
 import torch
 
-from shapeio.weights import read_weights
-
 from ..errors import PointCloudError
-from ..geometry import CORNER_SIGNS
 from ..fit import fit as fit_program
 from ..lang import Program, to_text
 from ..metrics import chamfer, fscore
 from ..sampling import sample_surface
-from ..vae.decode import decode_programs
-from ..vae.model import VAE
-from ..vae.pretrained import load_pretrained as load_vae
 from .data import TRAIN_POINTS
-from .encoder import PointNet2SSG
 from .normalize import CANONICAL_DIAGONAL, Transform, _corners_of, align_program, normalize, scale_program
 from .search import (SEARCH_POINTS, SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule, selection_chamfers,
                      selection_target)
-from ..macros.library import Library
 from ..physics import rootedness, stability as stable_fn
-from ..vae.layout import LineLayout
-from ..vae.macro_decode import decode_macro
-from ..vae.macro_model import MacroVAE
+from .selection import (FSCORE_THRESHOLD, SELECT_POINTS, UP_CANDIDATES, UP_RATIO, UpAxisWarning, orientation_scores,
+                        selection_scores, warn_up_axis)
+from .model import (PRETRAINED, CloudModel, cloud_corners, decode_codes, load_encoder, load_model,
+                    load_pretrained)
 
 __all__ = ["DEFAULT_METHOD", "ENCODER_POINTS", "FIT_STEPS", "FSCORE_THRESHOLD", "MAX_DIAGONAL", "METHODS", "MIN_DIAGONAL",
            "MIN_POINTS", "POLISH_STEPS", "PRETRAINED", "RETRIEVAL_CANDIDATES", "ROBUST_CANDIDATES", "ROBUST_SUBSETS",
@@ -77,8 +67,6 @@ MIN_DIAGONAL, MAX_DIAGONAL = 1e-32, 1e32
 ENCODER_POINTS = TRAIN_POINTS
 #: Adam steps of the polish (``fit=True``).
 FIT_STEPS = 150
-#: The F-score's distance threshold, canonical units (AABB diagonal 2): the papers' 0.03.
-FSCORE_THRESHOLD = 0.03
 #: Training programs that compete with the decoded one under ``infer(..., retrieval=index)``. Chosen on the
 #: validation carve-out of the chair cache (167 chairs against an index of the other 3,172 training chairs, the
 #: shipped end-to-end model, no fitting): F-score 57.3 for the decoded program alone, 68.2 / 68.9 / 69.1 with
@@ -97,180 +85,9 @@ DEFAULT_METHOD = "robust"
 ROBUST_SUBSETS = 4
 #: Training programs nearest to the cloud (the index's coarse stage) that compete in the robust method.
 ROBUST_CANDIDATES = 16
-#: Points of the input, and surface samples of each candidate, in the robust method's selection score.
-SELECT_POINTS = 2048
 #: Fitting steps of the robust method's final polish (kept only when it improves the selection score), and the
 #: surface samples and input points of each step.
 POLISH_STEPS, POLISH_SAMPLES = 10, 1024
-#: Up axes :func:`orientation_scores` compares (``up="auto"`` chooses among them).
-UP_CANDIDATES = ("y", "z", "x")
-#: Training programs per orientation in :func:`orientation_scores`.
-UP_SHORTLIST = 4
-#: :func:`infer` warns when another orientation's chamfer distance to its nearest training shapes is below this
-#: share of the kept program's chamfer distance to the cloud. On the first 8 test chairs the right orientation's
-#: nearest training cloud was at most 0.61 times as far as either wrong one's (chamfer 58-124 x1000 against
-#: 173-243); a z-up box chair read y-up: 0.32.
-UP_RATIO = 0.7
-
-
-class UpAxisWarning(UserWarning):
-    """The cloud matches the category's shapes clearly better with another up axis than the one given."""
-#: The weights files shipped under ``shapeprog/weights`` (docs/benchmarks.md names the command of each).
-PRETRAINED = {"chair": "pointcloud_e2e_chair.pt", "table": "pointcloud_e2e_table.pt",
-              "storage": "pointcloud_e2e_storage.pt"}
-WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
-_FORMAT, _VERSION = "shapeprog-pointcloud", 1
-#: Cloud points drawn as cubes in pictures, and the cubes' side (canonical units).
-_PICTURE_POINTS, _PICTURE_CUBE = 512, 0.03
-
-
-# ------------------------------------------------------------------------------------------ models
-
-
-def cloud_corners(points, count: int = _PICTURE_POINTS, side: float = _PICTURE_CUBE) -> torch.Tensor:
-    """A cloud as small axis-aligned cubes, for :func:`shapeprog.picture.render_grid`.
-
-    Args:
-        points: ``(N, 3)`` float, y up.
-        count: the first ``count`` points are drawn (the clouds are random subsets already).
-        side: the cubes' edge length.
-
-    Returns:
-        ``(min(N, count), 8, 3) float32`` corners in the spec's corner order.
-    """
-    p = torch.as_tensor(points, dtype=torch.float32)[:count]
-    signs = torch.as_tensor(CORNER_SIGNS, dtype=torch.float32)
-    return p[:, None, :] + (side / 2) * signs[None]
-
-
-def decode_codes(vae, codes: torch.Tensor, macros: bool = False) -> list:
-    """Decode latents ``(B, H)`` with ``vae``'s decoder (non-rejecting validity decoding), None where decoding
-    fails: programs (corpus frame); for a :class:`~shapeprog.vae.macro_model.MacroVAE` the expansions of its
-    macro programs, or with ``macros`` the :class:`~shapeprog.vae.macro_decode.MacroDecoded` themselves
-    (macro program, text and expansion). Shared by :class:`CloudModel` and the training modules' validation."""
-    if getattr(vae, "layout", None) is None:
-        with torch.no_grad():
-            return decode_programs(vae.decoder, codes)
-
-    out = []
-    with torch.no_grad():
-        for z in codes:
-            try:
-                d = decode_macro(vae, z)
-                out.append(d if macros else d.program)
-            except ValueError:
-                out.append(None)
-    return out
-
-
-class CloudModel(torch.nn.Module):
-    """A trained cloud encoder and the decoder of its latents.
-
-    Attributes:
-        encoder: the :class:`PointNet2SSG` (eval mode).
-        vae: the VAE whose decoder decodes (the shipped VAE for a latent-regression model); a
-            :class:`~shapeprog.vae.macro_model.MacroVAE` for a model that writes macro programs.
-        category, recipe: what it was trained on and how (``"latent"`` or ``"e2e"``).
-        meta: what the weights file records (epoch, step, command, ...).
-        layout: the macro library's line layout of a macro-program model (``layout.library``); None for the base
-            language.
-    """
-
-    def __init__(self, encoder: PointNet2SSG, vae: VAE, category: str, recipe: str, meta: Optional[dict] = None):
-        super().__init__()
-        if encoder.config["out_dim"] != vae.decoder.hidden_dim:
-            raise ValueError(f"the encoder's code has {encoder.config['out_dim']} dims, the decoder takes "
-                             f"{vae.decoder.hidden_dim}")
-        self.encoder, self.vae = encoder.eval(), vae.eval()
-        self.category, self.recipe, self.meta = category, recipe, dict(meta or {})
-        self.layout = getattr(vae, "layout", None)
-
-    def codes(self, clouds: torch.Tensor) -> torch.Tensor:
-        """Latents ``(B, H)`` of canonical clouds ``(B, N, 3)``."""
-        p = next(self.encoder.parameters())
-        with torch.no_grad():
-            return self.encoder(clouds.to(p.device, p.dtype))
-
-    def decode(self, codes: torch.Tensor) -> list[Optional[Program]]:
-        """Programs (corpus frame) of latents ``(B, H)``; None where decoding fails. A macro-program model's
-        programs are the expansions of its macro programs (:meth:`decode_macros` keeps the macro text)."""
-        return decode_codes(self.vae, codes)
-
-    def decode_macros(self, codes: torch.Tensor) -> list:
-        """The :class:`~shapeprog.vae.macro_decode.MacroDecoded` (macro program, its text, its expansion) of
-        latents ``(B, H)`` of a macro-program model; None where decoding fails.
-
-        Raises:
-            ValueError: the model writes base-language programs.
-        """
-        if self.layout is None:
-            raise ValueError(f"the {self.category} {self.recipe} model writes ShapeAssembly programs, not macro programs")
-        return decode_codes(self.vae, codes, macros=True)
-
-
-def _read_weights(path, category: Optional[str] = None) -> tuple[dict, PointNet2SSG]:
-    """The checked payload of a weights file and its encoder (float32, its recorded sizes)."""
-    payload = read_weights(path, _FORMAT, _VERSION, what="point-cloud model weights file")
-    cat = payload["category"]
-    if category is not None and cat != category:
-        raise ValueError(f"{path}: a model of category {cat!r}, not {category!r}")
-    encoder = PointNet2SSG(**dict(payload["config"]))
-    floats = {k: v.float() if v.is_floating_point() else v for k, v in payload["encoder"].items()}
-    try:
-        encoder.load_state_dict(floats)
-    except RuntimeError as e:
-        raise ValueError(f"{path}: tensors do not fit the recorded sizes: {str(e).splitlines()[0]}") from None
-    return payload, encoder
-
-
-def load_encoder(path, category: Optional[str] = None) -> PointNet2SSG:
-    """The encoder of a weights file alone (no decoder is built), e.g. to start a training run from it.
-
-    Raises:
-        FileNotFoundError, ValueError: as :func:`load_model`.
-    """
-    return _read_weights(path, category)[1]
-
-
-def load_model(path, category: Optional[str] = None) -> CloudModel:
-    """The :class:`CloudModel` of a weights file (:func:`shapeprog.pointcloud.train.export_weights`).
-
-    Raises:
-        FileNotFoundError: no such file.
-        ValueError: naming the file, for an unreadable file, another format or version, another category.
-    """
-    payload, encoder = _read_weights(path, category)
-    cat = payload["category"]
-    try:
-        if payload["recipe"] == "e2e":
-            if payload.get("library") is not None:
-                library = Library.from_text(payload["library"], f"{path}:library")
-                vae = MacroVAE(LineLayout(library), int(payload["hidden_dim"]))
-            else:
-                vae = VAE(int(payload["hidden_dim"]))
-            vae.decoder.load_state_dict({k: v.float() for k, v in payload["decoder"].items()})
-        else:
-            vae = load_vae(cat)
-    except RuntimeError as e:
-        raise ValueError(f"{path}: tensors do not fit the recorded sizes: {str(e).splitlines()[0]}") from None
-    return CloudModel(encoder, vae, cat, payload["recipe"], payload.get("meta"))
-
-
-@functools.lru_cache(maxsize=4)
-def load_pretrained(category: str = "chair") -> CloudModel:
-    """The model shipped for ``category`` (:data:`PRETRAINED`), loaded once per process."""
-    if category not in PRETRAINED:
-        raise ValueError(f"no shipped point-cloud model for category {category!r}; shipped: "
-                         f"{', '.join(PRETRAINED)} (train one: configs/pointcloud/)")
-    path = WEIGHTS / PRETRAINED[category]
-    if not path.is_file():
-        raise FileNotFoundError(f"the shipped {category} point-cloud weights {path} are missing from this installation")
-    return load_model(path, category)
-
-
-# ------------------------------------------------------------------------------------------ one cloud
-
-
 def text_unit(diagonal: float) -> float:
     """The unit of the program text :func:`infer` writes for a cloud of bounding-box ``diagonal`` (input units):
     the power of ten nearest to ``diagonal / CANONICAL_DIAGONAL`` (1 for diagonals 0.63 to 6.3, 1000 for a chair
@@ -486,7 +303,7 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
         r = _robust(x, unit, t, model, fit, fit_steps, fit_lr, physics, stability, seed, search, search_schedule,
                     retrieval, k, subsets, polish_steps, select)
         if up_scores is None and check_up:
-            up_scores = _check_up(x, r, up, retrieval if retrieval is not None else default_index(model.category),
+            up_scores = warn_up_axis(x, (r.robust["polished"] or r.robust["score"])[1], up, retrieval if retrieval is not None else default_index(model.category),
                                   seed)
         r.up_scores = up_scores
         return r
@@ -551,45 +368,6 @@ def infer(points, category: str = "chair", fit: bool = False, model: Optional[Cl
                    macro_text=macro_text, retrieval=retrieved, fit_stopped=fit_stopped, up_scores=up_scores)
 
 
-def _check_up(x: np.ndarray, r: Inference, up: str, index, seed: int) -> dict:
-    """Warn (:class:`UpAxisWarning`) when another orientation of :data:`UP_CANDIDATES` brings the cloud nearer to
-    the training shapes than the robust method's kept program is with ``up``, by the factor :data:`UP_RATIO` in
-    chamfer distance; the chamfer distances, ``up``'s being the kept program's."""
-    others = tuple(u for u in UP_CANDIDATES if u != up)
-    scores = orientation_scores(x, index, seed, others)
-    scores[up] = (r.robust["polished"] or r.robust["score"])[1]
-    best = min(scores, key=lambda u: scores[u])
-    if scores[best] < UP_RATIO * scores[up]:
-        warnings.warn(f"the cloud matches the training shapes far better with up={best!r} than with up={up!r} "
-                      f"(chamfer x1000 {1000 * scores[best]:.0f} against {1000 * scores[up]:.0f}): pass up={best!r} "
-                      f"(command line: --up {best})", UpAxisWarning, stacklevel=3)
-    return scores
-
-
-def orientation_scores(points, index, seed: int = 0, ups=UP_CANDIDATES) -> dict:
-    """How well a cloud matches a category's training shapes with each up axis of :data:`UP_CANDIDATES`:
-    ``{up: chamfer}`` for each of ``ups``, the smallest :func:`selection_scores` chamfer distance of the
-    :data:`UP_SHORTLIST` training clouds of
-    ``index`` that its coarse stage puts nearest to the cloud normalised with that ``up`` (:data:`SELECT_POINTS`
-    points drawn with ``seed``). A chair lying on its back matches no training chair well; standing, it matches
-    some closely.
-
-    Args:
-        points: ``(N, 3)`` float, the cloud in its own frame.
-        index: a :class:`~shapeprog.pointcloud.retrieval.RetrievalIndex`.
-        seed: the draw of the points.
-    """
-    x = np.asarray(points, dtype=np.float64)
-    pick = np.random.default_rng(int(seed)).permutation(len(x))[:SELECT_POINTS]
-    out = {}
-    for up in ups:
-        unit, _ = normalize(x[pick], up=up)
-        target = torch.from_numpy(unit)
-        refs = [index.reference_cloud(m.id)[:SELECT_POINTS] for m in index.shortlist(target, UP_SHORTLIST)]
-        out[up] = min(cd for _, cd in selection_scores(refs, target))
-    return out
-
-
 def _finish(canon: Program, off: np.ndarray, t: Transform, target: torch.Tensor, seed: int, physics: bool,
             stability: bool, seconds: dict, **fields) -> Inference:
     """The :class:`Inference` of the kept program ``canon`` (canonical frame, executed points + ``off`` on the
@@ -616,28 +394,6 @@ def default_index(category: str):
     from .retrieval import RetrievalIndex
 
     return RetrievalIndex.from_corpus(category)
-
-
-def selection_scores(clouds, target: torch.Tensor, threshold: float = FSCORE_THRESHOLD) -> list:
-    """``[fscore, cd]`` of each candidate cloud ``(M_i, 3)`` (None: no shape, scored ``[0, inf]``) against
-    ``target`` ``(N, 3)``: the F-score at ``threshold`` (0-100) and the chamfer distance (unsquared, both
-    directions, as :func:`shapeprog.metrics.chamfer` with ``eps = 0``), by k-d trees in float64."""
-    from scipy.spatial import cKDTree
-
-    tgt = np.asarray(torch.as_tensor(target, dtype=torch.float64))
-    tree = cKDTree(tgt)
-    out = []
-    for c in clouds:
-        if c is None or len(c) == 0:
-            out.append([0.0, math.inf])
-            continue
-        p = np.asarray(torch.as_tensor(c, dtype=torch.float64))
-        d_pt = tree.query(p, k=1)[0]
-        d_tp = cKDTree(p).query(tgt, k=1)[0]
-        prec, rec = 100.0 * float(np.mean(d_pt < threshold)), 100.0 * float(np.mean(d_tp < threshold))
-        f = 2 * prec * rec / (prec + rec + 1e-8)
-        out.append([f, float(d_pt.mean() + d_tp.mean())])
-    return out
 
 
 def _robust(x, unit, t, model, fit, fit_steps, fit_lr, physics, stability, seed, search, search_schedule, index, k,

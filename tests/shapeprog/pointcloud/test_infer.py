@@ -12,7 +12,8 @@ from shapeprog.errors import PointCloudError
 from shapeprog.lang import parse, to_text
 from shapeprog.pointcloud.data import corpus_cloud
 from shapeprog.pointcloud.encoder import PointNet2SSG
-from shapeprog.pointcloud.infer import PRETRAINED, WEIGHTS, CloudModel, infer, load_model, shape_metrics
+from shapeprog.pointcloud.infer import PRETRAINED, CloudModel, infer, load_model, shape_metrics
+from shapeprog.pointcloud.model import WEIGHTS
 from shapeprog.pointcloud.normalize import align_program
 from shapeprog.vae.pretrained import load_pretrained as load_vae
 
