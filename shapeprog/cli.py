@@ -125,6 +125,15 @@ def add_json(parser, what: str = "the figures") -> None:
                         help=f"also write {what} to this JSON file (a result file of shapeio.results)")
 
 
+def add_result_options(parser, what: str = "the rows", quiet: str | None = "progress lines") -> None:
+    """The output options of a command that scores something: ``--json FILE`` (:func:`add_json`), ``--quiet``
+    (unless ``quiet`` is None) and ``--overwrite``."""
+    add_json(parser, what)
+    if quiet is not None:
+        add_quiet(parser, quiet)
+    add_overwrite(parser)
+
+
 def write_json(args, result: dict) -> None:
     """Write ``result`` (:func:`shapeio.results.make_result`) to ``args.json`` when given."""
     if getattr(args, "json", None):

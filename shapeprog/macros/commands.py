@@ -14,9 +14,9 @@ from shapeio import atomic_write
 from shapeio.results import column, make_result, markdown
 
 from .. import corpus
-from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, Program, add_category, add_command, add_json, add_overwrite,
-                   add_quiet, category_pairs, command_line, float_in, int_at_least, macro_library, markdown_result,
-                   refuse_existing, refuse_inputs, seed, write_json)
+from ..cli import (add_result_options, MAX_SECONDS_OPTION, MAX_WORKERS, Program, add_category, add_command,
+                   add_quiet, category_pairs, command_line, float_in, int_at_least, macro_library, refuse_existing,
+                   refuse_inputs, seed, write_json)
 from .api import collection
 from .api import refactor
 from .discover import discover, prior_rounds, rounds_line
@@ -351,8 +351,7 @@ def register(sub) -> None:
     rf.add_argument("--library", default="chair", help="a shipped library's category or a library file")
     rf.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
     rf.add_argument("-o", "--out", help="write the macro programs here")
-    add_json(rf, "f per sub-program, before and after")
-    add_overwrite(rf)
+    add_result_options(rf, "f per sub-program, before and after", quiet=None)
     rc = add_command(sub, "refactor-corpus", cmd_refactor_corpus,
                      help="rewrite every corpus program of a category with a library",
                      description="Refactor every corpus program of a category with a ShapeMOD library (process "
@@ -389,9 +388,7 @@ def register(sub) -> None:
     tb.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
     tb.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
     tb.add_argument("--out", help="also write the table (markdown) here")
-    add_json(tb, "the table")
-    add_quiet(tb, "progress lines")
-    add_overwrite(tb)
+    add_result_options(tb, "the table")
     ab = add_command(sub, "ablation", cmd_ablation,
                      help="ShapeMOD Table 5: discovery with one part switched off per variant, on the same shapes",
                      description="Run discovery once per variant (the full method, and each with one part switched "
@@ -412,9 +409,7 @@ def register(sub) -> None:
     ab.add_argument("--limit", type=int_at_least(1), default=80, help="a random subset of N shapes")
     ab.add_argument("--seed", type=seed, default=0, help="seed of the subset and of the searches")
     ab.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
-    add_json(ab, "f per variant")
-    add_quiet(ab, "progress lines")
-    add_overwrite(ab)
+    add_result_options(ab, "f per variant")
     gn = add_command(sub, "generation", cmd_generation,
                      help="ShapeMOD Table 2: generation by the VAE without and with macros, beside the paper's rows",
                      description="Sample N programs from the VAE over ShapeAssembly programs (No Macros) and from the "
@@ -431,9 +426,7 @@ def register(sub) -> None:
     gn.add_argument("--fool-epochs", type=int_at_least(4), default=12, help="epochs of the %% fool classifier")
     gn.add_argument("--no-stability", action="store_true", help="skip the physics stability test")
     gn.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
-    add_json(gn, "the table")
-    add_quiet(gn, "progress lines")
-    add_overwrite(gn)
+    add_result_options(gn, "the table")
     pc = add_command(sub, "pointcloud", cmd_pointcloud,
                      help="ShapeMOD Table 3: point cloud to program without and with macros, beside the paper's rows",
                      description="Decode the test clouds of make-clouds caches with the shipped end-to-end point-cloud "
@@ -447,9 +440,7 @@ def register(sub) -> None:
     pc.add_argument("--seed", type=seed, default=0, help="seed of the inputs' noise, scales and positions")
     pc.add_argument("--no-stability", action="store_true", help="skip the stability test")
     pc.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes (1: none)")
-    add_json(pc, "the table")
-    add_quiet(pc, "progress lines")
-    add_overwrite(pc)
+    add_result_options(pc, "the table")
     pt = add_command(sub, "perturbation", cmd_perturbation,
                      help="ShapeMOD Fig. 7: FD of perturbed programs without and with macros",
                      description="Refactor N random train shapes without macros and with a ShapeMOD library, add "
@@ -467,6 +458,4 @@ def register(sub) -> None:
     pt.add_argument("--repeats", type=int_at_least(1), default=3, help="noise draws per sigma above 0")
     pt.add_argument("--seed", type=seed, default=0, help="seed of the subset and of the noise")
     pt.add_argument("--png", help="also write the plot here")
-    add_json(pt, "the FD per sigma")
-    add_quiet(pt, "progress lines")
-    add_overwrite(pt)
+    add_result_options(pt, "the FD per sigma")

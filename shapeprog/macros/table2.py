@@ -39,8 +39,8 @@ def generation_rows(category: str, models: Mapping[str, object], n: int, seed: i
     # lazy: the VAE, its sampling and the generation metrics (torch models) only when the table is computed
     import time
 
-    from ..vae.commands import EVALUATE_TRIES, draw
-    from ..vae.gentable import References, evaluate_generation
+    from ..vae.commands import draw
+    from ..vae.gentable import EVALUATE_TRIES, References, evaluate_generation
     from ..vae.pointnet import PRETRAINED_SHA256, load_classifier
 
     model, _, meta = load_classifier()

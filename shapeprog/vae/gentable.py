@@ -406,6 +406,9 @@ def table_notes(model_meta: dict, sha: Optional[str], fool_epochs: int, fool_ave
     ]
 
 
+#: The draws per VAE sample of the generation tables (``vae evaluate -n``) before a sample is decoded without
+#: rejection.
+EVALUATE_TRIES = 10
 #: Bumped when the classifier clouds or features change: cached feature fits of other versions are not read.
 FEATURE_CACHE_VERSION = 1
 
