@@ -1,0 +1,211 @@
+"""The editors' controls: :class:`Control` (one free parameter of a program: kind, range, value, place in the
+text), :func:`page_value` (a value from the browser page, checked) and what the control builders of
+:mod:`shapeprog.editor.controls` and :mod:`shapeprog.editor.macro_controls` share."""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Union
+
+from ..errors import EditError
+from ..lang import Attach, Cuboid, Reflect, Squeeze, Translate
+
+__all__ = ["BOOL", "CHOICE", "FLOAT", "INT", "KINDS", "MAX_DIM", "MIN_DIM", "PAGE_DECIMALS", "Control", "Value",
+           "page_value"]
+
+FLOAT, INT, BOOL, CHOICE = "float", "int", "bool", "choice"
+#: The kinds of control.
+KINDS = (FLOAT, INT, BOOL, CHOICE)
+#: Smallest cuboid extent a control offers (the executor's valid range, as :func:`shapeprog.fit.fit`).
+MIN_DIM = 0.01
+#: Largest cuboid extent a control offers (corpus maximum: 2.788); a larger current value widens it.
+MAX_DIM = 4.0
+
+Value = Union[float, int, bool, str]
+
+
+@dataclass(frozen=True)
+class Control:
+    """One free parameter of a program.
+
+    Attributes:
+        name: unique within the program (``Program_1:3:attach.y2``; ``2:four_legs.s`` for macro programs).
+        kind: ``'float'``, ``'int'``, ``'bool'`` or ``'choice'``.
+        value: the current value.
+        low, high: the range of a float or int (None otherwise), both included.
+        choices: the values of a choice (empty otherwise).
+        label: a short description for people (``'line 5 attach(cube0, bbox) y2'``).
+        line, column: 1-based place of the value's token in the printed program.
+        lines: 1-based lines whose text the control changes (two for a shared sub-program bbox).
+        cuboids: indices (executed leaf order) of the leaf cuboids the control moves: those whose
+            corners have a non-zero derivative with respect to it (float and int), or those that the
+            same line's floats move or the line creates (bool and choice). Empty when not computed.
+    """
+
+    name: str
+    kind: str
+    value: Value
+    low: float | None = None
+    high: float | None = None
+    choices: tuple = ()
+    label: str = ""
+    line: int = 1
+    column: int = 1
+    lines: tuple[int, ...] = ()
+    cuboids: tuple[int, ...] = ()
+
+    def check(self, value, file: str = "<edit>") -> Value:
+        """``value`` in this control's type, or :class:`EditError` (wrong type, not finite, out of range,
+        not a choice)."""
+        def bad(reason):
+            return EditError(reason, file, self.line, self.column, str(self.value), control=self.name, value=value)
+
+        if self.kind == FLOAT:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise bad(f"expected a number, got {type(value).__name__} {value!r}")
+            v = float(value)
+            if not math.isfinite(v) or not self.low <= v <= self.high:
+                raise bad(f"value {value!r} is outside [{self.low!r}, {self.high!r}]")
+            return v
+        if self.kind == INT:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                    isinstance(value, float) and not (math.isfinite(value) and value.is_integer())):
+                raise bad(f"expected an integer, got {type(value).__name__} {value!r}")
+            v = int(value)
+            if not self.low <= v <= self.high:
+                raise bad(f"value {value!r} is outside [{int(self.low)}, {int(self.high)}]")
+            return v
+        if self.kind == BOOL:
+            if not isinstance(value, bool):
+                raise bad(f"expected True or False, got {type(value).__name__} {value!r}")
+            return value
+        if not isinstance(value, str) or value not in self.choices:
+            raise bad(f"{value!r} is not one of {', '.join(map(str, self.choices))}")
+        return value
+
+
+#: Decimals a float slider's value keeps (a browser's 0.30000000000000004 arrives as 0.3).
+PAGE_DECIMALS = 9
+
+
+def page_value(control: "Control | None", value):
+    """A value as a page's widget sent it, made what :meth:`Control.check` takes: a float slider's number rounded
+    to :data:`PAGE_DECIMALS` decimals, an int slider's to the nearest integer. Anything else (another type, a
+    non-finite number, a control the page does not know) is passed on unchanged, for the check to refuse with
+    its located :class:`EditError`.
+
+    Example:
+        >>> c = Control("Program_0:1:cuboid.h", FLOAT, 0.5, low=0.01, high=4.0)
+        >>> page_value(c, 0.30000000000000004), page_value(c, float("nan")) != page_value(c, float("nan"))
+        (0.3, True)
+    """
+    if control is None or isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return value
+    if control.kind == FLOAT:
+        return round(float(value), PAGE_DECIMALS)
+    if control.kind == INT:
+        return int(round(value))
+    return value
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """A control and the places it writes: ``slots`` of (block index, statement index, field) for
+    ShapeAssembly, (line index, argument index) for macro programs; ``params`` its indices in the
+    executor's parameter vector."""
+
+    control: Control
+    slots: tuple
+    params: tuple[int, ...] = ()
+
+
+# ----------------------------------------------------------------------------- text positions
+
+_ARG_FIELDS = {
+    Cuboid: ("l", "h", "w", "aligned"),
+    Attach: ("a", "b", "x1", "y1", "z1", "x2", "y2", "z2"),
+    Squeeze: ("a", "b", "c", "face", "u", "v"),
+    Reflect: ("a", "axis"),
+    Translate: ("a", "axis", "n", "d"),
+}
+_FLOAT_RANGE = {"l": (MIN_DIM, MAX_DIM), "h": (MIN_DIM, MAX_DIM), "w": (MIN_DIM, MAX_DIM)}
+
+
+def _arg_columns(text: str) -> list[int]:
+    """0-based offsets of the arguments of ``f(a, b, ...)`` in ``text`` (the printer's ', ' separators)."""
+    start = text.index("(") + 1
+    out = [start]
+    for m in re.finditer(r", ", text[start:]):
+        out.append(start + m.end())
+    return out
+
+
+def _range(lo: float, hi: float, v: float) -> tuple[float, float]:
+    return (min(lo, v), max(hi, v))
+
+
+def _head(s) -> str:
+    if isinstance(s, Cuboid):
+        return f"{s.name} = Cuboid"
+    if isinstance(s, Attach):
+        return f"attach({s.a}, {s.b})"
+    if isinstance(s, Squeeze):
+        return f"squeeze({s.a}, {s.b}, {s.c})"
+    return f"{type(s).__name__.lower()}({s.a})"
+
+
+# ----------------------------------------------------------------------------- ShapeAssembly
+
+
+#: Derivatives below this share of a leaf's largest one count as zero when finding the cuboids a control moves.
+_GRAD_TOL = 1e-6
+
+
+def _moved(corners, x):
+    """(L, P) derivatives of each leaf's randomly weighted corner sum with respect to each parameter, and
+    (L,) the size below which a leaf's derivative counts as zero."""
+    import torch
+
+    L, P = corners.shape[0], x.shape[0]
+    grads = torch.zeros(L, P, dtype=torch.float64)
+    g = torch.Generator().manual_seed(0)
+    for leaf in range(L if P else 0):
+        w = torch.rand(8, 3, generator=g, dtype=corners.dtype) + 0.5  # no cancellation between corners
+        (grad,) = torch.autograd.grad((corners[leaf] * w).sum(), x, retain_graph=True, allow_unused=True)
+        if grad is not None:
+            grads[leaf] = grad.detach().to(torch.float64)
+    # a path that cancels exactly (a squeeze overriding a declared extent) leaves rounding noise
+    tol = _GRAD_TOL * grads.abs().amax(1).clamp_min(1e-6) if P else torch.zeros(L, dtype=torch.float64)
+    return grads, tol
+
+
+def _influence(specs, moved, made, line_of, key_of) -> list[tuple[int, ...]]:
+    """Leaves per control: a number's by its derivative (the sum over the numbers it sets); a discrete
+    one's are its line's numbers' leaves and the leaves its line created."""
+    grads, tol = moved
+
+    def leaves_of(params) -> set[int]:
+        d = grads[:, list(params)].sum(1)
+        return set(_nonzero(d.abs() > tol))
+
+    by_line: dict = {}
+    for spec in specs:
+        if spec.params:
+            by_line.setdefault(key_of(spec), set()).update(leaves_of(spec.params))
+    out = []
+    for spec in specs:
+        if spec.params and spec.control.kind == FLOAT:
+            leaves = leaves_of(spec.params)
+        else:
+            ln = line_of(spec)
+            leaves = by_line.get(key_of(spec), set()) | {k for k, m in enumerate(made) if m == ln}
+        out.append(tuple(sorted(leaves)))
+    return out
+
+
+def _nonzero(mask) -> list[int]:
+    return mask.nonzero().flatten().tolist()
+
+
+# ----------------------------------------------------------------------------- macro programs
