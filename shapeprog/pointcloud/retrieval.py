@@ -33,7 +33,8 @@ import torch
 from shapeio.cache import cached
 
 from .. import corpus
-from ..vae.genmetrics import _imap, coarse_fields
+from ..parallel import ordered_map
+from ..vae.genmetrics import coarse_fields
 from ..lang import Program, parse
 from ..metrics import chamfer
 from .data import cloud_transforms, corpus_splits, sample_clouds
@@ -316,7 +317,7 @@ class RetrievalIndex:
         rows = torch.arange(n).expand(len(qs), -1) if k >= n else self._candidates(qs, k)
         jobs = ([(qs[i], self.clouds[rows[i]]) for i in range(s, min(s + chunk, len(qs)))]
                 for s in range(0, len(qs), chunk))  # made one at a time: a job copies its candidates
-        dist = torch.tensor([row for part in _imap(executor, _exact_job, jobs) for row in part], dtype=torch.float64)
+        dist = torch.tensor([row for part in ordered_map(executor, _exact_job, jobs) for row in part], dtype=torch.float64)
         best = dist.argmin(dim=1)
         return [self._match(int(rows[i, b]), float(dist[i, b])) for i, b in enumerate(best.tolist())]
 

@@ -30,6 +30,7 @@ from typing import Iterable, Optional, Sequence
 import numpy as np
 import torch
 
+from ..parallel import ordered_map
 from ..errors import ExecutionError, ParseError
 from ..execute import ExecutedShape, execute, execute_batch
 from ..lang import Program, parse, to_text
@@ -436,21 +437,6 @@ def _fine_jobs(queries: torch.Tensor, refs: torch.Tensor, cand: torch.Tensor, ch
         yield queries[s:s + rows], refs[ids], local
 
 
-def _imap(executor, fn, jobs, window: int = 4):
-    """``fn`` over ``jobs`` (an iterable, consumed lazily), results in order; here, or on ``executor``
-    with at most ``window`` jobs in flight."""
-    if executor is None:
-        yield from map(fn, jobs)
-        return
-    pending = []
-    for job in jobs:
-        pending.append(executor.submit(fn, job))
-        if len(pending) >= window:
-            yield pending.pop(0).result()
-    for f in pending:
-        yield f.result()
-
-
 def _check_unit_clouds(x, name: str) -> torch.Tensor:
     if not isinstance(x, torch.Tensor) or x.dim() != 3 or x.shape[2] != 3 or x.shape[0] == 0 or x.shape[1] == 0:
         raise ValueError(f"`{name}` must be a (S, N, 3) float tensor with S, N >= 1, got "
@@ -509,7 +495,7 @@ def nearest_chamfer(
             cand = cand[keep].reshape(len(queries), -1)
     else:
         cand = _coarse_candidates(queries, refs, self_match, k, int(grid), executor)
-    parts = _imap(executor, _fine_job, _fine_jobs(queries, refs, cand, chunk))
+    parts = ordered_map(executor, _fine_job, _fine_jobs(queries, refs, cand, chunk))
     exact = torch.tensor([row for part in parts for row in part], dtype=torch.float64)
     best = exact.argmin(dim=1)
     dist = exact.gather(1, best[:, None])[:, 0]
@@ -519,13 +505,13 @@ def nearest_chamfer(
 def _coarse_candidates(queries, refs, self_match: bool, k: int, res: int, executor) -> torch.Tensor:
     """Indices ``(Q, k)`` of the references with the smallest coarse chamfer estimates."""
     chunks = lambda x: ((x[s:s + _REF_CHUNK], res) for s in range(0, len(x), _REF_CHUNK))  # noqa: E731
-    parts = list(_imap(executor, _coarse_job, chunks(queries)))
+    parts = list(ordered_map(executor, _coarse_job, chunks(queries)))
     hq, dq = torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
     best_val = torch.full((len(queries), 0), math.inf)
     best_idx = torch.zeros((len(queries), 0), dtype=torch.long)
     ref_parts = [(hq, dq)] if self_match else None
     start = 0
-    for hr, dr in (ref_parts or _imap(executor, _coarse_job, chunks(refs))):
+    for hr, dr in (ref_parts or ordered_map(executor, _coarse_job, chunks(refs))):
         est = hq @ dr.T + dq @ hr.T  # (Q, chunk): queries to refs + refs to queries
         cols = torch.arange(start, start + est.shape[1])
         if self_match:
