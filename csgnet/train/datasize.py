@@ -11,6 +11,7 @@ from typing import Callable, Sequence
 import lightning as L
 
 from .supervised import CSGDataModule, CSGNetModule
+from .sweep import one_epoch_trainer
 
 __all__ = ["data_size_runs", "MAX_DATASIZE_STEPS"]
 
@@ -33,9 +34,7 @@ def data_size_runs(data_dir: str, fractions: Sequence[float], steps: int, dim: i
         module = CSGNetModule(dim=dim, stack=stack, size=size, lr=lr, log_images=0, seed=seed)
         data = CSGDataModule(dim=dim, data_dir=data_dir, batch_size=batch_size, steps_per_epoch=int(steps),
                              val_per_length=2, seed=seed, train_fraction=float(f))
-        trainer = L.Trainer(max_epochs=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
-                            enable_model_summary=False, num_sanity_val_steps=0, limit_val_batches=1,
-                            accelerator="cpu", devices=1)
+        trainer = one_epoch_trainer(limit_val_batches=1)  # one small validation batch: the lr schedule reads it
         trainer.fit(module, datamodule=data)
         n = sum(t.shape[0] for t in data.train_tables.values())
         say(f"fraction {f:g}: {n} training programs, {steps} batches done")

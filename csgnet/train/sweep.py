@@ -18,10 +18,18 @@ import torch
 from ..inference import load_model
 from .reinforce import ReinforceModule, TargetDataModule
 
-__all__ = ["reward_sweep", "MAX_SWEEP_STEPS"]
+__all__ = ["reward_sweep", "one_epoch_trainer", "MAX_SWEEP_STEPS"]
 
 #: Most optimiser steps of one run of the sweep.
 MAX_SWEEP_STEPS = 100_000
+
+
+def one_epoch_trainer(**kwargs) -> L.Trainer:
+    """A quiet CPU trainer for one epoch of a study's run: no logger, checkpoints, progress bar or sanity check
+    (``kwargs`` add to or override these settings)."""
+    settings = dict(max_epochs=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
+                    enable_model_summary=False, num_sanity_val_steps=0, accelerator="cpu", devices=1)
+    return L.Trainer(**{**settings, **kwargs})
 
 
 def reward_sweep(init: str, gammas: Sequence[float], steps: int, train_images: np.ndarray, batch_size: int = 64,
@@ -48,9 +56,8 @@ def reward_sweep(init: str, gammas: Sequence[float], steps: int, train_images: n
         module = ReinforceModule(init=str(init), gamma=float(g), lr=lr, log_images=0, seed=seed)
         data = TargetDataModule.from_arrays(train_images, train_images[:batch_size], batch_size=batch_size,
                                             steps_per_epoch=int(steps), seed=seed)
-        trainer = L.Trainer(max_epochs=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
-                            enable_model_summary=False, num_sanity_val_steps=0, limit_val_batches=0,
-                            accelerator="cpu", devices=1, accumulate_grad_batches=int(accumulate), gradient_clip_val=10.0, gradient_clip_algorithm="norm")
+        trainer = one_epoch_trainer(limit_val_batches=0, accumulate_grad_batches=int(accumulate),
+                                    gradient_clip_val=10.0, gradient_clip_algorithm="norm")
         trainer.fit(module, datamodule=data)
         model = copy.deepcopy(module.model).eval()
         say(f"gamma {g:g}: {steps} batches done")
