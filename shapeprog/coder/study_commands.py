@@ -4,7 +4,9 @@ its Tables 2 and 3 (Table 4's ablations and perturbation FD, noisy input, sampli
 from __future__ import annotations
 
 import multiprocessing
+import random
 import sys
+from types import SimpleNamespace
 from concurrent.futures import ProcessPoolExecutor
 
 from shapeio.results import column, make_result
@@ -13,7 +15,12 @@ from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, add_category, add_command, a
                    float_in, int_at_least, refuse_existing, seed, write_json)
 from ..fit import MAX_LR
 from . import data, tables
+from ..vae.genmetrics import frechet_distance
 from .config import Config
+from .execute import corners, order
+from .lang import Num, substitute
+from .objective import naive_program, naive_summary
+from .studies import PieceSampler, execute_corners, free_numbers, noisy, perturbation_fd, shape_features
 from .search import WAKE_STEP_BUDGET
 
 
@@ -28,7 +35,6 @@ def _pool(workers: int, network: bool):
 
 def cmd_ablation(args) -> int:
     from . import ablation  # lazy: loaded when the command runs
-    from .objective import naive_summary
 
     refuse_existing([args.json], args.overwrite)
     rows = args.rows or list(ablation.DEFAULT_ROWS)
@@ -83,8 +89,6 @@ def cmd_ablation(args) -> int:
 
 def _naive_programs(prims_list):
     """The naive programs (every number a literal) of primitive sets."""
-    from .lang import Num, substitute
-    from .objective import naive_program
 
     out = []
     for prims in prims_list:
@@ -95,22 +99,23 @@ def _naive_programs(prims_list):
 
 def _heldout_features(category: str, heldout: int, seed: int):
     """The PointNet features of the first ``heldout`` held-out shapes, and how many."""
-    from .execute import corners
-    from .studies import shape_features
 
     recs = data.load(category, "heldout")[:heldout]
     return shape_features([corners(r.prims) for r in recs], seed=seed), len(recs)
 
 
-def cmd_perturbation(args) -> int:
-    from .studies import free_numbers, perturbation_fd
-
-    refuse_existing([args.json], args.overwrite)
+def _shipped_run(category: str):
+    """The shipped discovery run of ``category`` (its library and programs) and the data set's shapes by key."""
     try:
-        run = tables.shipped(args.category)
+        run = tables.shipped(category)
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
-    recs = {r.key: r for r in data.load(args.category, "all")}
+    return run, {r.key: r for r in data.load(category, "all")}
+
+
+def cmd_perturbation(args) -> int:
+    refuse_existing([args.json], args.overwrite)
+    run, recs = _shipped_run(args.category)
     programs = list(run.programs[:args.shapes])
     naive = _naive_programs(recs[k].prims for k in run.keys[:args.shapes])
     ref, n_ref = _heldout_features(args.category, args.heldout, args.seed)
@@ -141,12 +146,6 @@ def cmd_perturbation(args) -> int:
 
 
 def cmd_noise(args) -> int:
-    import random
-    from types import SimpleNamespace
-
-    from .execute import order
-    from .studies import noisy
-
     refuse_existing([args.json], args.overwrite)
     try:
         run = tables.shipped(args.category)
@@ -181,17 +180,8 @@ def cmd_noise(args) -> int:
 
 
 def cmd_sample(args) -> int:
-    import random
-
-    from .studies import PieceSampler, execute_corners, shape_features
-    from ..vae.genmetrics import frechet_distance
-
     refuse_existing([args.json], args.overwrite)
-    try:
-        run = tables.shipped(args.category)
-    except ValueError as e:
-        raise SystemExit(f"error: {e}") from None
-    recs = {r.key: r for r in data.load(args.category, "all")}
+    run, recs = _shipped_run(args.category)
     ref, n_ref = _heldout_features(args.category, args.heldout, args.seed)
     rows = []
     for name, progs in (("no abstractions (naive programs)", _naive_programs(recs[k].prims for k in run.keys)),
