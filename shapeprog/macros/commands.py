@@ -19,6 +19,7 @@ from ..cli import (add_result_options, MAX_SECONDS_OPTION, MAX_WORKERS, Program,
                    refuse_inputs, seed, write_json)
 from .api import collection
 from .api import refactor
+from .baseline import baseline_library
 from .discover import discover, prior_rounds, rounds_line
 from .state import Discovery, Nodes
 from .config import load_config
@@ -76,6 +77,8 @@ def cmd_discover(args) -> int:
         nodes, ids = merged_collection(args.category, args.split, args.limit, args.seed, executor=pool,
                                        max_orders=cfg["abs_order_num"])
         log(f"{', '.join(args.category)}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
+        if args.baseline:
+            return _write_baseline(out, args, nodes, ids, command, t0)
         start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior, args.start_from)
         state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
                          stop_after=args.stop_after, start=start)
@@ -93,6 +96,18 @@ def cmd_discover(args) -> int:
               f"{args.workers} worker(s)\n")
     atomic_write(out / "library.txt", header + lib.to_text())
     print(f"wrote {out / 'library.txt'} ({len(lib.macros)} macros)")
+    return 0
+
+
+def _write_baseline(out: Path, args, nodes: Nodes, ids: list, command: str, t0: float) -> int:
+    """The paper's Baseline macros of the collected sub-programs, written as ``library.txt``."""
+    lib = baseline_library([ls[0] for ls in nodes.lines])
+    header = (f"# ShapeMOD Baseline macros ({', '.join(args.category)}), {len(lib.macros)} macros, "
+              f"|L| = {len(lib)}\n# command: {command}\n"
+              f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}), sub-programs: {len(nodes.keys)}\n"
+              f"# time: {time.time() - t0:.0f} s on {platform.machine()}, {os.cpu_count()} CPUs\n")
+    atomic_write(out / "library.txt", header + lib.to_text())
+    print(f"wrote {out / 'library.txt'} ({len(lib.macros)} baseline macros)")
     return 0
 
 
@@ -338,6 +353,9 @@ def register(sub) -> None:
                    help="processes for the searches (1: none)")
     d.add_argument("--stop-after", type=float_in(0, MAX_SECONDS_OPTION),
                    help="seconds after which no new round starts")
+    d.add_argument("--baseline", action="store_true",
+                   help="write the paper's Baseline macros (frequent line sequences, constants where the corpus "
+                        "agrees; supplement B) instead of searching")
     d.add_argument("--start-from", metavar="LIBRARY",
                    help="continue from a library (a shipped category's or a file) when --out holds no state: "
                         "its macros are L, the rounds its header records count toward --rounds, and the "
