@@ -13,12 +13,12 @@ Example:
     >>> from shapeprog.lang import parse
     >>> from shapeprog.vae.model import VAE
     >>> from shapeprog.vae.vectors import program_to_tree
-    >>> tree = program_to_tree(parse("bbox = Cuboid(1.0, 1.0, 1.0, True)\\n"
-    ...     "cube0 = Cuboid(0.5, 0.25, 0.5, True)\\nattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n"))
-    >>> batch = TreeBatch([tree, tree])
+    >>> box = "bbox = Cuboid(1.0, 1.0, 1.0, True)\\n"  # trees of any sizes share a batch
+    >>> seat = box + "cube0 = Cuboid(0.5, 0.25, 0.5, True)\\nattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n"
+    >>> batch = TreeBatch([program_to_tree(parse(text)) for text in (box, seat)])
     >>> total, terms = batch_loss(batch_forward(VAE(hidden_dim=32), batch, sample=False), batch)
-    >>> tuple(total.shape), tuple(terms["kl"].shape), batch.size, batch.num_nodes
-    ((2,), (2,), 2, 2)
+    >>> tuple(total.shape), tuple(terms["kl"].shape), batch.size, batch.num_nodes, batch.targets.shape[0]
+    ((2,), (2,), 2, 2, 6)
 """
 from __future__ import annotations
 
