@@ -74,6 +74,8 @@ _ARG_FIELDS = {
     Reflect: ("a", "axis"),
     Translate: ("a", "axis", "n", "d"),
 }
+#: The statement fields that hold cuboid names.
+_NAME_FIELDS = ("a", "b", "c")
 _FLOAT_RANGE = {"l": (MIN_DIM, MAX_DIM), "h": (MIN_DIM, MAX_DIM), "w": (MIN_DIM, MAX_DIM)}
 
 
@@ -91,13 +93,12 @@ def _range(lo: float, hi: float, v: float) -> tuple[float, float]:
 
 
 def _head(s) -> str:
+    """A statement without its values: ``cube0 = Cuboid``, ``attach(cube0, bbox)``, ``reflect(cube1)``: its
+    cuboid-name arguments, in :data:`_ARG_FIELDS` order."""
     if isinstance(s, Cuboid):
         return f"{s.name} = Cuboid"
-    if isinstance(s, Attach):
-        return f"attach({s.a}, {s.b})"
-    if isinstance(s, Squeeze):
-        return f"squeeze({s.a}, {s.b}, {s.c})"
-    return f"{type(s).__name__.lower()}({s.a})"
+    names = [f for f in _ARG_FIELDS[type(s)] if f in _NAME_FIELDS]
+    return f"{type(s).__name__.lower()}({', '.join(getattr(s, f) for f in names)})"
 
 
 # ----------------------------------------------------------------------------- ShapeAssembly
