@@ -6,9 +6,14 @@ import (they do not import each other, and the file-format layer ``shapeio`` hol
 * :mod:`shapeedit.server`: the lazy import of the browser library ``viser`` (the ``editor`` extra), the
   port check, a server that answers only this machine's pages, the command's start and stop.
 * :mod:`shapeedit.camera`: a camera pose that frames a shape's bounding box in the 3D view.
+* :mod:`shapeedit.control`: the kinds of control, the check of a value against a control's kind, range and
+  choices (:class:`~shapeedit.control.BaseControl`) and a page widget's value made what it takes
+  (:func:`~shapeedit.control.page_value`). Standard library only.
+* :mod:`shapeedit.page`: :class:`~shapeedit.page.EditorPage`, what both browser pages do: the page's head
+  (status, error, undo / redo / reset and export buttons), the history moves, export, "Run text", the address.
 
-Importing this package imports neither ``viser`` nor ``websockets``; the page code lives in each system's
-``editor`` package.
+Importing this package imports neither ``viser`` nor ``websockets``; what each page shows and its controls
+live in each system's ``editor`` package.
 """
 from .camera import CameraPose, frame_box, show_pose
 from .history import MAX_HISTORY, History, UndoableSession

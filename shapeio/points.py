@@ -95,6 +95,41 @@ def _finite(pts: np.ndarray, where) -> np.ndarray:
     return out
 
 
+def _text_points(lines: Iterable[str], where, form: str, numbers) -> np.ndarray:
+    """The points of a text cloud as ``(N, 3) float32``: ``numbers(line)`` gives a line's number fields (the
+    first three are the point, further ones are ignored), or None for a line that holds no point; ``form``
+    (``'x y z'``) names a point line in the errors, which name ``where:line``."""
+    pts = []
+    for lineno, line in enumerate(lines, 1):
+        parts = numbers(line)
+        if parts is None:
+            continue
+        try:
+            if len(parts) < 3:
+                raise ValueError
+            xyz = [float(parts[0]), float(parts[1]), float(parts[2])]
+        except ValueError:
+            raise InputError(f"{where}:{lineno}: expected {form!r}, got {line.strip()[:80]!r}") from None
+        if not all(abs(v) <= _FLOAT32_MAX for v in xyz):  # False for NaN
+            raise InputError(f"{where}:{lineno}: the coordinates {line.strip()[:80]!r} are not finite float32 numbers")
+        if len(pts) == MAX_POINTS:
+            raise InputError(f"{where}:{lineno}: more than MAX_POINTS = {MAX_POINTS} points")
+        pts.append(xyz)
+    if not pts:
+        raise InputError(f"{where}: no {form!r} line found")
+    return np.asarray(pts, dtype=np.float32)
+
+
+def _obj_numbers(line: str) -> list[str] | None:
+    parts = line.split()
+    return parts[1:] if parts and parts[0] == "v" else None
+
+
+def _xyz_numbers(line: str) -> list[str] | None:
+    parts = line.split("#", 1)[0].replace(",", " ").split()
+    return parts or None
+
+
 def obj_vertices(lines: Iterable[str], where) -> np.ndarray:
     """The ``v x y z`` points of OBJ text ``lines`` as ``(N, 3) float32``; errors name ``where:line``.
 
@@ -102,50 +137,13 @@ def obj_vertices(lines: Iterable[str], where) -> np.ndarray:
         InputError: a ``v`` line without three numbers, a NaN or infinite coordinate, more than
             :data:`MAX_POINTS` points, or no ``v`` line at all.
     """
-    pts = []
-    for lineno, line in enumerate(lines, 1):
-        parts = line.split()
-        if not parts or parts[0] != "v":
-            continue
-        try:
-            if len(parts) < 4:
-                raise ValueError
-            xyz = [float(parts[1]), float(parts[2]), float(parts[3])]
-        except ValueError:
-            raise InputError(f"{where}:{lineno}: expected 'v x y z', got {line.strip()[:80]!r}") from None
-        if not all(abs(v) <= _FLOAT32_MAX for v in xyz):  # False for NaN
-            raise InputError(f"{where}:{lineno}: the coordinates {line.strip()[:80]!r} are not finite float32 numbers")
-        if len(pts) == MAX_POINTS:
-            raise InputError(f"{where}:{lineno}: more than MAX_POINTS = {MAX_POINTS} points")
-        pts.append(xyz)
-    if not pts:
-        raise InputError(f"{where}: no 'v x y z' line found")
-    return np.asarray(pts, dtype=np.float32)
+    return _text_points(lines, where, "v x y z", _obj_numbers)
 
 
 def _xyz_points(lines: Iterable[str], where) -> np.ndarray:
     """Points of ``.xyz`` text: one point per line, ``x y z`` and any further columns (normals,
     colours), separated by spaces, tabs or commas; blank lines and ``#`` comments are skipped."""
-    pts = []
-    for lineno, line in enumerate(lines, 1):
-        text = line.split("#", 1)[0].replace(",", " ")
-        parts = text.split()
-        if not parts:
-            continue
-        try:
-            if len(parts) < 3:
-                raise ValueError
-            xyz = [float(parts[0]), float(parts[1]), float(parts[2])]
-        except ValueError:
-            raise InputError(f"{where}:{lineno}: expected 'x y z', got {line.strip()[:80]!r}") from None
-        if not all(abs(v) <= _FLOAT32_MAX for v in xyz):  # False for NaN
-            raise InputError(f"{where}:{lineno}: the coordinates {line.strip()[:80]!r} are not finite float32 numbers")
-        if len(pts) == MAX_POINTS:
-            raise InputError(f"{where}:{lineno}: more than MAX_POINTS = {MAX_POINTS} points")
-        pts.append(xyz)
-    if not pts:
-        raise InputError(f"{where}: no 'x y z' line found")
-    return np.asarray(pts, dtype=np.float32)
+    return _text_points(lines, where, "x y z", _xyz_numbers)
 
 
 def _npy_points(path: Path) -> np.ndarray:

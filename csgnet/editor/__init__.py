@@ -29,7 +29,6 @@ Example:
 from __future__ import annotations
 
 import io
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +37,7 @@ from typing import Mapping, Union
 import numpy as np
 
 from shapeedit import History, UndoableSession, export_stem
+from shapeedit.control import CHOICE, INT, BaseControl, page_value
 from shapeio.files import write_new_set
 
 from .. import primitives as P
@@ -46,7 +46,6 @@ from ..lang import OPERATORS, Draw, Op, ParseError, Program, parse
 __all__ = ["CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls", "page_value",
            "render_png_bytes"]
 
-INT, CHOICE = "int", "choice"
 #: Side of exported PNGs: the 64-pixel canvas upscaled by this factor.
 PNG_SCALE = 4
 
@@ -70,44 +69,28 @@ class CSGEditError(ParseError):
 
 
 @dataclass(frozen=True)
-class Control:
-    """One free parameter of a CSG program.
+class Control(BaseControl):
+    """One free parameter of a CSG program (:class:`shapeedit.control.BaseControl`: kind, value, range, choices
+    and the check of a value) and its place in the printed program.
 
     Attributes:
         name: ``'1:square.r'`` (draw index, primitive, parameter), ``'1:square.kind'``, ``'0:op'``.
         kind: ``'int'`` or ``'choice'``.
         value: the current value (an int, a primitive's name such as ``'sphere'``, or an operator).
-        low, high: the range of an int (both included).
+        low, high: the range of an int (both included, ints).
         choices: the values of a choice.
-        label: a short description for people.
         position: 0-based character offset of the value's token in the printed program.
         token: the index in ``program.tokens`` of the draw or operator it changes.
     """
 
-    name: str
-    kind: str
-    value: Value
-    low: int | None = None
-    high: int | None = None
-    choices: tuple = ()
-    label: str = ""
     position: int = 0
     token: int = 0
 
     def check(self, value, program_text: str = "") -> Value:
-        def bad(reason):
-            return CSGEditError(reason, program_text, self.position, str(self.value), control=self.name, value=value)
-
-        if self.kind == INT:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or (
-                    isinstance(value, float) and not (math.isfinite(value) and value.is_integer())):
-                raise bad(f"expected an integer, got {type(value).__name__} {value!r}")
-            if not self.low <= value <= self.high:
-                raise bad(f"value {value!r} is outside [{self.low}, {self.high}]")
-            return int(value)
-        if not isinstance(value, str) or value not in self.choices:
-            raise bad(f"{value!r} is not one of {', '.join(self.choices)}")
-        return value
+        """``value`` in this control's type, or :class:`CSGEditError` at the token (wrong type, not an integer,
+        out of range, not a choice)."""
+        return self.checked(value, lambda reason: CSGEditError(reason, program_text, self.position, str(self.value),
+                                                               control=self.name, value=value))
 
 
 def _specs(program: Program) -> list[Control]:
@@ -180,23 +163,6 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
         raise CSGEditError(e.reason, e.program, e.position, e.token) from None
     except ValueError as e:
         raise CSGEditError(str(e), text, 0, "") from None
-
-
-def page_value(control: "Control | None", value):
-    """A value as a page's widget sent it, made what :meth:`Control.check` takes: an int slider's finite number
-    rounded to the nearest integer. Anything else (a drop-down's choice, another type, a non-finite number, a
-    control the page does not know) is passed on unchanged, for the check to refuse with its located
-    :class:`CSGEditError`.
-
-    Example:
-        >>> c = Control("1:square.r", INT, 20, low=0, high=64)
-        >>> page_value(c, 12.4), page_value(c, "12")
-        (12, '12')
-    """
-    if (control is None or control.kind != INT or isinstance(value, bool) or not isinstance(value, (int, float))
-            or not math.isfinite(value)):
-        return value
-    return int(round(value))
 
 
 def render_png_bytes(canvas: np.ndarray, scale: int = PNG_SCALE) -> bytes:

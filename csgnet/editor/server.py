@@ -9,13 +9,12 @@ program text (editable, "Run text"), the last error, and undo / redo / reset / e
 """
 from __future__ import annotations
 
-import threading
 import time
-from pathlib import Path
 
 import numpy as np
 
-from shapeedit import check_port, frame_box, import_viser, show_pose, viser_server
+from shapeedit import frame_box, show_pose
+from shapeedit.page import EditorPage
 
 from . import CHOICE, CSGEditSession, Control, page_value
 
@@ -31,8 +30,9 @@ VIEW_DIRECTION_3D = (1.0, -1.2, 0.9)
 VOXEL_CENTRE, VOXEL_HALF = 31.5, 32.0
 
 
-class CSGEditorApp:
-    """A running CSG editor page (see :class:`shapeprog.editor.server.EditorApp` for the ShapeAssembly one).
+class CSGEditorApp(EditorPage):
+    """A running CSG editor page (see :class:`shapeprog.editor.server.EditorApp` for the ShapeAssembly one; what
+    both share is :class:`shapeedit.page.EditorPage`'s).
 
     Args:
         session: the program to edit.
@@ -43,37 +43,21 @@ class CSGEditorApp:
 
     def __init__(self, session: CSGEditSession, host: str = "127.0.0.1", port: int = 8080, export_dir=".",
                  source_text: str | None = None):
-        check_port(port)
-        import_viser()
-        self.export_dir = Path(export_dir)
-        if not self.export_dir.is_dir():
-            raise FileNotFoundError(f"{export_dir}: the export folder does not exist")
-        self.session = session
-        self.source_text = session.text if source_text is None else source_text
-        self.lock = threading.RLock()
-        self._syncing = False
-        self._handles: dict = {}
+        super().__init__(session, host, port, export_dir, source_text)
         self._names: tuple = ()
-        self.state: dict = {"version": 0}
-        self.server = viser_server(host, port)
         if session.dim == 2:  # viser draws an image with its top row towards -y (OpenCV's camera frame)
             self.server.scene.set_up_direction("-y")
-        gui = self.server.gui
-        gui.add_markdown(f"**CSG program ({session.dim}D)**")
-        self.status = gui.add_markdown("")
-        self.error_md = gui.add_markdown("")
+        self._add_head(f"**CSG program ({session.dim}D)**", "Export text and render")
         self.image = None
         if session.dim == 2:
             self.image = self.server.scene.add_image("/render", self._picture(), PLANE_SIZE, PLANE_SIZE, format="png",
                                                      cast_shadow=False, receive_shadow=False)
-        row = gui.add_button_group("Edit", ("Undo", "Redo", "Reset"))
-        row.on_click(lambda e: {"Undo": self.undo, "Redo": self.redo, "Reset": self.reset}[e.target.value]())
-        gui.add_button("Export text and render", hint=f"into {self.export_dir}").on_click(lambda _: self.export())
+        gui = self.server.gui
         self.text_box = gui.add_text("Program", self.source_text)
         gui.add_button("Run text").on_click(lambda _: self.run_text())
         self.folder = None
         with self.lock:
-            self._rebuild()
+            self._rebuild_controls()
             self._draw()
             self.frame()
 
@@ -85,7 +69,7 @@ class CSGEditorApp:
         img = np.repeat(np.repeat(img, IMAGE_SCALE, 0), IMAGE_SCALE, 1)
         return np.repeat(img[:, :, None], 3, 2)
 
-    def _rebuild(self) -> None:
+    def _rebuild_controls(self) -> None:
         if self.folder is not None:
             self.folder.remove()
         gui = self.server.gui
@@ -93,13 +77,9 @@ class CSGEditorApp:
         self._handles = {}
         cs = self.session.controls()
         self._names = tuple(c.name for c in cs)
-        self._syncing = True
-        try:
-            with self.folder:
-                for c in cs:
-                    self._handles[c.name] = self._add(c)
-        finally:
-            self._syncing = False
+        with self._quiet(), self.folder:
+            for c in cs:
+                self._handles[c.name] = self._add(c)
 
     def _add(self, c: Control):
         gui = self.server.gui
@@ -110,47 +90,25 @@ class CSGEditorApp:
         h.on_update(lambda e, name=c.name: self._changed(name, e.target.value))
         return h
 
-    def _sync(self) -> None:
+    def _sync_values(self) -> None:
         cs = self.session.controls()
         if tuple(c.name for c in cs) != self._names:
-            self._rebuild()
+            self._rebuild_controls()
             return
-        self._syncing = True
-        try:
-            for c in cs:
-                if self._handles[c.name].value != c.value:
-                    self._handles[c.name].value = c.value
-        finally:
-            self._syncing = False
+        with self._quiet():
+            self._put_values(cs)
 
-    def _changed(self, name: str, value) -> None:
-        if self._syncing:
-            return
-        with self.lock:
-            t0 = time.perf_counter()
-            control = next((c for c in self.session.controls() if c.name == name), None)
-            ok = self.session.set({name: page_value(control, value)})  # NaN is left for the control's check
-            self._sync()
-            self._draw(t0 if ok else None)
+    def _set(self, name: str, value, t0: float) -> None:
+        control = next((c for c in self.session.controls() if c.name == name), None)
+        ok = self.session.set({name: page_value(control, value)})  # NaN is left for the control's check
+        self._sync_values()
+        self._draw(t0 if ok else None)
 
-    def _step(self, move) -> bool:
-        with self.lock:
-            done = move()
-            self._sync()
-            self._draw()
-            return done
+    def _redraw(self) -> None:
+        self._draw()
 
-    def undo(self) -> bool:
-        return self._step(self.session.undo)
-
-    def redo(self) -> bool:
-        return self._step(self.session.redo)
-
-    def reset(self) -> bool:
-        with self.lock:
-            done = self._step(self.session.reset)
-            self.frame()
-            return done
+    def _show(self) -> None:
+        self._draw()
 
     def frame(self) -> None:
         """Point the view at the render (2D: the image plane, straight on; 3D: the shape's bounding box, or
@@ -169,30 +127,6 @@ class CSGEditorApp:
                              direction=VIEW_DIRECTION_3D, up=(0, 0, 1))
         show_pose(self.server, pose)
         self.state["camera"] = pose
-
-    def export(self) -> list[Path]:
-        with self.lock:
-            try:
-                paths = self.session.export(self.export_dir)
-            except (OSError, ValueError) as e:
-                self.session.error = e
-                self._draw()
-                return []
-            self.status.content = "wrote " + ", ".join(f"`{p.name}`" for p in paths)
-            self.state["exported"] = [str(p) for p in paths]
-            return paths
-
-    def run_text(self, text: str | None = None) -> bool:
-        with self.lock:
-            if text is not None:
-                self.text_box.value = text
-            ok = self.session.set_text(self.text_box.value)
-            if ok:
-                self._rebuild()
-            self._draw()
-            if ok:
-                self.frame()
-            return ok
 
     def _draw(self, t0: float | None = None) -> None:
         s = self.session
@@ -218,14 +152,3 @@ class CSGEditorApp:
         self.state.update(version=self.state["version"] + 1, text=s.text,
                           canvas=None if s.canvas is None else np.asarray(s.canvas).copy(),
                           error=None if s.error is None else str(s.error))
-
-    @property
-    def url(self) -> str:
-        return f"http://{self.server.get_host()}:{self.server.get_port()}"
-
-    def handle(self, name: str):
-        """The GUI handle of control ``name`` (setting its ``value`` acts as a change in the page)."""
-        return self._handles[name]
-
-    def stop(self) -> None:
-        self.server.stop()

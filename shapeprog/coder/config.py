@@ -51,7 +51,7 @@ class Config:
         n_dreams, dream_timeout: valid dreams per function (N_D, 10,000) and seconds per function (1,800).
         train_lr, train_batch, train_epochs, train_patience, train_min_delta, train_holdout,
             train_seconds, dropout, train_bucket: the network's training (:class:`shapeprog.coder.train.TrainConfig`;
-            the paper's values by default, ``train_seconds`` per round).
+            its defaults, the paper's values, are theirs; ``train_seconds`` per round).
         wake_batch, wake_batches, wake_step_budget: samples per batch (64), batches per search step at
             most, and the step's budget in batch-primitives (:func:`~shapeprog.coder.search.step_batches`;
             the paper's 1 s per step as a count). wake_seconds: a safety cap per search step, not the budget
@@ -79,15 +79,15 @@ class Config:
     wake: str = "refactor"
     n_dreams: int = N_DREAMS
     dream_timeout: float = DREAM_TIMEOUT
-    train_lr: float = 1e-4
-    train_batch: int = 64
-    train_epochs: int = 300
-    train_patience: int = 30
-    train_min_delta: float = 0.025
-    train_holdout: float = 0.1
-    train_seconds: float | None = 12_000.0
-    dropout: float = 0.5
-    train_bucket: bool = True
+    train_lr: float = TrainConfig.lr
+    train_batch: int = TrainConfig.batch
+    train_epochs: int = TrainConfig.epochs
+    train_patience: int = TrainConfig.patience
+    train_min_delta: float = TrainConfig.min_delta
+    train_holdout: float = TrainConfig.holdout
+    train_seconds: float | None = TrainConfig.max_seconds
+    dropout: float = TrainConfig.dropout
+    train_bucket: bool = TrainConfig.bucket
     wake_batch: int = WAKE_BATCH
     wake_batches: int = WAKE_BATCHES
     wake_step_budget: int | None = WAKE_STEP_BUDGET

@@ -1,12 +1,13 @@
 """The editors' controls: :class:`Control` (one free parameter of a program: kind, range, value, place in the
-text), :func:`page_value` (a value from the browser page, checked) and what the control builders of
-:mod:`shapeprog.editor.controls` and :mod:`shapeprog.editor.macro_controls` share."""
+text) and what the control builders of :mod:`shapeprog.editor.controls` and
+:mod:`shapeprog.editor.macro_controls` share. The kinds of control and :func:`page_value` (a value from the
+browser page, made what the check takes) are :mod:`shapeedit.control`'s, which the CSG editor shares."""
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
-from typing import Union
+
+from shapeedit.control import BOOL, CHOICE, FLOAT, INT, KINDS, PAGE_DECIMALS, BaseControl, Value, page_value
 
 from ..errors import EditError
 from ..lang import Attach, Cuboid, Reflect, Squeeze, Translate
@@ -14,42 +15,33 @@ from ..lang import Attach, Cuboid, Reflect, Squeeze, Translate
 __all__ = ["BOOL", "CHOICE", "FLOAT", "INT", "KINDS", "MAX_DIM", "MIN_DIM", "PAGE_DECIMALS", "Control", "Value",
            "page_value"]
 
-FLOAT, INT, BOOL, CHOICE = "float", "int", "bool", "choice"
-#: The kinds of control.
-KINDS = (FLOAT, INT, BOOL, CHOICE)
 #: Smallest cuboid extent a control offers (the executor's valid range, as :func:`shapeprog.fit.fit`).
 MIN_DIM = 0.01
 #: Largest cuboid extent a control offers (corpus maximum: 2.788); a larger current value widens it.
 MAX_DIM = 4.0
 
-Value = Union[float, int, bool, str]
-
 
 @dataclass(frozen=True)
-class Control:
-    """One free parameter of a program.
+class Control(BaseControl):
+    """One free parameter of a program (:class:`shapeedit.control.BaseControl`: kind, value, range, choices
+    and the check of a value) and its place in the text.
 
     Attributes:
         name: unique within the program (``Program_1:3:attach.y2``; ``2:four_legs.s`` for macro programs).
         kind: ``'float'``, ``'int'``, ``'bool'`` or ``'choice'``.
-        value: the current value.
-        low, high: the range of a float or int (None otherwise), both included.
-        choices: the values of a choice (empty otherwise).
         label: a short description for people (``'line 5 attach(cube0, bbox) y2'``).
         line, column: 1-based place of the value's token in the printed program.
         lines: 1-based lines whose text the control changes (two for a shared sub-program bbox).
         cuboids: indices (executed leaf order) of the leaf cuboids the control moves: those whose
             corners have a non-zero derivative with respect to it (float and int), or those that the
             same line's floats move or the line creates (bool and choice). Empty when not computed.
+
+    Example:
+        >>> c = Control("Program_0:1:cuboid.h", FLOAT, 0.5, low=0.01, high=4.0)
+        >>> page_value(c, 0.30000000000000004), c.check(page_value(c, 0.30000000000000004))
+        (0.3, 0.3)
     """
 
-    name: str
-    kind: str
-    value: Value
-    low: float | None = None
-    high: float | None = None
-    choices: tuple = ()
-    label: str = ""
     line: int = 1
     column: int = 1
     lines: tuple[int, ...] = ()
@@ -58,55 +50,8 @@ class Control:
     def check(self, value, file: str = "<edit>") -> Value:
         """``value`` in this control's type, or :class:`EditError` (wrong type, not finite, out of range,
         not a choice)."""
-        def bad(reason):
-            return EditError(reason, file, self.line, self.column, str(self.value), control=self.name, value=value)
-
-        if self.kind == FLOAT:
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise bad(f"expected a number, got {type(value).__name__} {value!r}")
-            v = float(value)
-            if not math.isfinite(v) or not self.low <= v <= self.high:
-                raise bad(f"value {value!r} is outside [{self.low!r}, {self.high!r}]")
-            return v
-        if self.kind == INT:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or (
-                    isinstance(value, float) and not (math.isfinite(value) and value.is_integer())):
-                raise bad(f"expected an integer, got {type(value).__name__} {value!r}")
-            v = int(value)
-            if not self.low <= v <= self.high:
-                raise bad(f"value {value!r} is outside [{int(self.low)}, {int(self.high)}]")
-            return v
-        if self.kind == BOOL:
-            if not isinstance(value, bool):
-                raise bad(f"expected True or False, got {type(value).__name__} {value!r}")
-            return value
-        if not isinstance(value, str) or value not in self.choices:
-            raise bad(f"{value!r} is not one of {', '.join(map(str, self.choices))}")
-        return value
-
-
-#: Decimals a float slider's value keeps (a browser's 0.30000000000000004 arrives as 0.3).
-PAGE_DECIMALS = 9
-
-
-def page_value(control: "Control | None", value):
-    """A value as a page's widget sent it, made what :meth:`Control.check` takes: a float slider's number rounded
-    to :data:`PAGE_DECIMALS` decimals, an int slider's to the nearest integer. Anything else (another type, a
-    non-finite number, a control the page does not know) is passed on unchanged, for the check to refuse with
-    its located :class:`EditError`.
-
-    Example:
-        >>> c = Control("Program_0:1:cuboid.h", FLOAT, 0.5, low=0.01, high=4.0)
-        >>> page_value(c, 0.30000000000000004), page_value(c, float("nan")) != page_value(c, float("nan"))
-        (0.3, True)
-    """
-    if control is None or isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        return value
-    if control.kind == FLOAT:
-        return round(float(value), PAGE_DECIMALS)
-    if control.kind == INT:
-        return int(round(value))
-    return value
+        return self.checked(value, lambda reason: EditError(reason, file, self.line, self.column, str(self.value),
+                                                            control=self.name, value=value))
 
 
 @dataclass(frozen=True)
@@ -129,6 +74,8 @@ _ARG_FIELDS = {
     Reflect: ("a", "axis"),
     Translate: ("a", "axis", "n", "d"),
 }
+#: The statement fields that hold cuboid names.
+_NAME_FIELDS = ("a", "b", "c")
 _FLOAT_RANGE = {"l": (MIN_DIM, MAX_DIM), "h": (MIN_DIM, MAX_DIM), "w": (MIN_DIM, MAX_DIM)}
 
 
@@ -146,13 +93,12 @@ def _range(lo: float, hi: float, v: float) -> tuple[float, float]:
 
 
 def _head(s) -> str:
+    """A statement without its values: ``cube0 = Cuboid``, ``attach(cube0, bbox)``, ``reflect(cube1)``: its
+    cuboid-name arguments, in :data:`_ARG_FIELDS` order."""
     if isinstance(s, Cuboid):
         return f"{s.name} = Cuboid"
-    if isinstance(s, Attach):
-        return f"attach({s.a}, {s.b})"
-    if isinstance(s, Squeeze):
-        return f"squeeze({s.a}, {s.b}, {s.c})"
-    return f"{type(s).__name__.lower()}({s.a})"
+    names = [f for f in _ARG_FIELDS[type(s)] if f in _NAME_FIELDS]
+    return f"{type(s).__name__.lower()}({', '.join(getattr(s, f) for f in names)})"
 
 
 # ----------------------------------------------------------------------------- ShapeAssembly

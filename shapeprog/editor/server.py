@@ -21,13 +21,12 @@ imported. The page shows:
 from __future__ import annotations
 
 import dataclasses
-import threading
 import time
-from pathlib import Path
 
 import numpy as np
 
-from shapeedit import check_port, frame_box, import_viser, show_pose, viser_server
+from shapeedit import frame_box, show_pose
+from shapeedit.page import EditorPage
 
 from ..geometry import CORNER_SIGNS, mesh_arrays
 from ..picture import VIEW_DIRECTION, part_colors
@@ -62,8 +61,8 @@ def _heads(cs: list[Control]) -> dict[int, str]:
     return {c.line: c.label.rsplit(" ", 1)[0] for c in cs}
 
 
-class EditorApp:
-    """A running editor page.
+class EditorApp(EditorPage):
+    """A running editor page (what it shares with the CSG editor's is :class:`shapeedit.page.EditorPage`'s).
 
     Args:
         session: the program to edit.
@@ -79,23 +78,12 @@ class EditorApp:
 
     def __init__(self, session: EditSession, host: str = "127.0.0.1", port: int = 8080, export_dir=".",
                  source_text: str | None = None):
-        check_port(port)
-        import_viser()
-        self.export_dir = Path(export_dir)
-        if not self.export_dir.is_dir():
-            raise FileNotFoundError(f"{export_dir}: the export folder does not exist")
+        super().__init__(session, host, port, export_dir, source_text)
         self.base = session  # the session as opened (a macro program's, when it is one)
-        self.session = session
-        self.source_text = source_text if source_text is not None else session.text
-        self.lock = threading.RLock()
-        self._syncing = False
-        self._handles: dict[str, object] = {}
         self._folders: dict[int, object] = {}
         self._signature = None
         self._line_nodes: list = []
         self._layout = None
-        self.state: dict = {"version": 0}
-        self.server = viser_server(host, port)
         self.server.scene.set_up_direction("+y")
         self.server.gui.configure_theme(control_width="large")
         self._build_static()
@@ -108,13 +96,7 @@ class EditorApp:
     def _build_static(self) -> None:
         gui = self.server.gui
         s = self.session
-        gui.add_markdown(f"**{s.file}**")
-        self.status = gui.add_markdown("")
-        self.error_md = gui.add_markdown("")
-        row = gui.add_button_group("Edit", ("Undo", "Redo", "Reset"))
-        row.on_click(lambda e: {"Undo": self.undo, "Redo": self.redo, "Reset": self.reset}[e.target.value]())
-        self.export_button = gui.add_button("Export text, OBJ and PNG", hint=f"into {self.export_dir}")
-        self.export_button.on_click(lambda _: self.export())
+        self._add_head(f"**{s.file}**", "Export text, OBJ and PNG")
         self.expanded = None
         if s.is_macro:
             self.expanded = gui.add_checkbox("Expanded base-language parameters", False)
@@ -124,7 +106,7 @@ class EditorApp:
         with gui.add_folder("Program text", expand_by_default=False):
             self.text_box = gui.add_text("Program", self.source_text, multiline=True)
             run = gui.add_button("Run text")
-            run.on_click(lambda _: self._run_text())
+            run.on_click(lambda _: self.run_text())
         self.controls_folder = None
 
     # -- controls
@@ -138,8 +120,7 @@ class EditorApp:
         self._signature = _signature(cs)
         gui = self.server.gui
         self.controls_folder = gui.add_folder("Parameters")
-        self._syncing = True
-        try:
+        with self._quiet():
             with self.controls_folder:
                 groups: dict[int, list[Control]] = {}
                 for c in self._controls.values():
@@ -155,8 +136,6 @@ class EditorApp:
             names = ("(none)",) + tuple(self._controls)
             self.highlight_pick.options = names
             self.highlight_pick.value = "(none)"
-        finally:
-            self._syncing = False
 
     def _add_control(self, c: Control):
         gui = self.server.gui
@@ -184,64 +163,35 @@ class EditorApp:
         if _signature(cs) != self._signature:
             self._rebuild_controls()
             return
-        self._syncing = True
-        try:
-            for c in cs:
-                h = self._handles.get(c.name)
-                if h is not None and h.value != c.value:
-                    h.value = c.value
+        with self._quiet():
+            self._put_values(cs)
             for line, head in _heads(cs).items():  # a new attach target is in its line's title
                 if self._folders[line].label != head:
                     self._folders[line].label = head
             self._controls = {c.name: c for c in cs}
-        finally:
-            self._syncing = False
 
     # -- events
-    def _changed(self, name: str, value) -> None:
-        if self._syncing:
-            return
-        with self.lock:
-            t0 = time.perf_counter()
-            c = self._controls.get(name)
-            value = page_value(c, value)  # a browser slider's 0.30000000000000004; NaN is left for the check
-            ok = self.session.set({name: value})
-            if not ok:
-                self._sync_values()
-                self._show()
-                return
-            if c is not None and c.kind == FLOAT:  # numbers only: the controls and the cuboids they move stay
-                self._controls[name] = dataclasses.replace(c, value=value)
-                self._draw(highlight=self._controls[name].cuboids, t0=t0)
-                return
-            # a new structure: the geometry first, then the cuboids each control moves (a backward pass per
-            # leaf) and the highlight
-            self._sync_values(cuboids=False)
-            self._draw(highlight=(), t0=t0)
-            self._controls = {c.name: c for c in self.session.controls()}
-            self._draw(highlight=self._controls[name].cuboids if name in self._controls else (), geometry=False)
-
-    def _step(self, move) -> bool:
-        with self.lock:
-            done = move()
+    def _set(self, name: str, value, t0: float) -> None:
+        c = self._controls.get(name)
+        value = page_value(c, value)  # a browser slider's 0.30000000000000004; NaN is left for the check
+        ok = self.session.set({name: value})
+        if not ok:
             self._sync_values()
-            self._draw(highlight=())
-            return done
+            self._show()
+            return
+        if c is not None and c.kind == FLOAT:  # numbers only: the controls and the cuboids they move stay
+            self._controls[name] = dataclasses.replace(c, value=value)
+            self._draw(highlight=self._controls[name].cuboids, t0=t0)
+            return
+        # a new structure: the geometry first, then the cuboids each control moves (a backward pass per
+        # leaf) and the highlight
+        self._sync_values(cuboids=False)
+        self._draw(highlight=(), t0=t0)
+        self._controls = {c.name: c for c in self.session.controls()}
+        self._draw(highlight=self._controls[name].cuboids if name in self._controls else (), geometry=False)
 
-    def undo(self) -> bool:
-        """The Undo button: False when there is nothing to undo."""
-        return self._step(self.session.undo)
-
-    def redo(self) -> bool:
-        """The Redo button: False when there is nothing to redo."""
-        return self._step(self.session.redo)
-
-    def reset(self) -> bool:
-        """The Reset button: back to the program as opened (undoable), framed again."""
-        with self.lock:
-            done = self._step(self.session.reset)
-            self.frame()
-            return done
+    def _redraw(self) -> None:
+        self._draw(highlight=())
 
     def frame(self) -> None:
         """Point the view at the shape and the target (their cuboids' bounding box; a unit box when there is
@@ -257,36 +207,6 @@ class EditorApp:
         pose = frame_box(low, high, direction=VIEW_DIRECTION, up=(0, 1, 0))
         show_pose(self.server, pose)
         self.state["camera"] = pose
-
-    def export(self) -> list[Path]:
-        """The Export button: text, OBJ and PNG as new files in the export folder (the page shows their names
-        or the error)."""
-        with self.lock:
-            try:
-                paths = self.session.export(self.export_dir)
-            except (OSError, ValueError) as e:
-                self.session.error = e
-                self._show()
-                return []
-            self.state["exported"] = [str(p) for p in paths]
-            self.status.content = "wrote " + ", ".join(f"`{p.name}`" for p in paths)
-            return paths
-
-    def run_text(self, text: str | None = None) -> bool:
-        """The Run text button: replace the program by the text box's text (or ``text``)."""
-        if text is not None:
-            self.text_box.value = text
-        return self._run_text()
-
-    def _run_text(self) -> bool:
-        with self.lock:
-            if self.session.set_text(self.text_box.value):
-                self._rebuild_controls()
-                self._draw(highlight=())
-                self.frame()
-                return True
-            self._show()
-            return False
 
     def _toggle_expanded(self) -> None:
         if self._syncing:
@@ -379,15 +299,3 @@ class EditorApp:
         if t0 is not None:
             self.state["update_ms"] = 1000 * (time.perf_counter() - t0)
         self._show()
-
-    # -- control from code
-    @property
-    def url(self) -> str:
-        return f"http://{self.server.get_host()}:{self.server.get_port()}"
-
-    def handle(self, name: str):
-        """The GUI handle of control ``name`` (setting its ``value`` acts as a change in the page)."""
-        return self._handles[name]
-
-    def stop(self) -> None:
-        self.server.stop()

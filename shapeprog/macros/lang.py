@@ -103,6 +103,21 @@ class _Toks:
         self.i += 1
         return t
 
+    def separated(self, item, end: str, empty: bool = False) -> list:
+        """What ``item()`` reads, repeated with ``,`` between, up to the punctuation ``end`` (taken too);
+        ``empty``: the list may be empty (``end`` comes at once)."""
+        out = []
+        if empty and self.peek() is not None and self.peek()[1] == end:
+            self.i += 1
+            return out
+        while True:
+            out.append(item())
+            t = self.take("punct", what=f"',' or {end!r}")
+            if t[1] == end:
+                return out
+            if t[1] != ",":
+                raise self.error(f"expected ',' or {end!r}, got {t[1]!r}", t)
+
     def end(self) -> None:
         if self.peek() is not None:
             t = self.peek()
@@ -159,37 +174,28 @@ def _parse_arg(ln: _Toks):
     return Linear(tuple(terms)), first
 
 
+def _parse_param(ln: _Toks) -> tuple:
+    """``name: type``; returns the name's and the type's tokens."""
+    pt = ln.take("name", what="a parameter name")
+    ln.take("punct", ":")
+    ty = ln.take("name", what="a type")
+    if ty[1] not in TYPES:
+        raise ln.error(f"unknown type {ty[1]!r} (expected one of {', '.join(TYPES)})", ty)
+    return pt, ty
+
+
 def _parse_call(ln: _Toks) -> tuple[Call, list, tuple, list]:
     """``[a, b =] f(args)``; returns the call, the first token of every argument, the function's
     token and the tokens of the names bound."""
-    rets, rtoks, is_assign = [], [], any(t[1] == "=" for t in ln.toks)
-    if is_assign:
-        while True:
-            rt = ln.take("name", what="a cuboid name")
-            rets.append(rt[1])
-            rtoks.append(rt)
-            t = ln.take("punct", what="',' or '='")
-            if t[1] == "=":
-                break
-            if t[1] != ",":
-                raise ln.error(f"expected ',' or '=', got {t[1]!r}", t)
+    rtoks = []
+    if any(t[1] == "=" for t in ln.toks):
+        rtoks = ln.separated(lambda: ln.take("name", what="a cuboid name"), "=")
     fn = ln.take("name", what="a function name")
     ln.take("punct", "(")
-    args, toks = [], []
-    if ln.peek() is not None and ln.peek()[1] == ")":
-        ln.i += 1
-    else:
-        while True:
-            a, t = _parse_arg(ln)
-            args.append(a)
-            toks.append(t)
-            t = ln.take("punct", what="',' or ')'")
-            if t[1] == ")":
-                break
-            if t[1] != ",":
-                raise ln.error(f"expected ',' or ')', got {t[1]!r}", t)
+    parsed = ln.separated(lambda: _parse_arg(ln), ")", empty=True)
     ln.end()
-    return Call(fn[1], tuple(args), tuple(rets)), toks, fn, rtoks
+    call = Call(fn[1], tuple(a for a, _ in parsed), tuple(t[1] for t in rtoks))
+    return call, [t for _, t in parsed], fn, rtoks
 
 
 def _coerce(call: Call, functions: Mapping[str, FunctionInfo]) -> Call:
@@ -286,24 +292,9 @@ def _parse(text: str, file: str, functions: Mapping[str, FunctionInfo] | None, p
             ln.take("name", "def")
             ntok = ln.take("name", what="a macro name")
             ln.take("punct", "(")
-            params: list[Param] = []
-            ptoks = []
-            if ln.peek() is not None and ln.peek()[1] == ")":
-                ln.i += 1
-            else:
-                while True:
-                    pt = ln.take("name", what="a parameter name")
-                    ln.take("punct", ":")
-                    ty = ln.take("name", what="a type")
-                    if ty[1] not in TYPES:
-                        raise ln.error(f"unknown type {ty[1]!r} (expected one of {', '.join(TYPES)})", ty)
-                    params.append(Param(pt[1], ty[1]))
-                    ptoks.append(pt)
-                    t = ln.take("punct", what="',' or ')'")
-                    if t[1] == ")":
-                        break
-                    if t[1] != ",":
-                        raise ln.error(f"expected ',' or ')', got {t[1]!r}", t)
+            pairs = ln.separated(lambda: _parse_param(ln), ")", empty=True)
+            params = [Param(pt[1], ty[1]) for pt, ty in pairs]
+            ptoks = [pt for pt, _ in pairs]
             ln.take("punct", ":")
             ln.end()
             for j, (p, pt) in enumerate(zip(params, ptoks)):  # name errors at the parameter

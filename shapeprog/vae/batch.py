@@ -13,12 +13,12 @@ Example:
     >>> from shapeprog.lang import parse
     >>> from shapeprog.vae.model import VAE
     >>> from shapeprog.vae.vectors import program_to_tree
-    >>> tree = program_to_tree(parse("bbox = Cuboid(1.0, 1.0, 1.0, True)\\n"
-    ...     "cube0 = Cuboid(0.5, 0.25, 0.5, True)\\nattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n"))
-    >>> batch = TreeBatch([tree, tree])
+    >>> box = "bbox = Cuboid(1.0, 1.0, 1.0, True)\\n"  # trees of any sizes share a batch
+    >>> seat = box + "cube0 = Cuboid(0.5, 0.25, 0.5, True)\\nattach(cube0, bbox, 0.5, 0.0, 0.5, 0.5, 0.0, 0.5)\\n"
+    >>> batch = TreeBatch([program_to_tree(parse(text)) for text in (box, seat)])
     >>> total, terms = batch_loss(batch_forward(VAE(hidden_dim=32), batch, sample=False), batch)
-    >>> tuple(total.shape), tuple(terms["kl"].shape), batch.size, batch.num_nodes
-    ((2,), (2,), 2, 2)
+    >>> tuple(total.shape), tuple(terms["kl"].shape), batch.size, batch.num_nodes, batch.targets.shape[0]
+    ((2,), (2,), 2, 2, 6)
 """
 from __future__ import annotations
 
@@ -100,10 +100,10 @@ def _commands_by_node(trees: list, width: int, cmd: slice) -> dict[int, list[int
 class _LevelRows:
     """The sequence bookkeeping shared by the level plans of :class:`TreeBatch` and :class:`MacroPlan`: per node
     of a depth (n nodes, T steps at most), its ``[start, l1 .. lL, stop]`` block of ``seqs`` rows for the encoder
-    and its L + 1 decoder rows."""
+    and its L + 1 decoder rows; the level's target rows start at the plan's row ``R0``."""
 
-    def __init__(self, n: int, T: int):
-        self.T = T
+    def __init__(self, n: int, T: int, R0: int):
+        self.T, self.R0 = T, R0
         self.enc_index = torch.full((n, T + 1), -1, dtype=torch.int64)
         self.gather = torch.full((n, T), -1, dtype=torch.int64)
         self.enc_last, self.in_rows, self.row_node, self.steps, self.bbox_index = [], [], [], [], []
@@ -126,6 +126,68 @@ class _LevelRows:
         return {"enc_index": self.enc_index, "enc_last": t(self.enc_last), "in_rows": t(self.in_rows),
                 "row_node": t(self.row_node), "gather": self.gather, "steps": t(self.steps),
                 "bbox_index": t(self.bbox_index)}
+
+
+class _PlanRows:
+    """The rows of a plan (:class:`TreeBatch`, :class:`MacroPlan`) as its nodes come, level by level: every
+    node's ``[start, l1 .. lL, stop]`` block of ``seqs``, its L + 1 target rows ``[l1 .. lL, stop]`` and the
+    leaf terms of the cuboids it creates.
+
+    Args:
+        start, stop: (1, width) float, the start and stop rows (their dtype and device are the plan's).
+    """
+
+    def __init__(self, start: torch.Tensor, stop: torch.Tensor):
+        self.start, self.stop = start, stop
+        self.seq_parts: list[torch.Tensor] = []
+        self.target_rows: list[int] = []
+        self.offset = 0  # the next node's first seqs row
+        self.leaf_target: list[float] = []
+        self.leaf_weight: list[float] = []
+        self.leaf_shape: list[int] = []
+
+    def level(self, current: list, cmds_of: dict[int, list[int]]) -> _LevelRows:
+        """The bookkeeping of a new level of nodes ``current`` (``(tree, node)`` pairs)."""
+        T = max(len(cmds_of[id(node)]) for _, node in current) + 1
+        return _LevelRows(len(current), T, len(self.target_rows))
+
+    def add(self, seq: _LevelRows, k: int, lines: torch.Tensor) -> tuple[int, int]:
+        """Node ``k`` of ``seq``'s level with ``lines`` (L, width); returns its first target row in the plan and
+        in the level."""
+        L, o = len(lines), self.offset
+        self.seq_parts += [self.start, lines, self.stop]
+        self.offset += L + 2
+        r0 = len(self.target_rows)
+        seq.add(k, L, o, r0 - seq.R0)
+        self.target_rows += range(o + 1, o + L + 2)
+        return r0, r0 - seq.R0
+
+    def leaves(self, b: int, children: tuple, count: int) -> tuple[int, list]:
+        """The leaf terms of the ``count`` cuboids a node of tree ``b`` creates (a leaf: no child program; each
+        weighs 1 / ``count``); returns the first one's index and each one's child node (None for a leaf)."""
+        kids = [children[j] if j < len(children) else None for j in range(count)]
+        l0 = len(self.leaf_target)
+        self.leaf_target += [float(child is None) for child in kids]
+        self.leaf_weight += [1.0 / count] * count if count else []
+        self.leaf_shape += [b] * count
+        return l0, kids
+
+    def span(self, seq: _LevelRows) -> slice:
+        """The plan's target rows of ``seq``'s level (once its nodes are added)."""
+        return slice(seq.R0, len(self.target_rows))
+
+    def finish(self, plan, levels: list, width: int) -> None:
+        """Set the plan's ``seqs`` (every block and a final zero row, (S + 1, width)), ``targets`` (their target
+        rows, (R, width)) and ``leaf_target``, ``leaf_weight`` (K,) float, ``leaf_shape`` (K,) int64; the
+        padding of the levels' ``enc_index`` is pointed at the zero row."""
+        for lv in levels:
+            lv.enc_index[lv.enc_index < 0] = self.offset
+        dtype, device = self.start.dtype, self.start.device
+        plan.seqs = torch.cat(self.seq_parts + [torch.zeros(1, width, dtype=dtype, device=device)])
+        plan.targets = plan.seqs[torch.tensor(self.target_rows, dtype=torch.int64, device=device)]
+        plan.leaf_target = torch.tensor(self.leaf_target, dtype=dtype, device=device)
+        plan.leaf_weight = torch.tensor(self.leaf_weight, dtype=dtype, device=device)
+        plan.leaf_shape = torch.tensor(self.leaf_shape, dtype=torch.int64, device=device)
 
 
 class TreeBatch:
@@ -171,77 +233,52 @@ class TreeBatch:
 
         cmds_of = _commands_by_node(trees, LINE_DIM, CMD)
 
-        start = command_vector("start", dtype, device)[None]
-        stop = command_vector("stop", dtype, device)[None]
-        seq_parts: list[torch.Tensor] = []
-        offset = 0
-        target_rows: list[int] = []
+        flat = _PlanRows(command_vector("start", dtype, device)[None], command_vector("stop", dtype, device)[None])
         row_shape: list[int] = []
         kinds: dict[str, list[int]] = {k: [] for k in ("Cuboid", "attach", "reflect", "translate", "squeeze", "align")}
         kind_of = {_CUBOID: "Cuboid", _ATTACH: "attach", _REFLECT: "reflect", _TRANSLATE: "translate",
                    _SQUEEZE: "squeeze"}
-        leaf_target: list[float] = []
-        leaf_weight: list[float] = []
-        leaf_shape: list[int] = []
         self.levels: list[_Level] = []
         self._node_slices: list[tuple[int, int, int, int, int]] = []  # (tree, row0, rows, leaf0, leaves)
         current: list[tuple[int, VectorNode]] = list(enumerate(trees))
         depth = 0
         while current:
-            n = len(current)
-            T = max(len(cmds_of[id(node)]) for _, node in current) + 1
-            R0 = len(target_rows)
-            seq = _LevelRows(n, T)
+            seq = flat.level(current, cmds_of)
             next_index, leaf_index, child_nodes, child_pos = [], [], [], []
             nxt: list[tuple[int, VectorNode]] = []
             for k, (b, node) in enumerate(current):
                 cmds = cmds_of[id(node)]
                 L = len(cmds)
-                seq_parts += [start, node.lines, stop]
-                o = offset
-                offset += L + 2
-                r0 = len(target_rows)  # the node's first row in targets
-                q0 = r0 - R0  # ... and in the level
-                seq.add(k, L, o, q0)
-                target_rows += range(o + 1, o + L + 2)
+                r0, q0 = flat.add(seq, k, node.lines)  # the node's first row in targets and in the level
                 row_shape += [b] * (L + 1)
                 rows = [i for i, c in enumerate(cmds) if c == _CUBOID]
                 for i, c in enumerate(cmds):
                     if c in kind_of:
                         kinds[kind_of[c]].append(r0 + i)
                 kinds["align"] += [r0 + i for i in rows[1:]]
-                l0 = len(leaf_target)
-                for j, i in enumerate(rows):
-                    child = node.children[j] if j < len(node.children) else None
+                l0, kids = flat.leaves(b, node.children, len(rows))
+                for i, child in zip(rows, kids):
                     leaf_index.append(q0 + i)
-                    leaf_target.append(float(child is None))
-                    leaf_weight.append(1.0 / len(rows))
-                    leaf_shape.append(b)
                     if child is not None:
                         child_nodes.append(k)
                         child_pos.append(i + 1)  # the Cuboid line's place in [start, l1 .. lL, stop]
                         next_index.append(len(leaf_index) - 1)
                         nxt.append((b, child))
                 self._node_slices.append((b, r0, L + 1, l0, len(rows)))
-            r = len(target_rows) - R0
+            span = flat.span(seq)
             as_tensor = lambda v: torch.tensor(v, dtype=torch.int64)  # noqa: E731
             self.levels.append(_Level(
-                depth, slice(R0, R0 + r), child_rows=as_tensor([child_nodes, child_pos]),
-                leaf_index=as_tensor(leaf_index), next_index=as_tensor(next_index), **seq.tensors(r)))
+                depth, span, child_rows=as_tensor([child_nodes, child_pos]),
+                leaf_index=as_tensor(leaf_index), next_index=as_tensor(next_index),
+                **seq.tensors(span.stop - span.start)))
             current = nxt
             depth += 1
         self.num_nodes = len(self._node_slices)
-        for lv in self.levels:
-            lv.enc_index[lv.enc_index < 0] = offset  # the zero row
-        self.seqs = torch.cat(seq_parts + [torch.zeros(1, LINE_DIM, dtype=dtype, device=device)])
-        self.targets = self.seqs[torch.tensor(target_rows, dtype=torch.int64, device=device)]
+        flat.finish(self, self.levels, LINE_DIM)
         self.root_bbox = self.seqs[self.levels[0].bbox_index.to(device)][:, DIMS]
         self.l1_mask = l1_mask(self.targets)
         self.row_shape = torch.tensor(row_shape, dtype=torch.int64, device=device)
         self.kind_rows = {k: torch.tensor(v, dtype=torch.int64, device=device) for k, v in kinds.items()}
-        self.leaf_target = torch.tensor(leaf_target, dtype=dtype, device=device)
-        self.leaf_weight = torch.tensor(leaf_weight, dtype=dtype, device=device)
-        self.leaf_shape = torch.tensor(leaf_shape, dtype=torch.int64, device=device)
         self.levels = [lv.to(device) for lv in self.levels]
 
     @property

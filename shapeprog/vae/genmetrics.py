@@ -33,9 +33,10 @@ import torch
 from ..parallel import ordered_map
 from ..errors import ExecutionError, ParseError
 from ..execute import ExecutedShape, execute, execute_batch
-from ..lang import Program, parse, to_text
+from ..lang import Program, to_text
 from ..sampling import sample_surface
 from .pointnet import global_features, load_classifier, fit_classifier, predict
+from .structure import _program
 
 __all__ = ["CLASSIFIER_POINTS", "CHAMFER_POINTS", "FoolResult", "chamfer_clouds", "classifier_clouds",
            "classifier_features", "coarse_fields", "coverage", "execute_samples", "feature_variance", "frechet_distance",
@@ -50,14 +51,6 @@ CHAMFER_POINTS = 1024
 
 # --------------------------------------------------------------------------------------------------
 # programs -> executed shapes -> clouds
-
-
-def _as_program(item, name: str) -> Program:
-    if isinstance(item, Program):
-        return item
-    if isinstance(item, str):
-        return parse(item, file=name)
-    raise TypeError(f"{name}: expected a shapeprog Program or program text, got {type(item).__name__}")
 
 
 def execute_samples(samples: Iterable, batch: int = 200) -> tuple[list[Optional[torch.Tensor]], list[str]]:
@@ -76,7 +69,7 @@ def execute_samples(samples: Iterable, batch: int = 200) -> tuple[list[Optional[
     errors: list[str] = []
     for i, item in enumerate(samples):
         try:
-            programs.append(_as_program(item, f"sample {i}"))
+            programs.append(_program(item, f"sample {i}"))
         except ParseError as e:
             programs.append(None)
             errors.append(str(e))
@@ -118,7 +111,7 @@ def leaf_parts(item) -> int:
         return len(item)
     if isinstance(item, (Program, str)):
         with torch.no_grad():
-            return len(execute(_as_program(item, "<program>")))
+            return len(execute(_program(item, "<program>")))
     shape = tuple(getattr(item, "shape", ()))
     if len(shape) != 3 or shape[1:] != (8, 3):
         raise TypeError(f"expected a Program, text, ExecutedShape or (L, 8, 3) corners, got {type(item).__name__} "
@@ -550,7 +543,7 @@ def program_key(item, decimals: int = 3) -> str:
     """The text a program is compared by: :func:`shapeprog.to_text` of the parsed program with every
     number rounded to ``decimals`` (the corpus writes 3), so spacing, number spelling (``1`` / ``1.0``)
     and float noise below the corpus precision do not count as differences."""
-    return to_text(_as_program(item, "<program>"), decimals=decimals)
+    return to_text(_program(item, "<program>"), decimals=decimals)
 
 
 def novelty(samples: Iterable, training: Iterable, decimals: int = 3) -> float:

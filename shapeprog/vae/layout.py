@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Iterator
 
 import torch
 
@@ -49,6 +48,7 @@ from ..lang import AXES, FACES
 from ..macros.hierarchy import MacroHierarchy, block_line_offsets
 from ..macros.lang import AXIS, BOOL, CUBE, FACE, FLOAT, TYPES, Call, Linear, Literal, MacroProgram, Name
 from ..macros.library import Library
+from .vectors import _LineTree
 
 __all__ = ["GROUPS", "MAX_BLOCK_LINES", "NUM_SLOTS", "LineLayout", "MacroNode", "macro_program_to_tree",
            "tree_to_macro_program"]
@@ -182,7 +182,7 @@ class LineLayout:
 
 
 @dataclass(frozen=True, eq=False)
-class MacroNode:
+class MacroNode(_LineTree):
     """One block of a hierarchical macro program as line vectors.
 
     Attributes:
@@ -220,24 +220,11 @@ class MacroNode:
 
     def input_seq(self, layout: LineLayout) -> torch.Tensor:
         """(L+1, width) float: ``[start, l1 .. lL]``, the decoder's teacher-forced input."""
-        return torch.cat([layout.command_vector("start", self.lines.dtype, self.lines.device)[None], self.lines])
+        return self._framed(layout.command_vector, "start")
 
     def target_seq(self, layout: LineLayout) -> torch.Tensor:
         """(L+1, width) float: ``[l1 .. lL, stop]``, the decoder's target."""
-        return torch.cat([self.lines, layout.command_vector("stop", self.lines.dtype, self.lines.device)[None]])
-
-    def nodes(self) -> Iterator[tuple["MacroNode", int]]:
-        """Every node with its depth (root 0), breadth first."""
-        queue = [(self, 0)]
-        while queue:
-            node, depth = queue.pop(0)
-            yield node, depth
-            queue += [(c, depth + 1) for c in node.children if c is not None]
-
-    def to(self, device=None, dtype: torch.dtype | None = None) -> "MacroNode":
-        """A copy with every tensor moved / cast."""
-        kids = tuple(None if c is None else c.to(device, dtype) for c in self.children)
-        return MacroNode(self.lines.to(device=device, dtype=dtype), kids, self.name, self.float_start)
+        return self._framed(layout.command_vector, "stop")
 
 
 def macro_program_to_tree(h: MacroHierarchy, layout: LineLayout, file: str = "<program>",

@@ -12,7 +12,7 @@ import torch
 import torch.nn.functional as F
 
 from .model import NodeOutput, VAEOutput
-from .batch import BatchOutput, _LevelRows, _commands_by_node, _latents
+from .batch import BatchOutput, _PlanRows, _commands_by_node, _latents
 from .losses import MACRO_LOSS_WEIGHTS
 
 __all__ = [
@@ -86,46 +86,32 @@ class MacroPlan:
         dtype, device = ref.dtype, ref.device
         cmds_of = _commands_by_node(trees, layout.width, layout.slices["cmd"])
         n_created = layout.n_created.tolist()
-        start = layout.command_vector("start", dtype, device)[None]
-        stop = layout.command_vector("stop", dtype, device)[None]
-        seq_parts, target_rows, commands, row_shape, first_row = [], [], [], [], []
-        leaf_target, leaf_weight, leaf_shape = [], [], []
+        flat = _PlanRows(layout.command_vector("start", dtype, device)[None],
+                         layout.command_vector("stop", dtype, device)[None])
+        commands, row_shape, first_row = [], [], []
         self.levels: list[_MacroLevel] = []
         self._node_slices: list[tuple[int, int, int, int, int]] = []  # (tree, row0, rows, leaf0, leaves)
-        offset, depth = 0, 0
+        depth = 0
         current = list(enumerate(trees))
         as_tensor = lambda v: torch.tensor(v, dtype=torch.int64)  # noqa: E731
         while current:
-            n = len(current)
-            T = max(len(cmds_of[id(node)]) for _, node in current) + 1
-            R0 = len(target_rows)
-            seq = _LevelRows(n, T)
+            seq = flat.level(current, cmds_of)
             kid_node, kid_row, kid_pos = [], [], []
             creator_row, creator_pos, creator_node, next_index = [], [], [], []
             nxt = []
             for k, (b, node) in enumerate(current):
                 cmds = cmds_of[id(node)]
                 L = len(cmds)
-                seq_parts += [start, node.lines, stop]
-                o = offset
-                offset += L + 2
-                r0 = len(target_rows)
-                q0 = r0 - R0
-                seq.add(k, L, o, q0)
-                target_rows += range(o + 1, o + L + 2)
+                r0, q0 = flat.add(seq, k, node.lines)
                 commands += cmds + [layout.STOP]
                 row_shape += [b] * (L + 1)
                 first_row += [True] + [False] * L
                 creators = [(0, 0)] + [(i, j) for i, c in enumerate(cmds[1:], start=1) for j in range(n_created[c])]
-                l0 = len(leaf_target)
-                for j, (row, p) in enumerate(creators):
-                    child = node.children[j] if j < len(node.children) else None
+                l0, kids = flat.leaves(b, node.children, len(creators))
+                for (row, p), child in zip(creators, kids):
                     creator_row.append(q0 + row)
                     creator_pos.append(p)
                     creator_node.append(k)
-                    leaf_target.append(float(child is None))
-                    leaf_weight.append(1.0 / len(creators))
-                    leaf_shape.append(b)
                     if child is not None:
                         kid_node.append(k)
                         kid_row.append(row + 1)  # the creating line's place in [start, l1 .. lL, stop]
@@ -133,23 +119,18 @@ class MacroPlan:
                         next_index.append(len(creator_row) - 1)
                         nxt.append((b, child))
                 self._node_slices.append((b, r0, L + 1, l0, len(creators)))
-            r = len(target_rows) - R0
+            span = flat.span(seq)
             self.levels.append(_MacroLevel(
-                depth, slice(R0, R0 + r), kid_at=as_tensor([kid_node, kid_row]), kid_pos=as_tensor(kid_pos),
+                depth, span, kid_at=as_tensor([kid_node, kid_row]), kid_pos=as_tensor(kid_pos),
                 creator_row=as_tensor(creator_row), creator_pos=as_tensor(creator_pos),
-                creator_node=as_tensor(creator_node), next_index=as_tensor(next_index), **seq.tensors(r)))
+                creator_node=as_tensor(creator_node), next_index=as_tensor(next_index),
+                **seq.tensors(span.stop - span.start)))
             current = nxt
             depth += 1
-        for lv in self.levels:
-            lv.enc_index[lv.enc_index < 0] = offset  # the zero row
-        self.seqs = torch.cat(seq_parts + [torch.zeros(1, layout.width, dtype=dtype, device=device)])
-        self.targets = self.seqs[torch.tensor(target_rows, dtype=torch.int64, device=device)]
+        flat.finish(self, self.levels, layout.width)
         self.commands = torch.tensor(commands, dtype=torch.int64, device=device)
         self.row_shape = torch.tensor(row_shape, dtype=torch.int64, device=device)
         self.first_row = torch.tensor(first_row, dtype=torch.bool, device=device)
-        self.leaf_target = torch.tensor(leaf_target, dtype=dtype, device=device)
-        self.leaf_weight = torch.tensor(leaf_weight, dtype=dtype, device=device)
-        self.leaf_shape = torch.tensor(leaf_shape, dtype=torch.int64, device=device)
         self.levels = [lv.to(device) for lv in self.levels]
         f0 = layout.slices["float"].start
         self.bbox_rows = {lv.depth: self.seqs[lv.bbox_index][:, f0:f0 + 3] for lv in self.levels}

@@ -32,6 +32,8 @@ _TOKEN = re.compile(r"[^\s(),={}]+|[(),={}]")
 
 
 def _program(item, what: str) -> Program:
+    """``item`` as a Program: a Program as it is, a text parsed with ``what`` as its file name in errors (the
+    programs' reader of this module and of :mod:`shapeprog.vae.genmetrics`)."""
     if isinstance(item, Program):
         return item
     if isinstance(item, str):

@@ -18,6 +18,7 @@ Example:
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -89,8 +90,31 @@ def command_vector(command: str, dtype: torch.dtype = torch.float32, device=None
     return v
 
 
+class _LineTree:
+    """What the trees of line vectors share (:class:`VectorNode`, :class:`~shapeprog.vae.layout.MacroNode`,
+    frozen dataclasses with ``lines: (L, width) float`` and ``children``, one node or None each)."""
+
+    def _framed(self, command_vector, command: str) -> torch.Tensor:
+        """(L+1, width) float: the lines after ``command_vector("start")`` or before ``command_vector("stop")``."""
+        row = command_vector(command, self.lines.dtype, self.lines.device)[None]
+        return torch.cat([row, self.lines] if command == "start" else [self.lines, row])
+
+    def nodes(self) -> Iterator[tuple]:
+        """Every node of the tree with its depth (root 0), breadth first (the order of the blocks)."""
+        queue = [(self, 0)]
+        while queue:
+            node, depth = queue.pop(0)
+            yield node, depth
+            queue += [(c, depth + 1) for c in node.children if c is not None]
+
+    def to(self, device=None, dtype: torch.dtype | None = None):
+        """A copy of the tree with every tensor moved to ``device`` / cast to ``dtype``."""
+        kids = tuple(None if c is None else c.to(device, dtype) for c in self.children)
+        return dataclasses.replace(self, lines=self.lines.to(device=device, dtype=dtype), children=kids)
+
+
 @dataclass(frozen=True, eq=False)
-class VectorNode:
+class VectorNode(_LineTree):
     """One program block as line vectors, with the sub-program of each of its Cuboid lines.
 
     Attributes:
@@ -121,24 +145,11 @@ class VectorNode:
 
     def input_seq(self) -> torch.Tensor:
         """(L+1, 63) float: ``[start, l1 .. lL]``, the decoder's teacher-forced input."""
-        return torch.cat([command_vector("start", self.lines.dtype, self.lines.device)[None], self.lines])
+        return self._framed(command_vector, "start")
 
     def target_seq(self) -> torch.Tensor:
         """(L+1, 63) float: ``[l1 .. lL, stop]``, the decoder's target."""
-        return torch.cat([self.lines, command_vector("stop", self.lines.dtype, self.lines.device)[None]])
-
-    def nodes(self) -> Iterator[tuple["VectorNode", int]]:
-        """Every node of the tree with its depth (root 0), breadth first (the order of the blocks)."""
-        queue = [(self, 0)]
-        while queue:
-            node, depth = queue.pop(0)
-            yield node, depth
-            queue += [(c, depth + 1) for c in node.children if c is not None]
-
-    def to(self, device=None, dtype: torch.dtype | None = None) -> "VectorNode":
-        """A copy of the tree with every tensor moved to ``device`` / cast to ``dtype``."""
-        kids = tuple(None if c is None else c.to(device, dtype) for c in self.children)
-        return VectorNode(self.lines.to(device=device, dtype=dtype), kids, self.name)
+        return self._framed(command_vector, "stop")
 
 
 def l1_mask(target: torch.Tensor) -> torch.Tensor:
