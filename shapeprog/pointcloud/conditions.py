@@ -71,7 +71,7 @@ ROUND_SUBDIVISIONS = 2
 #: ``merged``: the outward step (canonical units) of the probe that decides whether a point is on the outer surface.
 MERGE_PROBE = 1e-4
 #: Largest number of ray-triangle pairs :func:`visible_from` tests at once (memory).
-_RAY_CHUNK = 1 << 21
+_RAY_CHUNK = 1 << 19
 
 
 def check_condition(name: str) -> str:
