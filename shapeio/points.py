@@ -23,8 +23,8 @@ from .arrays import as_numpy
 from .files import InputError, atomic_write
 from .mesh import MESH_SUFFIXES, _trimesh, load_mesh
 
-__all__ = ["CLOUD_SUFFIXES", "MAX_LINE_CHARS", "MAX_POINTS", "MESH_POINTS", "MIN_POINTS", "obj_vertices", "read_cloud", "read_points",
-           "write_points"]
+__all__ = ["CLOUD_SUFFIXES", "MAX_LINE_CHARS", "MAX_POINTS", "MESH_POINTS", "MIN_POINTS", "obj_vertices", "read_cloud",
+           "read_points", "sample_mesh", "write_points"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -279,12 +279,35 @@ def _obj_has_faces(path: Path) -> bool:
         return any(line.lstrip().startswith(("f ", "f\t")) for line in _lines(f, path))
 
 
-def _sample_mesh(mesh, n: int, seed: int, path: Path) -> np.ndarray:
+def sample_mesh(mesh, n: int, seed: int = 0, where: PathLike = "<mesh>") -> tuple[np.ndarray, np.ndarray]:
+    """``n`` points drawn uniformly by area on a triangle mesh (``trimesh.sample.sample_surface``), the
+    sampler of every mesh :func:`read_cloud` reads.
+
+    Args:
+        mesh: a ``trimesh.Trimesh``.
+        n: the number of points.
+        seed: the sampling seed; the same mesh, count and seed give the same points.
+        where: the name error messages start with (a file's path).
+
+    Returns:
+        ``points: (n, 3) float64`` and ``faces: (n,) int64``, the triangle each point lies on.
+
+    Raises:
+        InputError: the mesh has zero or no finite surface area, or a sampled point is not finite.
+    """
     area = float(mesh.area)  # huge coordinates give an infinite area
     if not (np.isfinite(area) and area > 0):
-        raise InputError(f"{path}: the mesh has zero or no finite surface area; there is nothing to sample")
-    pts, _ = _trimesh().sample.sample_surface(mesh, n, seed=np.random.default_rng(seed))
-    return _finite(pts, path)
+        raise InputError(f"{where}: the mesh has zero or no finite surface area; there is nothing to sample")
+    pts, faces = _trimesh().sample.sample_surface(mesh, int(n), seed=np.random.default_rng(seed))
+    pts = np.ascontiguousarray(pts, dtype=np.float64)
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        raise InputError(f"{where}: sampled point {int(np.argmax(bad)) + 1} has a NaN or infinite coordinate")
+    return pts, np.asarray(faces, dtype=np.int64)
+
+
+def _sample_mesh(mesh, n: int, seed: int, path: Path) -> np.ndarray:
+    return _finite(sample_mesh(mesh, n, seed, path)[0], path)  # float32, as every cloud read
 
 
 def _resample(pts: np.ndarray, n: int, seed: int) -> np.ndarray:

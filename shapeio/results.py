@@ -13,7 +13,7 @@ A docs page shows one with a block whose first line names the file (relative to 
     ...the table, written by `python -m shapeio.results`...
     <!-- end result -->
 
-``python -m shapeio.results README.md docs/*.md`` rewrites every such block from its file; with
+``python -m shapeio.results README.md docs/*.md docs/tables/*.md`` rewrites every such block from its file; with
 ``--check`` it changes nothing and exits 1 when a block differs, so that a test keeps the docs and the data
 in step: a table and the number quoted from it cannot disagree.
 """

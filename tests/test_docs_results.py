@@ -1,15 +1,16 @@
-"""The docs' result tables are generated from the result files under docs/results: they must agree."""
+"""The docs' result tables (README, docs/ and docs/tables/) are generated from the result files under docs/results:
+they must agree."""
 from pathlib import Path
 
 from shapeio.results import _BLOCK, read_result, sync
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "docs" / "tables").glob("*.md"))]
 
 
 def test_every_result_block_matches_its_file():
     stale = sync(PAGES, ROOT, check=True)
-    assert not stale, f"run `python -m shapeio.results README.md docs/*.md`: out of step: {stale}"
+    assert not stale, f"run `python -m shapeio.results README.md docs/*.md docs/tables/*.md`: out of step: {stale}"
 
 
 def test_every_result_file_is_shown_and_readable():

@@ -14,6 +14,8 @@ Data (clouds of corpus shapes, the canonical frame, users' files, a nearest-neig
   back; :func:`scale_program`.
 * :mod:`~shapeprog.pointcloud.retrieval`: :class:`RetrievalIndex`, the nearest training program by chamfer.
 * :func:`read_cloud` (from :mod:`shapeio.points`): users' clouds and meshes.
+* :mod:`~shapeprog.pointcloud.conditions`: test clouds of a shape under harder conditions (noise, uneven
+  density, one depth camera's view, rounded and merged parts).
 
 Cloud -> program (training in :mod:`~shapeprog.pointcloud.train`, the only module here importing Lightning):
 

@@ -46,7 +46,8 @@ from .normalize import _corners_of, normalize
 from .retrieval import RetrievalIndex
 from .search import QUICK_SEARCH_SCHEDULE, SEARCH_SCHEDULE
 
-__all__ = ["INPUT_POINTS", "NOISE", "PAPER_TABLE3", "PAPER_TABLE3_MACROS", "PAPER_TABLE7", "PAPER_TABLE7_NAMES", "ROWS", "TableResult", "evaluate",
+__all__ = ["INPUT_POINTS", "KEEP_MARK", "NOISE", "PAPER_TABLE3", "PAPER_TABLE3_MACROS", "PAPER_TABLE7",
+           "PAPER_TABLE7_NAMES", "ROWS", "TableResult", "evaluate",
            "fit_cuboids", "write_tables"]
 
 #: Points per input cloud, and the Gaussian noise added to them (canonical units): the issue's test condition.
@@ -54,11 +55,13 @@ INPUT_POINTS, NOISE = 2048, 0.005
 #: The random uniform scale of an input is ``exp(U(-log SCALE_RANGE, log SCALE_RANGE))``; its shift is
 #: ``U(-SHIFT, SHIFT)`` per axis.
 SCALE_RANGE, SHIFT = 10.0, 5.0
-#: The methods measured.
 #: Failed shapes listed by name under the tables (the rest are counted).
 MAX_LISTED_ERRORS = 20
 ROWS = ("model", "opt_program", "opt_cuboids", "retrieval", "search", "search_opt_program", "augmented",
         "augmented_opt_program")
+#: A line of a table file after which the text is kept when :func:`write_tables` rewrites the file: sections that
+#: show other commands' result files (the harder test conditions of ``bench/pointcloud_robust.py --conditions``).
+KEEP_MARK = "<!-- kept when `python -m shapeprog pointcloud tables` rewrites this file -->"
 #: ShapeMOD Table 3, "No Macros" row: CD x1000, F-score, % rooted, % stable (dense PartNet mesh samples).
 PAPER_TABLE3 = {"chair": (44.2, 54.8, 93.7, 83.6), "table": (41.1, 64.0, 92.8, 78.2),
                 "storage": (56.5, 41.1, 95.0, 87.7)}
@@ -303,7 +306,8 @@ def _against_retrieval(r: dict, row: str, claim: str) -> list:
 
 
 def write_tables(result: TableResult, out, command: str = "") -> Path:
-    """Write both layouts as Markdown to ``out`` (atomically); ``command`` is recorded under them."""
+    """Write both layouts as Markdown to ``out`` (atomically); ``command`` is recorded under them. When ``out``
+    exists, its text from the line :data:`KEEP_MARK` on is kept at the end."""
     r, cat = result.rows, result.category
     names = {"model": "Ours: PointNet++ -> latent -> VAE decoder (no fitting)",
              "opt_program": "Ours + Opt Program (fit the program's numbers)",
@@ -382,4 +386,8 @@ def write_tables(result: TableResult, out, command: str = "") -> Path:
         lines.append("")
     if command:
         lines += ["Command:", "", f"    {command}", ""]
-    return atomic_write(out, "\n".join(lines), mkdir=True)
+    kept = ""
+    if Path(out).is_file():  # what follows KEEP_MARK in the file being replaced stays
+        old = Path(out).read_text(encoding="utf-8")
+        kept = "\n" + old[old.index(KEEP_MARK):] if KEEP_MARK in old else ""
+    return atomic_write(out, "\n".join(lines) + kept, mkdir=True)

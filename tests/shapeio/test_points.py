@@ -189,3 +189,20 @@ def test_garbage_gives_only_our_errors(tmp_path, suffix):
             assert str(e).startswith(str(path))
         else:
             assert pts.shape == (32, 3) and np.isfinite(pts).all()
+
+
+def test_sample_mesh_gives_each_point_its_triangle_and_repeats_by_seed():
+    from shapeio.points import sample_mesh
+
+    mesh = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
+    pts, faces = sample_mesh(mesh, 3000, seed=5)
+    assert pts.shape == (3000, 3) and pts.dtype == np.float64 and faces.shape == (3000,)
+    tri = mesh.triangles[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert np.abs(((pts - tri[:, 0]) * normal).sum(1)).max() < 1e-12  # in its triangle's plane
+    again, faces_again = sample_mesh(mesh, 3000, seed=5)
+    assert np.array_equal(pts, again) and np.array_equal(faces, faces_again)
+    assert not np.array_equal(pts, sample_mesh(mesh, 3000, seed=6)[0])
+    flat = trimesh.Trimesh(vertices=np.zeros((3, 3)), faces=[[0, 1, 2]], process=False)
+    with pytest.raises(InputError, match="scan.stl: the mesh has zero"):
+        sample_mesh(flat, 10, where="scan.stl")

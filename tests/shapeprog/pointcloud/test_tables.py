@@ -8,7 +8,7 @@ from shapeprog.__main__ import main
 from shapeprog.lang import parse
 from shapeprog.metrics import chamfer
 from shapeprog.pointcloud.data import corpus_cloud, corpus_splits, make_clouds
-from shapeprog.pointcloud.tables import _inputs, evaluate, fit_cuboids, write_tables
+from shapeprog.pointcloud.tables import KEEP_MARK, TableResult, _inputs, evaluate, fit_cuboids, write_tables
 
 SPLITS = corpus_splits("chair")
 
@@ -110,3 +110,17 @@ def test_a_fit_that_fails_empties_its_own_row_only(tmp_path, monkeypatch):
     assert res.errors == {"model": [], "opt_program": [(test_id, "the fit failed")], "opt_cuboids": []}
     text = write_tables(res, tmp_path / "t.md").read_text()
     assert f"* opt_program: chair/{test_id}: the fit failed\n" in text
+
+
+def test_rewriting_a_table_file_keeps_what_follows_the_keep_mark(tmp_path):
+    model_row = {"cd": 80.0, "fscore": 50.0, "rooted": 100.0, "stable": None, "n": 1}
+    res = TableResult("storage", 1, rows={"model": model_row})
+    out = tmp_path / "t.md"
+    section = KEEP_MARK + "\n## Harder test conditions\n\n<!-- result: x.json -->\nold\n<!-- end result -->\n"
+    out.write_text("the old tables\n" + section)
+    text = write_tables(res, out, "python -m shapeprog pointcloud tables ...").read_text()
+    assert "the old tables" not in text and "| 80.0 | 50.0 | 100.0 | n/a |" in text
+    assert text.endswith("    python -m shapeprog pointcloud tables ...\n\n" + section) and text.count(KEEP_MARK) == 1
+    out.write_text("the old tables\n")
+    text = write_tables(res, out).read_text()
+    assert KEEP_MARK not in text and "the old tables" not in text
