@@ -17,9 +17,9 @@ from shapeio.results import column, make_result
 
 from . import corpus
 from . import io
-from .cli import (Program, add_category, add_command, add_json, add_overwrite, add_quiet, check_outputs,
-                  command_line, emit_text, float_in, int_at_least, macro_library, refuse_existing, refuse_inputs, seed,
-                  write_json, write_mesh)
+from .cli import (add_category, add_command, add_json, add_overwrite, add_quiet, add_seed, check_outputs, command_line,
+                  emit_text, float_in, int_at_least, macro_library, Program, refuse_existing, refuse_inputs, write_json,
+                  write_mesh)
 from .errors import ParseError
 from .fit import MAX_DECIMALS, MAX_LR, MAX_REG, fit
 from .fit import MAX_STEPS as MAX_FIT_STEPS
@@ -34,6 +34,7 @@ PROGRAM_HELP = "corpus id (chair/173, table/33075, storage/46436) or a UTF-8 pro
 
 
 def cmd_run(args) -> int:
+    """Execute a program; print its block and cuboid counts; export a mesh and a picture."""
     check_outputs([args.out], [args.png])
     prog = Program(args.program)
     refuse_inputs([args.out, args.png], [args.program])
@@ -51,6 +52,8 @@ def cmd_run(args) -> int:
 
 
 def cmd_fit(args) -> int:
+    """Fit a program's continuous numbers to a point cloud; print chamfer and F-score before and after; write the fitted
+    program."""
     check_outputs([args.mesh], [args.out, args.json])
     prog = Program(args.program)
     refuse_inputs([args.out, args.mesh, args.json], [args.program, None if args.points == "example" else args.points])
@@ -99,6 +102,7 @@ def cmd_fit(args) -> int:
 
 
 def cmd_silhouettes(args) -> int:
+    """Render front and side silhouettes of every corpus program (train and val)."""
     check_outputs(others=[args.out])
     refuse_existing([args.out], args.overwrite)
     t0 = time.perf_counter()
@@ -158,6 +162,8 @@ def open_for_edit(args):
 
 
 def cmd_edit(args) -> int:
+    """Serve an editor page for a program: the shape in 3D, one control per free parameter, live re-execution, undo /
+    redo / reset, export of text, OBJ and PNG. Runs until interrupted. See docs/editor.md."""
     from shapeedit import editor_preflight, serve_until_interrupted  # lazy: loaded when the command runs
 
     problem = editor_preflight(args.export_dir)
@@ -174,7 +180,6 @@ def cmd_edit(args) -> int:
 def register(sub) -> None:
     """Add the ``assembly`` commands to ``sub``."""
     r = add_command(sub, "run", cmd_run, help="execute a program and export its cuboids",
-                    description="Execute a program; print its block and cuboid counts; export a mesh and a picture.",
                     example="assembly run chair/173 -o chair.obj --png chair.png", outputs={"out": "file"})
     r.add_argument("program", help=PROGRAM_HELP)
     r.add_argument("-o", "--out", help="mesh file: .obj (reference layout), .ply or .glb (parts coloured by line)")
@@ -184,8 +189,6 @@ def register(sub) -> None:
     r.add_argument("--float64", action="store_true", help="execute in float64 (float32 is the reference)")
     add_overwrite(r)
     f = add_command(sub, "fit", cmd_fit, help="fit a program's parameters to a point cloud",
-                    description="Fit a program's continuous numbers to a point cloud; print chamfer and F-score "
-                                "before and after; write the fitted program.",
                     example="assembly fit table/33075 --points example --steps 400 -o fitted.txt",
                     outputs={"out": "file", "json": "file"})
     f.add_argument("program", help=PROGRAM_HELP)
@@ -199,14 +202,13 @@ def register(sub) -> None:
                    help="weight of the pull towards the starting numbers")
     f.add_argument("--decimals", type=int_at_least(0, MAX_DECIMALS), default=3,
                    help="decimals of the written numbers (the corpus uses 3)")
-    f.add_argument("--seed", type=seed, default=0, help="seed of the surface sampling")
+    add_seed(f, "seed of the surface sampling")
     f.add_argument("-o", "--out", help="fitted program file (ShapeAssembly text; without it: printed)")
     f.add_argument("--mesh", help="also write the fitted shape: .obj, .ply or .glb")
     add_json(f, "the chamfer distance and F-score before and after")
     add_overwrite(f)
     s = add_command(sub, "silhouettes", cmd_silhouettes,
                     help="render front and side silhouettes of the corpus to an .npz",
-                    description="Render front and side silhouettes of every corpus program (train and val).",
                     example="assembly silhouettes --out silhouettes.npz", outputs={"out": "file"})
     s.add_argument("--out", required=True, help="output file (.npz, compressed NumPy arrays)")
     s.add_argument("--size", type=int_at_least(1, SILHOUETTE_MAX_SIZE), default=64,
@@ -217,15 +219,12 @@ def register(sub) -> None:
     add_quiet(s, "progress bar")
     add_overwrite(s)
     d = add_command(sub, "edit", cmd_edit, help="edit a program in the browser (needs the 'editor' extra: viser)",
-                    description="Serve an editor page for a program: the shape in 3D, one control per free "
-                                "parameter, live re-execution, undo / redo / reset, export of text, OBJ and "
-                                "PNG. Runs until interrupted. See docs/editor.md.",
                     example="assembly edit chair/173 --port 8080 --no-browser --target chair/37982")
     d.add_argument("program", nargs="?", help=PROGRAM_HELP + ", or a macro program file (lines 'def ...')")
     d.add_argument("--sample", action="store_true",
                    help="edit a program generated by the shipped VAE of --category instead")
     add_category(d, help="with --sample: the shipped VAE's category")
-    d.add_argument("--seed", type=seed, default=0, help="seed of --sample")
+    add_seed(d, "seed of --sample")
     d.add_argument("--library", help="a shipped ShapeMOD library's category (chair) or a macro library file: a "
                                      "ShapeAssembly program (corpus id or corpus-format file) is refactored with it "
                                      "and its macro calls' parameters are edited; a macro program calls it")

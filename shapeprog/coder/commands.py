@@ -20,9 +20,9 @@ from shapeio import atomic_write
 from shapeio.files import NotShippedError
 from shapeio.results import column, make_result
 
-from ..cli import (add_result_options, MAX_SECONDS_OPTION, MAX_WORKERS, add_category, add_command, add_quiet,
-                   category_pairs, check_outputs, command_line, float_in, int_at_least, markdown_result,
-                   positive_float, refuse_existing, seed, write_json)
+from ..cli import (MAX_SECONDS_OPTION, add_category, add_command, add_quiet, add_result_options, add_seed, add_workers,
+                   category_pairs, check_outputs, command_line, float_in, int_at_least, markdown_result, positive_float,
+                   refuse_existing, write_json)
 from ..errors import ParseError
 from ..limits import decode
 from ..fit import MAX_LR
@@ -118,6 +118,10 @@ def add_egraph_limits(parser) -> None:
 
 
 def cmd_discover(args) -> int:
+    """Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake network, with dreams and a recognition
+    network; proposal, integration, removal sweep; a final wake with the library fixed) on the first N discovery
+    shapes of a PartNet category; write library.txt, programs.txt, log.json and a resumable state.json into --out (an
+    earlier run's folder is continued, never overwritten)."""
     category = args.category
     progress = None
     if not args.quiet:
@@ -160,6 +164,9 @@ def cmd_discover(args) -> int:
 
 
 def cmd_infer(args) -> int:
+    """Post hoc inference: refactor the naive program of one shape with a library's abstractions; print the program, its
+    expansion, its cost and error. A shape of ShapeCoder's data set is named coder-<category>:<line> (a line of the
+    vendored PN_<category>.txt), not by a corpus id."""
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
     try:
@@ -195,6 +202,10 @@ def cmd_infer(args) -> int:
 
 
 def cmd_tables(args) -> int:
+    """Write the ShapeCoder paper's Table 2 (Input Prims and ShapeCoder rows: F, |L|, Num Struct, Num Param on the
+    discovery shapes) and Table 3 (F of the discovered programs, and post hoc inference on the first --train
+    discovery and --heldout held-out shapes) for the shipped libraries or coder discover folders, beside the paper's
+    rows."""
     runs = category_pairs(args.library, "CATEGORY=FOLDER")
     baselines = {kind: category_pairs(getattr(args, f"baseline_{kind}"), "CATEGORY=FOLDER", f"--baseline-{kind}")
                  for kind in ("input", "wake")}
@@ -246,12 +257,6 @@ def cmd_tables(args) -> int:
 def register(sub) -> None:
     """Add the ``coder`` commands to ``sub``."""
     d = add_command(sub, "discover", cmd_discover, help="discover a library of abstractions for a category",
-                    description="Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake "
-                                "network, with dreams and a recognition network; proposal, integration, "
-                                "removal sweep; a final wake with the library fixed) on the first N discovery "
-                                "shapes of a PartNet category; write library.txt, programs.txt, log.json and a "
-                                "resumable state.json into --out (an earlier run's folder is continued, never "
-                                "overwritten).",
                     example="coder discover --category chair --out runs/chair_abs --workers 2",
                     outputs={"out": "folder"})
     add_category(d)
@@ -260,9 +265,8 @@ def register(sub) -> None:
     d.add_argument("--shapes", type=int_at_least(1), default=400, help="the first N discovery shapes (paper: 400)")
     d.add_argument("--proposals", type=int_at_least(1), default=10000, help="proposals per round (paper: 10,000)")
     d.add_argument("--abstractions", type=int_at_least(1), default=20, help="candidates tried per round (N_A)")
-    d.add_argument("--seed", type=seed, default=42, help="seed of the proposals")
-    d.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2,
-                   help="processes for the per-program refactors")
+    add_seed(d, "seed of the proposals", default=42)
+    add_workers(d, "processes for the per-program refactors", default=2)
     d.add_argument("--minutes", type=float_in(0, MAX_SECONDS_OPTION / 60),
                    help="start no phase after this many minutes: ends this session, not the run (the folder "
                         "resumes where it stopped; the run's result is set by --rounds and the counts, not by this)")
@@ -312,10 +316,6 @@ def register(sub) -> None:
     add_egraph_limits(d)
     add_quiet(d, "progress bars")
     a = add_command(sub, "infer", cmd_infer, help="infer one shape's program with a discovered library",
-                    description="Post hoc inference: refactor the naive program of one shape with a library's "
-                                "abstractions; print the program, its expansion, its cost and error. A shape of "
-                                "ShapeCoder's data set is named coder-<category>:<line> (a line of the vendored "
-                                "PN_<category>.txt), not by a corpus id.",
                     example="coder infer coder-chair:401 --library chair", outputs={"json": "file+"})
     a.add_argument("shape", help="coder-<category>:<line number> of the vendored data (e.g. coder-chair:401), a "
                                  "PN_<category>.txt line, or a file with one such line")
@@ -329,11 +329,6 @@ def register(sub) -> None:
     add_search_budget(a, "", "--network")
     add_result_options(a, "the program, its cost and error", quiet=None)
     t2 = add_command(sub, "tables", cmd_tables, help="ShapeCoder Tables 2 and 3 of discovered libraries",
-                     description="Write the ShapeCoder paper's Table 2 (Input Prims and ShapeCoder rows: F, |L|, "
-                                 "Num Struct, Num Param on the discovery shapes) and Table 3 (F of the discovered "
-                                 "programs, and post hoc inference on the first --train discovery and --heldout "
-                                 "held-out shapes) for the shipped libraries or coder discover folders, "
-                                 "beside the paper's rows.",
                      example="coder tables --category chair table storage --workers 2 --out shapecoder_tables.md",
                      outputs={"out": "file", "json": "file+"})
     add_category(t2, multiple=True)
@@ -347,8 +342,7 @@ def register(sub) -> None:
                          "semantic rewrites: the row beside the paper's ShapeMOD+Wake (ours)")
     t2.add_argument("--train", type=int_at_least(1), default=100, help="train-PHI: the first N discovery shapes")
     t2.add_argument("--heldout", type=int_at_least(1), default=100, help="validation-PHI: the first N held-out shapes")
-    t2.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2,
-                    help="processes for the per-shape inference (1: everything in this process)")
+    add_workers(t2, "processes for the per-shape inference (1: everything in this process)", default=2)
     add_egraph_limits(t2)
     t2.add_argument("--phi-network", action="store_true",
                     help="post hoc inference with the library's recognition network as well (the paper's; the "

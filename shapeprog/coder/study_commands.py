@@ -11,8 +11,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 from shapeio.results import column, make_result
 
-from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, add_category, add_command, add_result_options, command_line,
-                   float_in, int_at_least, refuse_existing, seed, write_json)
+from ..cli import (MAX_SECONDS_OPTION, add_category, add_command, add_result_options, add_seed, add_workers,
+                   command_line, float_in, int_at_least, refuse_existing, write_json)
 from ..fit import MAX_LR
 from . import data, tables
 from ..vae.genmetrics import frechet_distance
@@ -34,6 +34,9 @@ def _pool(workers: int, network: bool):
 
 
 def cmd_ablation(args) -> int:
+    """Discovery on the first --shapes discovery shapes once per ablation row (the network wake; the refactor-only wake;
+    no abstraction; a single round; no semantic rewrites; the naive rewrite scheme; no preferences), same shapes,
+    seed and counts; F, |L|, Num Struct, Num Param per row beside the paper's F."""
     from . import ablation  # lazy: loaded when the command runs
 
     refuse_existing([args.json], args.overwrite)
@@ -114,6 +117,8 @@ def _shipped_run(category: str):
 
 
 def cmd_perturbation(args) -> int:
+    """Perturb every free number of the shipped library's programs and of the naive programs of the same shapes by sigma
+    N(0, 1), execute, and compare with held-out shapes by the FD of the generation tables' PointNet features."""
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     programs = list(run.programs[:args.shapes])
@@ -146,6 +151,8 @@ def cmd_perturbation(args) -> int:
 
 
 def cmd_noise(args) -> int:
+    """Post hoc inference with the shipped library on held-out shapes whose primitives got Gaussian noise (dimensions
+    and positions), per sigma; F as Table 3's."""
     refuse_existing([args.json], args.overwrite)
     try:
         run = tables.shipped(args.category)
@@ -180,6 +187,9 @@ def cmd_noise(args) -> int:
 
 
 def cmd_sample(args) -> int:
+    """Fit a simple generative model (pieces per program, piece templates by frequency, a Gaussian per template number)
+    to the shipped library's programs and to the naive programs of the same shapes; sample, execute, FD against
+    held-out shapes."""
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     ref, n_ref = _heldout_features(args.category, args.heldout, args.seed)
@@ -216,10 +226,6 @@ def cmd_sample(args) -> int:
 def register(sub) -> None:
     """Add the study commands to ``sub``."""
     ab = add_command(sub, "ablation", cmd_ablation, help="the paper's Table 4 (left): discovery ablations",
-                     description="Discovery on the first --shapes discovery shapes once per ablation row (the "
-                                 "network wake; the refactor-only wake; no abstraction; a single round; no semantic "
-                                 "rewrites; the naive rewrite scheme; no preferences), same shapes, seed and "
-                                 "counts; F, |L|, Num Struct, Num Param per row beside the paper's F.",
                      example="coder ablation --category chair --shapes 20 --rounds 1 --proposals 100 "
                              "--abstractions 4 --rows 'no abstraction' 'single iteration' --json ablation.json",
                      outputs={"json": "file+"})
@@ -228,7 +234,7 @@ def register(sub) -> None:
     ab.add_argument("--rounds", type=int_at_least(1), default=2, help="proposal/integration rounds (paper: 4)")
     ab.add_argument("--proposals", type=int_at_least(1), default=300, help="proposals per round (paper: 10,000)")
     ab.add_argument("--abstractions", type=int_at_least(1), default=8, help="candidates tried per round (paper: 20)")
-    ab.add_argument("--seed", type=seed, default=42, help="seed of the proposals")
+    add_seed(ab, "seed of the proposals", default=42)
     ab.add_argument("--rows", nargs="+", metavar="ROW",
                     help="the rows to run (default: all but 'no conditional rewrites', whose naive e-graphs need "
                          "more than 4 GB per refactor of a 16-primitive chair)")
@@ -242,13 +248,10 @@ def register(sub) -> None:
     ab.add_argument("--wake-step-budget", type=int_at_least(1), default=36,
                     help=f"the network row: the search's budget per step (the wake's default is {WAKE_STEP_BUDGET}, "
                          "about the paper's 1 s; less keeps the row to minutes on a CPU)")
-    ab.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2, help="processes for the refactors")
+    add_workers(ab, "processes for the refactors", default=2)
     add_result_options(ab, "the rows")
     pe = add_command(sub, "perturbation", cmd_perturbation,
                      help="the paper's Table 4 (right): FD of perturbed programs with and without abstractions",
-                     description="Perturb every free number of the shipped library's programs and of the naive "
-                                 "programs of the same shapes by sigma N(0, 1), execute, and compare with held-out "
-                                 "shapes by the FD of the generation tables' PointNet features.",
                      example="coder perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 "
                              "--json perturbation.json", outputs={"json": "file+"})
     add_category(pe)
@@ -257,30 +260,25 @@ def register(sub) -> None:
     pe.add_argument("--sigmas", type=float_in(0, 10), nargs="+", default=[0.0, 0.025, 0.05, 0.1],
                     help="noise standard deviations")
     pe.add_argument("--draws", type=int_at_least(1), default=2, help="noise draws per sigma > 0")
-    pe.add_argument("--seed", type=seed, default=0, help="seed of the noise and the surface points")
+    add_seed(pe, "seed of the noise and the surface points")
     add_result_options(pe, "the rows")
     no = add_command(sub, "noise", cmd_noise, help="section 7.5: post hoc inference on noisy primitive input",
-                     description="Post hoc inference with the shipped library on held-out shapes whose primitives "
-                                 "got Gaussian noise (dimensions and positions), per sigma; F as Table 3's.",
                      example="coder noise --category chair --heldout 20 --sigmas 0 0.02 --json noise.json",
                      outputs={"json": "file+"})
     add_category(no)
     no.add_argument("--heldout", type=int_at_least(1), default=100, help="the first N held-out shapes")
     no.add_argument("--sigmas", type=float_in(0, 1), nargs="+", default=[0.0, 0.01, 0.02, 0.03],
                     help="noise standard deviations (0: the clean shapes)")
-    no.add_argument("--seed", type=seed, default=0, help="seed of the noise")
+    add_seed(no, "seed of the noise")
     no.add_argument("--network", action="store_true", help="with the recognition network's search as well")
-    no.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2, help="processes for the inference")
+    add_workers(no, "processes for the inference", default=2)
     add_result_options(no, "the rows")
     sa = add_command(sub, "sample", cmd_sample,
                      help="section 7.6 (partial): a piece sampler over programs with and without abstractions",
-                     description="Fit a simple generative model (pieces per program, piece templates by frequency, "
-                                 "a Gaussian per template number) to the shipped library's programs and to the "
-                                 "naive programs of the same shapes; sample, execute, FD against held-out shapes.",
                      example="coder sample --category chair -n 50 --heldout 100 --json sample.json",
                      outputs={"json": "file+"})
     add_category(sa)
     sa.add_argument("-n", type=int_at_least(2), default=300, help="samples per model")
     sa.add_argument("--heldout", type=int_at_least(2), default=700, help="the first N held-out shapes (reference)")
-    sa.add_argument("--seed", type=seed, default=0, help="seed of the samples and the surface points")
+    add_seed(sa, "seed of the samples and the surface points")
     add_result_options(sa, "the rows")

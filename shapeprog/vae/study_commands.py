@@ -9,8 +9,8 @@ import time
 from shapeio.results import column, make_result
 
 from .. import corpus
-from ..cli import (add_category, add_command, add_result_options, check_outputs, command_line, int_at_least,
-                   refuse_existing, seed, write_json)
+from ..cli import (add_category, add_command, add_result_options, add_seed, check_outputs, command_line, int_at_least,
+                   refuse_existing, write_json)
 from .decode import MAX_SAMPLES, MAX_TRIES, sample
 from .genmetrics import novelty
 from .gentable import EVALUATE_TRIES
@@ -19,6 +19,9 @@ from .smoothness import MAX_SEQUENCES, MAX_STEPS, interpolation_smoothness
 from .structure import mean_editability, structural_novelty
 
 def cmd_novelty(args) -> int:
+    """Sample the shipped VAE of each category and measure the share of samples, and of the corpus val split, whose
+    structure (the program with its continuous numbers abstracted) no training program has (ShapeAssembly §7.1.3),
+    beside the text novelty."""
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
     rows = []
@@ -48,6 +51,9 @@ def cmd_novelty(args) -> int:
 
 
 def cmd_smoothness(args) -> int:
+    """Decode programs along lines between random latents of the shipped VAE of each category and measure consecutive
+    steps: the chamfer distance of their shapes (same sampling seed) and the token edit distance of their programs
+    (ShapeAssembly Table 6)."""
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
     rows = []
@@ -81,6 +87,9 @@ def cmd_smoothness(args) -> int:
 
 
 def cmd_editability(args) -> int:
+    """Count the lines of the corpus val split's programs and of VAE samples per category: lines per program, per
+    statement kind, the share of squeeze / reflect / translate lines and of the parts they make (ShapeAssembly Table
+    3)."""
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
     rows = []
@@ -117,39 +126,28 @@ def register(sub) -> None:
     """Add the study commands to ``sub``."""
     nv = add_command(sub, "novelty", cmd_novelty,
                      help="structural novelty of VAE samples and of the val split against the train split",
-                     description="Sample the shipped VAE of each category and measure the share of samples, and of "
-                                 "the corpus val split, whose structure (the program with its continuous numbers "
-                                 "abstracted) no training program has (ShapeAssembly §7.1.3), beside the text "
-                                 "novelty.",
                      example="vae novelty --category chair table storage -n 1000 --json novelty.json",
                      outputs={"json": "file"})
     add_category(nv, multiple=True)
     nv.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=1000, help="samples per category")
     nv.add_argument("--max-tries", type=int_at_least(1, MAX_TRIES), default=EVALUATE_TRIES,
                     help="draws per sample before a sample is decoded without rejection")
-    nv.add_argument("--seed", type=seed, default=0, help="seed of the latents")
+    add_seed(nv, "seed of the latents")
     add_result_options(nv, "the novelty table", quiet=None)
     sm = add_command(sub, "smoothness", cmd_smoothness,
                      help="interpolation smoothness: geometric and program steps between random latents",
-                     description="Decode programs along lines between random latents of the shipped VAE of each "
-                                 "category and measure consecutive steps: the chamfer distance of their shapes "
-                                 "(same sampling seed) and the token edit distance of their programs "
-                                 "(ShapeAssembly Table 6).",
                      example="vae smoothness --category chair --sequences 100 --steps 100 --json smooth.json",
                      outputs={"json": "file"})
     add_category(sm, multiple=True)
     sm.add_argument("--sequences", type=int_at_least(1, MAX_SEQUENCES), default=100, help="lines between latents")
     sm.add_argument("--steps", type=int_at_least(2, MAX_STEPS), default=100, help="decodes per line, ends included")
-    sm.add_argument("--seed", type=seed, default=0, help="seed of the latents and the surface samples")
+    add_seed(sm, "seed of the latents and the surface samples")
     add_result_options(sm, "the smoothness table", quiet="progress lines on stderr")
     ed = add_command(sub, "editability", cmd_editability,
                      help="lines per program and the share of macro-like lines, of the val split and VAE samples",
-                     description="Count the lines of the corpus val split's programs and of VAE samples per "
-                                 "category: lines per program, per statement kind, the share of squeeze / reflect "
-                                 "/ translate lines and of the parts they make (ShapeAssembly Table 3).",
                      example="vae editability --category chair table storage -n 300 --json edit.json",
                      outputs={"json": "file"})
     add_category(ed, multiple=True)
     ed.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=300, help="samples per category")
-    ed.add_argument("--seed", type=seed, default=0, help="seed of the latents")
+    add_seed(ed, "seed of the latents")
     add_result_options(ed, "the editability table", quiet=None)
