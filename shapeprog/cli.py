@@ -161,13 +161,16 @@ def command_result(args, title: str, columns: list, rows: list, notes: list) -> 
     return make_result(title, columns, rows, notes, command_line(args))
 
 
-def report(args, result: dict, show: bool = True) -> int:
-    """The end of a command that scores something: print ``result`` as markdown (unless ``show`` is False: the
-    command printed its lines as it went), write it to ``--json`` when given; the exit status 0."""
-    if show:
-        from shapeio.results import markdown  # lazy: loaded when the command runs
+def report(args, result: dict, out: str | None = None) -> int:
+    """The end of a command that scores something: print ``result`` as markdown, also write that markdown to
+    ``out`` when given and the result to ``--json`` when given; the exit status 0."""
+    from shapeio.results import markdown  # lazy: loaded when the command runs
 
-        print(markdown(result))
+    text = markdown(result)
+    print(text)
+    if out:
+        atomic_write(out, text)
+        print(f"wrote {out}")
     write_json(args, result)
     return 0
 

@@ -13,13 +13,13 @@ from pathlib import Path
 import torch
 
 from shapeedit import port_argument
-from shapeio.results import column, make_result
+from shapeio.results import column
 
 from . import corpus
 from . import io
-from .cli import (add_category, add_command, add_json, add_overwrite, add_quiet, add_seed, check_outputs, command_line,
-                  emit_text, float_in, int_at_least, macro_library, Program, refuse_existing, refuse_inputs, write_json,
-                  write_mesh)
+from .cli import (add_category, add_command, add_json, add_overwrite, add_quiet, add_seed, check_outputs,
+                  command_result, emit_text, float_in, int_at_least, macro_library, Program, refuse_existing,
+                  refuse_inputs, write_json, write_mesh)
 from .errors import ParseError
 from .fit import MAX_DECIMALS, MAX_LR, MAX_REG, fit
 from .fit import MAX_STEPS as MAX_FIT_STEPS
@@ -91,13 +91,13 @@ def cmd_fit(args) -> int:
     if args.mesh:
         with torch.no_grad():
             write_mesh(args.mesh, prog.execute(res.program))
-    write_json(args, make_result(
-        f"fit of {prog.name} to {args.points}",
+    write_json(args, command_result(
+        args, f"fit of {prog.name} to {args.points}",
         [column("stage", "stage"), column("chamfer", "chamfer", 4), column("fscore", f"F-score @{thr:.3g}", 1)],
         [{"stage": "before", "chamfer": cd0, "fscore": float(f0)},
          {"stage": "after", "chamfer": cd1, "fscore": float(f1)}],
         [f"{len(res.losses)} of {args.steps} steps in {res.seconds:.1f} s"]
-        + ([res.stopped] if res.stopped is not None else []), command_line(args)))
+        + ([res.stopped] if res.stopped is not None else [])))
     return 0
 
 

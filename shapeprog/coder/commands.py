@@ -7,22 +7,19 @@ ShapeAssembly corpus, so its shapes have their own ids: ``coder-chair:401`` is l
 """
 from __future__ import annotations
 
-import multiprocessing
 import re
-import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from tqdm import tqdm
 
 from shapeio import atomic_write
 from shapeio.files import NotShippedError
-from shapeio.results import column, make_result
+from shapeio.results import column
 
 from ..cli import (MAX_SECONDS_OPTION, add_category, add_command, add_quiet, add_result_options, add_seed, add_workers,
-                   category_pairs, check_outputs, command_line, float_in, int_at_least, markdown_result, positive_float,
-                   refuse_existing, write_json)
+                   category_pairs, check_outputs, command_line, command_result, float_in, int_at_least, markdown_result,
+                   positive_float, progress_log, refuse_existing, worker_pool, write_json)
 from ..errors import ParseError
 from ..limits import decode
 from ..fit import MAX_LR
@@ -192,12 +189,11 @@ def cmd_infer(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {args.shape}: {e}") from None
     print(f"program:  {r.text}\nexpanded: {r.expanded}\ncost: {r.cost:.2f}  error: {r.error:.4f}  e-graph: {r.stop}")
-    write_json(args, make_result(f"ShapeCoder inference of {args.shape} with {args.library}",
-                                 [column("shape", "shape"), column("cost", "cost", 2), column("error", "error", 4),
-                                  column("stop", "e-graph"), column("program", "program")],
-                                 [{"shape": args.shape, "cost": float(r.cost), "error": float(r.error),
-                                   "stop": str(r.stop), "program": r.text}], [f"expanded: {r.expanded}"],
-                                 command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder inference of {args.shape} with {args.library}",
+                                    [column("shape", "shape"), column("cost", "cost", 2), column("error", "error", 4),
+                                     column("stop", "e-graph"), column("program", "program")],
+                                    [{"shape": args.shape, "cost": float(r.cost), "error": float(r.error),
+                                      "stop": str(r.stop), "program": r.text}], [f"expanded: {r.expanded}"]))
     return 0
 
 
@@ -222,11 +218,9 @@ def cmd_tables(args) -> int:
                            args.phi_network, "phi-", "--phi-network")
     command = command_line(args)
     parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]
-    progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    progress = progress_log(args)
     # workers forked after this process ran torch can hang: with a network they start from a fresh interpreter
-    ctx = multiprocessing.get_context("forkserver") if args.phi_network else None
-    pool = ProcessPoolExecutor(args.workers, mp_context=ctx) if args.workers > 1 else None
-    try:
+    with worker_pool(args.workers, "forkserver" if args.phi_network else None) as pool:
         for cat in args.category:
             try:
                 run = tables.from_run(runs[cat], cat) if cat in runs else tables.shipped(cat)
@@ -244,9 +238,6 @@ def cmd_tables(args) -> int:
             parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None, baselines=rows,
                                               **budget))
             print(parts[-1] + "\n", flush=True)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     if args.out:
         atomic_write(args.out, "\n\n".join(parts) + "\n")
         print(f"wrote {args.out}")

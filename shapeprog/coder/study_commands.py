@@ -3,16 +3,13 @@ its Tables 2 and 3 (Table 4's ablations and perturbation FD, noisy input, sampli
 :mod:`shapeprog.coder.commands` registers them beside the other ``coder`` commands."""
 from __future__ import annotations
 
-import multiprocessing
 import random
-import sys
 from types import SimpleNamespace
-from concurrent.futures import ProcessPoolExecutor
 
-from shapeio.results import column, make_result
+from shapeio.results import column
 
 from ..cli import (MAX_SECONDS_OPTION, add_category, add_command, add_result_options, add_seed, add_workers,
-                   command_line, float_in, int_at_least, refuse_existing, write_json)
+                   command_result, float_in, int_at_least, progress_log, refuse_existing, worker_pool, write_json)
 from ..fit import MAX_LR
 from . import data, tables
 from ..vae.genmetrics import frechet_distance
@@ -22,15 +19,6 @@ from .lang import Num, substitute
 from .objective import naive_program, naive_summary
 from .studies import PieceSampler, execute_corners, free_numbers, noisy, perturbation_fd, shape_features
 from .search import WAKE_STEP_BUDGET
-
-
-def _pool(workers: int, network: bool):
-    """A process pool of ``workers`` (None for 1); with a network its workers start from a fresh interpreter
-    (workers forked after this process ran torch can hang)."""
-    if workers <= 1:
-        return None
-    ctx = multiprocessing.get_context("forkserver") if network else None
-    return ProcessPoolExecutor(workers, mp_context=ctx)
 
 
 def cmd_ablation(args) -> int:
@@ -54,13 +42,10 @@ def cmd_ablation(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
     shapes = data.load(args.category)[:args.shapes]
-    progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
-    pool = _pool(args.workers, any(ablation.ROWS[r].get("wake") == "network" for r in rows))
-    try:
-        got = ablation.ablation(shapes, base, rows, network=network, executor=pool, progress=progress)
-    finally:
-        if pool is not None:
-            pool.shutdown()
+    network_rows = any(ablation.ROWS[r].get("wake") == "network" for r in rows)
+    # workers forked after this process ran torch can hang: with a network they start from a fresh interpreter
+    with worker_pool(args.workers, "forkserver" if network_rows else None) as pool:
+        got = ablation.ablation(shapes, base, rows, network=network, executor=pool, progress=progress_log(args))
     paper = ablation.PAPER_TABLE4_LEFT.get(args.category, {})
     naive = naive_summary(s.prims for s in shapes)
     table = [{"row": "naive programs (input primitives)", "F": naive.F, "L": 6, "struct": naive.num_struct,
@@ -85,8 +70,8 @@ def cmd_ablation(args) -> int:
              "which discovered with a constant omega)."]
     cols = [column("row", "row"), column("F", "F", 1), column("L", "|L|"), column("struct", "Num Struct", 1),
             column("param", "Num Param", 1), column("seconds", "wall s", 0), column("paper", "paper F (chair)", 1)]
-    write_json(args, make_result(f"ShapeCoder Table 4 (left): ablations ({args.category})", cols, table, notes,
-                                 command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder Table 4 (left): ablations ({args.category})", cols, table,
+                                    notes))
     return 0
 
 
@@ -145,8 +130,8 @@ def cmd_perturbation(args) -> int:
     cols = [column("programs", "programs"), column("sigma", "sigma"), column("free", "free numbers / program", 1),
             column("fd", "FD", 2), column("fd_min", "FD min", 2), column("fd_max", "FD max", 2),
             column("failed", "failed")]
-    write_json(args, make_result(f"ShapeCoder Table 4 (right): FD of perturbed programs ({args.category})", cols,
-                                 rows, notes, command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder Table 4 (right): FD of perturbed programs ({args.category})",
+                                    cols, rows, notes))
     return 0
 
 
@@ -160,9 +145,8 @@ def cmd_noise(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
     recs = [r for r in data.load(args.category, "heldout")[:args.heldout] if len(r.prims) <= run.library.lang.max_prims]
-    pool = _pool(args.workers, args.network)
     rows = []
-    try:
+    with worker_pool(args.workers, "forkserver" if args.network else None) as pool:  # as in cmd_ablation
         for sigma in args.sigmas:
             rng = random.Random(f"{args.seed}:{sigma!r}")
             shapes = [SimpleNamespace(prims=order(noisy(r.prims, sigma, rng))) for r in recs]
@@ -170,9 +154,6 @@ def cmd_noise(args) -> int:
             rows.append({"sigma": sigma, "shapes": row.shapes, "F": row.F, "used": row.used, "cpu": row.cpu})
             if not args.quiet:
                 print(f"sigma {sigma:g}: F {row.F:.2f} over {row.shapes} shapes", flush=True)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     how = "the recognition network's search and refactoring" if args.network else "refactoring only"
     notes = [f"Post hoc inference ({how}, default budgets) with the shipped {args.category} library on the first "
              f"{args.heldout} held-out shapes (those with at most 16 primitives), each primitive's dimensions and "
@@ -181,8 +162,8 @@ def cmd_noise(args) -> int:
              "The paper's section 7.5 protocol and figures are not in the spec: this is ours."]
     cols = [column("sigma", "sigma"), column("shapes", "shapes"), column("F", "F", 2),
             column("used", "abstractions used"), column("cpu", "CPU s / shape", 2)]
-    write_json(args, make_result(f"ShapeCoder section 7.5: post hoc inference on noisy primitives ({args.category})",
-                                 cols, rows, notes, command_line(args)))
+    title = f"ShapeCoder section 7.5: post hoc inference on noisy primitives ({args.category})"
+    write_json(args, command_result(args, title, cols, rows, notes))
     return 0
 
 
@@ -218,8 +199,8 @@ def cmd_sample(args) -> int:
              "its protocol and figures are not in the spec)."]
     cols = [column("model", "model"), column("templates", "templates"), column("valid", "valid %", 1, 100),
             column("fd", "FD", 2), column("fd_programs", "FD, fitted programs", 2)]
-    write_json(args, make_result(f"ShapeCoder section 7.6: a piece sampler over programs ({args.category})", cols,
-                                 rows, notes, command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder section 7.6: a piece sampler over programs ({args.category})",
+                                    cols, rows, notes))
     return 0
 
 

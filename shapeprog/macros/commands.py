@@ -2,21 +2,19 @@
 with them, and the paper's Table 1."""
 from __future__ import annotations
 
-import multiprocessing
 import os
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from shapeio import atomic_write
-from shapeio.results import column, make_result, markdown
+from shapeio.results import column
 
 from .. import corpus
 from ..cli import (MAX_SECONDS_OPTION, add_category, add_command, add_quiet, add_result_options, add_seed, add_workers,
-                   category_pairs, command_line, float_in, int_at_least, macro_library, Program, refuse_existing,
-                   refuse_inputs, write_json)
+                   category_pairs, command_line, command_result, float_in, int_at_least, macro_library, Program,
+                   progress_log, refuse_existing, refuse_inputs, report, worker_pool, write_json)
 from .api import collection
 from .api import refactor
 from .discover import discover, prior_rounds, rounds_line
@@ -72,19 +70,15 @@ def cmd_discover(args) -> int:
                          "choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     command = command_line(args)
-    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     t0 = time.time()
     log = (lambda m: None) if args.quiet else (lambda m: print(f"[{time.time() - t0:7.1f} s] {m}", flush=True))
-    try:
+    with worker_pool(args.workers) as pool:
         nodes, ids = merged_collection(args.category, args.split, args.limit, args.seed, executor=pool,
                                        max_orders=cfg["abs_order_num"])
         log(f"{', '.join(args.category)}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
         start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior, args.start_from)
         state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
                          stop_after=args.stop_after, start=start)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     lib = state.library()
     header = (f"# ShapeMOD library ({', '.join(args.category)}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
               f"# command: {command}\n"
@@ -130,12 +124,12 @@ def cmd_refactor(args) -> int:
         print(f"wrote {args.out}")
     rows = [{"block": b.key, "f_base": float(b.f_base), "f": float(b.f)} for b in r.blocks]
     rows.append({"block": "total", "f_base": float(st["f_base"]), "f": float(st["f"])})
-    write_json(args, make_result(f"ShapeMOD refactor of {prog.name} with {args.library}",
-                                 [column("block", "sub-program"), column("f_base", "f (base)", 2),
-                                  column("f", "f (macros)", 2)], rows,
-                                 [f"total: lines {st['lines']}, floats {st['float']}, cuboid ids {st['cube']}, "
-                                  f"categoricals {st['categorical']}, booleans {st['bool']} (after the bbox lines)"],
-                                 command_line(args)))
+    write_json(args, command_result(args, f"ShapeMOD refactor of {prog.name} with {args.library}",
+                                    [column("block", "sub-program"), column("f_base", "f (base)", 2),
+                                     column("f", "f (macros)", 2)], rows,
+                                    [f"total: lines {st['lines']}, floats {st['float']}, cuboid ids {st['cube']}, "
+                                     f"categoricals {st['categorical']}, booleans {st['bool']} (after the bbox "
+                                     "lines)"]))
     return 0
 
 
@@ -155,15 +149,10 @@ def cmd_refactor_corpus(args) -> int:
         raise SystemExit(f"error: {e}") from None
     lib = macro_library(args.library)
     command = command_line(args)
-    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
-            if args.workers > 1 else None)
     t0 = time.perf_counter()
-    try:
+    with worker_pool(args.workers, "spawn") as pool:
         rc = refactor_corpus(args.category, lib, args.library, split=args.split, limit=args.limit, seed=args.seed,
                              executor=pool, mode=args.search, check=not args.no_check)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     seconds = time.perf_counter() - t0
     rc.meta["seconds"] = round(seconds, 1)
     rc.meta["workers"] = args.workers
@@ -192,24 +181,13 @@ def cmd_tables(args) -> int:
     refuse_inputs([args.out, args.json], [*library_files.values(), *extra_files.values()])
     refuse_existing([args.out, args.json], args.overwrite)
     extra = {name: macro_library(f, f"--extra {name}=") for name, f in extra_files.items()}
-    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     try:
-        rows = table1_rows(args.category, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
-                           library_files=library_files, extra=extra,
-                           log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+        with worker_pool(args.workers) as pool:
+            rows = table1_rows(args.category, limit=args.limit, seed=args.seed, executor=pool, mode=args.search,
+                               library_files=library_files, extra=extra, log=progress_log(args))
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    result = table1_result(rows, command_line(args), args.limit, args.seed, args.note or ())
-    text = markdown(result)
-    print(text)
-    if args.out:
-        atomic_write(args.out, text)
-        print(f"wrote {args.out}")
-    write_json(args, result)
-    return 0
+    return report(args, table1_result(rows, command_line(args), args.limit, args.seed, args.note or ()), out=args.out)
 
 
 def cmd_perturbation(args) -> int:
@@ -221,17 +199,14 @@ def cmd_perturbation(args) -> int:
     refuse_existing([args.json, args.png], args.overwrite)
     name = args.library or args.category
     lib = macro_library(name, "--library ")
-    log = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
     try:
         study = perturbation_study(args.category, lib, name, n=args.n, sigmas=args.sigmas, repeats=args.repeats,
-                                   seed=args.seed, log=log)
+                                   seed=args.seed, log=progress_log(args))
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
     for ident, reason in study["left_out"]:
         print(f"left out: {args.category}/{ident}: {reason}", file=sys.stderr)
-    result = perturbation_result(study, command_line(args))
-    print(markdown(result))
-    write_json(args, result)
+    report(args, perturbation_result(study, command_line(args)))
     if args.png:
         plot(study, args.png)
         print(f"wrote {args.png}")
@@ -251,25 +226,18 @@ def cmd_ablation(args) -> int:
                          + ", ".join(repr(v) for v in VARIANTS))
     base = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
                        abs_shape_num=args.subsample)
-    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
     t0 = time.time()
     log = None if args.quiet else (lambda m: print(f"[{time.time() - t0:7.1f} s] {m}", file=sys.stderr, flush=True))
-    try:
+    with worker_pool(args.workers) as pool:
         nodes, ids = collection(args.category, "all", args.limit, args.seed, executor=pool,
                                 max_orders=base["abs_order_num"])
         if log:
             log(f"{args.category}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
         rows = run_ablation(nodes, args.variants, base, seed=args.seed, executor=pool, log=log)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     scale = (f"{args.category}: {len(ids)} shapes ({len(nodes.keys)} sub-programs; "
              + ("all" if args.limit is None else f"a random subset, seed {args.seed}") + f"), {base['num_rounds']} "
              f"round(s) of {base['cand_cluster_num']} proposal steps, subsample {base['abs_shape_num']} sub-programs")
-    result = ablation_result(rows, command_line(args), scale)
-    print(markdown(result))
-    write_json(args, result)
-    return 0
+    return report(args, ablation_result(rows, command_line(args), scale))
 
 
 def cmd_generation(args) -> int:
@@ -288,19 +256,10 @@ def cmd_generation(args) -> int:
             models[name] = load_model(path, category=args.category) if path else load_pretrained(args.category)
         except (FileNotFoundError, ValueError) as e:
             raise SystemExit(f"error: {e}") from None
-    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
-            if args.workers > 1 else None)
-    try:
+    with worker_pool(args.workers, "spawn") as pool:
         rows, settings = generation_rows(args.category, models, args.n, args.seed, stability=not args.no_stability,
-                                         fool_epochs=args.fool_epochs, executor=pool,
-                                         log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    result = table2_result(args.category, rows, settings, args.n, args.seed, command_line(args))
-    print(markdown(result))
-    write_json(args, result)
-    return 0
+                                         fool_epochs=args.fool_epochs, executor=pool, log=progress_log(args))
+    return report(args, table2_result(args.category, rows, settings, args.n, args.seed, command_line(args)))
 
 
 def cmd_pointcloud(args) -> int:
@@ -318,20 +277,13 @@ def cmd_pointcloud(args) -> int:
     if missing:
         raise SystemExit(f"error: --clouds: {missing[0]}: no such folder (make it with `python -m shapeprog "
                          "pointcloud make-clouds`)")
-    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
-            if args.workers > 1 else None)
     try:
-        rows = pointcloud_rows(pairs, args.limit, args.seed, stability=not args.no_stability, executor=pool,
-                               log=None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True)))
+        with worker_pool(args.workers, "spawn") as pool:
+            rows = pointcloud_rows(pairs, args.limit, args.seed, stability=not args.no_stability, executor=pool,
+                                   log=progress_log(args))
     except (FileNotFoundError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    result = table3_result(rows, command_line(args), args.limit, args.seed)
-    print(markdown(result))
-    write_json(args, result)
-    return 0
+    return report(args, table3_result(rows, command_line(args), args.limit, args.seed))
 
 
 def register(sub) -> None:

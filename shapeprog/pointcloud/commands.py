@@ -3,11 +3,9 @@ the cloud cache they read (make-clouds), and the export of trained weights."""
 from __future__ import annotations
 
 import json
-import multiprocessing
 import sys
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +21,7 @@ from shapeio.points import read_cloud
 from .. import corpus
 from ..cli import (add_category, add_command, add_export_weights, add_json, add_overwrite, add_quiet, add_seed,
                    add_workers, command_line, float_in, int_at_least, markdown_result, refuse_existing, refuse_inputs,
-                   write_json)
+                   worker_pool, write_json)
 from ..errors import PointCloudError
 from ..execute import execute
 from ..io import obj_text
@@ -193,21 +191,15 @@ def cmd_tables(args) -> int:
     ShapeAssembly Table 7 layouts as Markdown."""
     refuse_inputs([args.out, args.json], [args.weights])
     refuse_existing([args.out, args.json], args.overwrite)
-    executor = None
-    if args.workers > 1:
-        executor = ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
 
     def progress(done, total):
         if not args.quiet and (done % 10 == 0 or done == total):
             print(f"{done}/{total} shapes", file=sys.stderr, flush=True)
 
-    try:
+    with worker_pool(args.workers, "spawn") as executor:
         result = evaluate(args.clouds, args.category, weights=args.weights, limit=args.limit, steps=args.steps,
                           stability=not args.no_stability, retrieval=not args.no_retrieval, executor=executor,
                           seed=args.seed, progress=progress, search=args.search, augmented=args.augmented)
-    finally:
-        if executor is not None:
-            executor.shutdown()
     command = command_line(args)
     path = write_tables(result, args.out, command)
     for row, m in result.rows.items():
@@ -340,6 +332,7 @@ def register(sub) -> None:
     m.add_argument("--limit", type=int_at_least(1), help="only the first N shapes of the corpus train and val "
                                                          "splits (a quick check)")
     add_quiet(m, "progress bar")
-    add_export_weights(sub, export_cloud_weights, help="write a point-cloud training checkpoint as a small weights file",
+    add_export_weights(sub, export_cloud_weights,
+                       help="write a point-cloud training checkpoint as a small weights file",
                        example="pointcloud export-weights runs/pc_chair/checkpoints/last.ckpt --out pc_chair.pt",
                        checkpoint_help="a .ckpt file written by `python train.py fit --config configs/pointcloud/...`")

@@ -13,14 +13,14 @@ import torch
 from tqdm import tqdm
 
 from shapeio import atomic_write, write_new
-from shapeio.results import column, make_result
+from shapeio.results import column
 from shapeio.weights import load_payload
 
 from .. import io
 from ..cli import (DEFAULT_CATEGORY, add_category, add_command, add_export_weights, add_json, add_overwrite, add_quiet,
-                   add_result_options, add_seed, add_workers, category_of, check_outputs, command_line, emit_text,
-                   int_at_least, Program, progress_log, refuse_existing, refuse_inputs, worker_pool, write_json,
-                   write_mesh)
+                   add_result_options, add_seed, add_workers, category_of, check_outputs, command_line, command_result,
+                   emit_text, int_at_least, Program, progress_log, refuse_existing, refuse_inputs, worker_pool,
+                   write_json, write_mesh)
 from ..errors import ParseError
 from ..execute import execute
 from ..lang import parse
@@ -188,11 +188,11 @@ def cmd_reconstruct(args) -> int:
         render_grid([(target.corners, target.line.numpy()), (shape.corners, shape.line.numpy())], args.png,
                     cols=2, size=args.size)
         print(f"wrote {args.png} (input, reconstruction)")
-    write_json(args, make_result(
-        "VAE reconstruction", [column("program", "program"), column("leaves", "leaf cuboids"),
-                               column("input_leaves", "input leaf cuboids"),
-                               column("fscore", f"F-score @{thr:.3g}", 1), column("chamfer", "chamfer", 4)],
-        [figures], [f"weights: {args.weights or 'the shipped model'}; seed {args.seed}"], command_line(args)))
+    write_json(args, command_result(
+        args, "VAE reconstruction", [column("program", "program"), column("leaves", "leaf cuboids"),
+                                     column("input_leaves", "input leaf cuboids"),
+                                     column("fscore", f"F-score @{thr:.3g}", 1), column("chamfer", "chamfer", 4)],
+        [figures], [f"weights: {args.weights or 'the shipped model'}; seed {args.seed}"]))
     return 0
 
 
@@ -346,10 +346,10 @@ def cmd_train_classifier(args) -> int:
     print(f"wrote {args.out}, SHA-256 {sha256_file(args.out)}")
     rows = [{"category": c, "accuracy": float(a)} for c, a in meta["val_accuracy_per_category"].items()]
     rows.append({"category": "all", "accuracy": float(meta["val_accuracy"])})
-    write_json(args, make_result("PointNet category classifier: val accuracy (%)",
-                                 [column("category", "category"), column("accuracy", "val accuracy (%)", 2)], rows,
-                                 [f"weights {args.out}, SHA-256 {sha256_file(args.out)}; trained in "
-                                  f"{meta['train_seconds']:.0f} s"], command_line(args)))
+    write_json(args, command_result(args, "PointNet category classifier: val accuracy (%)",
+                                    [column("category", "category"), column("accuracy", "val accuracy (%)", 2)], rows,
+                                    [f"weights {args.out}, SHA-256 {sha256_file(args.out)}; trained in "
+                                     f"{meta['train_seconds']:.0f} s"]))
     return 0
 
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import sys
 import time
 
-from shapeio.results import column, make_result
+from shapeio.results import column
 
 from .. import corpus
-from ..cli import (add_category, add_command, add_result_options, add_seed, check_outputs, command_line, int_at_least,
+from ..cli import (add_category, add_command, add_result_options, add_seed, check_outputs, command_result, int_at_least,
                    refuse_existing, write_json)
 from .decode import MAX_SAMPLES, MAX_TRIES, sample
 from .genmetrics import novelty
@@ -38,15 +38,15 @@ def cmd_novelty(args) -> int:
                          "text": novelty(progs, train)})
             print(f"{category}: {name}: {len(progs)} programs, {rows[-1]['structure']:.1f} % novel structure, "
                   f"{rows[-1]['text']:.1f} % novel text ({time.perf_counter() - t0:.1f} s)")
-    write_json(args, make_result(
-        "Structural novelty (ShapeAssembly §7.1.3)",
+    write_json(args, command_result(
+        args, "Structural novelty (ShapeAssembly §7.1.3)",
         [column("category", "category"), column("row", "programs of"), column("programs", "programs"),
          column("structure", "% novel (structure)", 1), column("text", "% novel (text)", 1)], rows,
         ["% novel (structure): programs whose structure (every continuous number abstracted; names, faces, axes, "
          "aligned flags, translate counts and hierarchy kept) no program of the category's corpus train split has "
          "(`shapeprog.vae.structural_novelty`). % novel (text): whose text with numbers to 3 decimals none has.",
          "The paper's figures for this measure are not in the specification; its samples were 1,000 per category.",
-         f"Samples: seed {args.seed}, decoded with validity checks and rejection."], command_line(args)))
+         f"Samples: seed {args.seed}, decoded with validity checks and rejection."]))
     return 0
 
 
@@ -66,8 +66,8 @@ def cmd_smoothness(args) -> int:
               f"program step {r['program']:.1f} tokens, structure step {r['structure']:.2f} tokens "
               f"(ends: {r['geometric_ends']:.4f}, {r['program_ends']:.1f}, {r['structure_ends']:.1f}) in "
               f"{r['seconds']:.0f} s")
-    write_json(args, make_result(
-        "Interpolation smoothness (ShapeAssembly Table 6)",
+    write_json(args, command_result(
+        args, "Interpolation smoothness (ShapeAssembly Table 6)",
         [column("category", "category"), column("sequences", "sequences"), column("steps", "steps"),
          column("geometric", "geometric step (chamfer)", 4), column("program", "program step (token edits)", 2),
          column("structure", "structure step (token edits)", 2),
@@ -82,7 +82,7 @@ def cmd_smoothness(args) -> int:
          "Structure step: the same on the programs with every number abstracted. Lower is smoother.",
          "The paper's Table 6 figures are not in the specification (it gives the protocol: 100 sequences of 100 "
          "steps), and its tokenisation is not specified: compare categories and models here, not values with the "
-         "paper's.", f"Seed {args.seed}; the shipped models."], command_line(args)))
+         "paper's.", f"Seed {args.seed}; the shipped models."]))
     return 0
 
 
@@ -103,8 +103,8 @@ def cmd_editability(args) -> int:
             print(f"{category}: {name}: {r['programs']} programs, {r['lines']:.1f} lines, {r['macro_lines']:.1f} % "
                   f"squeeze / reflect / translate lines, {r['macro_parts']:.1f} % of parts made by reflect / "
                   "translate")
-    write_json(args, make_result(
-        "Editability (ShapeAssembly Table 3)",
+    write_json(args, command_result(
+        args, "Editability (ShapeAssembly Table 3)",
         [column("category", "category"), column("row", "programs of"), column("programs", "programs"),
          column("lines", "lines per program", 1), column("blocks", "blocks", 2),
          column("cuboid_lines", "Cuboid lines", 1), column("attach_lines", "attach lines", 1),
@@ -118,7 +118,7 @@ def cmd_editability(args) -> int:
          "plus the copies that reflect (1) and translate (n) make.",
          "The paper's Table 3 figures are not in the specification.",
          f"Samples: {args.n} per category, seed {args.seed}, validity-checked decoding with rejection (at most "
-         f"{EVALUATE_TRIES} draws)."], command_line(args)))
+         f"{EVALUATE_TRIES} draws)."]))
     return 0
 
 
