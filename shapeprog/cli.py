@@ -1,9 +1,10 @@
 """What every command of ``python -m shapeprog`` shares, written once.
 
-- :func:`add_command` makes a command's parser: its description is the command function's docstring, its help
-  shows each option's default and one example in its epilog; the outputs it lists are checked by the dispatcher
-  before the command's work starts. The options several commands share are added by one function each
-  (:func:`add_seed`, :func:`add_workers`, :func:`add_result_options`, :func:`add_export_weights`).
+- :func:`add_command` makes a command's parser from the command function and its docstring (summary line,
+  description, example): its help shows each option's default and the example in its epilog; the outputs it
+  lists are checked by the dispatcher before the command's work starts. The options several commands share are
+  added by one function each (:func:`add_seed`, :func:`add_workers`, :func:`add_result_options`,
+  :func:`add_export_weights`).
 - The category is always ``--category`` (:func:`add_category`): one of :data:`CATEGORIES`, by default
   :data:`DEFAULT_CATEGORY`, or, for commands whose input names one (a corpus id, a weights file), the input's.
 - A corpus id (``chair/173``) names a program of the ShapeAssembly corpus, everywhere (:class:`Program`).
@@ -81,21 +82,31 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return super()._fill_text(text, width, indent)
 
 
-def add_command(sub, name: str, func, *, help: str, example: str, description: str | None = None,
-                outputs: dict | None = None) -> argparse.ArgumentParser:
+def add_command(sub, name: str, func, *, outputs: dict | None = None, help: str | None = None,
+                description: str | None = None, example: str | None = None) -> argparse.ArgumentParser:
     """A command's parser in ``sub`` (a system's sub-parsers) that runs ``func(args)``.
 
+    The command's texts are ``func``'s docstring unless given: its first line is ``help``, the paragraphs after it
+    are ``description``, and its last paragraph, ``Example: ...``, is ``example``.
+
     Args:
-        help: the one line of the system's command list.
-        description: the text of the command's ``--help`` (default: ``func``'s docstring).
-        example: one command line after ``python -m shapeprog`` (``vae sample --category chair``); the
-            epilog shows it and a test parses it.
         outputs: each output option's attribute and what it names: ``"folder"`` (created with its parents),
             ``"file"`` (in an existing folder) or ``"file+"`` (its folder created); the dispatcher checks
             them with :func:`shapeio.files.output_problem` before the command's work starts.
+        help: the one line of the system's command list.
+        description: the text of the command's ``--help``.
+        example: one command line after ``python -m shapeprog`` (``vae sample --category chair``); the
+            epilog shows it and a test parses it.
     """
-    p = sub.add_parser(name, help=help, description=description or inspect.getdoc(func),
-                       epilog=f"example:\n  {PROG} {example}", formatter_class=HelpFormatter)
+    summary, *paragraphs = [" ".join(p.split()) for p in (inspect.getdoc(func) or "").split("\n\n")]
+    if paragraphs and paragraphs[-1].startswith("Example: "):
+        example = example or paragraphs.pop().removeprefix("Example: ")
+    help, description = help or summary, description or "\n\n".join(paragraphs)
+    if not (help and description and example):
+        raise ValueError(f"command {name!r}: {func.__qualname__} needs a docstring of a summary line, a description "
+                         "and an 'Example: ...' paragraph, or help, description and example given")
+    p = sub.add_parser(name, help=help, description=description, epilog=f"example:\n  {PROG} {example}",
+                       formatter_class=HelpFormatter)
     p.set_defaults(func=func, outputs=dict(outputs or {}), example=example, parser=p)
     return p
 

@@ -34,7 +34,12 @@ PROGRAM_HELP = "corpus id (chair/173, table/33075, storage/46436) or a UTF-8 pro
 
 
 def cmd_run(args) -> int:
-    """Execute a program; print its block and cuboid counts; export a mesh and a picture."""
+    """execute a program and export its cuboids
+
+    Execute a program; print its block and cuboid counts; export a mesh and a picture.
+
+    Example: assembly run chair/173 -o chair.obj --png chair.png
+    """
     check_outputs([args.out], [args.png])
     prog = Program(args.program)
     refuse_inputs([args.out, args.png], [args.program])
@@ -52,8 +57,13 @@ def cmd_run(args) -> int:
 
 
 def cmd_fit(args) -> int:
-    """Fit a program's continuous numbers to a point cloud; print chamfer and F-score before and after; write the fitted
-    program."""
+    """fit a program's parameters to a point cloud
+
+    Fit a program's continuous numbers to a point cloud; print chamfer and F-score before and after; write the fitted
+    program.
+
+    Example: assembly fit table/33075 --points example --steps 400 -o fitted.txt
+    """
     check_outputs([args.mesh], [args.out, args.json])
     prog = Program(args.program)
     refuse_inputs([args.out, args.mesh, args.json], [args.program, None if args.points == "example" else args.points])
@@ -102,7 +112,12 @@ def cmd_fit(args) -> int:
 
 
 def cmd_silhouettes(args) -> int:
-    """Render front and side silhouettes of every corpus program (train and val)."""
+    """render front and side silhouettes of the corpus to an .npz
+
+    Render front and side silhouettes of every corpus program (train and val).
+
+    Example: assembly silhouettes --out silhouettes.npz
+    """
     check_outputs(others=[args.out])
     refuse_existing([args.out], args.overwrite)
     t0 = time.perf_counter()
@@ -162,8 +177,13 @@ def open_for_edit(args):
 
 
 def cmd_edit(args) -> int:
-    """Serve an editor page for a program: the shape in 3D, one control per free parameter, live re-execution, undo /
-    redo / reset, export of text, OBJ and PNG. Runs until interrupted. See docs/editor.md."""
+    """edit a program in the browser (needs the 'editor' extra: viser)
+
+    Serve an editor page for a program: the shape in 3D, one control per free parameter, live re-execution, undo / redo
+    / reset, export of text, OBJ and PNG. Runs until interrupted. See docs/editor.md.
+
+    Example: assembly edit chair/173 --port 8080 --no-browser --target chair/37982
+    """
     from shapeedit import editor_preflight, serve_until_interrupted  # lazy: loaded when the command runs
 
     problem = editor_preflight(args.export_dir)
@@ -179,8 +199,7 @@ def cmd_edit(args) -> int:
 
 def register(sub) -> None:
     """Add the ``assembly`` commands to ``sub``."""
-    r = add_command(sub, "run", cmd_run, help="execute a program and export its cuboids",
-                    example="assembly run chair/173 -o chair.obj --png chair.png", outputs={"out": "file"})
+    r = add_command(sub, "run", cmd_run, outputs={"out": "file"})
     r.add_argument("program", help=PROGRAM_HELP)
     r.add_argument("-o", "--out", help="mesh file: .obj (reference layout), .ply or .glb (parts coloured by line)")
     r.add_argument("--png", help="picture file (.png), parts coloured by the program line that created them")
@@ -188,9 +207,7 @@ def register(sub) -> None:
                    help=f"picture width and height in pixels (8 to {MAX_PICTURE_SIZE})")
     r.add_argument("--float64", action="store_true", help="execute in float64 (float32 is the reference)")
     add_overwrite(r)
-    f = add_command(sub, "fit", cmd_fit, help="fit a program's parameters to a point cloud",
-                    example="assembly fit table/33075 --points example --steps 400 -o fitted.txt",
-                    outputs={"out": "file", "json": "file"})
+    f = add_command(sub, "fit", cmd_fit, outputs={"out": "file", "json": "file"})
     f.add_argument("program", help=PROGRAM_HELP)
     f.add_argument("--points", default="example",
                    help="point cloud file (.obj 'v x y z' lines, .ply, .xyz or .npy) or 'example' (the vendored "
@@ -207,9 +224,7 @@ def register(sub) -> None:
     f.add_argument("--mesh", help="also write the fitted shape: .obj, .ply or .glb")
     add_json(f, "the chamfer distance and F-score before and after")
     add_overwrite(f)
-    s = add_command(sub, "silhouettes", cmd_silhouettes,
-                    help="render front and side silhouettes of the corpus to an .npz",
-                    example="assembly silhouettes --out silhouettes.npz", outputs={"out": "file"})
+    s = add_command(sub, "silhouettes", cmd_silhouettes, outputs={"out": "file"})
     s.add_argument("--out", required=True, help="output file (.npz, compressed NumPy arrays)")
     s.add_argument("--size", type=int_at_least(1, SILHOUETTE_MAX_SIZE), default=64,
                    help=f"image side in pixels (1 to {SILHOUETTE_MAX_SIZE})")
@@ -218,8 +233,7 @@ def register(sub) -> None:
     s.add_argument("--limit", type=int_at_least(1), help="only the first N shapes per category and split")
     add_quiet(s, "progress bar")
     add_overwrite(s)
-    d = add_command(sub, "edit", cmd_edit, help="edit a program in the browser (needs the 'editor' extra: viser)",
-                    example="assembly edit chair/173 --port 8080 --no-browser --target chair/37982")
+    d = add_command(sub, "edit", cmd_edit)
     d.add_argument("program", nargs="?", help=PROGRAM_HELP + ", or a macro program file (lines 'def ...')")
     d.add_argument("--sample", action="store_true",
                    help="edit a program generated by the shipped VAE of --category instead")

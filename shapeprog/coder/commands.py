@@ -110,15 +110,20 @@ def add_egraph_limits(parser) -> None:
                              "results depend on the machine's load; the default does not bind)")
     parser.add_argument("--egraph-values", choices=VALUE_SCHEDULES, default=VALUES,
                         help=f"the e-graph's value table: {VALUES} (as the reference: up to date before every "
-                             f"iteration) or lagged (one iteration behind, as runs made before 2026-11-29; to "
-                             f"reproduce them)")
+                             "iteration) or lagged (one iteration behind, as runs made before 2026-11-29; to "
+                             "reproduce them)")
 
 
 def cmd_discover(args) -> int:
-    """Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake network, with dreams and a recognition
-    network; proposal, integration, removal sweep; a final wake with the library fixed) on the first N discovery
-    shapes of a PartNet category; write library.txt, programs.txt, log.json and a resumable state.json into --out (an
-    earlier run's folder is continued, never overwritten)."""
+    """discover a library of abstractions for a category
+
+    Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake network, with dreams and a recognition
+    network; proposal, integration, removal sweep; a final wake with the library fixed) on the first N discovery shapes
+    of a PartNet category; write library.txt, programs.txt, log.json and a resumable state.json into --out (an earlier
+    run's folder is continued, never overwritten).
+
+    Example: coder discover --category chair --out runs/chair_abs --workers 2
+    """
     category = args.category
     progress = None
     if not args.quiet:
@@ -161,9 +166,14 @@ def cmd_discover(args) -> int:
 
 
 def cmd_infer(args) -> int:
-    """Post hoc inference: refactor the naive program of one shape with a library's abstractions; print the program, its
+    """infer one shape's program with a discovered library
+
+    Post hoc inference: refactor the naive program of one shape with a library's abstractions; print the program, its
     expansion, its cost and error. A shape of ShapeCoder's data set is named coder-<category>:<line> (a line of the
-    vendored PN_<category>.txt), not by a corpus id."""
+    vendored PN_<category>.txt), not by a corpus id.
+
+    Example: coder infer coder-chair:401 --library chair
+    """
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
     try:
@@ -198,10 +208,14 @@ def cmd_infer(args) -> int:
 
 
 def cmd_tables(args) -> int:
-    """Write the ShapeCoder paper's Table 2 (Input Prims and ShapeCoder rows: F, |L|, Num Struct, Num Param on the
-    discovery shapes) and Table 3 (F of the discovered programs, and post hoc inference on the first --train
-    discovery and --heldout held-out shapes) for the shipped libraries or coder discover folders, beside the paper's
-    rows."""
+    """ShapeCoder Tables 2 and 3 of discovered libraries
+
+    Write the ShapeCoder paper's Table 2 (Input Prims and ShapeCoder rows: F, |L|, Num Struct, Num Param on the
+    discovery shapes) and Table 3 (F of the discovered programs, and post hoc inference on the first --train discovery
+    and --heldout held-out shapes) for the shipped libraries or coder discover folders, beside the paper's rows.
+
+    Example: coder tables --category chair table storage --workers 2 --out shapecoder_tables.md
+    """
     runs = category_pairs(args.library, "CATEGORY=FOLDER")
     baselines = {kind: category_pairs(getattr(args, f"baseline_{kind}"), "CATEGORY=FOLDER", f"--baseline-{kind}")
                  for kind in ("input", "wake")}
@@ -247,9 +261,7 @@ def cmd_tables(args) -> int:
 
 def register(sub) -> None:
     """Add the ``coder`` commands to ``sub``."""
-    d = add_command(sub, "discover", cmd_discover, help="discover a library of abstractions for a category",
-                    example="coder discover --category chair --out runs/chair_abs --workers 2",
-                    outputs={"out": "folder"})
+    d = add_command(sub, "discover", cmd_discover, outputs={"out": "folder"})
     add_category(d)
     d.add_argument("--out", required=True, help="output folder (an earlier run's folder resumes it)")
     d.add_argument("--rounds", type=int_at_least(0), default=4, help="proposal/integration rounds (paper: 4)")
@@ -306,8 +318,7 @@ def register(sub) -> None:
                         "score (the paper's 'no preferences' ablation)")
     add_egraph_limits(d)
     add_quiet(d, "progress bars")
-    a = add_command(sub, "infer", cmd_infer, help="infer one shape's program with a discovered library",
-                    example="coder infer coder-chair:401 --library chair", outputs={"json": "file+"})
+    a = add_command(sub, "infer", cmd_infer, outputs={"json": "file+"})
     a.add_argument("shape", help="coder-<category>:<line number> of the vendored data (e.g. coder-chair:401), a "
                                  "PN_<category>.txt line, or a file with one such line")
     a.add_argument("--library", required=True, help="a shipped category (chair) or a library.txt file")
@@ -319,9 +330,7 @@ def register(sub) -> None:
                         "inference; slower)")
     add_search_budget(a, "", "--network")
     add_result_options(a, "the program, its cost and error", quiet=None)
-    t2 = add_command(sub, "tables", cmd_tables, help="ShapeCoder Tables 2 and 3 of discovered libraries",
-                     example="coder tables --category chair table storage --workers 2 --out shapecoder_tables.md",
-                     outputs={"out": "file", "json": "file+"})
+    t2 = add_command(sub, "tables", cmd_tables, outputs={"out": "file", "json": "file+"})
     add_category(t2, multiple=True)
     t2.add_argument("--library", action="append",
                     help="CATEGORY=FOLDER: a coder discover output folder instead of the shipped library")

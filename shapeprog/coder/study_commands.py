@@ -22,9 +22,15 @@ from .search import WAKE_STEP_BUDGET
 
 
 def cmd_ablation(args) -> int:
-    """Discovery on the first --shapes discovery shapes once per ablation row (the network wake; the refactor-only wake;
-    no abstraction; a single round; no semantic rewrites; the naive rewrite scheme; no preferences), same shapes,
-    seed and counts; F, |L|, Num Struct, Num Param per row beside the paper's F."""
+    """the paper's Table 4 (left): discovery ablations
+
+    Discovery on the first --shapes discovery shapes once per ablation row (the network wake; the refactor-only wake; no
+    abstraction; a single round; no semantic rewrites; the naive rewrite scheme; no preferences), same shapes, seed and
+    counts; F, |L|, Num Struct, Num Param per row beside the paper's F.
+
+    Example: coder ablation --category chair --shapes 20 --rounds 1 --proposals 100 --abstractions 4 --rows 'no
+        abstraction' 'single iteration' --json ablation.json
+    """
     from . import ablation  # lazy: loaded when the command runs
 
     refuse_existing([args.json], args.overwrite)
@@ -102,8 +108,13 @@ def _shipped_run(category: str):
 
 
 def cmd_perturbation(args) -> int:
-    """Perturb every free number of the shipped library's programs and of the naive programs of the same shapes by sigma
-    N(0, 1), execute, and compare with held-out shapes by the FD of the generation tables' PointNet features."""
+    """the paper's Table 4 (right): FD of perturbed programs with and without abstractions
+
+    Perturb every free number of the shipped library's programs and of the naive programs of the same shapes by sigma
+    N(0, 1), execute, and compare with held-out shapes by the FD of the generation tables' PointNet features.
+
+    Example: coder perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 --json perturbation.json
+    """
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     programs = list(run.programs[:args.shapes])
@@ -136,8 +147,13 @@ def cmd_perturbation(args) -> int:
 
 
 def cmd_noise(args) -> int:
-    """Post hoc inference with the shipped library on held-out shapes whose primitives got Gaussian noise (dimensions
-    and positions), per sigma; F as Table 3's."""
+    """section 7.5: post hoc inference on noisy primitive input
+
+    Post hoc inference with the shipped library on held-out shapes whose primitives got Gaussian noise (dimensions and
+    positions), per sigma; F as Table 3's.
+
+    Example: coder noise --category chair --heldout 20 --sigmas 0 0.02 --json noise.json
+    """
     refuse_existing([args.json], args.overwrite)
     try:
         run = tables.shipped(args.category)
@@ -168,9 +184,14 @@ def cmd_noise(args) -> int:
 
 
 def cmd_sample(args) -> int:
-    """Fit a simple generative model (pieces per program, piece templates by frequency, a Gaussian per template number)
-    to the shipped library's programs and to the naive programs of the same shapes; sample, execute, FD against
-    held-out shapes."""
+    """section 7.6 (partial): a piece sampler over programs with and without abstractions
+
+    Fit a simple generative model (pieces per program, piece templates by frequency, a Gaussian per template number) to
+    the shipped library's programs and to the naive programs of the same shapes; sample, execute, FD against held-out
+    shapes.
+
+    Example: coder sample --category chair -n 50 --heldout 100 --json sample.json
+    """
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     ref, n_ref = _heldout_features(args.category, args.heldout, args.seed)
@@ -206,10 +227,7 @@ def cmd_sample(args) -> int:
 
 def register(sub) -> None:
     """Add the study commands to ``sub``."""
-    ab = add_command(sub, "ablation", cmd_ablation, help="the paper's Table 4 (left): discovery ablations",
-                     example="coder ablation --category chair --shapes 20 --rounds 1 --proposals 100 "
-                             "--abstractions 4 --rows 'no abstraction' 'single iteration' --json ablation.json",
-                     outputs={"json": "file+"})
+    ab = add_command(sub, "ablation", cmd_ablation, outputs={"json": "file+"})
     add_category(ab)
     ab.add_argument("--shapes", type=int_at_least(1), default=60, help="the first N discovery shapes (paper: 400)")
     ab.add_argument("--rounds", type=int_at_least(1), default=2, help="proposal/integration rounds (paper: 4)")
@@ -231,10 +249,7 @@ def register(sub) -> None:
                          "about the paper's 1 s; less keeps the row to minutes on a CPU)")
     add_workers(ab, "processes for the refactors", default=2)
     add_result_options(ab, "the rows")
-    pe = add_command(sub, "perturbation", cmd_perturbation,
-                     help="the paper's Table 4 (right): FD of perturbed programs with and without abstractions",
-                     example="coder perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 "
-                             "--json perturbation.json", outputs={"json": "file+"})
+    pe = add_command(sub, "perturbation", cmd_perturbation, outputs={"json": "file+"})
     add_category(pe)
     pe.add_argument("--shapes", type=int_at_least(2), default=400, help="the first N discovery shapes' programs")
     pe.add_argument("--heldout", type=int_at_least(2), default=700, help="the first N held-out shapes (reference)")
@@ -243,9 +258,7 @@ def register(sub) -> None:
     pe.add_argument("--draws", type=int_at_least(1), default=2, help="noise draws per sigma > 0")
     add_seed(pe, "seed of the noise and the surface points")
     add_result_options(pe, "the rows")
-    no = add_command(sub, "noise", cmd_noise, help="section 7.5: post hoc inference on noisy primitive input",
-                     example="coder noise --category chair --heldout 20 --sigmas 0 0.02 --json noise.json",
-                     outputs={"json": "file+"})
+    no = add_command(sub, "noise", cmd_noise, outputs={"json": "file+"})
     add_category(no)
     no.add_argument("--heldout", type=int_at_least(1), default=100, help="the first N held-out shapes")
     no.add_argument("--sigmas", type=float_in(0, 1), nargs="+", default=[0.0, 0.01, 0.02, 0.03],
@@ -254,10 +267,7 @@ def register(sub) -> None:
     no.add_argument("--network", action="store_true", help="with the recognition network's search as well")
     add_workers(no, "processes for the inference", default=2)
     add_result_options(no, "the rows")
-    sa = add_command(sub, "sample", cmd_sample,
-                     help="section 7.6 (partial): a piece sampler over programs with and without abstractions",
-                     example="coder sample --category chair -n 50 --heldout 100 --json sample.json",
-                     outputs={"json": "file+"})
+    sa = add_command(sub, "sample", cmd_sample, outputs={"json": "file+"})
     add_category(sa)
     sa.add_argument("-n", type=int_at_least(2), default=300, help="samples per model")
     sa.add_argument("--heldout", type=int_at_least(2), default=700, help="the first N held-out shapes (reference)")

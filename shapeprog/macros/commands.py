@@ -56,9 +56,14 @@ def merged_collection(categories, split: str = "all", limit: int | None = None, 
 
 
 def cmd_discover(args) -> int:
-    """Run ShapeMOD discovery (proposal, generalisation, integration, filterBadOrders) on a corpus category; state.json
-    is written after every round and an interrupted run resumes from it (an --out folder of a run is continued, never
-    overwritten); library.txt holds the result."""
+    """discover a macro library from a category's programs
+
+    Run ShapeMOD discovery (proposal, generalisation, integration, filterBadOrders) on a corpus category; state.json is
+    written after every round and an interrupted run resumes from it (an --out folder of a run is continued, never
+    overwritten); library.txt holds the result.
+
+    Example: macros discover --category chair --rounds 5 --workers 2 --out runs/shapemod_chair
+    """
     cfg = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
                       abs_shape_num=args.subsample, selection=args.selection, search=args.search)
     lib0, text0 = macro_library(args.start_from, "--start-from: ", text=True) if args.start_from else (None, "")
@@ -94,8 +99,13 @@ def cmd_discover(args) -> int:
 
 
 def cmd_refactor(args) -> int:
-    """Rewrite every sub-program with the library's macros (best program over its orderings); print it beside the base
-    program with both f."""
+    """rewrite a program with a ShapeMOD library
+
+    Rewrite every sub-program with the library's macros (best program over its orderings); print it beside the base
+    program with both f.
+
+    Example: macros refactor chair/173 --library chair
+    """
     refuse_inputs([args.out, args.json], [args.program, args.library])
     refuse_existing([args.out, args.json], args.overwrite)
     prog = Program(args.program)
@@ -139,9 +149,14 @@ def _size(path: Path) -> str:
 
 
 def cmd_refactor_corpus(args) -> int:
-    """Refactor every corpus program of a category with a ShapeMOD library (process pool with --workers > 1), check each
-    against its original (parse back, execute, leaf cuboids matched), and write one macro program per shape
-    (<id>.txt) and summary.json (its figures) into a new folder, atomically."""
+    """rewrite every corpus program of a category with a library
+
+    Refactor every corpus program of a category with a ShapeMOD library (process pool with --workers > 1), check each
+    against its original (parse back, execute, leaf cuboids matched), and write one macro program per shape (<id>.txt)
+    and summary.json (its figures) into a new folder, atomically.
+
+    Example: macros refactor-corpus --category chair --library chair --workers 2 --out chair_macros
+    """
     out = Path(args.out)
     try:
         check_target(out)
@@ -174,8 +189,13 @@ def cmd_refactor_corpus(args) -> int:
 
 
 def cmd_tables(args) -> int:
-    """Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the given categories; f also as a ratio
-    to the same run's No Macros f, beside the paper's ratio (the paper's absolute f is on another scale)."""
+    """ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows
+
+    Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the given categories; f also as a ratio to
+    the same run's No Macros f, beside the paper's ratio (the paper's absolute f is on another scale).
+
+    Example: macros tables --category chair --limit 200 --out table1.md --json table1.json
+    """
     library_files = category_pairs(args.library, "CATEGORY=FILE")
     extra_files = category_pairs(args.extra, "NAME=FILE", "--extra")
     refuse_inputs([args.out, args.json], [*library_files.values(), *extra_files.values()])
@@ -191,9 +211,14 @@ def cmd_tables(args) -> int:
 
 
 def cmd_perturbation(args) -> int:
-    """Refactor N random train shapes without macros and with a ShapeMOD library, add sigma * N(0, 1) to every
-    continuous parameter, and measure the Frechet distance of the perturbed shapes' classifier features to the val
-    split's, per sigma (mean, min and max over the noise draws)."""
+    """ShapeMOD Fig. 7: FD of perturbed programs without and with macros
+
+    Refactor N random train shapes without macros and with a ShapeMOD library, add sigma * N(0, 1) to every continuous
+    parameter, and measure the Frechet distance of the perturbed shapes' classifier features to the val split's, per
+    sigma (mean, min and max over the noise draws).
+
+    Example: macros perturbation --category chair --n 100 --repeats 1 --sigmas 0 0.05 0.1 --json fig7.json
+    """
     from .perturb_study import perturbation_result, perturbation_study, plot  # lazy: torch models on use
 
     refuse_existing([args.json, args.png], args.overwrite)
@@ -214,9 +239,14 @@ def cmd_perturbation(args) -> int:
 
 
 def cmd_ablation(args) -> int:
-    """Run discovery once per variant (the full method, and each with one part switched off: P_matches-dist weighting,
-    beam search, the bad-order filter, generalisation, the valid-macro criteria) on the same shapes and seed; report
-    f per sub-program after each round and of each final library over all the sub-programs."""
+    """ShapeMOD Table 5: discovery with one part switched off per variant, on the same shapes
+
+    Run discovery once per variant (the full method, and each with one part switched off: P_matches-dist weighting, beam
+    search, the bad-order filter, generalisation, the valid-macro criteria) on the same shapes and seed; report f per
+    sub-program after each round and of each final library over all the sub-programs.
+
+    Example: macros ablation --category chair --limit 30 --rounds 1 --proposal-steps 20 --json t5.json
+    """
     from .ablation import VARIANTS, ablation_result, run_ablation
 
     refuse_existing([args.json], args.overwrite)
@@ -241,10 +271,15 @@ def cmd_ablation(args) -> int:
 
 
 def cmd_generation(args) -> int:
-    # lazy: the VAE models and the generation metrics only when the command runs
-    """Sample N programs from the VAE over ShapeAssembly programs (No Macros) and from the VAE over macro programs
+    """ShapeMOD Table 2: generation by the VAE without and with macros, beside the paper's rows
+
+    Sample N programs from the VAE over ShapeAssembly programs (No Macros) and from the VAE over macro programs
     (ShapeMOD), measure both with the generation metrics against the same corpus references, and print the ShapeMOD
-    paper's Table 2 rows beside them."""
+    paper's Table 2 rows beside them.
+
+    Example: macros generation --category chair -n 20 --no-stability --fool-epochs 4 --json t2.json
+    """
+    # lazy: the VAE models and the generation metrics only when the command runs
     from ..vae.pretrained import load_model, load_pretrained
     from .table2 import generation_rows, table2_result
 
@@ -263,9 +298,13 @@ def cmd_generation(args) -> int:
 
 
 def cmd_pointcloud(args) -> int:
-    """Decode the test clouds of make-clouds caches with the shipped end-to-end point-cloud models without macros and
-    with the ShapeMOD library (one decode, no fitting) and measure CD, F-score, rooted and stable beside the paper's
-    Table 3."""
+    """ShapeMOD Table 3: point cloud to program without and with macros, beside the paper's rows
+
+    Decode the test clouds of make-clouds caches with the shipped end-to-end point-cloud models without macros and with
+    the ShapeMOD library (one decode, no fitting) and measure CD, F-score, rooted and stable beside the paper's Table 3.
+
+    Example: macros pointcloud --clouds chair=clouds --limit 20 --json t3.json
+    """
     from .table3 import pointcloud_rows, table3_result  # lazy: torch models on use
 
     refuse_existing([args.json], args.overwrite)
@@ -288,9 +327,7 @@ def cmd_pointcloud(args) -> int:
 
 def register(sub) -> None:
     """Add the ``macros`` commands to ``sub``."""
-    d = add_command(sub, "discover", cmd_discover, help="discover a macro library from a category's programs",
-                    example="macros discover --category chair --rounds 5 --workers 2 --out runs/shapemod_chair",
-                    outputs={"out": "folder"})
+    d = add_command(sub, "discover", cmd_discover, outputs={"out": "folder"})
     add_category(d, multiple=True, help="the categories (several: one library over all their programs, "
                                         "--limit shapes of each)")
     d.add_argument("--out", required=True, help="output folder (state.json, library.txt)")
@@ -312,17 +349,13 @@ def register(sub) -> None:
                         "its macros are L, the rounds its header records count toward --rounds, and the "
                         "orderings are filtered with it first (a library file does not record them)")
     add_quiet(d, "progress lines")
-    rf = add_command(sub, "refactor", cmd_refactor, help="rewrite a program with a ShapeMOD library",
-                     example="macros refactor chair/173 --library chair", outputs={"out": "file", "json": "file"})
+    rf = add_command(sub, "refactor", cmd_refactor, outputs={"out": "file", "json": "file"})
     rf.add_argument("program", help="corpus id (chair/173) or a ShapeAssembly program file")
     rf.add_argument("--library", default="chair", help="a shipped library's category or a library file")
     rf.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
     rf.add_argument("-o", "--out", help="write the macro programs here")
     add_result_options(rf, "f per sub-program, before and after", quiet=None)
-    rc = add_command(sub, "refactor-corpus", cmd_refactor_corpus,
-                     help="rewrite every corpus program of a category with a library",
-                     example="macros refactor-corpus --category chair --library chair --workers 2 --out chair_macros",
-                     outputs={"out": "folder"})
+    rc = add_command(sub, "refactor-corpus", cmd_refactor_corpus, outputs={"out": "folder"})
     add_category(rc)
     rc.add_argument("--library", required=True, help="a shipped library's category or a library file")
     rc.add_argument("--out", required=True, help="the new folder (must not exist, or be empty), or a new "
@@ -333,9 +366,7 @@ def register(sub) -> None:
     rc.add_argument("--search", choices=SEARCHES, default="beam", help="best-program search")
     add_workers(rc, "processes of the pool (1: no pool, everything in this process)", default=2)
     rc.add_argument("--no-check", action="store_true", help="skip reading back and executing every result")
-    tb = add_command(sub, "tables", cmd_tables, help="ShapeMOD Table 1: No Macros, Baseline macros and ShapeMOD rows",
-                     example="macros tables --category chair --limit 200 --out table1.md --json table1.json",
-                     outputs={"out": "file", "json": "file+"})
+    tb = add_command(sub, "tables", cmd_tables, outputs={"out": "file", "json": "file+"})
     add_category(tb, multiple=True)
     tb.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes per category")
     add_seed(tb, "seed of --limit's subset")
@@ -348,11 +379,7 @@ def register(sub) -> None:
     add_workers(tb)
     tb.add_argument("--out", help="also write the table (markdown) here")
     add_result_options(tb, "the table")
-    ab = add_command(sub, "ablation", cmd_ablation,
-                     help="ShapeMOD Table 5: discovery with one part switched off per variant, on the same shapes",
-                     example="macros ablation --category chair --limit 30 --rounds 1 --proposal-steps 20 "
-                             "--json t5.json",
-                     outputs={"json": "file+"})
+    ab = add_command(sub, "ablation", cmd_ablation, outputs={"json": "file+"})
     add_category(ab)
     ab.add_argument("--variants", nargs="+", default=list(ABLATION_VARIANTS), metavar="VARIANT",
                     help="the variants run, quoted: " + ", ".join(f"'{v}'" for v in ABLATION_VARIANTS))
@@ -365,10 +392,7 @@ def register(sub) -> None:
     add_seed(ab, "seed of the subset and of the searches")
     add_workers(ab)
     add_result_options(ab, "f per variant")
-    gn = add_command(sub, "generation", cmd_generation,
-                     help="ShapeMOD Table 2: generation by the VAE without and with macros, beside the paper's rows",
-                     example="macros generation --category chair -n 20 --no-stability --fool-epochs 4 --json t2.json",
-                     outputs={"json": "file+"})
+    gn = add_command(sub, "generation", cmd_generation, outputs={"json": "file+"})
     add_category(gn)
     gn.add_argument("--weights", help="the VAE over macro programs (default: shapeprog/weights/vae_CATEGORY_macros.pt)")
     gn.add_argument("--base-weights", help="the VAE over ShapeAssembly programs (default: the shipped one)")
@@ -378,10 +402,7 @@ def register(sub) -> None:
     gn.add_argument("--no-stability", action="store_true", help="skip the physics stability test")
     add_workers(gn)
     add_result_options(gn, "the table")
-    pc = add_command(sub, "pointcloud", cmd_pointcloud,
-                     help="ShapeMOD Table 3: point cloud to program without and with macros, beside the paper's rows",
-                     example="macros pointcloud --clouds chair=clouds --limit 20 --json t3.json",
-                     outputs={"json": "file+"})
+    pc = add_command(sub, "pointcloud", cmd_pointcloud, outputs={"json": "file+"})
     pc.add_argument("--clouds", action="append", required=True, metavar="CATEGORY=FOLDER",
                     help="a category and its make-clouds folder (repeat for several categories)")
     pc.add_argument("--limit", type=int_at_least(1), help="the first N test shapes of each category")
@@ -389,11 +410,7 @@ def register(sub) -> None:
     pc.add_argument("--no-stability", action="store_true", help="skip the stability test")
     add_workers(pc)
     add_result_options(pc, "the table")
-    pt = add_command(sub, "perturbation", cmd_perturbation,
-                     help="ShapeMOD Fig. 7: FD of perturbed programs without and with macros",
-                     example="macros perturbation --category chair --n 100 --repeats 1 --sigmas 0 0.05 0.1 "
-                             "--json fig7.json",
-                     outputs={"json": "file+", "png": "file+"})
+    pt = add_command(sub, "perturbation", cmd_perturbation, outputs={"json": "file+", "png": "file+"})
     add_category(pt)
     pt.add_argument("--library", help="a shipped library's category or a library file (default: --category)")
     pt.add_argument("--n", type=int_at_least(1), default=500, help="train shapes perturbed (a random subset)")

@@ -72,11 +72,16 @@ def retrieval_index(category: str, clouds):
 
 
 def cmd_infer(args) -> int:
-    """Encode a point cloud (.ply .obj .xyz .npy) or a mesh (.obj .ply .stl .glb, sampled by area) with the trained
+    """a ShapeAssembly program for a point cloud or a mesh
+
+    Encode a point cloud (.ply .obj .xyz .npy) or a mesh (.obj .ply .stl .glb, sampled by area) with the trained
     point-cloud model, decode a program, optionally polish its numbers by fitting (--fit), and write into --out:
     <name>.txt (the program at the input's scale, in the power of ten of input units that keeps its numbers in the
     corpus's range: the json's unit), <name>.obj (its cuboids in the input's frame), <name>.png (input beside result)
-    and <name>.json (offset, rotation, metrics)."""
+    and <name>.json (offset, rotation, metrics).
+
+    Example: pointcloud infer scan.ply --category chair --fit --out result/
+    """
     src = Path(args.file)
     out = Path(args.out)
     stem = src.stem
@@ -186,9 +191,14 @@ def print_inference(r, files) -> int:
 
 
 def cmd_tables(args) -> int:
-    """Measure the point-cloud model (no fitting, Opt Program, Opt Cuboids) and the retrieval baseline on the test split
-    of a make-clouds cache (noisy 2,048-point inputs in random scale and position) and write the ShapeMOD Table 3 and
-    ShapeAssembly Table 7 layouts as Markdown."""
+    """the papers' point-cloud reconstruction tables on the test split
+
+    Measure the point-cloud model (no fitting, Opt Program, Opt Cuboids) and the retrieval baseline on the test split of
+    a make-clouds cache (noisy 2,048-point inputs in random scale and position) and write the ShapeMOD Table 3 and
+    ShapeAssembly Table 7 layouts as Markdown.
+
+    Example: pointcloud tables --category chair --clouds clouds --limit 20 --out pointcloud_chair.md
+    """
     refuse_inputs([args.out, args.json], [args.weights])
     refuse_existing([args.out, args.json], args.overwrite)
 
@@ -211,10 +221,15 @@ def cmd_tables(args) -> int:
 
 
 def cmd_make_clouds(args) -> int:
-    """Sample area-weighted surface points of every executed program of a category into <out>/<category>_clouds.npz, and
-    write the train / val / test split (val: a seeded carve-out of the corpus train split; test: the corpus val
-    split) to <out>/<category>_split.json. A program that fails is reported and skipped. An existing cache is never
-    replaced (remove it, or choose another --out)."""
+    """sample point clouds of a category's corpus shapes into a cache
+
+    Sample area-weighted surface points of every executed program of a category into <out>/<category>_clouds.npz, and
+    write the train / val / test split (val: a seeded carve-out of the corpus train split; test: the corpus val split)
+    to <out>/<category>_split.json. A program that fails is reported and skipped. An existing cache is never replaced
+    (remove it, or choose another --out).
+
+    Example: pointcloud make-clouds --category chair --points 10000 --workers 2 --out clouds
+    """
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise SystemExit(f"error: {args.out}: not a folder")
     refuse_existing(cache_paths(args.out, args.category),
@@ -250,9 +265,7 @@ def export_cloud_weights(checkpoint: str, out: str, half: bool = True) -> Path:
 
 def register(sub) -> None:
     """Add the ``pointcloud`` commands to ``sub``."""
-    i = add_command(sub, "infer", cmd_infer, help="a ShapeAssembly program for a point cloud or a mesh",
-                    example="pointcloud infer scan.ply --category chair --fit --out result/",
-                    outputs={"out": "folder"})
+    i = add_command(sub, "infer", cmd_infer, outputs={"out": "folder"})
     i.add_argument("file", help="point cloud or mesh file")
     add_category(i, help="the shipped model to use")
     i.add_argument("--weights", help="a point-cloud weights file instead of the shipped one")
@@ -272,10 +285,10 @@ def register(sub) -> None:
     i.add_argument("--clouds", metavar="DIR",
                    help="with --retrieval: a make-clouds folder whose training clouds make the index (else it is "
                         "sampled from the corpus, about 20 s for chairs)")
-    i.add_argument("--method", choices=METHODS, default=None,
+    i.add_argument("--method", choices=METHODS,
                    help=f"robust (the default): {ROBUST_SUBSETS} encoder subsets decoded and the training programs "
-                        f"nearest to the cloud compete, the best against the input is kept and polished; decode: the "
-                        f"papers' single decode (the default when --search or --retrieval is given)")
+                        "nearest to the cloud compete, the best against the input is kept and polished; decode: the "
+                        "papers' single decode (the default when --search or --retrieval is given)")
     i.add_argument("--subsets", type=int_at_least(1, 64), default=ROBUST_SUBSETS,
                    help="robust method: encoder subsets decoded")
     i.add_argument("--candidates", type=int_at_least(0, 1000), default=None,
@@ -295,9 +308,7 @@ def register(sub) -> None:
     add_seed(i, "seed of the point subsets")
     i.add_argument("--out", required=True, help="output folder (created if missing)")
     add_overwrite(i)
-    pt = add_command(sub, "tables", cmd_tables, help="the papers' point-cloud reconstruction tables on the test split",
-                     example="pointcloud tables --category chair --clouds clouds --limit 20 --out pointcloud_chair.md",
-                     outputs={"out": "file", "json": "file"})
+    pt = add_command(sub, "tables", cmd_tables, outputs={"out": "file", "json": "file"})
     add_category(pt)
     pt.add_argument("--clouds", required=True, help="the make-clouds folder")
     pt.add_argument("--weights", help="a point-cloud weights file (default: the shipped model)")
@@ -314,10 +325,7 @@ def register(sub) -> None:
     pt.add_argument("--out", required=True, help="Markdown file (e.g. docs/tables/pointcloud_chair.md)")
     add_json(pt, "the tables")
     add_overwrite(pt)
-    m = add_command(sub, "make-clouds", cmd_make_clouds,
-                    help="sample point clouds of a category's corpus shapes into a cache",
-                    example="pointcloud make-clouds --category chair --points 10000 --workers 2 --out clouds",
-                    outputs={"out": "folder"})
+    m = add_command(sub, "make-clouds", cmd_make_clouds, outputs={"out": "folder"})
     add_category(m, help="the corpus category")
     m.add_argument("--out", required=True, help="the cache folder (created if missing)")
     m.add_argument("--points", type=int_at_least(1, MAX_POINTS), default=10000,

@@ -123,8 +123,13 @@ def draw(vae, n: int, seed: int, max_tries: int):
 
 
 def cmd_sample(args) -> int:
-    """Sample latents from N(0, I) and decode them with semantic validity (rejection sampling); write programs, meshes
-    and a picture grid."""
+    """generate programs with the VAE
+
+    Sample latents from N(0, I) and decode them with semantic validity (rejection sampling); write programs, meshes and
+    a picture grid.
+
+    Example: vae sample --category chair -n 16 --seed 0 --out samples --png grid.png
+    """
     check_outputs(others=[args.png])
     if args.png:
         check_grid(args.n, args.cols, args.size)
@@ -143,7 +148,12 @@ def cmd_sample(args) -> int:
 
 
 def cmd_interpolate(args) -> int:
-    """Encode two programs, interpolate their latent means linearly and decode each step (both ends included)."""
+    """decode shapes along the latent line between two programs
+
+    Encode two programs, interpolate their latent means linearly and decode each step (both ends included).
+
+    Example: vae interpolate chair/173 chair/44017 --steps 8 --png interp.png
+    """
     check_outputs(others=[args.png])
     a, b = Program(args.a), Program(args.b)
     planned = planned_files(args.out, "step_{:03d}", args.steps)
@@ -156,8 +166,13 @@ def cmd_interpolate(args) -> int:
 
 
 def cmd_reconstruct(args) -> int:
-    """Encode a program to its latent mean, decode it with semantic validity, and print the F-score and chamfer distance
-    to the input shape."""
+    """encode a program and decode it back, with the F-score to the input
+
+    Encode a program to its latent mean, decode it with semantic validity, and print the F-score and chamfer distance to
+    the input shape.
+
+    Example: vae reconstruct chair/173 -o recon.txt --json recon.json
+    """
     check_outputs([args.mesh], [args.out, args.png, args.json])
     prog = Program(args.program)
     outputs = [args.out, args.mesh, args.png, args.json]
@@ -275,9 +290,14 @@ def vae_samples(args, vae=None, max_tries: int = EVALUATE_TRIES, paper_rules: bo
 
 
 def cmd_evaluate(args) -> int:
-    """Measure generated programs with the ShapeAssembly paper's generation metrics (% rooted, % stable, % fool, FD,
-    leaf parts, generalization, coverage, variety, % novel) against the corpus train split, beside the ground truth
-    (the val split) and the paper's figures; print a markdown table."""
+    """the generation tables (Tables 2, 4, 5) of VAE samples or a folder of programs
+
+    Measure generated programs with the ShapeAssembly paper's generation metrics (% rooted, % stable, % fool, FD, leaf
+    parts, generalization, coverage, variety, % novel) against the corpus train split, beside the ground truth (the val
+    split) and the paper's figures; print a markdown table.
+
+    Example: vae evaluate --category chair table -n 300 --max-tries 10 1 --paper-decoding --json table.json
+    """
     check_outputs(others=[args.out, args.json])
     refuse_inputs([args.out, args.json], [args.classifier])
     refuse_existing([args.out, args.json], args.overwrite)
@@ -333,8 +353,13 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_train_classifier(args) -> int:
-    """Train the chair / table / storage PointNet classifier on the corpus train split; print its val accuracy; write
-    its weights and their SHA-256."""
+    """train the PointNet classifier of the generation metrics
+
+    Train the chair / table / storage PointNet classifier on the corpus train split; print its val accuracy; write its
+    weights and their SHA-256.
+
+    Example: vae train-classifier --out runs/pointnet_cls.pt
+    """
     check_outputs(others=[args.out, args.json])
     refuse_existing([args.out, args.json], args.overwrite)
     log = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))
@@ -355,9 +380,7 @@ def cmd_train_classifier(args) -> int:
 
 def register(sub) -> None:
     """Add the ``vae`` commands to ``sub``."""
-    g = add_command(sub, "sample", cmd_sample, help="generate programs with the VAE",
-                    example="vae sample --category chair -n 16 --seed 0 --out samples --png grid.png",
-                    outputs={"out": "folder"})
+    g = add_command(sub, "sample", cmd_sample, outputs={"out": "folder"})
     add_category(g, from_input="the --weights model", help="the shipped model to use")
     g.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=16, help=f"number of samples (1 to {MAX_SAMPLES})")
     add_seed(g, "seed of the latents (an integer)")
@@ -370,10 +393,7 @@ def register(sub) -> None:
     g.add_argument("--weights", help=WEIGHTS_HELP)
     add_quiet(g, "progress bar")
     add_overwrite(g)
-    i = add_command(sub, "interpolate", cmd_interpolate,
-                    help="decode shapes along the latent line between two programs",
-                    example="vae interpolate chair/173 chair/44017 --steps 8 --png interp.png",
-                    outputs={"out": "folder"})
+    i = add_command(sub, "interpolate", cmd_interpolate, outputs={"out": "folder"})
     i.add_argument("a", help="the first program: " + "corpus id (chair/173) or a program file")
     i.add_argument("b", help="the last program: " + "corpus id (chair/44017) or a program file")
     i.add_argument("--steps", type=int_at_least(2), default=8, help="shapes along the line, ends included (>= 2)")
@@ -383,10 +403,7 @@ def register(sub) -> None:
     i.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=160, help="cell side in pixels")
     i.add_argument("--weights", help=WEIGHTS_HELP)
     add_overwrite(i)
-    c = add_command(sub, "reconstruct", cmd_reconstruct,
-                    help="encode a program and decode it back, with the F-score to the input",
-                    example="vae reconstruct chair/173 -o recon.txt --json recon.json",
-                    outputs={"out": "file", "json": "file"})
+    c = add_command(sub, "reconstruct", cmd_reconstruct, outputs={"out": "file", "json": "file"})
     c.add_argument("program", help="corpus id (chair/173) or a program file")
     add_category(c, from_input="the corpus id", help="model category")
     c.add_argument("-o", "--out", help="reconstructed program file (without it: printed)")
@@ -396,10 +413,7 @@ def register(sub) -> None:
     add_seed(c, "seed of the surface samples of the F-score")
     c.add_argument("--weights", help=WEIGHTS_HELP)
     add_result_options(c, "the F-score and chamfer distance", quiet=None)
-    e = add_command(sub, "evaluate", cmd_evaluate,
-                    help="the generation tables (Tables 2, 4, 5) of VAE samples or a folder of programs",
-                    example="vae evaluate --category chair table -n 300 --max-tries 10 1 --paper-decoding --json table.json",
-                    outputs={"out": "file", "json": "file"})
+    e = add_command(sub, "evaluate", cmd_evaluate, outputs={"out": "file", "json": "file"})
     add_category(e, multiple=True, help="the categories (one table each; --programs and --weights: one)")
     e.add_argument("--programs", help="folder of program files (*.txt, one program each); without it and -n, the "
                                       "ground-truth row alone")
@@ -430,9 +444,7 @@ def register(sub) -> None:
     add_quiet(e, "progress lines on stderr")
     add_overwrite(e)
     study_commands.register(sub)
-    t = add_command(sub, "train-classifier", cmd_train_classifier,
-                    help="train the PointNet classifier of the generation metrics",
-                    example="vae train-classifier --out runs/pointnet_cls.pt", outputs={"out": "file+", "json": "file"})
+    t = add_command(sub, "train-classifier", cmd_train_classifier, outputs={"out": "file+", "json": "file"})
     t.add_argument("--out", required=True, help="weights file (.pt)")
     t.add_argument("--epochs", type=int_at_least(1), default=10, help="epochs on point subsets")
     t.add_argument("--per-class", type=int_at_least(1), default=500, help="shapes per category and epoch")

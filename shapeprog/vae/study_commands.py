@@ -18,15 +18,26 @@ from .pretrained import load_pretrained
 from .smoothness import MAX_SEQUENCES, MAX_STEPS, interpolation_smoothness
 from .structure import mean_editability, structural_novelty
 
-def cmd_novelty(args) -> int:
-    """Sample the shipped VAE of each category and measure the share of samples, and of the corpus val split, whose
-    structure (the program with its continuous numbers abstracted) no training program has (ShapeAssembly §7.1.3),
-    beside the text novelty."""
+
+def _shipped_models(args):
+    """Each category of ``--category`` once with its shipped VAE, after ``--json`` is checked (a study's output)."""
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
-    rows = []
     for category in dict.fromkeys(args.category):
-        vae = load_pretrained(category)
+        yield category, load_pretrained(category)
+
+
+def cmd_novelty(args) -> int:
+    """structural novelty of VAE samples and of the val split against the train split
+
+    Sample the shipped VAE of each category and measure the share of samples, and of the corpus val split, whose
+    structure (the program with its continuous numbers abstracted) no training program has (ShapeAssembly §7.1.3),
+    beside the text novelty.
+
+    Example: vae novelty --category chair table storage -n 1000 --json novelty.json
+    """
+    rows = []
+    for category, vae in _shipped_models(args):
         t0 = time.perf_counter()
         samples = [r.program for r in sample(vae, args.n, seed=args.seed, max_tries=args.max_tries)]
         val = [p for _, p in corpus.load(category, "val")]
@@ -51,14 +62,16 @@ def cmd_novelty(args) -> int:
 
 
 def cmd_smoothness(args) -> int:
-    """Decode programs along lines between random latents of the shipped VAE of each category and measure consecutive
+    """interpolation smoothness: geometric and program steps between random latents
+
+    Decode programs along lines between random latents of the shipped VAE of each category and measure consecutive
     steps: the chamfer distance of their shapes (same sampling seed) and the token edit distance of their programs
-    (ShapeAssembly Table 6)."""
-    check_outputs(others=[args.json])
-    refuse_existing([args.json], args.overwrite)
+    (ShapeAssembly Table 6).
+
+    Example: vae smoothness --category chair --sequences 100 --steps 100 --json smooth.json
+    """
     rows = []
-    for category in dict.fromkeys(args.category):
-        vae = load_pretrained(category)
+    for category, vae in _shipped_models(args):
         log = None if args.quiet else (lambda s, c=category: print(f"{c}: {s}", file=sys.stderr, flush=True))
         r = interpolation_smoothness(vae, args.sequences, args.steps, seed=args.seed, log=log)
         rows.append({"category": category, **r})
@@ -87,14 +100,15 @@ def cmd_smoothness(args) -> int:
 
 
 def cmd_editability(args) -> int:
-    """Count the lines of the corpus val split's programs and of VAE samples per category: lines per program, per
-    statement kind, the share of squeeze / reflect / translate lines and of the parts they make (ShapeAssembly Table
-    3)."""
-    check_outputs(others=[args.json])
-    refuse_existing([args.json], args.overwrite)
+    """lines per program and the share of macro-like lines, of the val split and VAE samples
+
+    Count the lines of the corpus val split's programs and of VAE samples per category: lines per program, per statement
+    kind, the share of squeeze / reflect / translate lines and of the parts they make (ShapeAssembly Table 3).
+
+    Example: vae editability --category chair table storage -n 300 --json edit.json
+    """
     rows = []
-    for category in dict.fromkeys(args.category):
-        vae = load_pretrained(category)
+    for category, vae in _shipped_models(args):
         samples = [r.program for r in sample(vae, args.n, seed=args.seed, max_tries=EVALUATE_TRIES)]
         for name, progs in (("corpus val split", [p for _, p in corpus.load(category, "val")]),
                             (f"VAE samples (shipped {category} model)", samples)):
@@ -124,29 +138,20 @@ def cmd_editability(args) -> int:
 
 def register(sub) -> None:
     """Add the study commands to ``sub``."""
-    nv = add_command(sub, "novelty", cmd_novelty,
-                     help="structural novelty of VAE samples and of the val split against the train split",
-                     example="vae novelty --category chair table storage -n 1000 --json novelty.json",
-                     outputs={"json": "file"})
+    nv = add_command(sub, "novelty", cmd_novelty, outputs={"json": "file"})
     add_category(nv, multiple=True)
     nv.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=1000, help="samples per category")
     nv.add_argument("--max-tries", type=int_at_least(1, MAX_TRIES), default=EVALUATE_TRIES,
                     help="draws per sample before a sample is decoded without rejection")
     add_seed(nv, "seed of the latents")
     add_result_options(nv, "the novelty table", quiet=None)
-    sm = add_command(sub, "smoothness", cmd_smoothness,
-                     help="interpolation smoothness: geometric and program steps between random latents",
-                     example="vae smoothness --category chair --sequences 100 --steps 100 --json smooth.json",
-                     outputs={"json": "file"})
+    sm = add_command(sub, "smoothness", cmd_smoothness, outputs={"json": "file"})
     add_category(sm, multiple=True)
     sm.add_argument("--sequences", type=int_at_least(1, MAX_SEQUENCES), default=100, help="lines between latents")
     sm.add_argument("--steps", type=int_at_least(2, MAX_STEPS), default=100, help="decodes per line, ends included")
     add_seed(sm, "seed of the latents and the surface samples")
     add_result_options(sm, "the smoothness table", quiet="progress lines on stderr")
-    ed = add_command(sub, "editability", cmd_editability,
-                     help="lines per program and the share of macro-like lines, of the val split and VAE samples",
-                     example="vae editability --category chair table storage -n 300 --json edit.json",
-                     outputs={"json": "file"})
+    ed = add_command(sub, "editability", cmd_editability, outputs={"json": "file"})
     add_category(ed, multiple=True)
     ed.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=300, help="samples per category")
     add_seed(ed, "seed of the latents")
