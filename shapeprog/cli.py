@@ -44,10 +44,9 @@ from .limits import decode
 __all__ = ["PROG", "CATEGORIES", "DEFAULT_CATEGORY", "MAX_COUNT_OPTION", "MAX_WORKERS", "MAX_SEED",
            "MAX_SECONDS_OPTION", "HelpFormatter", "add_command", "add_category", "category_of", "add_quiet",
            "add_overwrite", "add_json", "add_result_options", "add_seed", "add_workers", "add_export_weights",
-           "worker_pool", "progress_log", "write_json", "command_result", "report", "markdown_result", "int_at_least",
-           "seed", "float_in",
-           "positive_float", "Program", "check_outputs", "refuse_inputs", "refuse_existing", "write_mesh",
-           "emit_text", "command_line", "category_pairs", "macro_library"]
+           "worker_pool", "progress_log", "write_json", "command_result", "report", "markdown_result",
+           "int_at_least", "seed", "float_in", "positive_float", "Program", "check_outputs", "refuse_inputs",
+           "refuse_existing", "write_mesh", "emit_text", "command_line", "category_pairs", "macro_library"]
 
 #: How the commands are started, for examples and the command lines recorded in written files.
 PROG = "python -m shapeprog"
