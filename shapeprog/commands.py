@@ -38,8 +38,7 @@ def cmd_run(args) -> int:
 
     Execute a program; print its block and cuboid counts; export a mesh and a picture.
 
-    Example: assembly run chair/173 -o chair.obj --png chair.png
-    """
+    Example: assembly run chair/173 -o chair.obj --png chair.png"""
     check_outputs([args.out], [args.png])
     prog = Program(args.program)
     refuse_inputs([args.out, args.png], [args.program])
@@ -62,8 +61,7 @@ def cmd_fit(args) -> int:
     Fit a program's continuous numbers to a point cloud; print chamfer and F-score before and after; write the fitted
     program.
 
-    Example: assembly fit table/33075 --points example --steps 400 -o fitted.txt
-    """
+    Example: assembly fit table/33075 --points example --steps 400 -o fitted.txt"""
     check_outputs([args.mesh], [args.out, args.json])
     prog = Program(args.program)
     refuse_inputs([args.out, args.mesh, args.json], [args.program, None if args.points == "example" else args.points])
@@ -116,8 +114,7 @@ def cmd_silhouettes(args) -> int:
 
     Render front and side silhouettes of every corpus program (train and val).
 
-    Example: assembly silhouettes --out silhouettes.npz
-    """
+    Example: assembly silhouettes --out silhouettes.npz"""
     check_outputs(others=[args.out])
     refuse_existing([args.out], args.overwrite)
     t0 = time.perf_counter()
@@ -182,8 +179,7 @@ def cmd_edit(args) -> int:
     Serve an editor page for a program: the shape in 3D, one control per free parameter, live re-execution, undo / redo
     / reset, export of text, OBJ and PNG. Runs until interrupted. See docs/editor.md.
 
-    Example: assembly edit chair/173 --port 8080 --no-browser --target chair/37982
-    """
+    Example: assembly edit chair/173 --port 8080 --no-browser --target chair/37982"""
     from shapeedit import editor_preflight, serve_until_interrupted  # lazy: loaded when the command runs
 
     problem = editor_preflight(args.export_dir)

@@ -122,8 +122,7 @@ def cmd_discover(args) -> int:
     of a PartNet category; write library.txt, programs.txt, log.json and a resumable state.json into --out (an earlier
     run's folder is continued, never overwritten).
 
-    Example: coder discover --category chair --out runs/chair_abs --workers 2
-    """
+    Example: coder discover --category chair --out runs/chair_abs --workers 2"""
     category = args.category
     progress = None
     if not args.quiet:
@@ -172,8 +171,7 @@ def cmd_infer(args) -> int:
     expansion, its cost and error. A shape of ShapeCoder's data set is named coder-<category>:<line> (a line of the
     vendored PN_<category>.txt), not by a corpus id.
 
-    Example: coder infer coder-chair:401 --library chair
-    """
+    Example: coder infer coder-chair:401 --library chair"""
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
     try:
@@ -214,8 +212,7 @@ def cmd_tables(args) -> int:
     discovery shapes) and Table 3 (F of the discovered programs, and post hoc inference on the first --train discovery
     and --heldout held-out shapes) for the shipped libraries or coder discover folders, beside the paper's rows.
 
-    Example: coder tables --category chair table storage --workers 2 --out shapecoder_tables.md
-    """
+    Example: coder tables --category chair table storage --workers 2 --out shapecoder_tables.md"""
     runs = category_pairs(args.library, "CATEGORY=FOLDER")
     baselines = {kind: category_pairs(getattr(args, f"baseline_{kind}"), "CATEGORY=FOLDER", f"--baseline-{kind}")
                  for kind in ("input", "wake")}

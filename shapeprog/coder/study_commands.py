@@ -28,9 +28,8 @@ def cmd_ablation(args) -> int:
     abstraction; a single round; no semantic rewrites; the naive rewrite scheme; no preferences), same shapes, seed and
     counts; F, |L|, Num Struct, Num Param per row beside the paper's F.
 
-    Example: coder ablation --category chair --shapes 20 --rounds 1 --proposals 100 --abstractions 4 --rows 'no
-        abstraction' 'single iteration' --json ablation.json
-    """
+    Example: coder ablation --category chair --shapes 20 --rounds 1 --proposals 100 --abstractions 4
+        --rows 'no abstraction' 'single iteration' --json ablation.json"""
     from . import ablation  # lazy: loaded when the command runs
 
     refuse_existing([args.json], args.overwrite)
@@ -113,8 +112,7 @@ def cmd_perturbation(args) -> int:
     Perturb every free number of the shipped library's programs and of the naive programs of the same shapes by sigma
     N(0, 1), execute, and compare with held-out shapes by the FD of the generation tables' PointNet features.
 
-    Example: coder perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 --json perturbation.json
-    """
+    Example: coder perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 --json perturbation.json"""
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     programs = list(run.programs[:args.shapes])
@@ -152,8 +150,7 @@ def cmd_noise(args) -> int:
     Post hoc inference with the shipped library on held-out shapes whose primitives got Gaussian noise (dimensions and
     positions), per sigma; F as Table 3's.
 
-    Example: coder noise --category chair --heldout 20 --sigmas 0 0.02 --json noise.json
-    """
+    Example: coder noise --category chair --heldout 20 --sigmas 0 0.02 --json noise.json"""
     refuse_existing([args.json], args.overwrite)
     try:
         run = tables.shipped(args.category)
@@ -190,8 +187,7 @@ def cmd_sample(args) -> int:
     the shipped library's programs and to the naive programs of the same shapes; sample, execute, FD against held-out
     shapes.
 
-    Example: coder sample --category chair -n 50 --heldout 100 --json sample.json
-    """
+    Example: coder sample --category chair -n 50 --heldout 100 --json sample.json"""
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     ref, n_ref = _heldout_features(args.category, args.heldout, args.seed)

@@ -62,8 +62,7 @@ def cmd_discover(args) -> int:
     written after every round and an interrupted run resumes from it (an --out folder of a run is continued, never
     overwritten); library.txt holds the result.
 
-    Example: macros discover --category chair --rounds 5 --workers 2 --out runs/shapemod_chair
-    """
+    Example: macros discover --category chair --rounds 5 --workers 2 --out runs/shapemod_chair"""
     cfg = load_config(args.config, num_rounds=args.rounds, cand_cluster_num=args.proposal_steps,
                       abs_shape_num=args.subsample, selection=args.selection, search=args.search)
     lib0, text0 = macro_library(args.start_from, "--start-from: ", text=True) if args.start_from else (None, "")
@@ -104,8 +103,7 @@ def cmd_refactor(args) -> int:
     Rewrite every sub-program with the library's macros (best program over its orderings); print it beside the base
     program with both f.
 
-    Example: macros refactor chair/173 --library chair
-    """
+    Example: macros refactor chair/173 --library chair"""
     refuse_inputs([args.out, args.json], [args.program, args.library])
     refuse_existing([args.out, args.json], args.overwrite)
     prog = Program(args.program)
@@ -155,8 +153,7 @@ def cmd_refactor_corpus(args) -> int:
     against its original (parse back, execute, leaf cuboids matched), and write one macro program per shape (<id>.txt)
     and summary.json (its figures) into a new folder, atomically.
 
-    Example: macros refactor-corpus --category chair --library chair --workers 2 --out chair_macros
-    """
+    Example: macros refactor-corpus --category chair --library chair --workers 2 --out chair_macros"""
     out = Path(args.out)
     try:
         check_target(out)
@@ -194,8 +191,7 @@ def cmd_tables(args) -> int:
     Compute the ShapeMOD paper's Table 1 (f, |L|, fn, d, f, b per shape) for the given categories; f also as a ratio to
     the same run's No Macros f, beside the paper's ratio (the paper's absolute f is on another scale).
 
-    Example: macros tables --category chair --limit 200 --out table1.md --json table1.json
-    """
+    Example: macros tables --category chair --limit 200 --out table1.md --json table1.json"""
     library_files = category_pairs(args.library, "CATEGORY=FILE")
     extra_files = category_pairs(args.extra, "NAME=FILE", "--extra")
     refuse_inputs([args.out, args.json], [*library_files.values(), *extra_files.values()])
@@ -217,8 +213,7 @@ def cmd_perturbation(args) -> int:
     parameter, and measure the Frechet distance of the perturbed shapes' classifier features to the val split's, per
     sigma (mean, min and max over the noise draws).
 
-    Example: macros perturbation --category chair --n 100 --repeats 1 --sigmas 0 0.05 0.1 --json fig7.json
-    """
+    Example: macros perturbation --category chair --n 100 --repeats 1 --sigmas 0 0.05 0.1 --json fig7.json"""
     from .perturb_study import perturbation_result, perturbation_study, plot  # lazy: torch models on use
 
     refuse_existing([args.json, args.png], args.overwrite)
@@ -245,8 +240,7 @@ def cmd_ablation(args) -> int:
     search, the bad-order filter, generalisation, the valid-macro criteria) on the same shapes and seed; report f per
     sub-program after each round and of each final library over all the sub-programs.
 
-    Example: macros ablation --category chair --limit 30 --rounds 1 --proposal-steps 20 --json t5.json
-    """
+    Example: macros ablation --category chair --limit 30 --rounds 1 --proposal-steps 20 --json t5.json"""
     from .ablation import VARIANTS, ablation_result, run_ablation
 
     refuse_existing([args.json], args.overwrite)
@@ -277,8 +271,7 @@ def cmd_generation(args) -> int:
     (ShapeMOD), measure both with the generation metrics against the same corpus references, and print the ShapeMOD
     paper's Table 2 rows beside them.
 
-    Example: macros generation --category chair -n 20 --no-stability --fool-epochs 4 --json t2.json
-    """
+    Example: macros generation --category chair -n 20 --no-stability --fool-epochs 4 --json t2.json"""
     # lazy: the VAE models and the generation metrics only when the command runs
     from ..vae.pretrained import load_model, load_pretrained
     from .table2 import generation_rows, table2_result
@@ -303,8 +296,7 @@ def cmd_pointcloud(args) -> int:
     Decode the test clouds of make-clouds caches with the shipped end-to-end point-cloud models without macros and with
     the ShapeMOD library (one decode, no fitting) and measure CD, F-score, rooted and stable beside the paper's Table 3.
 
-    Example: macros pointcloud --clouds chair=clouds --limit 20 --json t3.json
-    """
+    Example: macros pointcloud --clouds chair=clouds --limit 20 --json t3.json"""
     from .table3 import pointcloud_rows, table3_result  # lazy: torch models on use
 
     refuse_existing([args.json], args.overwrite)

@@ -80,8 +80,7 @@ def cmd_infer(args) -> int:
     corpus's range: the json's unit), <name>.obj (its cuboids in the input's frame), <name>.png (input beside result)
     and <name>.json (offset, rotation, metrics).
 
-    Example: pointcloud infer scan.ply --category chair --fit --out result/
-    """
+    Example: pointcloud infer scan.ply --category chair --fit --out result/"""
     src = Path(args.file)
     out = Path(args.out)
     stem = src.stem
@@ -197,8 +196,7 @@ def cmd_tables(args) -> int:
     a make-clouds cache (noisy 2,048-point inputs in random scale and position) and write the ShapeMOD Table 3 and
     ShapeAssembly Table 7 layouts as Markdown.
 
-    Example: pointcloud tables --category chair --clouds clouds --limit 20 --out pointcloud_chair.md
-    """
+    Example: pointcloud tables --category chair --clouds clouds --limit 20 --out pointcloud_chair.md"""
     refuse_inputs([args.out, args.json], [args.weights])
     refuse_existing([args.out, args.json], args.overwrite)
 
@@ -228,8 +226,7 @@ def cmd_make_clouds(args) -> int:
     to <out>/<category>_split.json. A program that fails is reported and skipped. An existing cache is never replaced
     (remove it, or choose another --out).
 
-    Example: pointcloud make-clouds --category chair --points 10000 --workers 2 --out clouds
-    """
+    Example: pointcloud make-clouds --category chair --points 10000 --workers 2 --out clouds"""
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise SystemExit(f"error: {args.out}: not a folder")
     refuse_existing(cache_paths(args.out, args.category),

@@ -128,8 +128,7 @@ def cmd_sample(args) -> int:
     Sample latents from N(0, I) and decode them with semantic validity (rejection sampling); write programs, meshes and
     a picture grid.
 
-    Example: vae sample --category chair -n 16 --seed 0 --out samples --png grid.png
-    """
+    Example: vae sample --category chair -n 16 --seed 0 --out samples --png grid.png"""
     check_outputs(others=[args.png])
     if args.png:
         check_grid(args.n, args.cols, args.size)
@@ -152,8 +151,7 @@ def cmd_interpolate(args) -> int:
 
     Encode two programs, interpolate their latent means linearly and decode each step (both ends included).
 
-    Example: vae interpolate chair/173 chair/44017 --steps 8 --png interp.png
-    """
+    Example: vae interpolate chair/173 chair/44017 --steps 8 --png interp.png"""
     check_outputs(others=[args.png])
     a, b = Program(args.a), Program(args.b)
     planned = planned_files(args.out, "step_{:03d}", args.steps)
@@ -171,8 +169,7 @@ def cmd_reconstruct(args) -> int:
     Encode a program to its latent mean, decode it with semantic validity, and print the F-score and chamfer distance to
     the input shape.
 
-    Example: vae reconstruct chair/173 -o recon.txt --json recon.json
-    """
+    Example: vae reconstruct chair/173 -o recon.txt --json recon.json"""
     check_outputs([args.mesh], [args.out, args.png, args.json])
     prog = Program(args.program)
     outputs = [args.out, args.mesh, args.png, args.json]
@@ -296,8 +293,7 @@ def cmd_evaluate(args) -> int:
     parts, generalization, coverage, variety, % novel) against the corpus train split, beside the ground truth (the val
     split) and the paper's figures; print a markdown table.
 
-    Example: vae evaluate --category chair table -n 300 --max-tries 10 1 --paper-decoding --json table.json
-    """
+    Example: vae evaluate --category chair table -n 300 --max-tries 10 1 --paper-decoding --json table.json"""
     check_outputs(others=[args.out, args.json])
     refuse_inputs([args.out, args.json], [args.classifier])
     refuse_existing([args.out, args.json], args.overwrite)
@@ -358,8 +354,7 @@ def cmd_train_classifier(args) -> int:
     Train the chair / table / storage PointNet classifier on the corpus train split; print its val accuracy; write its
     weights and their SHA-256.
 
-    Example: vae train-classifier --out runs/pointnet_cls.pt
-    """
+    Example: vae train-classifier --out runs/pointnet_cls.pt"""
     check_outputs(others=[args.out, args.json])
     refuse_existing([args.out, args.json], args.overwrite)
     log = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))

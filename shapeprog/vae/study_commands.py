@@ -34,8 +34,7 @@ def cmd_novelty(args) -> int:
     structure (the program with its continuous numbers abstracted) no training program has (ShapeAssembly §7.1.3),
     beside the text novelty.
 
-    Example: vae novelty --category chair table storage -n 1000 --json novelty.json
-    """
+    Example: vae novelty --category chair table storage -n 1000 --json novelty.json"""
     rows = []
     for category, vae in _shipped_models(args):
         t0 = time.perf_counter()
@@ -68,8 +67,7 @@ def cmd_smoothness(args) -> int:
     steps: the chamfer distance of their shapes (same sampling seed) and the token edit distance of their programs
     (ShapeAssembly Table 6).
 
-    Example: vae smoothness --category chair --sequences 100 --steps 100 --json smooth.json
-    """
+    Example: vae smoothness --category chair --sequences 100 --steps 100 --json smooth.json"""
     rows = []
     for category, vae in _shipped_models(args):
         log = None if args.quiet else (lambda s, c=category: print(f"{c}: {s}", file=sys.stderr, flush=True))
@@ -105,8 +103,7 @@ def cmd_editability(args) -> int:
     Count the lines of the corpus val split's programs and of VAE samples per category: lines per program, per statement
     kind, the share of squeeze / reflect / translate lines and of the parts they make (ShapeAssembly Table 3).
 
-    Example: vae editability --category chair table storage -n 300 --json edit.json
-    """
+    Example: vae editability --category chair table storage -n 300 --json edit.json"""
     rows = []
     for category, vae in _shipped_models(args):
         samples = [r.program for r in sample(vae, args.n, seed=args.seed, max_tries=EVALUATE_TRIES)]
