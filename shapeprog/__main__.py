@@ -106,29 +106,26 @@ def _export_weights(rest: list[str]) -> tuple[str, list[str]]:
     return "pointcloud" if files and is_pointcloud_checkpoint(files[0]) else "vae", rest
 
 
+def _coder_discover(rest: list[str]) -> list[str]:
+    """The earlier ``discover-abstractions chair``: a bare category becomes ``--category chair``."""
+    return _positional_category(rest, ("--quiet", "--no-semantic-rewrites"))
+
+
+_OUTPUT = _renamed("--output", "--out")
+_CATEGORIES_OPTION = _renamed("--categories", "--category")
+
 #: The earlier one-word commands: name -> (system, command, rewrite of the earlier argument forms or None).
 ALIASES = {
-    "run": ("assembly", "run", _renamed("--output", "--out")),
-    "fit": ("assembly", "fit", _renamed("--output", "--out")),
-    "silhouettes": ("assembly", "silhouettes", None),
-    "edit": ("assembly", "edit", _edit_sample),
-    "sample": ("vae", "sample", _positional_category),
-    "interpolate": ("vae", "interpolate", None),
-    "reconstruct": ("vae", "reconstruct", _renamed("--output", "--out")),
-    "evaluate-generation": ("vae", "evaluate", None),
-    "train-classifier": ("vae", "train-classifier", None),
-    "export-weights": (None, "export-weights", None),
-    "infer": ("pointcloud", "infer", None),
-    "pointcloud-tables": ("pointcloud", "tables", None),
-    "make-clouds": ("pointcloud", "make-clouds", None),
-    "discover-macros": ("macros", "discover", None),
-    "refactor": ("macros", "refactor", _renamed("--output", "--out")),
-    "refactor-corpus": ("macros", "refactor-corpus", None),
-    "table1": ("macros", "tables", _renamed("--categories", "--category")),
-    "discover-abstractions": ("coder", "discover", lambda rest: _positional_category(
-        rest, ("--quiet", "--no-semantic-rewrites"))),
-    "abstract-infer": ("coder", "infer", _coder_shape),
-    "table2-coder": ("coder", "tables", _renamed("--categories", "--category")),
+    "run": ("assembly", "run", _OUTPUT), "fit": ("assembly", "fit", _OUTPUT),
+    "silhouettes": ("assembly", "silhouettes", None), "edit": ("assembly", "edit", _edit_sample),
+    "sample": ("vae", "sample", _positional_category), "interpolate": ("vae", "interpolate", None),
+    "reconstruct": ("vae", "reconstruct", _OUTPUT), "evaluate-generation": ("vae", "evaluate", None),
+    "train-classifier": ("vae", "train-classifier", None), "export-weights": (None, "export-weights", None),
+    "infer": ("pointcloud", "infer", None), "pointcloud-tables": ("pointcloud", "tables", None),
+    "make-clouds": ("pointcloud", "make-clouds", None), "discover-macros": ("macros", "discover", None),
+    "refactor": ("macros", "refactor", _OUTPUT), "refactor-corpus": ("macros", "refactor-corpus", None),
+    "table1": ("macros", "tables", _CATEGORIES_OPTION), "discover-abstractions": ("coder", "discover", _coder_discover),
+    "abstract-infer": ("coder", "infer", _coder_shape), "table2-coder": ("coder", "tables", _CATEGORIES_OPTION),
 }
 
 

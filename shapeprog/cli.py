@@ -1,23 +1,32 @@
 """What every command of ``python -m shapeprog`` shares, written once.
 
-- :func:`add_command` makes a command's parser: help that shows each option's default and one example in its
-  epilog; the outputs it lists are checked by the dispatcher before the command's work starts.
+- :func:`add_command` makes a command's parser from the command function and its docstring (summary line,
+  description, example): its help shows each option's default and the example in its epilog; the outputs it
+  lists are checked by the dispatcher before the command's work starts. The options several commands share are
+  added by one function each (:func:`add_seed`, :func:`add_workers`, :func:`add_result_options`,
+  :func:`add_export_weights`).
 - The category is always ``--category`` (:func:`add_category`): one of :data:`CATEGORIES`, by default
   :data:`DEFAULT_CATEGORY`, or, for commands whose input names one (a corpus id, a weights file), the input's.
 - A corpus id (``chair/173``) names a program of the ShapeAssembly corpus, everywhere (:class:`Program`).
 - Outputs go to ``--out``; an existing output file is refused unless ``--overwrite``
   (:func:`refuse_existing`), and an output that is one of the inputs is always refused (:func:`refuse_inputs`).
-- ``--quiet`` silences progress output (:func:`add_quiet`).
+- ``--quiet`` silences progress output (:func:`add_quiet`, :func:`progress_log`).
+- Per-item work runs in a process pool of ``--workers`` (:func:`worker_pool`).
 - A command that scores something writes its figures with ``--json FILE`` as a result file of
-  :mod:`shapeio.results` (:func:`add_json`, :func:`write_json`, :func:`markdown_result`).
+  :mod:`shapeio.results` (:func:`add_json`, :func:`write_json`, :func:`command_result`, :func:`report`,
+  :func:`markdown_result`).
 """
 from __future__ import annotations
 
 import argparse
+import inspect
 import math
+import multiprocessing
 import re
 import shlex
 import sys
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from pathlib import Path
 
 from shapeio import atomic_write, refuse_overwrite
@@ -34,9 +43,10 @@ from .limits import decode
 
 __all__ = ["PROG", "CATEGORIES", "DEFAULT_CATEGORY", "MAX_COUNT_OPTION", "MAX_WORKERS", "MAX_SEED",
            "MAX_SECONDS_OPTION", "HelpFormatter", "add_command", "add_category", "category_of", "add_quiet",
-           "add_overwrite", "add_json", "write_json", "markdown_result", "int_at_least", "seed", "float_in",
-           "positive_float", "Program", "check_outputs", "refuse_inputs", "refuse_existing", "write_mesh",
-           "emit_text", "command_line", "category_pairs", "macro_library"]
+           "add_overwrite", "add_json", "add_result_options", "add_seed", "add_workers", "add_export_weights",
+           "worker_pool", "progress_log", "write_json", "command_result", "report", "markdown_result",
+           "int_at_least", "seed", "float_in", "positive_float", "Program", "check_outputs", "refuse_inputs",
+           "refuse_existing", "write_mesh", "emit_text", "command_line", "category_pairs", "macro_library"]
 
 #: How the commands are started, for examples and the command lines recorded in written files.
 PROG = "python -m shapeprog"
@@ -71,17 +81,29 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return super()._fill_text(text, width, indent)
 
 
-def add_command(sub, name: str, func, *, help: str, description: str, example: str,
-                outputs: dict | None = None) -> argparse.ArgumentParser:
+def add_command(sub, name: str, func, *, outputs: dict | None = None, help: str | None = None,
+                description: str | None = None, example: str | None = None) -> argparse.ArgumentParser:
     """A command's parser in ``sub`` (a system's sub-parsers) that runs ``func(args)``.
 
+    The command's texts are ``func``'s docstring unless given: its first line is ``help``, the paragraphs after it
+    are ``description``, and its last paragraph, ``Example: ...``, is ``example``.
+
     Args:
-        example: one command line after ``python -m shapeprog`` (``vae sample --category chair``); the
-            epilog shows it and a test parses it.
         outputs: each output option's attribute and what it names: ``"folder"`` (created with its parents),
             ``"file"`` (in an existing folder) or ``"file+"`` (its folder created); the dispatcher checks
             them with :func:`shapeio.files.output_problem` before the command's work starts.
+        help: the one line of the system's command list.
+        description: the text of the command's ``--help``.
+        example: one command line after ``python -m shapeprog`` (``vae sample --category chair``); the
+            epilog shows it and a test parses it.
     """
+    summary, *paragraphs = [" ".join(p.split()) for p in (inspect.getdoc(func) or "").split("\n\n")]
+    if paragraphs and paragraphs[-1].startswith("Example: "):
+        example = example or paragraphs.pop().removeprefix("Example: ")
+    help, description = help or summary, description or "\n\n".join(paragraphs)
+    if not (help and description and example):
+        raise ValueError(f"command {name!r}: {func.__qualname__} needs a docstring of a summary line, a description "
+                         "and an 'Example: ...' paragraph, or help, description and example given")
     p = sub.add_parser(name, help=help, description=description, epilog=f"example:\n  {PROG} {example}",
                        formatter_class=HelpFormatter)
     p.set_defaults(func=func, outputs=dict(outputs or {}), example=example, parser=p)
@@ -140,6 +162,82 @@ def write_json(args, result: dict) -> None:
         from shapeio.results import write_result  # lazy: loaded when the command runs
 
         print(f"wrote {write_result(args.json, result)}")
+
+
+def command_result(args, title: str, columns: list, rows: list, notes: list) -> dict:
+    """A command's figures as a result (:func:`shapeio.results.make_result`) that records its command line."""
+    from shapeio.results import make_result  # lazy: loaded when the command runs
+
+    return make_result(title, columns, rows, notes, command_line(args))
+
+
+def report(args, result: dict, out: str | None = None) -> int:
+    """The end of a command that scores something: print ``result`` as markdown, also write that markdown to
+    ``out`` when given and the result to ``--json`` when given; the exit status 0."""
+    from shapeio.results import markdown  # lazy: loaded when the command runs
+
+    text = markdown(result)
+    print(text)
+    if out:
+        atomic_write(out, text)
+        print(f"wrote {out}")
+    write_json(args, result)
+    return 0
+
+
+def add_seed(parser, help: str, default: int = 0, flag: str = "--seed") -> None:
+    """A seed option (:func:`seed`: 0 to :data:`MAX_SEED`)."""
+    parser.add_argument(flag, type=seed, default=default, help=help)
+
+
+def add_workers(parser, help: str = "processes (1: none)", default: int | None = 1) -> None:
+    """``--workers``: the processes of the command's pool (:func:`worker_pool`), 1 to :data:`MAX_WORKERS`."""
+    parser.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=default, help=help)
+
+
+@contextmanager
+def worker_pool(workers: int, start: str | None = None):
+    """A process pool of ``workers`` processes, shut down on leaving; None for one worker (the work runs in this
+    process). ``start``: the pool's start method (``"spawn"``, ``"forkserver"``; None: the platform's)."""
+    if workers <= 1:
+        yield None
+        return
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start) if start else None)
+    try:
+        yield pool
+    finally:
+        pool.shutdown()
+
+
+def progress_log(args):
+    """The ``log`` of a command's long work: None with ``--quiet``, else a function that prints each line on
+    stderr at once."""
+    return None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
+
+
+def add_export_weights(sub, export, *, help: str, example: str, checkpoint_help: str) -> None:
+    """The ``export-weights`` command of a model family: ``export(checkpoint, out, half=...)`` writes the weights
+    file of a training checkpoint and returns its path (a usage error raises SystemExit; an unreadable or
+    foreign checkpoint FileNotFoundError or ValueError, naming the file); its docstring is the command's
+    description."""
+
+    def run(args) -> int:
+        check_outputs(others=[args.out])
+        refuse_inputs([args.out], [args.checkpoint])
+        refuse_existing([args.out], args.overwrite)
+        try:
+            path = export(args.checkpoint, args.out, half=not args.float32)
+        except (FileNotFoundError, ValueError) as e:
+            raise SystemExit(f"error: {e}") from None
+        print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
+        return 0
+
+    x = add_command(sub, "export-weights", run, help=help, description=inspect.getdoc(export), example=example,
+                    outputs={"out": "file"})
+    x.add_argument("checkpoint", help=checkpoint_help)
+    x.add_argument("--out", required=True, help="the weights file to write (.pt)")
+    x.add_argument("--float32", action="store_true", help="keep float32 (float16 storage otherwise)")
+    add_overwrite(x)
 
 
 def _number(cell: str):

@@ -13,13 +13,13 @@ from pathlib import Path
 import torch
 
 from shapeedit import port_argument
-from shapeio.results import column, make_result
+from shapeio.results import column
 
 from . import corpus
 from . import io
-from .cli import (Program, add_category, add_command, add_json, add_overwrite, add_quiet, check_outputs,
-                  command_line, emit_text, float_in, int_at_least, macro_library, refuse_existing, refuse_inputs, seed,
-                  write_json, write_mesh)
+from .cli import (add_category, add_command, add_json, add_overwrite, add_quiet, add_seed, check_outputs,
+                  command_result, emit_text, float_in, int_at_least, macro_library, Program, refuse_existing,
+                  refuse_inputs, write_json, write_mesh)
 from .errors import ParseError
 from .fit import MAX_DECIMALS, MAX_LR, MAX_REG, fit
 from .fit import MAX_STEPS as MAX_FIT_STEPS
@@ -34,6 +34,11 @@ PROGRAM_HELP = "corpus id (chair/173, table/33075, storage/46436) or a UTF-8 pro
 
 
 def cmd_run(args) -> int:
+    """execute a program and export its cuboids
+
+    Execute a program; print its block and cuboid counts; export a mesh and a picture.
+
+    Example: assembly run chair/173 -o chair.obj --png chair.png"""
     check_outputs([args.out], [args.png])
     prog = Program(args.program)
     refuse_inputs([args.out, args.png], [args.program])
@@ -51,6 +56,12 @@ def cmd_run(args) -> int:
 
 
 def cmd_fit(args) -> int:
+    """fit a program's parameters to a point cloud
+
+    Fit a program's continuous numbers to a point cloud; print chamfer and F-score before and after; write the fitted
+    program.
+
+    Example: assembly fit table/33075 --points example --steps 400 -o fitted.txt"""
     check_outputs([args.mesh], [args.out, args.json])
     prog = Program(args.program)
     refuse_inputs([args.out, args.mesh, args.json], [args.program, None if args.points == "example" else args.points])
@@ -88,17 +99,22 @@ def cmd_fit(args) -> int:
     if args.mesh:
         with torch.no_grad():
             write_mesh(args.mesh, prog.execute(res.program))
-    write_json(args, make_result(
-        f"fit of {prog.name} to {args.points}",
+    write_json(args, command_result(
+        args, f"fit of {prog.name} to {args.points}",
         [column("stage", "stage"), column("chamfer", "chamfer", 4), column("fscore", f"F-score @{thr:.3g}", 1)],
         [{"stage": "before", "chamfer": cd0, "fscore": float(f0)},
          {"stage": "after", "chamfer": cd1, "fscore": float(f1)}],
         [f"{len(res.losses)} of {args.steps} steps in {res.seconds:.1f} s"]
-        + ([res.stopped] if res.stopped is not None else []), command_line(args)))
+        + ([res.stopped] if res.stopped is not None else [])))
     return 0
 
 
 def cmd_silhouettes(args) -> int:
+    """render front and side silhouettes of the corpus to an .npz
+
+    Render front and side silhouettes of every corpus program (train and val).
+
+    Example: assembly silhouettes --out silhouettes.npz"""
     check_outputs(others=[args.out])
     refuse_existing([args.out], args.overwrite)
     t0 = time.perf_counter()
@@ -158,6 +174,12 @@ def open_for_edit(args):
 
 
 def cmd_edit(args) -> int:
+    """edit a program in the browser (needs the 'editor' extra: viser)
+
+    Serve an editor page for a program: the shape in 3D, one control per free parameter, live re-execution, undo / redo
+    / reset, export of text, OBJ and PNG. Runs until interrupted. See docs/editor.md.
+
+    Example: assembly edit chair/173 --port 8080 --no-browser --target chair/37982"""
     from shapeedit import editor_preflight, serve_until_interrupted  # lazy: loaded when the command runs
 
     problem = editor_preflight(args.export_dir)
@@ -173,9 +195,7 @@ def cmd_edit(args) -> int:
 
 def register(sub) -> None:
     """Add the ``assembly`` commands to ``sub``."""
-    r = add_command(sub, "run", cmd_run, help="execute a program and export its cuboids",
-                    description="Execute a program; print its block and cuboid counts; export a mesh and a picture.",
-                    example="assembly run chair/173 -o chair.obj --png chair.png", outputs={"out": "file"})
+    r = add_command(sub, "run", cmd_run, outputs={"out": "file"})
     r.add_argument("program", help=PROGRAM_HELP)
     r.add_argument("-o", "--out", help="mesh file: .obj (reference layout), .ply or .glb (parts coloured by line)")
     r.add_argument("--png", help="picture file (.png), parts coloured by the program line that created them")
@@ -183,11 +203,7 @@ def register(sub) -> None:
                    help=f"picture width and height in pixels (8 to {MAX_PICTURE_SIZE})")
     r.add_argument("--float64", action="store_true", help="execute in float64 (float32 is the reference)")
     add_overwrite(r)
-    f = add_command(sub, "fit", cmd_fit, help="fit a program's parameters to a point cloud",
-                    description="Fit a program's continuous numbers to a point cloud; print chamfer and F-score "
-                                "before and after; write the fitted program.",
-                    example="assembly fit table/33075 --points example --steps 400 -o fitted.txt",
-                    outputs={"out": "file", "json": "file"})
+    f = add_command(sub, "fit", cmd_fit, outputs={"out": "file", "json": "file"})
     f.add_argument("program", help=PROGRAM_HELP)
     f.add_argument("--points", default="example",
                    help="point cloud file (.obj 'v x y z' lines, .ply, .xyz or .npy) or 'example' (the vendored "
@@ -199,15 +215,12 @@ def register(sub) -> None:
                    help="weight of the pull towards the starting numbers")
     f.add_argument("--decimals", type=int_at_least(0, MAX_DECIMALS), default=3,
                    help="decimals of the written numbers (the corpus uses 3)")
-    f.add_argument("--seed", type=seed, default=0, help="seed of the surface sampling")
+    add_seed(f, "seed of the surface sampling")
     f.add_argument("-o", "--out", help="fitted program file (ShapeAssembly text; without it: printed)")
     f.add_argument("--mesh", help="also write the fitted shape: .obj, .ply or .glb")
     add_json(f, "the chamfer distance and F-score before and after")
     add_overwrite(f)
-    s = add_command(sub, "silhouettes", cmd_silhouettes,
-                    help="render front and side silhouettes of the corpus to an .npz",
-                    description="Render front and side silhouettes of every corpus program (train and val).",
-                    example="assembly silhouettes --out silhouettes.npz", outputs={"out": "file"})
+    s = add_command(sub, "silhouettes", cmd_silhouettes, outputs={"out": "file"})
     s.add_argument("--out", required=True, help="output file (.npz, compressed NumPy arrays)")
     s.add_argument("--size", type=int_at_least(1, SILHOUETTE_MAX_SIZE), default=64,
                    help=f"image side in pixels (1 to {SILHOUETTE_MAX_SIZE})")
@@ -216,16 +229,12 @@ def register(sub) -> None:
     s.add_argument("--limit", type=int_at_least(1), help="only the first N shapes per category and split")
     add_quiet(s, "progress bar")
     add_overwrite(s)
-    d = add_command(sub, "edit", cmd_edit, help="edit a program in the browser (needs the 'editor' extra: viser)",
-                    description="Serve an editor page for a program: the shape in 3D, one control per free "
-                                "parameter, live re-execution, undo / redo / reset, export of text, OBJ and "
-                                "PNG. Runs until interrupted. See docs/editor.md.",
-                    example="assembly edit chair/173 --port 8080 --no-browser --target chair/37982")
+    d = add_command(sub, "edit", cmd_edit)
     d.add_argument("program", nargs="?", help=PROGRAM_HELP + ", or a macro program file (lines 'def ...')")
     d.add_argument("--sample", action="store_true",
                    help="edit a program generated by the shipped VAE of --category instead")
     add_category(d, help="with --sample: the shipped VAE's category")
-    d.add_argument("--seed", type=seed, default=0, help="seed of --sample")
+    add_seed(d, "seed of --sample")
     d.add_argument("--library", help="a shipped ShapeMOD library's category (chair) or a macro library file: a "
                                      "ShapeAssembly program (corpus id or corpus-format file) is refactored with it "
                                      "and its macro calls' parameters are edited; a macro program calls it")

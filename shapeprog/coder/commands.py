@@ -7,22 +7,19 @@ ShapeAssembly corpus, so its shapes have their own ids: ``coder-chair:401`` is l
 """
 from __future__ import annotations
 
-import multiprocessing
 import re
-import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from tqdm import tqdm
 
 from shapeio import atomic_write
 from shapeio.files import NotShippedError
-from shapeio.results import column, make_result
+from shapeio.results import column
 
-from ..cli import (add_result_options, MAX_SECONDS_OPTION, MAX_WORKERS, add_category, add_command, add_quiet,
-                   category_pairs, check_outputs, command_line, float_in, int_at_least, markdown_result,
-                   positive_float, refuse_existing, seed, write_json)
+from ..cli import (MAX_SECONDS_OPTION, add_category, add_command, add_quiet, add_result_options, add_seed, add_workers,
+                   category_pairs, check_outputs, command_line, command_result, float_in, int_at_least, markdown_result,
+                   positive_float, progress_log, refuse_existing, worker_pool, write_json)
 from ..errors import ParseError
 from ..limits import decode
 from ..fit import MAX_LR
@@ -113,11 +110,19 @@ def add_egraph_limits(parser) -> None:
                              "results depend on the machine's load; the default does not bind)")
     parser.add_argument("--egraph-values", choices=VALUE_SCHEDULES, default=VALUES,
                         help=f"the e-graph's value table: {VALUES} (as the reference: up to date before every "
-                             f"iteration) or lagged (one iteration behind, as runs made before 2026-11-29; to "
-                             f"reproduce them)")
+                             "iteration) or lagged (one iteration behind, as runs made before 2026-11-29; to "
+                             "reproduce them)")
 
 
 def cmd_discover(args) -> int:
+    """discover a library of abstractions for a category
+
+    Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake network, with dreams and a recognition
+    network; proposal, integration, removal sweep; a final wake with the library fixed) on the first N discovery shapes
+    of a PartNet category; write library.txt, programs.txt, log.json and a resumable state.json into --out (an earlier
+    run's folder is continued, never overwritten).
+
+    Example: coder discover --category chair --out runs/chair_abs --workers 2"""
     category = args.category
     progress = None
     if not args.quiet:
@@ -160,6 +165,13 @@ def cmd_discover(args) -> int:
 
 
 def cmd_infer(args) -> int:
+    """infer one shape's program with a discovered library
+
+    Post hoc inference: refactor the naive program of one shape with a library's abstractions; print the program, its
+    expansion, its cost and error. A shape of ShapeCoder's data set is named coder-<category>:<line> (a line of the
+    vendored PN_<category>.txt), not by a corpus id.
+
+    Example: coder infer coder-chair:401 --library chair"""
     check_outputs(others=[args.json])
     refuse_existing([args.json], args.overwrite)
     try:
@@ -185,16 +197,22 @@ def cmd_infer(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {args.shape}: {e}") from None
     print(f"program:  {r.text}\nexpanded: {r.expanded}\ncost: {r.cost:.2f}  error: {r.error:.4f}  e-graph: {r.stop}")
-    write_json(args, make_result(f"ShapeCoder inference of {args.shape} with {args.library}",
-                                 [column("shape", "shape"), column("cost", "cost", 2), column("error", "error", 4),
-                                  column("stop", "e-graph"), column("program", "program")],
-                                 [{"shape": args.shape, "cost": float(r.cost), "error": float(r.error),
-                                   "stop": str(r.stop), "program": r.text}], [f"expanded: {r.expanded}"],
-                                 command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder inference of {args.shape} with {args.library}",
+                                    [column("shape", "shape"), column("cost", "cost", 2), column("error", "error", 4),
+                                     column("stop", "e-graph"), column("program", "program")],
+                                    [{"shape": args.shape, "cost": float(r.cost), "error": float(r.error),
+                                      "stop": str(r.stop), "program": r.text}], [f"expanded: {r.expanded}"]))
     return 0
 
 
 def cmd_tables(args) -> int:
+    """ShapeCoder Tables 2 and 3 of discovered libraries
+
+    Write the ShapeCoder paper's Table 2 (Input Prims and ShapeCoder rows: F, |L|, Num Struct, Num Param on the
+    discovery shapes) and Table 3 (F of the discovered programs, and post hoc inference on the first --train discovery
+    and --heldout held-out shapes) for the shipped libraries or coder discover folders, beside the paper's rows.
+
+    Example: coder tables --category chair table storage --workers 2 --out shapecoder_tables.md"""
     runs = category_pairs(args.library, "CATEGORY=FOLDER")
     baselines = {kind: category_pairs(getattr(args, f"baseline_{kind}"), "CATEGORY=FOLDER", f"--baseline-{kind}")
                  for kind in ("input", "wake")}
@@ -211,11 +229,9 @@ def cmd_tables(args) -> int:
                            args.phi_network, "phi-", "--phi-network")
     command = command_line(args)
     parts = [f"# ShapeCoder Tables 2 and 3\n\n# command: {command}"]
-    progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    progress = progress_log(args)
     # workers forked after this process ran torch can hang: with a network they start from a fresh interpreter
-    ctx = multiprocessing.get_context("forkserver") if args.phi_network else None
-    pool = ProcessPoolExecutor(args.workers, mp_context=ctx) if args.workers > 1 else None
-    try:
+    with worker_pool(args.workers, "forkserver" if args.phi_network else None) as pool:
         for cat in args.category:
             try:
                 run = tables.from_run(runs[cat], cat) if cat in runs else tables.shipped(cat)
@@ -233,9 +249,6 @@ def cmd_tables(args) -> int:
             parts.append(tables.format_tables(run, t2, t3, **limits, network=network is not None, baselines=rows,
                                               **budget))
             print(parts[-1] + "\n", flush=True)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     if args.out:
         atomic_write(args.out, "\n\n".join(parts) + "\n")
         print(f"wrote {args.out}")
@@ -245,24 +258,15 @@ def cmd_tables(args) -> int:
 
 def register(sub) -> None:
     """Add the ``coder`` commands to ``sub``."""
-    d = add_command(sub, "discover", cmd_discover, help="discover a library of abstractions for a category",
-                    description="Run ShapeCoder's discovery (wake by e-graph refactoring or, with --wake "
-                                "network, with dreams and a recognition network; proposal, integration, "
-                                "removal sweep; a final wake with the library fixed) on the first N discovery "
-                                "shapes of a PartNet category; write library.txt, programs.txt, log.json and a "
-                                "resumable state.json into --out (an earlier run's folder is continued, never "
-                                "overwritten).",
-                    example="coder discover --category chair --out runs/chair_abs --workers 2",
-                    outputs={"out": "folder"})
+    d = add_command(sub, "discover", cmd_discover, outputs={"out": "folder"})
     add_category(d)
     d.add_argument("--out", required=True, help="output folder (an earlier run's folder resumes it)")
     d.add_argument("--rounds", type=int_at_least(0), default=4, help="proposal/integration rounds (paper: 4)")
     d.add_argument("--shapes", type=int_at_least(1), default=400, help="the first N discovery shapes (paper: 400)")
     d.add_argument("--proposals", type=int_at_least(1), default=10000, help="proposals per round (paper: 10,000)")
     d.add_argument("--abstractions", type=int_at_least(1), default=20, help="candidates tried per round (N_A)")
-    d.add_argument("--seed", type=seed, default=42, help="seed of the proposals")
-    d.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2,
-                   help="processes for the per-program refactors")
+    add_seed(d, "seed of the proposals", default=42)
+    add_workers(d, "processes for the per-program refactors", default=2)
     d.add_argument("--minutes", type=float_in(0, MAX_SECONDS_OPTION / 60),
                    help="start no phase after this many minutes: ends this session, not the run (the folder "
                         "resumes where it stopped; the run's result is set by --rounds and the counts, not by this)")
@@ -311,12 +315,7 @@ def register(sub) -> None:
                         "score (the paper's 'no preferences' ablation)")
     add_egraph_limits(d)
     add_quiet(d, "progress bars")
-    a = add_command(sub, "infer", cmd_infer, help="infer one shape's program with a discovered library",
-                    description="Post hoc inference: refactor the naive program of one shape with a library's "
-                                "abstractions; print the program, its expansion, its cost and error. A shape of "
-                                "ShapeCoder's data set is named coder-<category>:<line> (a line of the vendored "
-                                "PN_<category>.txt), not by a corpus id.",
-                    example="coder infer coder-chair:401 --library chair", outputs={"json": "file+"})
+    a = add_command(sub, "infer", cmd_infer, outputs={"json": "file+"})
     a.add_argument("shape", help="coder-<category>:<line number> of the vendored data (e.g. coder-chair:401), a "
                                  "PN_<category>.txt line, or a file with one such line")
     a.add_argument("--library", required=True, help="a shipped category (chair) or a library.txt file")
@@ -328,14 +327,7 @@ def register(sub) -> None:
                         "inference; slower)")
     add_search_budget(a, "", "--network")
     add_result_options(a, "the program, its cost and error", quiet=None)
-    t2 = add_command(sub, "tables", cmd_tables, help="ShapeCoder Tables 2 and 3 of discovered libraries",
-                     description="Write the ShapeCoder paper's Table 2 (Input Prims and ShapeCoder rows: F, |L|, "
-                                 "Num Struct, Num Param on the discovery shapes) and Table 3 (F of the discovered "
-                                 "programs, and post hoc inference on the first --train discovery and --heldout "
-                                 "held-out shapes) for the shipped libraries or coder discover folders, "
-                                 "beside the paper's rows.",
-                     example="coder tables --category chair table storage --workers 2 --out shapecoder_tables.md",
-                     outputs={"out": "file", "json": "file+"})
+    t2 = add_command(sub, "tables", cmd_tables, outputs={"out": "file", "json": "file+"})
     add_category(t2, multiple=True)
     t2.add_argument("--library", action="append",
                     help="CATEGORY=FOLDER: a coder discover output folder instead of the shipped library")
@@ -347,8 +339,7 @@ def register(sub) -> None:
                          "semantic rewrites: the row beside the paper's ShapeMOD+Wake (ours)")
     t2.add_argument("--train", type=int_at_least(1), default=100, help="train-PHI: the first N discovery shapes")
     t2.add_argument("--heldout", type=int_at_least(1), default=100, help="validation-PHI: the first N held-out shapes")
-    t2.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2,
-                    help="processes for the per-shape inference (1: everything in this process)")
+    add_workers(t2, "processes for the per-shape inference (1: everything in this process)", default=2)
     add_egraph_limits(t2)
     t2.add_argument("--phi-network", action="store_true",
                     help="post hoc inference with the library's recognition network as well (the paper's; the "

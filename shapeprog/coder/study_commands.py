@@ -3,16 +3,13 @@ its Tables 2 and 3 (Table 4's ablations and perturbation FD, noisy input, sampli
 :mod:`shapeprog.coder.commands` registers them beside the other ``coder`` commands."""
 from __future__ import annotations
 
-import multiprocessing
 import random
-import sys
 from types import SimpleNamespace
-from concurrent.futures import ProcessPoolExecutor
 
-from shapeio.results import column, make_result
+from shapeio.results import column
 
-from ..cli import (MAX_SECONDS_OPTION, MAX_WORKERS, add_category, add_command, add_result_options, command_line,
-                   float_in, int_at_least, refuse_existing, seed, write_json)
+from ..cli import (MAX_SECONDS_OPTION, add_category, add_command, add_result_options, add_seed, add_workers,
+                   command_result, float_in, int_at_least, progress_log, refuse_existing, worker_pool, write_json)
 from ..fit import MAX_LR
 from . import data, tables
 from ..vae.genmetrics import frechet_distance
@@ -24,16 +21,15 @@ from .studies import PieceSampler, execute_corners, free_numbers, noisy, perturb
 from .search import WAKE_STEP_BUDGET
 
 
-def _pool(workers: int, network: bool):
-    """A process pool of ``workers`` (None for 1); with a network its workers start from a fresh interpreter
-    (workers forked after this process ran torch can hang)."""
-    if workers <= 1:
-        return None
-    ctx = multiprocessing.get_context("forkserver") if network else None
-    return ProcessPoolExecutor(workers, mp_context=ctx)
-
-
 def cmd_ablation(args) -> int:
+    """the paper's Table 4 (left): discovery ablations
+
+    Discovery on the first --shapes discovery shapes once per ablation row (the network wake; the refactor-only wake; no
+    abstraction; a single round; no semantic rewrites; the naive rewrite scheme; no preferences), same shapes, seed and
+    counts; F, |L|, Num Struct, Num Param per row beside the paper's F.
+
+    Example: coder ablation --category chair --shapes 20 --rounds 1 --proposals 100 --abstractions 4
+        --rows 'no abstraction' 'single iteration' --json ablation.json"""
     from . import ablation  # lazy: loaded when the command runs
 
     refuse_existing([args.json], args.overwrite)
@@ -51,13 +47,10 @@ def cmd_ablation(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
     shapes = data.load(args.category)[:args.shapes]
-    progress = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
-    pool = _pool(args.workers, any(ablation.ROWS[r].get("wake") == "network" for r in rows))
-    try:
-        got = ablation.ablation(shapes, base, rows, network=network, executor=pool, progress=progress)
-    finally:
-        if pool is not None:
-            pool.shutdown()
+    network_rows = any(ablation.ROWS[r].get("wake") == "network" for r in rows)
+    # workers forked after this process ran torch can hang: with a network they start from a fresh interpreter
+    with worker_pool(args.workers, "forkserver" if network_rows else None) as pool:
+        got = ablation.ablation(shapes, base, rows, network=network, executor=pool, progress=progress_log(args))
     paper = ablation.PAPER_TABLE4_LEFT.get(args.category, {})
     naive = naive_summary(s.prims for s in shapes)
     table = [{"row": "naive programs (input primitives)", "F": naive.F, "L": 6, "struct": naive.num_struct,
@@ -82,8 +75,8 @@ def cmd_ablation(args) -> int:
              "which discovered with a constant omega)."]
     cols = [column("row", "row"), column("F", "F", 1), column("L", "|L|"), column("struct", "Num Struct", 1),
             column("param", "Num Param", 1), column("seconds", "wall s", 0), column("paper", "paper F (chair)", 1)]
-    write_json(args, make_result(f"ShapeCoder Table 4 (left): ablations ({args.category})", cols, table, notes,
-                                 command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder Table 4 (left): ablations ({args.category})", cols, table,
+                                    notes))
     return 0
 
 
@@ -114,6 +107,12 @@ def _shipped_run(category: str):
 
 
 def cmd_perturbation(args) -> int:
+    """the paper's Table 4 (right): FD of perturbed programs with and without abstractions
+
+    Perturb every free number of the shipped library's programs and of the naive programs of the same shapes by sigma
+    N(0, 1), execute, and compare with held-out shapes by the FD of the generation tables' PointNet features.
+
+    Example: coder perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 --json perturbation.json"""
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     programs = list(run.programs[:args.shapes])
@@ -140,12 +139,18 @@ def cmd_perturbation(args) -> int:
     cols = [column("programs", "programs"), column("sigma", "sigma"), column("free", "free numbers / program", 1),
             column("fd", "FD", 2), column("fd_min", "FD min", 2), column("fd_max", "FD max", 2),
             column("failed", "failed")]
-    write_json(args, make_result(f"ShapeCoder Table 4 (right): FD of perturbed programs ({args.category})", cols,
-                                 rows, notes, command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder Table 4 (right): FD of perturbed programs ({args.category})",
+                                    cols, rows, notes))
     return 0
 
 
 def cmd_noise(args) -> int:
+    """section 7.5: post hoc inference on noisy primitive input
+
+    Post hoc inference with the shipped library on held-out shapes whose primitives got Gaussian noise (dimensions and
+    positions), per sigma; F as Table 3's.
+
+    Example: coder noise --category chair --heldout 20 --sigmas 0 0.02 --json noise.json"""
     refuse_existing([args.json], args.overwrite)
     try:
         run = tables.shipped(args.category)
@@ -153,9 +158,8 @@ def cmd_noise(args) -> int:
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
     recs = [r for r in data.load(args.category, "heldout")[:args.heldout] if len(r.prims) <= run.library.lang.max_prims]
-    pool = _pool(args.workers, args.network)
     rows = []
-    try:
+    with worker_pool(args.workers, "forkserver" if args.network else None) as pool:  # as in cmd_ablation
         for sigma in args.sigmas:
             rng = random.Random(f"{args.seed}:{sigma!r}")
             shapes = [SimpleNamespace(prims=order(noisy(r.prims, sigma, rng))) for r in recs]
@@ -163,9 +167,6 @@ def cmd_noise(args) -> int:
             rows.append({"sigma": sigma, "shapes": row.shapes, "F": row.F, "used": row.used, "cpu": row.cpu})
             if not args.quiet:
                 print(f"sigma {sigma:g}: F {row.F:.2f} over {row.shapes} shapes", flush=True)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     how = "the recognition network's search and refactoring" if args.network else "refactoring only"
     notes = [f"Post hoc inference ({how}, default budgets) with the shipped {args.category} library on the first "
              f"{args.heldout} held-out shapes (those with at most 16 primitives), each primitive's dimensions and "
@@ -174,12 +175,19 @@ def cmd_noise(args) -> int:
              "The paper's section 7.5 protocol and figures are not in the spec: this is ours."]
     cols = [column("sigma", "sigma"), column("shapes", "shapes"), column("F", "F", 2),
             column("used", "abstractions used"), column("cpu", "CPU s / shape", 2)]
-    write_json(args, make_result(f"ShapeCoder section 7.5: post hoc inference on noisy primitives ({args.category})",
-                                 cols, rows, notes, command_line(args)))
+    title = f"ShapeCoder section 7.5: post hoc inference on noisy primitives ({args.category})"
+    write_json(args, command_result(args, title, cols, rows, notes))
     return 0
 
 
 def cmd_sample(args) -> int:
+    """section 7.6 (partial): a piece sampler over programs with and without abstractions
+
+    Fit a simple generative model (pieces per program, piece templates by frequency, a Gaussian per template number) to
+    the shipped library's programs and to the naive programs of the same shapes; sample, execute, FD against held-out
+    shapes.
+
+    Example: coder sample --category chair -n 50 --heldout 100 --json sample.json"""
     refuse_existing([args.json], args.overwrite)
     run, recs = _shipped_run(args.category)
     ref, n_ref = _heldout_features(args.category, args.heldout, args.seed)
@@ -208,27 +216,20 @@ def cmd_sample(args) -> int:
              "its protocol and figures are not in the spec)."]
     cols = [column("model", "model"), column("templates", "templates"), column("valid", "valid %", 1, 100),
             column("fd", "FD", 2), column("fd_programs", "FD, fitted programs", 2)]
-    write_json(args, make_result(f"ShapeCoder section 7.6: a piece sampler over programs ({args.category})", cols,
-                                 rows, notes, command_line(args)))
+    write_json(args, command_result(args, f"ShapeCoder section 7.6: a piece sampler over programs ({args.category})",
+                                    cols, rows, notes))
     return 0
 
 
 def register(sub) -> None:
     """Add the study commands to ``sub``."""
-    ab = add_command(sub, "ablation", cmd_ablation, help="the paper's Table 4 (left): discovery ablations",
-                     description="Discovery on the first --shapes discovery shapes once per ablation row (the "
-                                 "network wake; the refactor-only wake; no abstraction; a single round; no semantic "
-                                 "rewrites; the naive rewrite scheme; no preferences), same shapes, seed and "
-                                 "counts; F, |L|, Num Struct, Num Param per row beside the paper's F.",
-                     example="coder ablation --category chair --shapes 20 --rounds 1 --proposals 100 "
-                             "--abstractions 4 --rows 'no abstraction' 'single iteration' --json ablation.json",
-                     outputs={"json": "file+"})
+    ab = add_command(sub, "ablation", cmd_ablation, outputs={"json": "file+"})
     add_category(ab)
     ab.add_argument("--shapes", type=int_at_least(1), default=60, help="the first N discovery shapes (paper: 400)")
     ab.add_argument("--rounds", type=int_at_least(1), default=2, help="proposal/integration rounds (paper: 4)")
     ab.add_argument("--proposals", type=int_at_least(1), default=300, help="proposals per round (paper: 10,000)")
     ab.add_argument("--abstractions", type=int_at_least(1), default=8, help="candidates tried per round (paper: 20)")
-    ab.add_argument("--seed", type=seed, default=42, help="seed of the proposals")
+    add_seed(ab, "seed of the proposals", default=42)
     ab.add_argument("--rows", nargs="+", metavar="ROW",
                     help="the rows to run (default: all but 'no conditional rewrites', whose naive e-graphs need "
                          "more than 4 GB per refactor of a 16-primitive chair)")
@@ -242,45 +243,29 @@ def register(sub) -> None:
     ab.add_argument("--wake-step-budget", type=int_at_least(1), default=36,
                     help=f"the network row: the search's budget per step (the wake's default is {WAKE_STEP_BUDGET}, "
                          "about the paper's 1 s; less keeps the row to minutes on a CPU)")
-    ab.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2, help="processes for the refactors")
+    add_workers(ab, "processes for the refactors", default=2)
     add_result_options(ab, "the rows")
-    pe = add_command(sub, "perturbation", cmd_perturbation,
-                     help="the paper's Table 4 (right): FD of perturbed programs with and without abstractions",
-                     description="Perturb every free number of the shipped library's programs and of the naive "
-                                 "programs of the same shapes by sigma N(0, 1), execute, and compare with held-out "
-                                 "shapes by the FD of the generation tables' PointNet features.",
-                     example="coder perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 "
-                             "--json perturbation.json", outputs={"json": "file+"})
+    pe = add_command(sub, "perturbation", cmd_perturbation, outputs={"json": "file+"})
     add_category(pe)
     pe.add_argument("--shapes", type=int_at_least(2), default=400, help="the first N discovery shapes' programs")
     pe.add_argument("--heldout", type=int_at_least(2), default=700, help="the first N held-out shapes (reference)")
     pe.add_argument("--sigmas", type=float_in(0, 10), nargs="+", default=[0.0, 0.025, 0.05, 0.1],
                     help="noise standard deviations")
     pe.add_argument("--draws", type=int_at_least(1), default=2, help="noise draws per sigma > 0")
-    pe.add_argument("--seed", type=seed, default=0, help="seed of the noise and the surface points")
+    add_seed(pe, "seed of the noise and the surface points")
     add_result_options(pe, "the rows")
-    no = add_command(sub, "noise", cmd_noise, help="section 7.5: post hoc inference on noisy primitive input",
-                     description="Post hoc inference with the shipped library on held-out shapes whose primitives "
-                                 "got Gaussian noise (dimensions and positions), per sigma; F as Table 3's.",
-                     example="coder noise --category chair --heldout 20 --sigmas 0 0.02 --json noise.json",
-                     outputs={"json": "file+"})
+    no = add_command(sub, "noise", cmd_noise, outputs={"json": "file+"})
     add_category(no)
     no.add_argument("--heldout", type=int_at_least(1), default=100, help="the first N held-out shapes")
     no.add_argument("--sigmas", type=float_in(0, 1), nargs="+", default=[0.0, 0.01, 0.02, 0.03],
                     help="noise standard deviations (0: the clean shapes)")
-    no.add_argument("--seed", type=seed, default=0, help="seed of the noise")
+    add_seed(no, "seed of the noise")
     no.add_argument("--network", action="store_true", help="with the recognition network's search as well")
-    no.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=2, help="processes for the inference")
+    add_workers(no, "processes for the inference", default=2)
     add_result_options(no, "the rows")
-    sa = add_command(sub, "sample", cmd_sample,
-                     help="section 7.6 (partial): a piece sampler over programs with and without abstractions",
-                     description="Fit a simple generative model (pieces per program, piece templates by frequency, "
-                                 "a Gaussian per template number) to the shipped library's programs and to the "
-                                 "naive programs of the same shapes; sample, execute, FD against held-out shapes.",
-                     example="coder sample --category chair -n 50 --heldout 100 --json sample.json",
-                     outputs={"json": "file+"})
+    sa = add_command(sub, "sample", cmd_sample, outputs={"json": "file+"})
     add_category(sa)
     sa.add_argument("-n", type=int_at_least(2), default=300, help="samples per model")
     sa.add_argument("--heldout", type=int_at_least(2), default=700, help="the first N held-out shapes (reference)")
-    sa.add_argument("--seed", type=seed, default=0, help="seed of the samples and the surface points")
+    add_seed(sa, "seed of the samples and the surface points")
     add_result_options(sa, "the rows")

@@ -3,11 +3,9 @@ the cloud cache they read (make-clouds), and the export of trained weights."""
 from __future__ import annotations
 
 import json
-import multiprocessing
 import sys
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -21,9 +19,9 @@ from shapeio.points import MAX_POINTS
 from shapeio.points import read_cloud
 
 from .. import corpus
-from ..cli import (MAX_WORKERS, add_category, add_command, add_json, add_overwrite, add_quiet, check_outputs,
-                   command_line, float_in, int_at_least, markdown_result, refuse_existing, refuse_inputs, seed,
-                   write_json)
+from ..cli import (add_category, add_command, add_export_weights, add_json, add_overwrite, add_quiet, add_seed,
+                   add_workers, command_line, float_in, int_at_least, markdown_result, refuse_existing, refuse_inputs,
+                   worker_pool, write_json)
 from ..errors import PointCloudError
 from ..execute import execute
 from ..io import obj_text
@@ -74,6 +72,15 @@ def retrieval_index(category: str, clouds):
 
 
 def cmd_infer(args) -> int:
+    """a ShapeAssembly program for a point cloud or a mesh
+
+    Encode a point cloud (.ply .obj .xyz .npy) or a mesh (.obj .ply .stl .glb, sampled by area) with the trained
+    point-cloud model, decode a program, optionally polish its numbers by fitting (--fit), and write into --out:
+    <name>.txt (the program at the input's scale, in the power of ten of input units that keeps its numbers in the
+    corpus's range: the json's unit), <name>.obj (its cuboids in the input's frame), <name>.png (input beside result)
+    and <name>.json (offset, rotation, metrics).
+
+    Example: pointcloud infer scan.ply --category chair --fit --out result/"""
     src = Path(args.file)
     out = Path(args.out)
     stem = src.stem
@@ -183,23 +190,24 @@ def print_inference(r, files) -> int:
 
 
 def cmd_tables(args) -> int:
+    """the papers' point-cloud reconstruction tables on the test split
+
+    Measure the point-cloud model (no fitting, Opt Program, Opt Cuboids) and the retrieval baseline on the test split of
+    a make-clouds cache (noisy 2,048-point inputs in random scale and position) and write the ShapeMOD Table 3 and
+    ShapeAssembly Table 7 layouts as Markdown.
+
+    Example: pointcloud tables --category chair --clouds clouds --limit 20 --out pointcloud_chair.md"""
     refuse_inputs([args.out, args.json], [args.weights])
     refuse_existing([args.out, args.json], args.overwrite)
-    executor = None
-    if args.workers > 1:
-        executor = ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
 
     def progress(done, total):
         if not args.quiet and (done % 10 == 0 or done == total):
             print(f"{done}/{total} shapes", file=sys.stderr, flush=True)
 
-    try:
+    with worker_pool(args.workers, "spawn") as executor:
         result = evaluate(args.clouds, args.category, weights=args.weights, limit=args.limit, steps=args.steps,
                           stability=not args.no_stability, retrieval=not args.no_retrieval, executor=executor,
                           seed=args.seed, progress=progress, search=args.search, augmented=args.augmented)
-    finally:
-        if executor is not None:
-            executor.shutdown()
     command = command_line(args)
     path = write_tables(result, args.out, command)
     for row, m in result.rows.items():
@@ -211,6 +219,14 @@ def cmd_tables(args) -> int:
 
 
 def cmd_make_clouds(args) -> int:
+    """sample point clouds of a category's corpus shapes into a cache
+
+    Sample area-weighted surface points of every executed program of a category into <out>/<category>_clouds.npz, and
+    write the train / val / test split (val: a seeded carve-out of the corpus train split; test: the corpus val split)
+    to <out>/<category>_split.json. A program that fails is reported and skipped. An existing cache is never replaced
+    (remove it, or choose another --out).
+
+    Example: pointcloud make-clouds --category chair --points 10000 --workers 2 --out clouds"""
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise SystemExit(f"error: {args.out}: not a folder")
     refuse_existing(cache_paths(args.out, args.category),
@@ -235,33 +251,18 @@ def cmd_make_clouds(args) -> int:
     return 0
 
 
-def cmd_export_weights(args) -> int:
+def export_cloud_weights(checkpoint: str, out: str, half: bool = True) -> Path:
+    """Write the model of a point-cloud training checkpoint (configs/pointcloud/) as the file that `pointcloud infer
+    --weights` and shapeprog.pointcloud.load_model read."""
     # the training module imports Lightning, needed only to read a training checkpoint
     from .train import export_weights  # lazy: the training module brings Lightning
 
-    check_outputs(others=[args.out])
-    refuse_inputs([args.out], [args.checkpoint])
-    refuse_existing([args.out], args.overwrite)
-    try:
-        path = export_weights(args.checkpoint, args.out, half=not args.float32)
-    except (FileNotFoundError, ValueError) as e:
-        raise SystemExit(f"error: {e}") from None
-    print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
-    return 0
+    return export_weights(checkpoint, out, half=half)
 
 
 def register(sub) -> None:
     """Add the ``pointcloud`` commands to ``sub``."""
-    i = add_command(sub, "infer", cmd_infer, help="a ShapeAssembly program for a point cloud or a mesh",
-                    description="Encode a point cloud (.ply .obj .xyz .npy) or a mesh (.obj .ply .stl .glb, "
-                                "sampled by area) with the trained point-cloud model, decode a program, "
-                                "optionally polish its numbers by fitting (--fit), and write into --out: "
-                                "<name>.txt (the program at the input's scale, in the power of ten of input units "
-                                "that keeps its numbers in the corpus's range: the json's unit), <name>.obj (its "
-                                "cuboids in the input's frame), <name>.png (input beside result) and <name>.json "
-                                "(offset, rotation, metrics).",
-                    example="pointcloud infer scan.ply --category chair --fit --out result/",
-                    outputs={"out": "folder"})
+    i = add_command(sub, "infer", cmd_infer, outputs={"out": "folder"})
     i.add_argument("file", help="point cloud or mesh file")
     add_category(i, help="the shipped model to use")
     i.add_argument("--weights", help="a point-cloud weights file instead of the shipped one")
@@ -281,10 +282,10 @@ def register(sub) -> None:
     i.add_argument("--clouds", metavar="DIR",
                    help="with --retrieval: a make-clouds folder whose training clouds make the index (else it is "
                         "sampled from the corpus, about 20 s for chairs)")
-    i.add_argument("--method", choices=METHODS, default=None,
+    i.add_argument("--method", choices=METHODS,
                    help=f"robust (the default): {ROBUST_SUBSETS} encoder subsets decoded and the training programs "
-                        f"nearest to the cloud compete, the best against the input is kept and polished; decode: the "
-                        f"papers' single decode (the default when --search or --retrieval is given)")
+                        "nearest to the cloud compete, the best against the input is kept and polished; decode: the "
+                        "papers' single decode (the default when --search or --retrieval is given)")
     i.add_argument("--subsets", type=int_at_least(1, 64), default=ROBUST_SUBSETS,
                    help="robust method: encoder subsets decoded")
     i.add_argument("--candidates", type=int_at_least(0, 1000), default=None,
@@ -301,16 +302,10 @@ def register(sub) -> None:
                         "clearly better)")
     i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
     i.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=256, help="picture cell size in pixels")
-    i.add_argument("--seed", type=seed, default=0, help="seed of the point subsets")
+    add_seed(i, "seed of the point subsets")
     i.add_argument("--out", required=True, help="output folder (created if missing)")
     add_overwrite(i)
-    pt = add_command(sub, "tables", cmd_tables, help="the papers' point-cloud reconstruction tables on the test split",
-                     description="Measure the point-cloud model (no fitting, Opt Program, Opt Cuboids) and the "
-                                 "retrieval baseline on the test split of a make-clouds cache (noisy 2,048-point "
-                                 "inputs in random scale and position) and write the ShapeMOD Table 3 and "
-                                 "ShapeAssembly Table 7 layouts as Markdown.",
-                     example="pointcloud tables --category chair --clouds clouds --limit 20 --out pointcloud_chair.md",
-                     outputs={"out": "file", "json": "file"})
+    pt = add_command(sub, "tables", cmd_tables, outputs={"out": "file", "json": "file"})
     add_category(pt)
     pt.add_argument("--clouds", required=True, help="the make-clouds folder")
     pt.add_argument("--weights", help="a point-cloud weights file (default: the shipped model)")
@@ -321,45 +316,28 @@ def register(sub) -> None:
     pt.add_argument("--search", action="store_true", help="also measure the latent-search rows (ours, not the papers')")
     pt.add_argument("--augmented", action="store_true",
                     help="also measure the retrieval-augmented decoding rows (ours, not the papers')")
-    pt.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes for the per-shape work")
-    pt.add_argument("--seed", type=seed, default=0, help="seed of the inputs' noise, subsets, scales and positions")
+    add_workers(pt, "processes for the per-shape work")
+    add_seed(pt, "seed of the inputs' noise, subsets, scales and positions")
     add_quiet(pt, "progress lines")
     pt.add_argument("--out", required=True, help="Markdown file (e.g. docs/tables/pointcloud_chair.md)")
     add_json(pt, "the tables")
     add_overwrite(pt)
-    m = add_command(sub, "make-clouds", cmd_make_clouds,
-                    help="sample point clouds of a category's corpus shapes into a cache",
-                    description="Sample area-weighted surface points of every executed program of a category "
-                                "into <out>/<category>_clouds.npz, and write the train / val / test split "
-                                "(val: a seeded carve-out of the corpus train split; test: the corpus val "
-                                "split) to <out>/<category>_split.json. A program that fails is reported "
-                                "and skipped. An existing cache is never replaced (remove it, or choose another "
-                                "--out).",
-                    example="pointcloud make-clouds --category chair --points 10000 --workers 2 --out clouds",
-                    outputs={"out": "folder"})
+    m = add_command(sub, "make-clouds", cmd_make_clouds, outputs={"out": "folder"})
     add_category(m, help="the corpus category")
     m.add_argument("--out", required=True, help="the cache folder (created if missing)")
     m.add_argument("--points", type=int_at_least(1, MAX_POINTS), default=10000,
                    help="points per shape (the papers' 10,000)")
-    m.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), help="processes (default: the CPU count; 1: none)")
-    m.add_argument("--seed", type=seed, default=0, help="sampling seed (each shape's seed is a hash of category, "
-                                                        "id and this)")
+    add_workers(m, "processes (default: the CPU count; 1: none)", default=None)
+    add_seed(m, "sampling seed (each shape's seed is a hash of category, id and this)")
     m.add_argument("--val-fraction", type=float_in(0, 1, high_open=True), default=0.05,
                    help="share of the corpus train split carved out for validation")
-    m.add_argument("--split-seed", type=seed, default=0, help="seed of the validation carve-out")
+    add_seed(m, "seed of the validation carve-out", flag="--split-seed")
     m.add_argument("--dtype", choices=("float16", "float32"), default="float16",
                    help="storage type of the points (float16: half the size, within 5e-4)")
     m.add_argument("--limit", type=int_at_least(1), help="only the first N shapes of the corpus train and val "
                                                          "splits (a quick check)")
     add_quiet(m, "progress bar")
-    x = add_command(sub, "export-weights", cmd_export_weights,
-                    help="write a point-cloud training checkpoint as a small weights file",
-                    description="Write the model of a point-cloud training checkpoint (configs/pointcloud/) as "
-                                "the file that `pointcloud infer --weights` and shapeprog.pointcloud.load_model "
-                                "read.",
-                    example="pointcloud export-weights runs/pc_chair/checkpoints/last.ckpt --out pc_chair.pt",
-                    outputs={"out": "file"})
-    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config configs/pointcloud/...`")
-    x.add_argument("--out", required=True, help="the weights file to write (.pt)")
-    x.add_argument("--float32", action="store_true", help="keep float32 (float16 storage otherwise)")
-    add_overwrite(x)
+    add_export_weights(sub, export_cloud_weights,
+                       help="write a point-cloud training checkpoint as a small weights file",
+                       example="pointcloud export-weights runs/pc_chair/checkpoints/last.ckpt --out pc_chair.pt",
+                       checkpoint_help="a .ckpt file written by `python train.py fit --config configs/pointcloud/...`")

@@ -5,23 +5,22 @@ generated programs (the generation tables), train the metrics' classifier, expor
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import torch
 from tqdm import tqdm
 
 from shapeio import atomic_write, write_new
-from shapeio.results import column, make_result
+from shapeio.results import column
 from shapeio.weights import load_payload
 
 from .. import io
-from ..cli import (add_result_options, DEFAULT_CATEGORY, MAX_WORKERS, Program, add_category, add_command, add_json,
-                   add_overwrite, add_quiet, category_of, check_outputs, command_line, emit_text, int_at_least,
-                   refuse_existing, refuse_inputs, seed, write_json, write_mesh)
+from ..cli import (DEFAULT_CATEGORY, add_category, add_command, add_export_weights, add_json, add_overwrite, add_quiet,
+                   add_result_options, add_seed, add_workers, category_of, check_outputs, command_line, command_result,
+                   emit_text, int_at_least, Program, progress_log, refuse_existing, refuse_inputs, worker_pool,
+                   write_json, write_mesh)
 from ..errors import ParseError
 from ..execute import execute
 from ..lang import parse
@@ -124,6 +123,12 @@ def draw(vae, n: int, seed: int, max_tries: int):
 
 
 def cmd_sample(args) -> int:
+    """generate programs with the VAE
+
+    Sample latents from N(0, I) and decode them with semantic validity (rejection sampling); write programs, meshes and
+    a picture grid.
+
+    Example: vae sample --category chair -n 16 --seed 0 --out samples --png grid.png"""
     check_outputs(others=[args.png])
     if args.png:
         check_grid(args.n, args.cols, args.size)
@@ -142,6 +147,11 @@ def cmd_sample(args) -> int:
 
 
 def cmd_interpolate(args) -> int:
+    """decode shapes along the latent line between two programs
+
+    Encode two programs, interpolate their latent means linearly and decode each step (both ends included).
+
+    Example: vae interpolate chair/173 chair/44017 --steps 8 --png interp.png"""
     check_outputs(others=[args.png])
     a, b = Program(args.a), Program(args.b)
     planned = planned_files(args.out, "step_{:03d}", args.steps)
@@ -154,6 +164,12 @@ def cmd_interpolate(args) -> int:
 
 
 def cmd_reconstruct(args) -> int:
+    """encode a program and decode it back, with the F-score to the input
+
+    Encode a program to its latent mean, decode it with semantic validity, and print the F-score and chamfer distance to
+    the input shape.
+
+    Example: vae reconstruct chair/173 -o recon.txt --json recon.json"""
     check_outputs([args.mesh], [args.out, args.png, args.json])
     prog = Program(args.program)
     outputs = [args.out, args.mesh, args.png, args.json]
@@ -184,11 +200,11 @@ def cmd_reconstruct(args) -> int:
         render_grid([(target.corners, target.line.numpy()), (shape.corners, shape.line.numpy())], args.png,
                     cols=2, size=args.size)
         print(f"wrote {args.png} (input, reconstruction)")
-    write_json(args, make_result(
-        "VAE reconstruction", [column("program", "program"), column("leaves", "leaf cuboids"),
-                               column("input_leaves", "input leaf cuboids"),
-                               column("fscore", f"F-score @{thr:.3g}", 1), column("chamfer", "chamfer", 4)],
-        [figures], [f"weights: {args.weights or 'the shipped model'}; seed {args.seed}"], command_line(args)))
+    write_json(args, command_result(
+        args, "VAE reconstruction", [column("program", "program"), column("leaves", "leaf cuboids"),
+                                     column("input_leaves", "input leaf cuboids"),
+                                     column("fscore", f"F-score @{thr:.3g}", 1), column("chamfer", "chamfer", 4)],
+        [figures], [f"weights: {args.weights or 'the shipped model'}; seed {args.seed}"]))
     return 0
 
 
@@ -201,19 +217,13 @@ def is_pointcloud_checkpoint(path: str) -> bool:
     return isinstance(payload, dict) and "shapeprog_pointcloud" in payload
 
 
-def cmd_export_weights(args) -> int:
-    check_outputs(others=[args.out])
-    refuse_inputs([args.out], [args.checkpoint])
-    refuse_existing([args.out], args.overwrite)
-    if Path(args.checkpoint).is_file() and is_pointcloud_checkpoint(args.checkpoint):
-        raise SystemExit(f"error: {args.checkpoint}: a checkpoint of a point-cloud model; export it with "
+def export_vae_weights(checkpoint: str, out: str, half: bool = True) -> Path:
+    """Write the VAE of a Lightning checkpoint (or weights file) as a weights file that --weights and
+    shapeprog.vae.load_pretrained read (a point-cloud model's checkpoint: `pointcloud export-weights`)."""
+    if Path(checkpoint).is_file() and is_pointcloud_checkpoint(checkpoint):
+        raise SystemExit(f"error: {checkpoint}: a checkpoint of a point-cloud model; export it with "
                          "`python -m shapeprog pointcloud export-weights`")
-    try:
-        path = export_weights(args.checkpoint, args.out, half=not args.float32)
-    except (FileNotFoundError, ValueError) as e:
-        raise SystemExit(f"error: {e}") from None
-    print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
-    return 0
+    return export_weights(checkpoint, out, half=half)
 
 
 def read_programs(folder: str) -> list:
@@ -277,6 +287,13 @@ def vae_samples(args, vae=None, max_tries: int = EVALUATE_TRIES, paper_rules: bo
 
 
 def cmd_evaluate(args) -> int:
+    """the generation tables (Tables 2, 4, 5) of VAE samples or a folder of programs
+
+    Measure generated programs with the ShapeAssembly paper's generation metrics (% rooted, % stable, % fool, FD, leaf
+    parts, generalization, coverage, variety, % novel) against the corpus train split, beside the ground truth (the val
+    split) and the paper's figures; print a markdown table.
+
+    Example: vae evaluate --category chair table -n 300 --max-tries 10 1 --paper-decoding --json table.json"""
     check_outputs(others=[args.out, args.json])
     refuse_inputs([args.out, args.json], [args.classifier])
     refuse_existing([args.out, args.json], args.overwrite)
@@ -295,25 +312,20 @@ def cmd_evaluate(args) -> int:
             model = load_classifier(args.classifier)[0]
         except (FileNotFoundError, ValueError) as e:
             raise SystemExit(f"error: {e}") from None
-    pool = None
-    if args.workers > 1:
-        pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"))
     t0 = time.perf_counter()
     texts, tables, notes, sampling, papers = [], [], [], [], set()
-    try:
+    with worker_pool(args.workers, "spawn") as pool:
         for category in categories:
             one = argparse.Namespace(**{**vars(args), "category": category})
             header, sets, paper = "", [], "shapeassembly"
             if args.n:
                 vae = load_vae(one, category, macro=True)
                 paper = "shapemod" if isinstance(vae, MacroVAE) else "shapeassembly"
-                for k in dict.fromkeys(args.max_tries):
-                    samples, name, line = vae_samples(one, vae, k)
-                    sets.append((name, samples))
-                    header += line
-                    sampling.append(line.strip())
+                decodings = [(k, False) for k in dict.fromkeys(args.max_tries)]
                 if args.paper_decoding:
-                    samples, name, line = vae_samples(one, vae, args.max_tries[0], paper_rules=True)
+                    decodings.append((args.max_tries[0], True))
+                for k, paper_rules in decodings:
+                    samples, name, line = vae_samples(one, vae, k, paper_rules=paper_rules)
                     sets.append((name, samples))
                     header += line
                     sampling.append(line.strip())
@@ -323,16 +335,12 @@ def cmd_evaluate(args) -> int:
                 sets, category, ground_truth=not args.no_ground_truth, executor=pool, model=model,
                 stability=not args.no_stability, fool=not args.no_fool, fool_epochs=args.fool_epochs,
                 fool_average_last=args.fool_average_last, fool_points=args.fool_points,
-                candidates=args.candidates or None, seed=args.seed,
-                log=None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True)))
+                candidates=args.candidates or None, seed=args.seed, log=progress_log(args))
             table = header + format_table(rows, category, notes, paper=paper)
             sys.stdout.write(table)
             texts.append(table)
             tables.append((category, rows))
             papers.add(paper)
-    finally:
-        if pool is not None:
-            pool.shutdown()
     if args.out:
         atomic_write(args.out, "\n".join(texts))
         print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s)")
@@ -341,6 +349,12 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_train_classifier(args) -> int:
+    """train the PointNet classifier of the generation metrics
+
+    Train the chair / table / storage PointNet classifier on the corpus train split; print its val accuracy; write its
+    weights and their SHA-256.
+
+    Example: vae train-classifier --out runs/pointnet_cls.pt"""
     check_outputs(others=[args.out, args.json])
     refuse_existing([args.out, args.json], args.overwrite)
     log = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))
@@ -352,23 +366,19 @@ def cmd_train_classifier(args) -> int:
     print(f"wrote {args.out}, SHA-256 {sha256_file(args.out)}")
     rows = [{"category": c, "accuracy": float(a)} for c, a in meta["val_accuracy_per_category"].items()]
     rows.append({"category": "all", "accuracy": float(meta["val_accuracy"])})
-    write_json(args, make_result("PointNet category classifier: val accuracy (%)",
-                                 [column("category", "category"), column("accuracy", "val accuracy (%)", 2)], rows,
-                                 [f"weights {args.out}, SHA-256 {sha256_file(args.out)}; trained in "
-                                  f"{meta['train_seconds']:.0f} s"], command_line(args)))
+    write_json(args, command_result(args, "PointNet category classifier: val accuracy (%)",
+                                    [column("category", "category"), column("accuracy", "val accuracy (%)", 2)], rows,
+                                    [f"weights {args.out}, SHA-256 {sha256_file(args.out)}; trained in "
+                                     f"{meta['train_seconds']:.0f} s"]))
     return 0
 
 
 def register(sub) -> None:
     """Add the ``vae`` commands to ``sub``."""
-    g = add_command(sub, "sample", cmd_sample, help="generate programs with the VAE",
-                    description="Sample latents from N(0, I) and decode them with semantic validity "
-                                "(rejection sampling); write programs, meshes and a picture grid.",
-                    example="vae sample --category chair -n 16 --seed 0 --out samples --png grid.png",
-                    outputs={"out": "folder"})
+    g = add_command(sub, "sample", cmd_sample, outputs={"out": "folder"})
     add_category(g, from_input="the --weights model", help="the shipped model to use")
     g.add_argument("-n", type=int_at_least(1, MAX_SAMPLES), default=16, help=f"number of samples (1 to {MAX_SAMPLES})")
-    g.add_argument("--seed", type=seed, default=0, help="seed of the latents (an integer)")
+    add_seed(g, "seed of the latents (an integer)")
     g.add_argument("--max-tries", type=int_at_least(1, MAX_TRIES), default=10,
                    help="draws per sample before giving up rejection")
     g.add_argument("--out", help="folder for sample_NNNN.txt and sample_NNNN.obj (without it and --png: printed)")
@@ -378,12 +388,7 @@ def register(sub) -> None:
     g.add_argument("--weights", help=WEIGHTS_HELP)
     add_quiet(g, "progress bar")
     add_overwrite(g)
-    i = add_command(sub, "interpolate", cmd_interpolate,
-                    help="decode shapes along the latent line between two programs",
-                    description="Encode two programs, interpolate their latent means linearly and decode "
-                                "each step (both ends included).",
-                    example="vae interpolate chair/173 chair/44017 --steps 8 --png interp.png",
-                    outputs={"out": "folder"})
+    i = add_command(sub, "interpolate", cmd_interpolate, outputs={"out": "folder"})
     i.add_argument("a", help="the first program: " + "corpus id (chair/173) or a program file")
     i.add_argument("b", help="the last program: " + "corpus id (chair/44017) or a program file")
     i.add_argument("--steps", type=int_at_least(2), default=8, help="shapes along the line, ends included (>= 2)")
@@ -393,29 +398,17 @@ def register(sub) -> None:
     i.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=160, help="cell side in pixels")
     i.add_argument("--weights", help=WEIGHTS_HELP)
     add_overwrite(i)
-    c = add_command(sub, "reconstruct", cmd_reconstruct,
-                    help="encode a program and decode it back, with the F-score to the input",
-                    description="Encode a program to its latent mean, decode it with semantic validity, and "
-                                "print the F-score and chamfer distance to the input shape.",
-                    example="vae reconstruct chair/173 -o recon.txt --json recon.json",
-                    outputs={"out": "file", "json": "file"})
+    c = add_command(sub, "reconstruct", cmd_reconstruct, outputs={"out": "file", "json": "file"})
     c.add_argument("program", help="corpus id (chair/173) or a program file")
     add_category(c, from_input="the corpus id", help="model category")
     c.add_argument("-o", "--out", help="reconstructed program file (without it: printed)")
     c.add_argument("--mesh", help="also write the reconstructed shape: .obj, .ply or .glb")
     c.add_argument("--png", help="picture of the input beside the reconstruction (.png)")
     c.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=256, help="cell side in pixels")
-    c.add_argument("--seed", type=seed, default=0, help="seed of the surface samples of the F-score")
+    add_seed(c, "seed of the surface samples of the F-score")
     c.add_argument("--weights", help=WEIGHTS_HELP)
     add_result_options(c, "the F-score and chamfer distance", quiet=None)
-    e = add_command(sub, "evaluate", cmd_evaluate,
-                    help="the generation tables (Tables 2, 4, 5) of VAE samples or a folder of programs",
-                    description="Measure generated programs with the ShapeAssembly paper's generation metrics "
-                                "(% rooted, % stable, % fool, FD, leaf parts, generalization, coverage, variety, "
-                                "% novel) against the corpus train split, beside the ground truth (the val split) "
-                                "and the paper's figures; print a markdown table.",
-                    example="vae evaluate --category chair table -n 300 --max-tries 10 1 --paper-decoding --json table.json",
-                    outputs={"out": "file", "json": "file"})
+    e = add_command(sub, "evaluate", cmd_evaluate, outputs={"out": "file", "json": "file"})
     add_category(e, multiple=True, help="the categories (one table each; --programs and --weights: one)")
     e.add_argument("--programs", help="folder of program files (*.txt, one program each); without it and -n, the "
                                       "ground-truth row alone")
@@ -441,32 +434,20 @@ def register(sub) -> None:
     e.add_argument("--fool-points", type=int_at_least(16), default=512, help="%% fool: points per shape")
     e.add_argument("--candidates", type=int_at_least(0), default=16,
                    help="shapes measured exactly per nearest-chamfer search (0: every pair)")
-    e.add_argument("--workers", type=int_at_least(1, MAX_WORKERS), default=1, help="processes for the per-shape work")
-    e.add_argument("--seed", type=seed, default=0, help="seed of the sampling and of the %% fool training")
+    add_workers(e, "processes for the per-shape work")
+    add_seed(e, "seed of the sampling and of the %% fool training")
     add_quiet(e, "progress lines on stderr")
     add_overwrite(e)
     study_commands.register(sub)
-    t = add_command(sub, "train-classifier", cmd_train_classifier,
-                    help="train the PointNet classifier of the generation metrics",
-                    description="Train the chair / table / storage PointNet classifier on the corpus train "
-                                "split; print its val accuracy; write its weights and their SHA-256.",
-                    example="vae train-classifier --out runs/pointnet_cls.pt", outputs={"out": "file+", "json": "file"})
+    t = add_command(sub, "train-classifier", cmd_train_classifier, outputs={"out": "file+", "json": "file"})
     t.add_argument("--out", required=True, help="weights file (.pt)")
     t.add_argument("--epochs", type=int_at_least(1), default=10, help="epochs on point subsets")
     t.add_argument("--per-class", type=int_at_least(1), default=500, help="shapes per category and epoch")
     t.add_argument("--points", type=int_at_least(16), default=512, help="points per shape and visit")
     t.add_argument("--finetune-epochs", type=int_at_least(0), default=1, help="final epochs on all 2,500 points")
-    t.add_argument("--seed", type=seed, default=0, help="seed of the sampling and the training")
+    add_seed(t, "seed of the sampling and the training")
     add_result_options(t, "the val accuracy", quiet="training log")
-    x = add_command(sub, "export-weights", cmd_export_weights,
-                    help="write a VAE training checkpoint as a small weights file",
-                    description="Write the VAE of a Lightning checkpoint (or weights file) as a weights file "
-                                "that --weights and shapeprog.vae.load_pretrained read (a point-cloud model's "
-                                "checkpoint: `pointcloud export-weights`).",
-                    example="vae export-weights runs/vae_chair/checkpoints/last.ckpt --out vae_chair.pt",
-                    outputs={"out": "file"})
-    x.add_argument("checkpoint", help="a .ckpt file written by `python train.py fit --config "
-                                      "configs/shapeassembly/...`")
-    x.add_argument("--out", required=True, help="the weights file to write (.pt)")
-    x.add_argument("--float32", action="store_true", help="keep float32 (float16 storage otherwise)")
-    add_overwrite(x)
+    add_export_weights(sub, export_vae_weights, help="write a VAE training checkpoint as a small weights file",
+                       example="vae export-weights runs/vae_chair/checkpoints/last.ckpt --out vae_chair.pt",
+                       checkpoint_help="a .ckpt file written by `python train.py fit --config "
+                                       "configs/shapeassembly/...`")

@@ -327,3 +327,43 @@ def test_the_coder_aliases_run_and_name_the_new_form(capsys):
     assert err == "note: 'abstract-infer' is now 'coder infer'\n"
     new, err = _alias_run(capsys, ["coder", "infer", "coder-chair:401", "--library", "chair", "--passes", "1"])
     assert old == new and old.startswith("program:  ") and err == ""
+
+
+def test_a_command_takes_its_help_description_and_example_from_its_docstring():
+    import argparse
+
+    from shapeprog.cli import add_command
+
+    def cmd_demo(args):
+        """count the demo's shapes
+
+        Count every shape of the demo
+        and print the count.
+
+        Example: demo count --category chair"""
+
+    def cmd_bare(args):
+        """count, undocumented"""
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    parser = add_command(sub, "count", cmd_demo, outputs={"json": "file"})
+    assert parser.description == "Count every shape of the demo and print the count."
+    assert [a.help for a in sub._choices_actions] == ["count the demo's shapes"]
+    assert (parser.get_default("example"), parser.get_default("outputs")) == ("demo count --category chair",
+                                                                               {"json": "file"})
+    assert parser.epilog == "example:\n  python -m shapeprog demo count --category chair"
+    with pytest.raises(ValueError, match="command 'bare': .*cmd_bare needs a docstring of a summary line"):
+        add_command(sub, "bare", cmd_bare)
+    given = add_command(sub, "given", cmd_bare, description="Counts.", example="demo given")
+    assert (given.description, given.get_default("example")) == ("Counts.", "demo given")
+
+
+def test_a_worker_pool_of_one_is_this_process_and_a_larger_one_is_shut_down_on_leaving():
+    from shapeprog.cli import worker_pool
+
+    with worker_pool(1) as none:
+        assert none is None
+    with worker_pool(2) as pool:
+        assert list(pool.map(abs, [-1, -2, 3])) == [1, 2, 3]
+    with pytest.raises(RuntimeError, match="after shutdown"):
+        pool.submit(abs, -4)
