@@ -58,13 +58,12 @@ EXPERIMENTS: tuple[Experiment, ...] = (
         scale="the 400 chair discovery programs against the 700 held-out chairs, 2 noise draws per sigma (the "
               "paper's protocol and figures are not in the spec)"),
     Experiment(
-        "coder-s75", "partial", "Section 7.5: post hoc inference from noisy primitive input",
+        "coder-s75", "done", "Section 7.5: post hoc inference from noisy primitive input",
         result=_R + "noise_chair.json",
         steps=(Step(("coder", "noise", "--category", "chair", "--heldout", "100", "--sigmas", "0", "0.01", "0.02",
                      "0.03", "--workers", "2", "--quiet", "--overwrite", "--json", "{out}")),),
         quick=(Step(("coder", "noise", "--category", "chair", "--heldout", "10", "--sigmas", "0", "0.02",
                      "--workers", "2", "--quiet", "--overwrite", "--json", "{out}")),),
-        why="built and quick-checked in parts; the full run (queued behind other jobs on the shared CPU) has not written its result file yet, so docs/shapecoder.md shows no table for it",
         scale="the first 100 held-out chairs, refactoring only, with the shipped library (the paper's protocol "
               "and figures are not in the spec; no discovery from noisy input)"),
     Experiment(

@@ -56,8 +56,8 @@ EXPERIMENTS: tuple[Experiment, ...] = (
         "sa-t5", "partial", "Table 5: leaf parts per sample (in the generation table)",
         why="built and tested with its quick run; the full run (python -m shapeprog paper run sa-t5) has not written its result file yet", result=_GENERATION_RESULT, steps=(_GENERATION,), quick=(_GENERATION_QUICK,), scale=_GENERATION_SCALE),
     Experiment(
-        "sa-t6", "partial", "Table 6: interpolation smoothness (geometric and program steps between random latents)",
-        why="built and tested with its quick run; the full run (python -m shapeprog paper run sa-t6) has not written its result file yet", result=f"{RESULTS}/smoothness.json",
+        "sa-t6", "done", "Table 6: interpolation smoothness (geometric and program steps between random latents)",
+        result=f"{RESULTS}/smoothness.json",
         steps=(Step(("vae", "smoothness", "--category", *_CATEGORIES, "--sequences", str(SMOOTHNESS_SEQUENCES),
                      "--steps", str(SMOOTHNESS_STEPS), "--quiet", "--json", "{out}", "--overwrite")),),
         quick=(Step(("vae", "smoothness", "--category", "storage", "--sequences", "3", "--steps", "20", "--quiet",
