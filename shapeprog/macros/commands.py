@@ -82,33 +82,27 @@ def cmd_discover(args) -> int:
                                        max_orders=cfg["abs_order_num"])
         log(f"{', '.join(args.category)}: {len(ids)} shapes, {len(nodes.keys)} sub-programs")
         if args.baseline:
-            return _write_baseline(out, args, nodes, ids, command, t0)
+            return _write_library(out, args, baseline_library([ls[0] for ls in nodes.lines]), nodes, ids,
+                                  command, t0, "ShapeMOD Baseline macros", "")
         start = None if lib0 is None else Discovery.from_library(lib0, nodes, prior, args.start_from)
         state = discover(nodes, cfg, seed=args.seed, executor=pool, out=out, log=log,
                          stop_after=args.stop_after, start=start)
-    lib = state.library()
-    header = (f"# ShapeMOD library ({', '.join(args.category)}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
+    return _write_library(out, args, state.library(), nodes, ids, command, t0, "ShapeMOD library",
+                          rounds_line(state, cfg) + "\n")
+
+
+def _write_library(out: Path, args, lib, nodes: Nodes, ids: list, command: str, t0: float, title: str,
+                   rounds: str) -> int:
+    """``library.txt`` in ``out``: a header (what, the command, the shapes, the rounds, the time), then ``lib``."""
+    header = (f"# {title} ({', '.join(args.category)}), {len(lib.macros)} macros, |L| = {len(lib)}\n"
               f"# command: {command}\n"
               f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}"
               + (f", up to {args.limit} per category" if len(args.category) > 1 and args.limit else "")
-              + f"), sub-programs: {len(nodes.keys)}\n"
-              f"{rounds_line(state, cfg)}\n"
+              + f"), sub-programs: {len(nodes.keys)}\n{rounds}"
               f"# time: {time.time() - t0:.0f} s on {platform.machine()}, {os.cpu_count()} CPUs, "
               f"{args.workers} worker(s)\n")
     atomic_write(out / "library.txt", header + lib.to_text())
     print(f"wrote {out / 'library.txt'} ({len(lib.macros)} macros)")
-    return 0
-
-
-def _write_baseline(out: Path, args, nodes: Nodes, ids: list, command: str, t0: float) -> int:
-    """The paper's Baseline macros of the collected sub-programs, written as ``library.txt``."""
-    lib = baseline_library([ls[0] for ls in nodes.lines])
-    header = (f"# ShapeMOD Baseline macros ({', '.join(args.category)}), {len(lib.macros)} macros, "
-              f"|L| = {len(lib)}\n# command: {command}\n"
-              f"# shapes: {len(ids)} of split '{args.split}' (seed {args.seed}), sub-programs: {len(nodes.keys)}\n"
-              f"# time: {time.time() - t0:.0f} s on {platform.machine()}, {os.cpu_count()} CPUs\n")
-    atomic_write(out / "library.txt", header + lib.to_text())
-    print(f"wrote {out / 'library.txt'} ({len(lib.macros)} baseline macros)")
     return 0
 
 

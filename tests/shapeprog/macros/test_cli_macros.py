@@ -64,3 +64,22 @@ def test_discover_macros_continues_from_a_library(tmp_path, capsys):
     with pytest.raises(SystemExit, match="--start-from: sofa: neither a ShapeMOD library file nor a shipped ShapeMOD library"):
         main(common + ["--rounds", "2", "--out", str(tmp_path / "x"), "--start-from", "sofa"])
     assert not (tmp_path / "x").exists()
+
+
+def test_discover_baseline_writes_the_baseline_library_of_the_same_shapes(tmp_path):
+    from shapeprog.macros.api import collection
+    from shapeprog.macros.baseline import baseline_library
+
+    out = tmp_path / "base"
+    assert main(["macros", "discover", "--category", "storage", "--split", "train", "--limit", "12", "--baseline",
+                 "--quiet", "--out", str(out)]) == 0
+    text = (out / "library.txt").read_text()
+    assert text.startswith("# ShapeMOD Baseline macros (storage), ")
+    assert "# shapes: 12 of split 'train' (seed 0)" in text
+    nodes, _ = collection("storage", "train", 12, 0)
+    expected = baseline_library([ls[0] for ls in nodes.lines])
+    written = Library.from_text(text)
+    assert written.to_text() == expected.to_text() and len(written.macros) > 0
+    # the library file is never overwritten: a second run into the same folder is refused
+    with pytest.raises(SystemExit, match="library.txt"):
+        main(["macros", "discover", "--category", "storage", "--limit", "12", "--baseline", "--out", str(out)])
