@@ -11,68 +11,64 @@ from shapeio.experiments import Experiment, Step
 __all__ = ["EXPERIMENTS"]
 
 _R = "docs/results/shapecoder/"
-_CATS = ("--category", "chair", "table", "storage")
+
+#: Why a built experiment is partial until its full run writes its result file.
+_NOT_RUN = ("built and quick-checked in parts; the full run has not written its result file yet, so "
+            "docs/shapecoder.md shows no table for it")
+
+
+def _coder(words: str) -> Step:
+    """A ``coder`` command (its words after ``coder``) writing its figures to the result file, quietly."""
+    return Step(("coder", *words.split(), "--quiet", "--overwrite", "--json", "{out}"))
+
 
 EXPERIMENTS: tuple[Experiment, ...] = (
     Experiment(
         "coder-t2", "partial", "Table 2: F, |L|, structural and parametric terms of the discovered libraries",
         result=_R + "table2.json",
-        steps=(Step(("coder", "tables", *_CATS, "--train", "100", "--heldout", "100", "--workers", "2",
-                     "--quiet", "--overwrite", "--json", "{out}")),),
-        quick=(Step(("coder", "tables", "--category", "chair", "--train", "5", "--heldout", "5", "--workers", "2",
-                     "--quiet", "--overwrite", "--json", "{out}")),),
-        why="built and quick-checked in parts; the full run (queued behind other jobs on the shared CPU) has not written its result file yet, so docs/shapecoder.md shows no table for it",
+        steps=(_coder("tables --category chair table storage --train 100 --heldout 100 --workers 2"),),
+        quick=(_coder("tables --category chair --train 5 --heldout 5 --workers 2"),),
+        why=_NOT_RUN,
         scale="the shipped libraries' 400 discovery shapes per category, as the paper; their discovery (hours per "
               "category, docs/shapecoder.md) is not rerun; the table's post hoc rows refactor only"),
     Experiment(
         "coder-t3", "partial", "Table 3: post hoc inference with a discovered library on training and held-out shapes",
         result=_R + "table3_chair.json",
-        steps=(Step(("coder", "tables", "--category", "chair", "--phi-network", "--train", "100", "--heldout", "100",
-                     "--workers", "2", "--quiet", "--overwrite", "--json", "{out}")),),
-        quick=(Step(("coder", "tables", "--category", "chair", "--phi-network", "--train", "3", "--heldout", "3",
-                     "--workers", "2", "--quiet", "--overwrite", "--json", "{out}")),),
-        why="built and quick-checked in parts; the full run (queued behind other jobs on the shared CPU) has not written its result file yet, so docs/shapecoder.md shows no table for it",
+        steps=(_coder("tables --category chair --phi-network --train 100 --heldout 100 --workers 2"),),
+        quick=(_coder("tables --category chair --phi-network --train 3 --heldout 3 --workers 2"),),
+        why=_NOT_RUN,
         scale="chair (the paper reports chair only), the first 100 discovery and 100 held-out shapes with the "
               "shipped library and network; the search budgeted in batches (the paper: 1 s per step)"),
     Experiment(
         "coder-t4-left", "partial", "Table 4 left: ablations of the discovery",
         result=_R + "table4_left_chair.json",
-        steps=(Step(("coder", "ablation", "--category", "chair", "--shapes", "60", "--rounds", "2", "--proposals",
-                     "300", "--abstractions", "8", "--workers", "2", "--quiet", "--overwrite", "--json", "{out}")),),
-        quick=(Step(("coder", "ablation", "--category", "chair", "--shapes", "6", "--rounds", "1", "--proposals",
-                     "60", "--abstractions", "3", "--dreams", "40", "--train-epochs", "1", "--wake-step-budget", "8",
-                     "--workers", "2",
-                     "--quiet", "--overwrite", "--json", "{out}")),),
-        why="built and quick-checked in parts; the full run (queued behind other jobs on the shared CPU) has not written its result file yet, so docs/shapecoder.md shows no table for it",
+        steps=(_coder("ablation --category chair --shapes 60 --rounds 2 --proposals 300 --abstractions 8 "
+                      "--workers 2"),),
+        quick=(_coder("ablation --category chair --shapes 6 --rounds 1 --proposals 60 --abstractions 3 --dreams 40 "
+                      "--train-epochs 1 --wake-step-budget 8 --workers 2"),),
+        why=_NOT_RUN,
         scale="60 chairs, 2 rounds of 300 proposals, 8 candidates per round, the ablations taken from the "
               "refactor-only wake, without the 'no conditional rewrites' row (its naive e-graphs need more than 4 GB per "
               "refactor); the paper: 400 chairs, 4 rounds of 10,000, from its full method"),
     Experiment(
         "coder-t4-right", "done", "Table 4 right: FD of perturbed programs with and without abstractions",
         result=_R + "table4_right_chair.json",
-        steps=(Step(("coder", "perturbation", "--category", "chair", "--shapes", "400", "--heldout", "700",
-                     "--sigmas", "0", "0.025", "0.05", "0.1", "--draws", "2", "--quiet", "--overwrite", "--json",
-                     "{out}")),),
-        quick=(Step(("coder", "perturbation", "--category", "chair", "--shapes", "50", "--heldout", "100",
-                     "--sigmas", "0", "0.05", "--draws", "1", "--quiet", "--overwrite", "--json", "{out}")),),
+        steps=(_coder("perturbation --category chair --shapes 400 --heldout 700 --sigmas 0 0.025 0.05 0.1 --draws 2"),),
+        quick=(_coder("perturbation --category chair --shapes 50 --heldout 100 --sigmas 0 0.05 --draws 1"),),
         scale="the 400 chair discovery programs against the 700 held-out chairs, 2 noise draws per sigma (the "
               "paper's protocol and figures are not in the spec)"),
     Experiment(
         "coder-s75", "done", "Section 7.5: post hoc inference from noisy primitive input",
         result=_R + "noise_chair.json",
-        steps=(Step(("coder", "noise", "--category", "chair", "--heldout", "100", "--sigmas", "0", "0.01", "0.02",
-                     "0.03", "--workers", "2", "--quiet", "--overwrite", "--json", "{out}")),),
-        quick=(Step(("coder", "noise", "--category", "chair", "--heldout", "10", "--sigmas", "0", "0.02",
-                     "--workers", "2", "--quiet", "--overwrite", "--json", "{out}")),),
+        steps=(_coder("noise --category chair --heldout 100 --sigmas 0 0.01 0.02 0.03 --workers 2"),),
+        quick=(_coder("noise --category chair --heldout 10 --sigmas 0 0.02 --workers 2"),),
         scale="the first 100 held-out chairs, refactoring only, with the shipped library (the paper's protocol "
               "and figures are not in the spec; no discovery from noisy input)"),
     Experiment(
         "coder-s76", "partial", "Section 7.6: a generative model over programs with abstractions",
         result=_R + "sample_chair.json",
-        steps=(Step(("coder", "sample", "--category", "chair", "-n", "300", "--heldout", "700", "--quiet",
-                     "--overwrite", "--json", "{out}")),),
-        quick=(Step(("coder", "sample", "--category", "chair", "-n", "30", "--heldout", "100", "--quiet",
-                     "--overwrite", "--json", "{out}")),),
+        steps=(_coder("sample --category chair -n 300 --heldout 700"),),
+        quick=(_coder("sample --category chair -n 30 --heldout 100"),),
         why="a piece sampler (templates by frequency, a Gaussian per number) stands in for the paper's deep "
             "generative model, which is not built; scored by validity and FD only; the full run has not written "
             "its result file yet",

@@ -20,12 +20,19 @@ GENERATION_SAMPLES = 200
 NOVELTY_SAMPLES = 1000
 #: Interpolation lines per category of sa-t6 (the paper: 100), each of the paper's 100 steps.
 SMOOTHNESS_SEQUENCES, SMOOTHNESS_STEPS = 50, 100
-_CATEGORIES = ("chair", "table", "storage")
-_GENERATION = Step(("vae", "evaluate", "--category", *_CATEGORIES, "-n", str(GENERATION_SAMPLES), "--max-tries", "10",
-                    "1", "--paper-decoding", "--workers", "2", "--quiet", "--json", "{out}", "--overwrite"))
-_GENERATION_QUICK = Step(("vae", "evaluate", "--category", "storage", "-n", "30", "--max-tries", "10", "1",
-                          "--paper-decoding", "--no-ground-truth", "--no-stability", "--fool-epochs", "2",
-                          "--fool-average-last", "1", "--candidates", "4", "--quiet", "--json", "{out}", "--overwrite"))
+#: The point-cloud model of sa-t7 (the latent-regression model: Table 7 projects into the VAE's latent space).
+_TABLE7_WEIGHTS = "shapeprog/weights/pointcloud_latent_chair.pt"
+
+
+def step(words: str, result: bool = True, creates: str | None = None) -> Step:
+    """A command (its words after ``python -m shapeprog``), writing its figures to the result file unless
+    ``result`` is False."""
+    return Step((*words.split(), *(("--json", "{out}", "--overwrite") if result else ())), creates=creates)
+
+_GENERATION = step(f"vae evaluate --category chair table storage -n {GENERATION_SAMPLES} --max-tries 10 1 "
+                   "--paper-decoding --workers 2 --quiet")
+_GENERATION_QUICK = step("vae evaluate --category storage -n 30 --max-tries 10 1 --paper-decoding --no-ground-truth "
+                         "--no-stability --fool-epochs 2 --fool-average-last 1 --candidates 4 --quiet")
 _GENERATION_RESULT = f"{RESULTS}/generation.json"
 _GENERATION_SCALE = (f"{GENERATION_SAMPLES} samples per category and decoding (the paper: 1,000), the val split as "
                      "ground truth, % fool with 12 epochs (the paper: 300)")
@@ -42,9 +49,8 @@ EXPERIMENTS: tuple[Experiment, ...] = (
         "sa-t3", "done", "Table 3: editability (lines per program, share of squeeze / reflect / translate lines and "
         "of the parts they make) of the val split and of VAE samples",
         result=f"{RESULTS}/editability.json",
-        steps=(Step(("vae", "editability", "--category", *_CATEGORIES, "-n", str(NOVELTY_SAMPLES), "--json", "{out}",
-                     "--overwrite")),),
-        quick=(Step(("vae", "editability", "--category", "storage", "-n", "30", "--json", "{out}", "--overwrite")),),
+        steps=(step(f"vae editability --category chair table storage -n {NOVELTY_SAMPLES}"),),
+        quick=(step("vae editability --category storage -n 30"),),
         scale=f"the val split and {NOVELTY_SAMPLES} samples per category; the paper's figures are not in the "
               "specification"),
     Experiment(
@@ -58,34 +64,29 @@ EXPERIMENTS: tuple[Experiment, ...] = (
     Experiment(
         "sa-t6", "done", "Table 6: interpolation smoothness (geometric and program steps between random latents)",
         result=f"{RESULTS}/smoothness.json",
-        steps=(Step(("vae", "smoothness", "--category", *_CATEGORIES, "--sequences", str(SMOOTHNESS_SEQUENCES),
-                     "--steps", str(SMOOTHNESS_STEPS), "--quiet", "--json", "{out}", "--overwrite")),),
-        quick=(Step(("vae", "smoothness", "--category", "storage", "--sequences", "3", "--steps", "20", "--quiet",
-                     "--json", "{out}", "--overwrite")),),
+        steps=(step(f"vae smoothness --category chair table storage --sequences {SMOOTHNESS_SEQUENCES} "
+                    f"--steps {SMOOTHNESS_STEPS} --quiet"),),
+        quick=(step("vae smoothness --category storage --sequences 3 --steps 20 --quiet"),),
         scale=f"{SMOOTHNESS_SEQUENCES} sequences of {SMOOTHNESS_STEPS} steps per category (the paper: 100 of 100); "
               "the paper's figures are not in the specification"),
     Experiment(
         "sa-t7", "partial", "Table 7: point cloud to program on the chair val split (latent projection, optimised program, cuboids)",
         why="built and tested with its quick run; the full run (python -m shapeprog paper run sa-t7) has not written its result file yet", result=f"{RESULTS}/table7_chair.json",
-        steps=(Step(("pointcloud", "make-clouds", "--category", "chair", "--workers", "2", "--out", CLOUDS),
+        steps=(step(f"pointcloud make-clouds --category chair --workers 2 --out {CLOUDS}", result=False,
                     creates=f"{CLOUDS}/chair_clouds.npz"),
-               Step(("pointcloud", "tables", "--category", "chair", "--clouds", CLOUDS, "--weights",
-                     "shapeprog/weights/pointcloud_latent_chair.pt", "--limit", str(TABLE7_SHAPES), "--workers", "2",
-                     "--quiet", "--out", f"{CLOUDS}/table7_chair.md", "--json", "{out}", "--overwrite"))),
-        quick=(Step(("pointcloud", "make-clouds", "--category", "chair", "--limit", "30", "--out", CLOUDS_QUICK),
+               step(f"pointcloud tables --category chair --clouds {CLOUDS} --weights {_TABLE7_WEIGHTS} "
+                    f"--limit {TABLE7_SHAPES} --workers 2 --quiet --out {CLOUDS}/table7_chair.md")),
+        quick=(step(f"pointcloud make-clouds --category chair --limit 30 --out {CLOUDS_QUICK}", result=False,
                     creates=f"{CLOUDS_QUICK}/chair_clouds.npz"),
-               Step(("pointcloud", "tables", "--category", "chair", "--clouds", CLOUDS_QUICK, "--weights",
-                     "shapeprog/weights/pointcloud_latent_chair.pt", "--limit", "10", "--steps", "20",
-                     "--no-retrieval", "--no-stability", "--quiet", "--out", f"{CLOUDS_QUICK}/table7_chair.md",
-                     "--json", "{out}", "--overwrite"))),
+               step(f"pointcloud tables --category chair --clouds {CLOUDS_QUICK} --weights {_TABLE7_WEIGHTS} "
+                    f"--limit 10 --steps 20 --no-retrieval --no-stability --quiet --out {CLOUDS_QUICK}/table7_chair.md")),
         scale=f"the first {TABLE7_SHAPES} of the 496 val-split chairs, noisy 2,048-point cuboid-surface clouds, "
               "150 fitting steps (the paper: every val chair, PartNet mesh samples)"),
     Experiment(
         "sa-novelty", "done", "Section 7.1.3: structural novelty of samples and of the val split against the "
         "training split",
         result=f"{RESULTS}/novelty.json",
-        steps=(Step(("vae", "novelty", "--category", *_CATEGORIES, "-n", str(NOVELTY_SAMPLES), "--json", "{out}",
-                     "--overwrite")),),
-        quick=(Step(("vae", "novelty", "--category", "storage", "-n", "50", "--json", "{out}", "--overwrite")),),
+        steps=(step(f"vae novelty --category chair table storage -n {NOVELTY_SAMPLES}"),),
+        quick=(step("vae novelty --category storage -n 50"),),
         scale=f"{NOVELTY_SAMPLES} samples per category, as the paper; its figures are not in the specification"),
 )
