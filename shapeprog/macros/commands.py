@@ -287,8 +287,13 @@ def cmd_generation(args) -> int:
 
     refuse_existing([args.json], args.overwrite)
     models = {}
-    weights = args.weights or str(Path(__file__).resolve().parents[1] / "weights" / f"vae_{args.category}_macros.pt")
-    for name, path in (("No Macros", args.base_weights), ("ShapeMOD", weights)):
+    shipped = Path(__file__).resolve().parents[1] / "weights"
+    weights = args.weights or str(shipped / f"vae_{args.category}_macros.pt")
+    baseline = args.baseline_weights or shipped / f"vae_{args.category}_baseline_macros.pt"
+    named = [("No Macros", args.base_weights), ("Baseline Macros", baseline), ("ShapeMOD", weights)]
+    if not args.baseline_weights and not Path(baseline).is_file():
+        named.pop(1)  # no shipped Baseline Macros model for this category: the table says so
+    for name, path in named:
         try:
             models[name] = load_model(path, category=args.category) if path else load_pretrained(args.category)
         except (FileNotFoundError, ValueError) as e:
@@ -400,6 +405,8 @@ def register(sub) -> None:
     add_category(gn)
     gn.add_argument("--weights", help="the VAE over macro programs (default: shapeprog/weights/vae_CATEGORY_macros.pt)")
     gn.add_argument("--base-weights", help="the VAE over ShapeAssembly programs (default: the shipped one)")
+    gn.add_argument("--baseline-weights", help="the VAE over programs refactored with the Baseline macros "
+                    "(default: shapeprog/weights/vae_CATEGORY_baseline_macros.pt where it ships: chair)")
     gn.add_argument("-n", type=int_at_least(2, MAX_GENERATION_SAMPLES), default=100, help="samples per model")
     add_seed(gn, "seed of the samples and the metrics")
     gn.add_argument("--fool-epochs", type=int_at_least(4), default=12, help="epochs of the %% fool classifier")

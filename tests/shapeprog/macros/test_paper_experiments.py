@@ -251,6 +251,17 @@ def test_table2_result_rows():
     res = table2_result("storage", rows, {"meta": {}, "sha": None, "sampling": [], "fool_epochs": 12,
                                           "stability": False}, 10, 0, "cmd")
     assert len(res["rows"]) == 3 and "storage: not in the specification" in res["notes"][1]
+    # with a Baseline Macros model measured, its row is the measured one and the note says how it was made
+    from shapeprog.macros.table2 import BASELINE_NOTE
+    rows.insert(1, GenerationRow("Baseline Macros", 10, 8, rooted=85.0, stable=70.0, fool=15.0, fd=40.0,
+                                 leaf_parts=6.0))
+    res = table2_result("chair", rows, {"meta": {}, "sha": "ab" * 32, "sampling": ["x"], "fool_epochs": 12,
+                                        "stability": True}, 10, 0, "cmd")
+    assert [r["method"] for r in res["rows"]] == ["No Macros", "Baseline Macros", "ShapeMOD",
+                                                  "paper (ShapeMOD Table 2): No Macros",
+                                                  "paper (ShapeMOD Table 2): ShapeMOD"]
+    assert res["rows"][1]["samples"] == "8 of 10" and res["rows"][1]["fd"] == 40.0
+    assert BASELINE_NOTE in res["notes"]
 
 
 def test_table3_result_and_weights():
