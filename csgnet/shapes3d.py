@@ -4,7 +4,8 @@
 y up), a file built once with ``python -m shapeprog assembly volumes --out data/assembly_volumes.npz
 --workers 2`` (layout: :mod:`shapeio.volumes`; ``docs/csgnet.md``, "The ShapeAssembly volumes"). Splits
 ``train``, ``val`` and ``test`` are disjoint sets of shapes, each in a fixed shuffled order, so the first ``n``
-of a split are a uniform sample of it. The set is not shipped (about 10 MB); nothing is read at import.
+of a split are a uniform sample of it. The set is not shipped (2.6 MB, built in about a minute); nothing is
+read at import.
 """
 
 from __future__ import annotations
