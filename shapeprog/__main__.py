@@ -4,6 +4,7 @@ modules (:data:`SYSTEMS`).
     python -m shapeprog assembly run chair/173 -o chair.obj --png chair.png
     python -m shapeprog assembly fit table/33075 --points example --steps 400 -o fitted.txt
     python -m shapeprog assembly silhouettes --out silhouettes.npz
+    python -m shapeprog assembly volumes --out data/assembly_volumes.npz --workers 2
     python -m shapeprog assembly edit chair/173 --port 8080 --no-browser --target chair/37982
     python -m shapeprog vae sample --category chair -n 16 --seed 0 --out samples --png grid.png
     python -m shapeprog vae interpolate chair/173 chair/44017 --steps 8 --png interp.png
@@ -46,7 +47,7 @@ from .errors import ExecutionError, ParseError, RefactorError
 #: Each system: the module that registers its commands (``register(sub)``) and its one-line summary. The
 #: modules are imported only when their system is named, so ``--help`` and each system start without the others.
 SYSTEMS = {
-    "assembly": ("shapeprog.commands", "ShapeAssembly programs: run, fit, silhouettes, edit"),
+    "assembly": ("shapeprog.commands", "ShapeAssembly programs: run, fit, silhouettes, volumes, edit"),
     "vae": ("shapeprog.vae.commands",
             "the ShapeAssembly VAE: sample, interpolate, reconstruct, evaluate, novelty, smoothness, editability, "
             "train-classifier, export-weights"),

@@ -17,9 +17,9 @@ from shapeio.results import column
 
 from . import corpus
 from . import io
-from .cli import (add_category, add_command, add_json, add_overwrite, add_quiet, add_seed, check_outputs,
+from .cli import (add_category, add_command, add_json, add_overwrite, add_quiet, add_seed, add_workers, check_outputs,
                   command_result, emit_text, float_in, int_at_least, macro_library, Program, refuse_existing,
-                  refuse_inputs, write_json, write_mesh)
+                  refuse_inputs, worker_pool, write_json, write_mesh)
 from .errors import ParseError
 from .fit import MAX_DECIMALS, MAX_LR, MAX_REG, fit
 from .fit import MAX_STEPS as MAX_FIT_STEPS
@@ -29,6 +29,7 @@ from .picture import render_png
 from .sampling import sample_surface
 from .silhouettes import MAX_SIZE as SILHOUETTE_MAX_SIZE
 from .silhouettes import build, write
+from . import volumes
 
 PROGRAM_HELP = "corpus id (chair/173, table/33075, storage/46436) or a UTF-8 program file (corpus or flat format)"
 
@@ -125,6 +126,28 @@ def cmd_silhouettes(args) -> int:
     write(args.out, data, margin=args.margin)
     counts = ", ".join(f"{split} {len(s.images)}" for split, s in data.items())
     print(f"wrote {args.out}: {counts} images in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def cmd_volumes(args) -> int:
+    """voxelise the corpus's chairs and tables to 64³ volumes in an .npz
+
+    Execute the corpus programs of the categories (train, val and test splits) and voxelise each shape to a
+    64³ occupancy volume: the 3D target set of CSGNet's self-training (docs/csgnet.md, "The ShapeAssembly
+    volumes").
+
+    Example: assembly volumes --out data/assembly_volumes.npz --workers 2"""
+    refuse_existing([args.out], args.overwrite)
+    t0 = time.perf_counter()
+    try:
+        with worker_pool(args.workers) as pool:
+            data = volumes.build(args.category, args.size, args.margin, args.limit, pool, progress=not args.quiet)
+    except ValueError as e:  # --size / --margin, checked before any program runs
+        raise SystemExit(f"error: {e}") from None
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    volumes.write(args.out, data, margin=args.margin)
+    counts = ", ".join(f"{split} {len(s)}" for split, s in data.items())
+    print(f"wrote {args.out}: {counts} volumes in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -229,6 +252,18 @@ def register(sub) -> None:
     s.add_argument("--limit", type=int_at_least(1), help="only the first N shapes per category and split")
     add_quiet(s, "progress bar")
     add_overwrite(s)
+    v = add_command(sub, "volumes", cmd_volumes, outputs={"out": "file+"})
+    v.add_argument("--out", required=True, help="output file (.npz, compressed NumPy arrays)")
+    v.add_argument("--category", nargs="+", choices=corpus.CATEGORIES, default=list(volumes.CATEGORIES),
+                   metavar="CATEGORY", help=f"corpus categories: one or more of {', '.join(corpus.CATEGORIES)}")
+    v.add_argument("--size", type=int_at_least(1, volumes.MAX_SIZE), default=64,
+                   help=f"volume side in voxels (1 to {volumes.MAX_SIZE})")
+    v.add_argument("--margin", type=int_at_least(0, volumes.MAX_SIZE), default=4,
+                   help="free voxels on each side of the longest extent")
+    v.add_argument("--limit", type=int_at_least(1), help="only the first N shapes per category and split")
+    add_workers(v, "processes voxelising the shapes (1: none)")
+    add_quiet(v, "progress bar")
+    add_overwrite(v)
     d = add_command(sub, "edit", cmd_edit)
     d.add_argument("program", nargs="?", help=PROGRAM_HELP + ", or a macro program file (lines 'def ...')")
     d.add_argument("--sample", action="store_true",

@@ -48,7 +48,7 @@ def test_every_shapeprog_docstring_example_parses():
 def test_every_shapeprog_command_has_an_example_and_help_for_every_option():
     parser = sp_cli.build_parser()
     commands = list(_commands(parser))
-    assert len(commands) == 32
+    assert len(commands) == 33
     for system, command, cp in commands:
         argv = shlex.split(cp.get_default("example"))
         assert argv[:2] == [system, command], f"{system} {command}: the epilog's example runs {argv[:2]}"

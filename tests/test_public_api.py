@@ -48,7 +48,7 @@ COMMANDS = sorted(set(re.findall(r"python -m (csgnet) ([a-z][\w-]*)", README))
 # The shapeprog command line: each system's commands, and the earlier one-word names that still work (each prints
 # one line naming its new form). A change here is a change of the command line: make it on purpose.
 SHAPEPROG_COMMANDS = {
-    "assembly": {"run", "fit", "silhouettes", "edit"},
+    "assembly": {"run", "fit", "silhouettes", "volumes", "edit"},
     "vae": {"sample", "interpolate", "reconstruct", "evaluate", "novelty", "smoothness", "editability",
             "train-classifier", "export-weights"},
     "pointcloud": {"infer", "tables", "make-clouds", "export-weights"},

@@ -12,7 +12,7 @@ from ..lang import Draw
 from ..primitives import SIZE
 from ..vocab import vocabulary
 
-__all__ = ["jitter", "jitter_reference", "symmetry_tables", "mirror_programs"]
+__all__ = ["jitter", "jitter_reference", "symmetry_tables", "mirror_programs", "mirror_volumes", "mirror_pairs"]
 
 
 @lru_cache(maxsize=None)
@@ -51,15 +51,50 @@ def symmetry_tables(dim: int = 3) -> torch.Tensor:
     return torch.tensor(rows, dtype=torch.int64)
 
 
+def _mirrored(tokens: torch.Tensor, generator: np.random.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """The mapped programs and ``(B,) int64`` symmetry of each (0 where a program stays as it is)."""
+    tables = symmetry_tables(3).to(tokens.device)
+    g = torch.as_tensor(generator.integers(0, len(tables), size=tokens.shape[0]), device=tokens.device)
+    mapped = tables[g[:, None], tokens]
+    keep = (mapped < 0).any(1)
+    return torch.where(keep[:, None], tokens, mapped), torch.where(keep, torch.zeros_like(g), g)
+
+
 def mirror_programs(tokens: torch.Tensor, generator: np.random.Generator) -> torch.Tensor:
     """3D programs ``(B, T)`` (``$``-padded token indices), each mapped by one of the 16
     :func:`symmetry_tables` drawn uniformly (one draw per program, always consumed); a program with a
     primitive whose image is not in the vocabulary stays as it is."""
-    tables = symmetry_tables(3).to(tokens.device)
-    g = torch.as_tensor(generator.integers(0, len(tables), size=tokens.shape[0]), device=tokens.device)
-    mapped = tables[g[:, None], tokens]
-    keep = (mapped < 0).any(1, keepdim=True)
-    return torch.where(keep, tokens, mapped)
+    return _mirrored(tokens, generator)[0]
+
+
+def mirror_volumes(volumes: torch.Tensor, symmetry: torch.Tensor) -> torch.Tensor:
+    """Map each volume by a symmetry of :func:`symmetry_tables`, as the mapped program's render moves: each
+    mirrored axis flipped and rolled by one voxel, then the first two axes exchanged.
+
+    Args:
+        volumes: ``(B, 64, 64, 64)`` bool.
+        symmetry: ``(B,) int64`` row of :func:`symmetry_tables` per volume (0: the identity).
+    """
+    out = volumes.clone()
+    for g in torch.unique(symmetry).tolist():
+        if g == 0:
+            continue
+        rows = torch.nonzero(symmetry == g).flatten()
+        x = volumes[rows]
+        for a in range(3):
+            if (g >> (2 - a)) & 1:  # the flips of the axes, x first (symmetry_tables' order)
+                x = torch.roll(torch.flip(x, [a + 1]), 1, a + 1)
+        out[rows] = x.transpose(1, 2) if g >= 8 else x
+    return out
+
+
+def mirror_pairs(tokens: torch.Tensor, volumes: torch.Tensor, generator: np.random.Generator
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """3D (program, target) pairs ``(B, T)``, ``(B, 64, 64, 64)`` both mapped by one of the 16 symmetries
+    drawn uniformly per pair (:func:`mirror_programs`, :func:`mirror_volumes`): a program that draws its
+    target draws the mapped target. A pair whose program has no image stays as it is."""
+    mapped, g = _mirrored(tokens, generator)
+    return mapped, mirror_volumes(volumes, g)
 
 _CENTRE = 32.5  # Keras' centre h / 2 + 0.5
 

@@ -2,8 +2,8 @@
 
 The pieces of the objective are plain functions (:func:`episode_rewards`, :func:`update_baseline`,
 :func:`policy_loss`); :class:`ReinforceModule` samples programs from the policy, scores them with the
-chamfer reward against a running-average baseline and validates greedily; :class:`TargetDataModule`
-serves the target images (:func:`load_targets`). ``docs/csgnet.md`` ("REINFORCE") describes the procedure
+chamfer reward against a running-average baseline and validates greedily;
+:class:`~csgnet.train.targets.TargetDataModule` serves the target images (:func:`~csgnet.train.targets.load_targets`). ``docs/csgnet.md`` ("REINFORCE") describes the procedure
 and how to run it:
 ``python train.py fit --config configs/csgnet/rl_csgnet2d_small.yaml`` (``--ckpt_path last`` resumes).
 """
@@ -16,23 +16,18 @@ import lightning as L
 import numpy as np
 import torch
 
-from shapeio.image import read_image_folder
-
 from .. import metrics
-from ..data import load_dataset
 from .augment import jitter
 from ..decode import Sampled, greedy, sample
 from ..inference import load_model
 from ..models import CSGNet, ModelConfig, preset
-from ..renderer import render_programs, render_tokens
-from ..shapes2d import load_cad_h5, load_silhouettes
+from ..renderer import render_tokens
 from .logs import EpochValues, log_means, log_pairs
-from .streams import ShuffledBatches, distributed, set_stream_epoch, stream_loader
+from .streams import set_stream_epoch
+from .targets import SOURCES, TargetDataModule, load_targets, target_batch
 
 __all__ = ["ReinforceModule", "TargetDataModule", "load_targets", "load_initial", "episode_rewards",
            "update_baseline", "policy_loss", "greedy_scores", "log_greedy_validation", "SOURCES"]
-
-SOURCES = ("silhouettes", "cad", "folder", "npz", "synthetic")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -237,7 +232,7 @@ class ReinforceModule(L.LightningModule):
         return s, pred, torch.as_tensor(r, dtype=torch.float32, device=targets.device), cd
 
     def training_step(self, batch, batch_idx):
-        targets = _images(batch)
+        targets = target_batch(batch)
         if self.hparams.augment:
             targets = jitter(targets, self._rng)
         s, pred, rewards, cd = self.rollout(targets)
@@ -270,7 +265,7 @@ class ReinforceModule(L.LightningModule):
         self._val = EpochValues(self.hparams.log_images)
 
     def validation_step(self, batch, batch_idx):
-        targets = _images(batch)
+        targets = target_batch(batch)
         hp = self.hparams
         pred, values = greedy_scores(self.model, targets, hp.max_len, hp.constrained, hp.gamma, hp.invalid_reward,
                                      hp.reward_workers)
@@ -315,138 +310,3 @@ def log_greedy_validation(module: L.LightningModule, val: EpochValues) -> None:
               prog_bar=("val/reward", "val/chamfer"))
     if val.grid is not None:
         log_pairs(module, "val/targets_vs_greedy", *val.grid)
-
-
-def _images(batch) -> torch.Tensor:
-    x = batch[0] if isinstance(batch, (list, tuple)) else batch
-    if x.dim() != 3 or tuple(x.shape[1:]) != (64, 64):
-        raise ValueError(f"target batches must be (B, 64, 64), got {tuple(x.shape)}")
-    return x.bool()
-
-
-# ---------------------------------------------------------------------------------------------
-# target images
-
-def _check_images(images, name: str) -> np.ndarray:
-    a = np.asarray(images)
-    if a.ndim != 3 or a.shape[1:] != (64, 64):
-        raise ValueError(f"{name}: target images must be (N, 64, 64), got shape {a.shape}")
-    a = a != 0
-    if len(a) == 0:
-        raise ValueError(f"{name}: no images")
-    empty = np.flatnonzero(~a.reshape(len(a), -1).any(1))
-    if len(empty):
-        raise ValueError(f"{name}: {len(empty)} empty target image(s), e.g. index {int(empty[0])}; "
-                         f"the chamfer reward is undefined for an empty target")
-    return a
-
-
-def load_targets(source: str, split: str, path=None) -> np.ndarray:
-    """One split of a set of 2D target images as ``(N, 64, 64)`` bool.
-
-    Sources:
-        * ``"silhouettes"``: the shipped PartNet silhouettes (or a file written by
-          ``python -m shapeprog assembly silhouettes`` at ``path``);
-        * ``"cad"``: the paper's ``cad.h5`` at ``path`` (needs h5py, the ``cad`` extra);
-        * ``"folder"``: image files under ``path/<split>/`` (PNG, JPG, ...; each binarised by Otsu's rule and
-          fitted into 64x64, :func:`shapeio.image.read_image_folder`), in sorted name order;
-        * ``"npz"``: a NumPy ``.npz`` at ``path`` holding ``<split>`` or ``<split>_images`` arrays
-          ``(N, 64, 64)``;
-        * ``"synthetic"``: the renders of the programs of a dataset written by ``python -m csgnet generate``
-          at ``path`` (all lengths).
-    """
-    if source not in SOURCES:
-        raise ValueError(f"unknown target source {source!r}; expected one of {', '.join(SOURCES)}")
-    if split not in ("train", "val", "test"):
-        raise ValueError(f"unknown split {split!r}; expected train, val or test")
-    if source == "silhouettes":
-        return _check_images(load_silhouettes(split, path), f"silhouettes {split}")
-    if path is None:
-        raise ValueError(f"the {source!r} target source needs a path")
-    p = Path(path)
-    if source == "cad":
-        return _check_images(load_cad_h5(p, split), f"{p}:{split}_images")
-    if source == "folder":
-        d = p / split
-        if not d.is_dir():
-            raise FileNotFoundError(f"{d}: no such folder; the 'folder' source reads images from "
-                                    f"{p}/train/, {p}/val/ and {p}/test/")
-        return _check_images(read_image_folder(d), str(d))
-    if source == "npz":
-        if not p.is_file():
-            raise FileNotFoundError(f"{p}: no such file")
-        with np.load(p, allow_pickle=False) as f:
-            for key in (split, f"{split}_images"):
-                if key in f.files:
-                    return _check_images(f[key], f"{p}:{key}")
-            raise ValueError(f"{p}: no array {split!r} or {split + '_images'!r} (found: {', '.join(f.files) or 'none'})")
-    progs = [q for _, ps in sorted(load_dataset(p, 2, split).items()) for q in ps]
-    if not progs:
-        raise ValueError(f"{p}: the 2D {split} split holds no programs")
-    return _check_images(render_programs(progs, 2).numpy(), f"{p} 2D {split}")
-
-
-class TargetDataModule(L.LightningDataModule):
-    """Target images for REINFORCE (training with shuffled batches; validation in order).
-
-    Args:
-        source: ``"silhouettes"`` (default), ``"cad"``, ``"folder"``, ``"npz"`` or ``"synthetic"``
-            (:func:`load_targets`).
-        path: the file or folder of the source (optional for the shipped silhouettes).
-        batch_size: images per batch (the paper: 300).
-        steps_per_epoch: training batches per epoch (default: one pass, ``N // batch_size``); with the
-            paper's accumulation of 10 batches, 330 batches make the reference's 33 updates per epoch.
-        val_size: validation images (the first ones of the split; default: all).
-        train_size: training images (the first ones; default: all).
-        val_split: the split validated on (``"val"``; ``"test"`` for a final check).
-        num_workers: DataLoader workers.
-        seed: shuffling seed.
-    """
-
-    def __init__(self, source: str = "silhouettes", path: str | None = None, batch_size: int = 300,
-                 steps_per_epoch: int | None = None, val_size: int | None = None, train_size: int | None = None,
-                 val_split: str = "val", num_workers: int = 0, seed: int = 0):
-        super().__init__()
-        if source not in SOURCES:
-            raise ValueError(f"unknown target source {source!r}; expected one of {', '.join(SOURCES)}")
-        if batch_size < 1:
-            raise ValueError(f"batch_size must be positive, got {batch_size}")
-        self.source, self.path = source, path
-        self.batch_size, self.steps_per_epoch = int(batch_size), steps_per_epoch
-        self.val_size, self.train_size, self.val_split = val_size, train_size, val_split
-        self.num_workers, self.seed = int(num_workers), int(seed)
-        self._arrays: dict[str, np.ndarray] | None = None
-        self.train_images: torch.Tensor | None = None
-        self.val_images: torch.Tensor | None = None
-
-    @classmethod
-    def from_arrays(cls, train, val=None, **kwargs) -> "TargetDataModule":
-        """Targets given in code: ``train`` (and ``val``, default: ``train``) as ``(N, 64, 64)`` arrays."""
-        dm = cls(**kwargs)
-        dm._arrays = {"train": _check_images(train, "train"),
-                      "val": _check_images(train if val is None else val, "val")}
-        return dm
-
-    def _load(self, split: str) -> torch.Tensor:
-        if self._arrays is not None:
-            a = self._arrays["val" if split != "train" else "train"]
-        else:
-            a = load_targets(self.source, split, self.path)
-        size = self.train_size if split == "train" else self.val_size
-        return torch.from_numpy(np.ascontiguousarray(a[:size] if size else a))
-
-    def setup(self, stage: str | None = None) -> None:
-        if stage in (None, "fit") and self.train_images is None:
-            self.train_images = self._load("train")
-        if self.val_images is None:
-            self.val_images = self._load(self.val_split)
-
-    def train_dataloader(self):
-        rank, world = distributed(self.trainer)
-        steps = self.steps_per_epoch or max(1, len(self.train_images) // self.batch_size)
-        ds = ShuffledBatches(self.train_images, self.batch_size, steps, self.seed, rank, world)
-        return stream_loader(ds, self.trainer, self.num_workers)
-
-    def val_dataloader(self):
-        return torch.utils.data.DataLoader(torch.utils.data.TensorDataset(self.val_images), batch_size=self.batch_size,
-                                           shuffle=False)

@@ -90,6 +90,7 @@ def test_unreadable_point_cloud_is_an_error_naming_it(tmp_path, capsys):
     ("fit", ["program", "--points", ".obj", ".ply", "example", "--steps", "--lr", "--reg", "--decimals", "--seed",
              "--out", "--json", "--overwrite", "--mesh", ".glb"]),
     ("silhouettes", ["--out", ".npz", "--size", "--margin", "--limit", "--quiet"]),
+    ("volumes", ["--out", ".npz", "--category", "--size", "--margin", "--limit", "--workers", "--quiet"]),
 ])
 def test_help_lists_every_option_and_format(cmd, options, capsys):
     with pytest.raises(SystemExit):

@@ -127,3 +127,20 @@ def test_mirror_programs_keeps_programs_whose_image_leaves_the_vocabulary():
     out = mirror_programs(tokens, np.random.default_rng(0))
     assert len({tuple(r) for r in out.tolist()}) == 16
     assert (out[:, 2:] == tokens[:, 2:]).all()
+
+
+def test_mirror_pairs_map_a_program_and_its_target_alike():
+    from csgnet.renderer import render_tokens
+    from csgnet.train.augment import mirror_pairs, mirror_programs, mirror_volumes
+    rows = torch.as_tensor(np.asarray(sample_programs(3, 5, 40, np.random.default_rng(5))))
+    lengths = torch.full((len(rows),), 5)
+    targets = render_tokens(rows, 3, lengths).clone()
+    tokens, volumes = mirror_pairs(rows, targets, np.random.default_rng(1))
+    assert torch.equal(tokens, mirror_programs(rows, np.random.default_rng(1)))  # the same draws
+    assert (tokens != rows).any(1).sum() > 30  # most pairs moved
+    assert torch.equal(render_tokens(tokens, 3, lengths), volumes)  # each label still draws its target
+    assert torch.equal(mirror_volumes(targets, torch.zeros(len(rows), dtype=torch.int64)), targets)
+    # symmetry 14 = 8 (exchange) + 4 (mirror x) + 2 (mirror y): a voxel (x, y, z) goes to (64 - y, 64 - x, z)
+    one = torch.zeros(1, 64, 64, 64, dtype=torch.bool)
+    one[0, 10, 20, 30] = True
+    assert mirror_volumes(one, torch.tensor([14]))[0].nonzero().tolist() == [[44, 54, 30]]

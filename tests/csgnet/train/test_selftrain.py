@@ -23,7 +23,7 @@ def test_a_label_is_replaced_only_by_a_better_one():
     toks = torch.tensor([[5, 6, 7, STOP, STOP], [8, STOP, STOP, STOP, STOP]])
     got = labels.offer(torch.tensor([0, 2]), toks, torch.tensor([3, 1]), [2.0, float("nan")])
     assert got.tolist() == [True, False] and labels.labelled().tolist() == [0]
-    assert labels.tokens[0].tolist() == [5, 6, 7, STOP] and labels.chamfer[0] == 2.0
+    assert labels.tokens[0].tolist() == [5, 6, 7, STOP] and labels.score[0] == 2.0
     # equal or worse: kept; better: replaced
     assert labels.offer(torch.tensor([0]), toks[1:], torch.tensor([1]), [2.0]).tolist() == [False]
     assert labels.offer(torch.tensor([0]), toks[1:], torch.tensor([1]), [1.5]).tolist() == [True]
@@ -34,7 +34,7 @@ def test_a_label_is_replaced_only_by_a_better_one():
         labels.offer(torch.tensor([1]), toks, torch.tensor([4]), [0.0])
     other = PseudoLabels(3, 4)
     other.load_state_dict(labels.state_dict())
-    assert torch.equal(other.tokens, labels.tokens) and torch.equal(other.chamfer, labels.chamfer)
+    assert torch.equal(other.tokens, labels.tokens) and torch.equal(other.score, labels.score)
     with pytest.raises(ValueError, match="expected shape"):
         PseudoLabels(2, 4).load_state_dict(labels.state_dict())
 
@@ -91,8 +91,8 @@ def test_self_training_raises_the_reward_on_a_tiny_problem():
     assert after > before + 0.1, (before, after)
     assert dm.labels.rounds == 6 and len(seen.tables) == 6
     for old, new in zip(seen.tables, seen.tables[1:]):
-        assert (new["chamfer"] <= old["chamfer"]).all()
-        same = new["chamfer"] == old["chamfer"]
+        assert new["metric"] == "chamfer" and (new["score"] <= old["score"]).all()
+        same = new["score"] == old["score"]
         assert torch.equal(new["tokens"][same], old["tokens"][same])
     assert trainer.callback_metrics["round/labelled"] == 1.0
 
@@ -129,7 +129,7 @@ def test_fit_validates_checkpoints_the_labels_and_resumes(tmp_path):
         assert key in t.callback_metrics, key
     assert t.global_step == 4, t.global_step
     saved = dm.labels.state_dict()
-    assert saved["rounds"] == 1 and saved["last_epoch"] == 0 and torch.isfinite(saved["chamfer"]).any()
+    assert saved["rounds"] == 1 and saved["last_epoch"] == 0 and torch.isfinite(saved["score"]).any()
     ckpt = tmp_path / "ckpt" / "last.ckpt"
     assert torch.load(ckpt, weights_only=False)["global_step"] == 4, torch.load(ckpt, weights_only=False)["global_step"]
     cb = _AtStart()
@@ -137,7 +137,7 @@ def test_fit_validates_checkpoints_the_labels_and_resumes(tmp_path):
     t2 = _fit(tmp_path, 3, cb)
     t2.fit(m2, dm2, ckpt_path=str(ckpt))
     assert cb.step == 4 and cb.table["rounds"] == 1
-    assert all(torch.equal(cb.table[k], saved[k]) for k in ("tokens", "lengths", "chamfer"))
+    assert all(torch.equal(cb.table[k], saved[k]) for k in ("tokens", "lengths", "score"))
     assert t2.global_step == 6, t2.global_step
     assert dm2.labels.rounds == 2 and dm2.labels.last_epoch == 2  # epoch 2 starts the second round
     assert load_model(ckpt).config == m.config  # a self-training checkpoint is a model file
@@ -155,16 +155,24 @@ def test_st_configs_parse_and_build(config, tmp_path, monkeypatch, train_main):
     from csgnet.models import CSGNet, preset
 
     monkeypatch.chdir(ROOT)
-    stack = "stack" in config
-    model = CSGNet(preset("small", 2, stack, **{k: v for k, v in TINY.items() if k != "input_pool"}))
+    stack, dim = "stack" in config, 3 if "3d" in config else 2
+    tiny = {k: v for k, v in TINY.items() if k != "input_pool"}
+    if dim == 3:
+        tiny["channels"] = [2, 2, 2, 2]
+    model = CSGNet(preset("lite" if dim == 3 else "small", dim, stack, **tiny))
     torch.save({"config": model.config.to_dict(), "state_dict": model.state_dict()}, tmp_path / "w.pt")
     cli = train_main(["--config", f"configs/csgnet/{config}", "--trainer.logger", "false",
                       "--model.init", str(tmp_path / "w.pt")], run=False)
     assert isinstance(cli.model, SelfTrainModule) and isinstance(cli.datamodule, SelfTrainDataModule)
-    assert cli.model.config.stack == stack
+    assert cli.model.config.stack == stack and cli.model.config.dim == dim == cli.datamodule.dim
     hp = cli.model.hparams
-    assert (hp.beam_width, hp.max_len, hp.gamma, hp.invalid_reward) == (10, 13, 20.0, "zero")
-    assert cli.datamodule.source == "silhouettes" and cli.datamodule.max_len >= hp.max_len
-    from lightning.pytorch.callbacks import EarlyStopping
+    want = (10, 13, "chamfer", "silhouettes", "per_step") if dim == 2 else (10, 7, "iou", "volumes", "sum")
+    assert (hp.beam_width, hp.max_len, hp.loss_norm) == (want[0], want[1], want[4])
+    assert cli.datamodule.source == want[3] and cli.datamodule.max_len >= hp.max_len
+    if dim == 2:
+        assert (hp.gamma, hp.invalid_reward) == (20.0, "zero")
+    from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
     stops = [c for c in cli.trainer.callbacks if isinstance(c, EarlyStopping)]
-    assert stops and stops[0].monitor == "val/chamfer"
+    assert stops and stops[0].monitor == f"val/{want[2]}" and stops[0].mode == ("min" if dim == 2 else "max")
+    saves = [c for c in cli.trainer.callbacks if isinstance(c, ModelCheckpoint)]
+    assert any(c.save_last for c in saves) and any(c.monitor == f"val/{want[2]}" for c in saves)

@@ -1,0 +1,152 @@
+"""The volume set's file: a NumPy ``.npz`` (no pickles) of 64³ occupancy volumes, one entry per split and field.
+
+* ``{split}_volumes``: ``(N, size, size, ceil(size / 8)) uint8``, ``np.packbits`` of the bool volumes
+  ``vol[x, y, z]`` along the last axis (NumPy's default big-endian bit order);
+* ``{split}_ids``: ``(N,)`` str, ``"category/id"``;
+* ``size``, ``margin``: ints; ``version``: :data:`FORMAT_VERSION`.
+
+Written by :func:`write_volumes` (``python -m shapeprog assembly volumes``), read by :func:`read_volumes`
+(``csgnet.shapes3d.load_volumes``); ``docs/csgnet.md`` ("The ShapeAssembly volumes") describes the set.
+The volumes stay packed (32 KiB each at 64³) until :func:`unpack_volumes`, since a whole split unpacked
+takes 256 KiB per shape.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Union
+
+import numpy as np
+
+from .files import atomic_write
+from .silhouettes import SPLITS, check_split
+
+__all__ = ["FORMAT_VERSION", "MAX_SIZE", "SPLITS", "VolumeSplit", "pack_volumes", "unpack_volumes", "write_volumes",
+           "read_volumes"]
+
+PathLike = Union[str, os.PathLike]
+
+#: The layout version this module writes and reads.
+FORMAT_VERSION = 1
+MAX_SIZE = 256
+"""The largest volume side a volume file may declare."""
+
+
+@dataclass(frozen=True)
+class VolumeSplit:
+    """One split of a volume set, packed.
+
+    Attributes:
+        packed: ``(N, size, size, ceil(size / 8)) uint8``, :func:`pack_volumes` of the volumes.
+        ids: ``(N,)`` str, the shape of each volume (``"chair/173"``).
+        size: the volume side.
+    """
+
+    packed: np.ndarray
+    ids: np.ndarray
+    size: int
+
+    def __len__(self) -> int:
+        return len(self.packed)
+
+    def volumes(self, limit: int | None = None) -> np.ndarray:
+        """The first ``limit`` volumes (default: all) unpacked: ``(n, size, size, size) bool``."""
+        return unpack_volumes(self.packed[:limit], self.size)
+
+
+def pack_volumes(volumes: np.ndarray) -> np.ndarray:
+    """``(..., D, H, W) bool`` -> ``(..., D, H, ceil(W / 8)) uint8`` (bits along the last axis)."""
+    return np.packbits(np.asarray(volumes, dtype=bool), axis=-1)
+
+
+def unpack_volumes(packed: np.ndarray, size: int) -> np.ndarray:
+    """The inverse of :func:`pack_volumes` for volumes of side ``size``."""
+    return np.unpackbits(packed, axis=-1, count=size).astype(bool)
+
+
+def _int_entry(value: np.ndarray, p: Path, name: str, low: int, high: int) -> int:
+    if np.ndim(value) != 0 or not np.issubdtype(np.asarray(value).dtype, np.integer) or not low <= int(value) <= high:
+        raise ValueError(f"{p}: the entry {name!r} is not an integer in [{low}, {high}]: "
+                         f"dtype {np.asarray(value).dtype}, shape {np.shape(value)}")
+    return int(value)
+
+
+def write_volumes(path: PathLike, data: Mapping[str, VolumeSplit], margin: int) -> Path:
+    """Write a volume set as a compressed ``.npz``, atomically.
+
+    Args:
+        path: the output file.
+        data: ``{split: VolumeSplit}`` (any of ``train``, ``val``, ``test``), all of one size.
+        margin: the fitting margin the volumes were drawn with (stored for readers).
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: naming ``path``: no split, an unknown split, or arrays of mismatched shapes.
+    """
+    if not data:
+        raise ValueError(f"{path}: no split to write")
+    size = next(iter(data.values())).size
+    if not 1 <= size <= MAX_SIZE:
+        raise ValueError(f"{path}: volumes of side {size}; at most MAX_SIZE = {MAX_SIZE} are written (and read)")
+    want = (size, size, -(-size // 8))
+    arrays = {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(FORMAT_VERSION)}
+    for split, s in data.items():
+        check_split(split)
+        packed = np.asarray(s.packed)
+        if s.size != size or packed.dtype != np.uint8 or packed.ndim != 4 or packed.shape[1:] != want:
+            raise ValueError(f"{path}: {split} volumes must be packed as (N, {', '.join(map(str, want))}) uint8, "
+                             f"got {packed.shape} {packed.dtype} of side {s.size}")
+        if len(s.ids) != len(packed):
+            raise ValueError(f"{path}: {split} has {len(packed)} volumes but {len(s.ids)} ids")
+        arrays[f"{split}_volumes"] = packed
+        arrays[f"{split}_ids"] = np.asarray(s.ids, dtype=str)
+    return atomic_write(path, lambda f: np.savez_compressed(f, **arrays))
+
+
+def read_volumes(path: PathLike, split: str) -> VolumeSplit:
+    """Read one split of a volume file (packed; :meth:`VolumeSplit.volumes` unpacks).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file: an unknown split, not an ``.npz``, a missing entry, another
+            version, or arrays of the wrong dtype or shape.
+    """
+    check_split(split)
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    try:
+        z = np.load(p, allow_pickle=False)
+    except Exception as e:  # numpy and zipfile raise many types for damaged files
+        raise ValueError(f"{p}: not a readable .npz file ({type(e).__name__}: {e})") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ValueError(f"{p}: not a volume set: a single array, not an .npz archive")
+    need = {f"{split}_volumes", f"{split}_ids", "size", "version"}
+    try:
+        with z:
+            keys = set(z.files)
+            if not need <= keys:
+                raise ValueError(f"{p}: not a volume set with a {split} split: missing "
+                                 f"{', '.join(sorted(need - keys))} (found {', '.join(sorted(keys)) or 'nothing'})")
+            version = _int_entry(z["version"], p, "version", 0, 2**31)
+            if version != FORMAT_VERSION:
+                raise ValueError(f"{p}: volume file version {version}; this reader reads version {FORMAT_VERSION}")
+            size = _int_entry(z["size"], p, "size", 1, MAX_SIZE)
+            packed, ids = z[f"{split}_volumes"], z[f"{split}_ids"]
+    except ValueError as e:
+        if str(e).startswith(f"{p}: "):
+            raise
+        raise ValueError(f"{p}: corrupt .npz file ({e})") from None
+    except Exception as e:  # zipfile, zlib and numpy's readers raise many types for damaged members
+        raise ValueError(f"{p}: corrupt .npz file ({type(e).__name__}: {e})") from None
+    want = (size, size, -(-size // 8))
+    if packed.dtype != np.uint8 or packed.ndim != 4 or packed.shape[1:] != want:
+        raise ValueError(f"{p}: {split}_volumes has dtype {packed.dtype} and shape {packed.shape}; expected "
+                         f"(N, {', '.join(map(str, want))}) uint8 (packed bits)")
+    if len(ids) != len(packed):
+        raise ValueError(f"{p}: {split} has {len(packed)} volumes but {len(ids)} ids")
+    return VolumeSplit(packed, ids, size)
