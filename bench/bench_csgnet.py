@@ -92,6 +92,13 @@ def bench_train(dim: int, stack: bool, size: str, overrides: dict, batch: int, s
     return tok.shape[0] / float(np.median(times))
 
 
+def _wait_policy() -> str:
+    """``"; OMP_WAIT_POLICY=PASSIVE"`` when that variable is set (threads that sleep at barriers instead of
+    spinning keep two threads usable on a CPU shared with other jobs), else ``""``."""
+    policy = os.environ.get("OMP_WAIT_POLICY")
+    return f"; OMP_WAIT_POLICY={policy}" if policy else ""
+
+
 def _precision_label(precision: str, resolved: str) -> str:
     """``"bfloat16"``, or ``"auto (bfloat16)"`` for a choice the machine resolves."""
     return resolved if precision == resolved else f"{precision} ({resolved})"
@@ -123,7 +130,7 @@ def main(argv=None) -> int:
     device = _device(args.device)
     print(f"# machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
           f"{torch.__version__}, threads {torch.get_num_threads()}, device {device}, "
-          f"load average {os.getloadavg()[0]:.2f}")
+          f"load average {os.getloadavg()[0]:.2f}{_wait_policy()}")
     if args.rounds < 1:
         ap.error(f"--rounds must be at least 1, got {args.rounds}")
     precisions = list(dict.fromkeys(args.precision))  # each once, in the order given
@@ -164,7 +171,7 @@ def main(argv=None) -> int:
                 f"{', '.join(_precision_label(p, resolved[p]) for p in precisions)} (bfloat16: the model's layers "
                 f"under bfloat16 autocast, scores in float32; native bfloat16 on this CPU: "
                 f"{'yes' if native_bf16() else 'no'}); median of {args.rounds} round{'s' * (args.rounds > 1)}, "
-                f"the precisions alternating.")
+                f"the precisions alternating{_wait_policy()}.")
         command = "python " + shlex.join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
         print(f"wrote {write_result(args.out, make_result('Beam-search decoding speed', cols, rows, [note], command))}")
     if not args.skip_train:

@@ -170,6 +170,15 @@ class _Rows:
         """The context of the model's layers: bfloat16 autocast with ``precision="bfloat16"``."""
         return precision_context("bfloat16", self.device) if self.bf16 else contextlib.nullcontext()
 
+    def scope(self):
+        """The context of a whole decoding loop. With bfloat16, a disabled autocast around the steps' enabled
+        ones: autocast keeps its bfloat16 copies of the weights until the outermost of its contexts ends, so
+        they are cast once per decode instead of once per step; what runs between the steps (the stack
+        machine, the beam bookkeeping) stays outside autocast."""
+        if not self.bf16:
+            return contextlib.nullcontext()
+        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=False)
+
     def logits(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``(logits (B, V), new GRU state (B, H))`` of the current rows, both float32."""
         if not self.bf16:
@@ -299,17 +308,18 @@ def beam_search(model, targets, width: int = 10, max_len: int | None = None, mod
     score[:, 0] = 0.0
     offsets = (torch.arange(N, device=targets.device) * w)[:, None]
     finish = mode == "improved"
-    for t in range(T):
-        logits, rows.h_new = rows.logits()
-        logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
-        cand = (score.reshape(-1, 1) + logp).view(N, w * V)
-        score, idx = cand.topk(w, dim=1)
-        parent = (idx // V + offsets).flatten()
-        tok = (idx % V).flatten()
-        rows.reorder(parent)
-        rows.advance(tok)
-        if finish and bool(rows.done.all()):
-            break
+    with rows.scope():
+        for t in range(T):
+            logits, rows.h_new = rows.logits()
+            logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+            cand = (score.reshape(-1, 1) + logp).view(N, w * V)
+            score, idx = cand.topk(w, dim=1)
+            parent = (idx // V + offsets).flatten()
+            tok = (idx % V).flatten()
+            rows.reorder(parent)
+            rows.advance(tok)
+            if finish and bool(rows.done.all()):
+                break
     tokens = rows.tokens().view(N, w, -1)
     return Decoded(tokens, rows.length.view(N, w), score, rows.valid.view(N, w) & torch.isfinite(score),
                    model.config.dim)
@@ -324,14 +334,15 @@ def greedy(model, targets, max_len: int | None = None, mode: str = "improved", c
     rows = _Rows(model, targets, 1, T, skip_done=mode == "improved", precision=precision)
     score = torch.zeros(N, device=targets.device)
     finish = mode == "improved"
-    for t in range(T):
-        logits, rows.h = rows.logits()
-        logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
-        lp, tok = logp.max(dim=1)
-        score = score + lp
-        rows.advance(tok)
-        if finish and bool(rows.done.all()):
-            break
+    with rows.scope():
+        for t in range(T):
+            logits, rows.h = rows.logits()
+            logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+            lp, tok = logp.max(dim=1)
+            score = score + lp
+            rows.advance(tok)
+            if finish and bool(rows.done.all()):
+                break
     return Decoded(rows.tokens()[:, None], rows.length[:, None], score[:, None], rows.valid[:, None],
                    model.config.dim)
 

@@ -129,3 +129,16 @@ def test_the_paper_experiments_decode_in_float32():
             assert getattr(args, "precision", "float32") == "float32", (e.id, step.argv)
             evaluated += args.cmd == "evaluate"
     assert evaluated >= 4  # Tables 3 and 5, full and quick
+
+
+def test_the_stack_encoder_input_is_written_in_the_autocast_dtype_exactly():
+    m = tiny(True)
+    t = torch.from_numpy(synthetic_targets(1))
+    stack = (torch.rand((t.shape[0], m.config.stack_k, 64, 64), generator=torch.Generator().manual_seed(0)) > 0.5)
+    with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16):
+        got = m.encode(t, stack.float())
+        x = torch.cat([t[:, None].float(), stack.float()], 1).contiguous(memory_format=torch.channels_last)
+        want = m.encoder(x)  # float32 input, cast by the first convolution
+    assert got.dtype == torch.bfloat16 and torch.equal(got, want)
+    with torch.no_grad():
+        assert m.encode(t, stack.float()).dtype == torch.float32  # without autocast: the weights' dtype
