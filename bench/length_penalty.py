@@ -64,7 +64,7 @@ def main(argv=None) -> int:
     programs = [p for ps in load_dataset(args.data, args.dim, "val").values() for p in ps[: args.per_length]]
     targets = render([p.text() for p in programs], args.dim)
     t0 = time.process_time()
-    starts = infer(model, targets, beam=args.beam, select="match")
+    starts = infer(model, targets, beam=args.beam, select="match", precision="float32")  # the same on every CPU
     per_penalty: dict[float, list[tuple[float, int, int]]] = {lam: [] for lam in args.penalties}
     for prog, target, start in zip(programs, targets, starts):
         valid = [parse(b, args.dim) for b in start.beams if is_valid_text(b, args.dim)]

@@ -16,9 +16,16 @@ Two behaviours (``mode``):
 that would make the program impossible to finish validly within ``max_len`` tokens (an operator with
 fewer than two shapes on the stack, ``$`` unless exactly one shape is on it, a primitive when the
 remaining steps cannot reduce the stack any more), so every decoded program is valid.
+
+``precision`` (:data:`PRECISIONS`) is the arithmetic of the model's layers while decoding: ``"float32"`` (the
+default of these functions, and the protocol of every table), ``"bfloat16"`` (the encoder and the output
+layers under ``torch.autocast`` with bfloat16; the GRU state, the log-softmax and every score stay float32,
+and the stack machine renders as before) or ``"auto"`` (:func:`resolve_precision`: bfloat16 on a CPU that
+computes it natively, float32 elsewhere).
 """
 from __future__ import annotations
 
+import contextlib
 import numbers
 from dataclasses import dataclass
 
@@ -29,11 +36,51 @@ from .lang import Program, completable
 from .renderer import StackMachine, primitive_cache, unpack
 from .vocab import codes, vocabulary
 
-__all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled", "MAX_BEAM", "check_beam"]
+__all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled", "MAX_BEAM", "check_beam",
+           "PRECISIONS", "native_bf16", "resolve_precision", "precision_context"]
 
 _MODES = ("improved", "reference")
 MAX_BEAM = 256
 """Widest beam accepted: decoding costs grow with ``N × width`` rows (the paper uses at most 40)."""
+PRECISIONS = ("auto", "float32", "bfloat16")
+"""The ``precision`` choices of the decoders: ``"auto"`` (:func:`resolve_precision`), ``"float32"``,
+``"bfloat16"`` (the model's layers under bfloat16 autocast; scores stay float32)."""
+_NATIVE_BF16_CHECKS = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+
+
+def native_bf16() -> bool:
+    """True when this CPU computes bfloat16 natively (AVX512-BF16 or AMX tiles, as torch reports them);
+    False when it does not, or when this torch has no such check."""
+    for name in _NATIVE_BF16_CHECKS:
+        check = getattr(torch.cpu, name, None)
+        try:
+            if check is not None and bool(check()):
+                return True
+        except (RuntimeError, OSError):  # a torch build that cannot answer: count it as no
+            continue
+    return False
+
+
+def resolve_precision(precision: str, device="cpu") -> str:
+    """``"float32"`` or ``"bfloat16"``: the arithmetic ``precision`` (:data:`PRECISIONS`) means on ``device``.
+    ``"auto"`` is bfloat16 on a CPU with native bfloat16 (:func:`native_bf16`) and float32 elsewhere, GPUs
+    included.
+
+    Raises:
+        ValueError: ``precision`` is not one of :data:`PRECISIONS` (the message names it and them).
+    """
+    if not isinstance(precision, str) or precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if precision == "auto":
+        return "bfloat16" if torch.device(device).type == "cpu" and native_bf16() else "float32"
+    return precision
+
+
+def precision_context(precision: str, device="cpu"):
+    """The context the model's layers run in for ``precision`` on ``device``: bfloat16 autocast, or nothing."""
+    if resolve_precision(precision, device) == "bfloat16":
+        return torch.autocast(torch.device(device).type, dtype=torch.bfloat16)
+    return contextlib.nullcontext()
 
 
 @dataclass
@@ -85,8 +132,10 @@ def _token_classes(dim: int, device) -> tuple[torch.Tensor, torch.Tensor, int]:
 class _Rows:
     """Decoding state of ``B`` rows (targets repeated per beam): GRU state, previous token, stack."""
 
-    def __init__(self, model, targets: torch.Tensor, repeat: int, max_len: int, skip_done: bool = False):
+    def __init__(self, model, targets: torch.Tensor, repeat: int, max_len: int, skip_done: bool = False,
+                 precision: str = "float32"):
         cfg = model.config
+        self.bf16 = resolve_precision(precision, targets.device) == "bfloat16"
         self.repeat, self.skip_done, self.steps = repeat, skip_done, 0
         self.unique_targets = targets
         self.model, self.dim, self.max_len = model, cfg.dim, max_len
@@ -103,7 +152,8 @@ class _Rows:
             # the features are fixed per target: their share of the GRU gates is computed once, and a
             # beam's parent always belongs to the same target, so reordering never touches it
             self.machine = None
-            f = model.project_features(model.encode(targets))
+            with self._layers():
+                f = model.project_features(model.encode(targets))
             self.projected = f.repeat_interleave(repeat, 0) if repeat > 1 else f
             self.w_tok = model.token_input_weight()
         self.h = None
@@ -116,10 +166,31 @@ class _Rows:
         self.parents: list[torch.Tensor | None] = []  # parents[t]: rows after step t -> rows before it
         self._parent: torch.Tensor | None = None
 
+    def _layers(self):
+        """The context of the model's layers: bfloat16 autocast with ``precision="bfloat16"``."""
+        return precision_context("bfloat16", self.device) if self.bf16 else contextlib.nullcontext()
+
+    def scope(self):
+        """The context of a whole decoding loop. With bfloat16, a disabled autocast around the steps' enabled
+        ones: autocast keeps its bfloat16 copies of the weights until the outermost of its contexts ends, so
+        they are cast once per decode instead of once per step; what runs between the steps (the stack
+        machine, the beam bookkeeping) stays outside autocast."""
+        if not self.bf16:
+            return contextlib.nullcontext()
+        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=False)
+
     def logits(self) -> tuple[torch.Tensor, torch.Tensor]:
-        if self.machine is not None:
-            return self.model.step(self._stack_features(), self.prev, self.h)
-        return self.model.step_projected(self.projected, self.prev, self.h, self.w_tok)
+        """``(logits (B, V), new GRU state (B, H))`` of the current rows, both float32."""
+        if not self.bf16:
+            if self.machine is not None:
+                return self.model.step(self._stack_features(), self.prev, self.h)
+            return self.model.step_projected(self.projected, self.prev, self.h, self.w_tok)
+        with self._layers():
+            if self.machine is not None:
+                logits, h = self.model.step(self._stack_features(), self.prev, self.h)
+            else:
+                logits, h = self.model.step_projected(self.projected, self.prev, self.h, self.w_tok)
+        return logits.float(), h.float()  # the state carried between steps stays float32
 
     def _stack_features(self) -> torch.Tensor:
         """CSGNetStack's encoder features of every row, computed only where they can differ: at the first
@@ -203,9 +274,10 @@ def check_beam(width, name: str = "beam") -> int:
     return int(width)
 
 
-def _check(model, targets, max_len, mode):
+def _check(model, targets, max_len, mode, precision="float32"):
     if mode not in _MODES:
         raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
+    resolve_precision(precision)  # a bad name is refused before any work
     targets = torch.as_tensor(targets)
     want = (64,) * model.config.dim
     if targets.dim() == model.config.dim:
@@ -218,56 +290,59 @@ def _check(model, targets, max_len, mode):
 
 @torch.no_grad()
 def beam_search(model, targets, width: int = 10, max_len: int | None = None, mode: str = "improved",
-                constrained: bool = False) -> Decoded:
+                constrained: bool = False, precision: str = "float32") -> Decoded:
     """Batched beam search: ``N`` targets × ``width`` beams decoded together.
 
     Hypotheses are ranked by the sum of token log-probabilities (the reference multiplies
-    probabilities, the same order). Step 1 expands only the START row of each target.
+    probabilities, the same order). Step 1 expands only the START row of each target. ``precision``:
+    :data:`PRECISIONS` (the scores are float32 in every one).
 
     Returns:
         :class:`Decoded` with ``k = width`` hypotheses per target, most likely first.
     """
-    targets, T = _check(model, targets, max_len, mode)
+    targets, T = _check(model, targets, max_len, mode, precision)
     N, w = targets.shape[0], check_beam(width, "width")
-    rows = _Rows(model, targets, w, T, skip_done=mode == "improved")
+    rows = _Rows(model, targets, w, T, skip_done=mode == "improved", precision=precision)
     V = model.config.vocab_size
     score = torch.full((N, w), float("-inf"), device=targets.device)
     score[:, 0] = 0.0
     offsets = (torch.arange(N, device=targets.device) * w)[:, None]
     finish = mode == "improved"
-    for t in range(T):
-        logits, rows.h_new = rows.logits()
-        logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
-        cand = (score.reshape(-1, 1) + logp).view(N, w * V)
-        score, idx = cand.topk(w, dim=1)
-        parent = (idx // V + offsets).flatten()
-        tok = (idx % V).flatten()
-        rows.reorder(parent)
-        rows.advance(tok)
-        if finish and bool(rows.done.all()):
-            break
+    with rows.scope():
+        for t in range(T):
+            logits, rows.h_new = rows.logits()
+            logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+            cand = (score.reshape(-1, 1) + logp).view(N, w * V)
+            score, idx = cand.topk(w, dim=1)
+            parent = (idx // V + offsets).flatten()
+            tok = (idx % V).flatten()
+            rows.reorder(parent)
+            rows.advance(tok)
+            if finish and bool(rows.done.all()):
+                break
     tokens = rows.tokens().view(N, w, -1)
     return Decoded(tokens, rows.length.view(N, w), score, rows.valid.view(N, w) & torch.isfinite(score),
                    model.config.dim)
 
 
 @torch.no_grad()
-def greedy(model, targets, max_len: int | None = None, mode: str = "improved", constrained: bool = False
-           ) -> Decoded:
-    """Arg-max decoding (what the reference validates with). ``k = 1``."""
-    targets, T = _check(model, targets, max_len, mode)
+def greedy(model, targets, max_len: int | None = None, mode: str = "improved", constrained: bool = False,
+           precision: str = "float32") -> Decoded:
+    """Arg-max decoding (what the reference validates with). ``k = 1``; ``precision``: :data:`PRECISIONS`."""
+    targets, T = _check(model, targets, max_len, mode, precision)
     N = targets.shape[0]
-    rows = _Rows(model, targets, 1, T, skip_done=mode == "improved")
+    rows = _Rows(model, targets, 1, T, skip_done=mode == "improved", precision=precision)
     score = torch.zeros(N, device=targets.device)
     finish = mode == "improved"
-    for t in range(T):
-        logits, rows.h = rows.logits()
-        logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
-        lp, tok = logp.max(dim=1)
-        score = score + lp
-        rows.advance(tok)
-        if finish and bool(rows.done.all()):
-            break
+    with rows.scope():
+        for t in range(T):
+            logits, rows.h = rows.logits()
+            logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+            lp, tok = logp.max(dim=1)
+            score = score + lp
+            rows.advance(tok)
+            if finish and bool(rows.done.all()):
+                break
     return Decoded(rows.tokens()[:, None], rows.length[:, None], score[:, None], rows.valid[:, None],
                    model.config.dim)
 
@@ -329,7 +404,8 @@ def sample(model, targets, max_len: int | None = None, generator: torch.Generato
 
 
 def decode(model, targets, beam: int = 1, **kwargs) -> Decoded:
-    """Greedy for ``beam == 1``, else :func:`beam_search`; ``beam`` is 1 to :data:`MAX_BEAM`."""
+    """Greedy for ``beam == 1``, else :func:`beam_search`; ``beam`` is 1 to :data:`MAX_BEAM`; the keywords
+    (``max_len``, ``mode``, ``constrained``, ``precision``) are theirs."""
     beam = check_beam(beam)
     return greedy(model, targets, **kwargs) if beam <= 1 else beam_search(model, targets, beam, **kwargs)
 

@@ -23,14 +23,15 @@ from shapeio.image import IMAGE_SUFFIXES, MARGIN, centre_on_canvas, fit_to_canva
 from shapeio.mesh import MESH_SUFFIXES, load_mesh
 from shapeio.weights import check_weights, load_payload, write_weights
 
-from .decode import decode
+from .decode import PRECISIONS, decode, resolve_precision
 from .lang import Program, is_valid, parse
 from .models import CSGNet, ModelConfig, preset
 from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "load_shape_framed", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
            "load_pretrained", "infer", "Inference", "parse_shape", "Parsed",
-           "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH", "FORMAT", "VERSION"]
+           "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH", "INFER_PRECISION", "PRECISIONS",
+           "FORMAT", "VERSION"]
 
 WEIGHTS = Path(__file__).parent / "weights"
 KINDS = ("csgnet", "csgnetstack")
@@ -54,6 +55,11 @@ PRETRAINED = {dim: SHIPPED[(dim, kind, "supervised")] for dim, kind in DEFAULT_K
 INFER_BATCH = 16
 """Shapes :func:`infer` decodes together by default: beam search over 16 to 32 shapes was fastest on a 2-core
 CPU for both shipped 2D kinds (``python bench/bench_csgnet.py --threads 2 --skip-train --batch B``)."""
+INFER_PRECISION = "auto"
+"""The arithmetic :func:`infer` and :func:`parse_shape` decode in by default (:data:`csgnet.decode.PRECISIONS`):
+bfloat16 autocast on a CPU with native bfloat16 (AVX512-BF16 or AMX), float32 elsewhere; the papers' tables
+(``evaluate``, ``python -m csgnet paper``) decode in float32. docs/csgnet.md, "Decoding speed", has the
+measurement behind it."""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -266,7 +272,7 @@ class Inference:
 
 
 def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", constrained: bool = True,
-          batch: int = INFER_BATCH, mode: str = "improved") -> list[Inference]:
+          batch: int = INFER_BATCH, mode: str = "improved", precision: str = INFER_PRECISION) -> list[Inference]:
     """Parse shapes into programs.
 
     Args:
@@ -278,9 +284,15 @@ def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", con
         constrained: mask tokens that would make the program invalid (:mod:`csgnet.decode`).
         batch: shapes decoded together.
         mode: beam-search behaviour, ``"improved"`` or ``"reference"``.
+        precision: the model's arithmetic, ``"auto"``, ``"float32"`` or ``"bfloat16"``
+            (:data:`csgnet.decode.PRECISIONS`; default :data:`INFER_PRECISION`); the scores are float32 in all.
+
+    Raises:
+        ValueError: a bad ``select``, ``precision``, beam width or shape array (the message names it).
     """
     if select not in ("likelihood", "match"):
         raise ValueError(f"select must be 'likelihood' or 'match', got {select!r}")
+    resolve_precision(precision)
     dim = model.config.dim
     x = torch.as_tensor(np.asarray(shapes) if not isinstance(shapes, torch.Tensor) else shapes).bool()
     if x.dim() == dim:
@@ -291,7 +303,7 @@ def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", con
     out: list[Inference] = []
     for lo in range(0, x.shape[0], batch):
         tgt = x[lo: lo + batch]
-        dec = decode(model, tgt, beam, mode=mode, constrained=constrained)
+        dec = decode(model, tgt, beam, mode=mode, constrained=constrained, precision=precision)
         _, iou, cd = score_beams(dec, tgt)
         n = dec.tokens.shape[0]
         texts = dec.texts()
@@ -339,7 +351,8 @@ class Parsed:
 
 def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, beam: int = 10,
                 select: str = "match", refine: bool = True, rule: str = "short", refine_iters: int | None = None,
-                constrained: bool = True, graft: bool = True, extend: bool = True) -> Parsed:
+                constrained: bool = True, graft: bool = True, extend: bool = True,
+                precision: str = INFER_PRECISION) -> Parsed:
     """Infer a program for one shape the way ``python -m csgnet parse --select match --refine`` does.
 
     Args:
@@ -357,7 +370,9 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
             (:func:`csgnet.rewrite.graft`).
         extend: with the ``"short"`` rule, also try adding any primitive of the vocabulary
             (:func:`csgnet.rewrite.extend`).
+        precision: the decoder's arithmetic (:func:`infer`; default :data:`INFER_PRECISION`).
     """
+    resolve_precision(precision)  # a bad name is refused before the shape is read
     frame = None
     if isinstance(shape, (str, Path)):
         shape, frame = load_shape_framed(shape)
@@ -368,7 +383,7 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
         model = load_pretrained(shape.ndim, kind=kind)
     elif model.config.dim != shape.ndim:
         raise ValueError(f"a {model.config.dim}D model cannot parse a {shape.ndim}D shape")
-    decoded = infer(model, shape[None], beam=beam, select=select, constrained=constrained)[0]
+    decoded = infer(model, shape[None], beam=beam, select=select, constrained=constrained, precision=precision)[0]
     program = decoded.program if decoded.valid else None
     refined = None
     if refine and program is not None:

@@ -337,8 +337,10 @@ class CSGNet(nn.Module):
             raise ValueError(f"stack must be (B, {self.config.stack_k}, {', '.join(map(str, target.shape[1:]))}),"
                              f" got {tuple(stack.shape)}")
         # target and stack maps written once into channels-last memory (what the encoder runs on), instead of
-        # converting, concatenating and reordering them
-        dtype = self.token_bias.dtype
+        # converting, concatenating and reordering them; under autocast in its dtype, which holds their 0/1
+        # values exactly and which the first convolution would cast them to
+        device = target.device.type
+        dtype = torch.get_autocast_dtype(device) if torch.is_autocast_enabled(device) else self.token_bias.dtype
         x = torch.empty(tuple(target.shape) + (stack.shape[1] + 1,), dtype=dtype, device=target.device)
         x[..., 0] = target
         x[..., 1:] = stack.movedim(1, -1)

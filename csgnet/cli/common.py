@@ -13,7 +13,7 @@ from ..lang import ParseError, is_valid, parse
 
 __all__ = ["named", "located", "is_valid_text", "labelled_models", "command_line", "decoding", "measured_on",
            "refuse_table_over_inputs", "write_table", "beam_width", "non_negative", "MAX_SCALE", "MAX_WORKERS",
-           "MAX_SEED", "MAX_LENGTH", "MAX_PER_LENGTH", "MAX_NN_TRAIN", "MAX_IMAGES", "MAX_REFINE_ITERS", "scale",
+           "MAX_SEED", "MAX_LENGTH", "PRECISIONS", "MAX_PER_LENGTH", "MAX_NN_TRAIN", "MAX_IMAGES", "MAX_REFINE_ITERS", "scale",
            "workers", "seed", "length", "per_length", "int_in"]
 
 #: Largest ``--scale`` of generate and demo: the paper's Table 2 split sizes themselves.
@@ -32,6 +32,9 @@ MAX_NN_TRAIN = 10_000_000
 MAX_IMAGES = 1_000_000
 #: Most Powell iterations of ``parse --refine-iters``.
 MAX_REFINE_ITERS = 100_000
+
+#: The ``--precision`` choices: :data:`csgnet.decode.PRECISIONS`, named here so that ``--help`` needs no torch.
+PRECISIONS = ("auto", "float32", "bfloat16")
 
 #: argparse types of the shared number options (one line, exit 2, before any work).
 scale = float_in(0.0, MAX_SCALE, low_open=True)
@@ -84,8 +87,10 @@ def command_line(args) -> str:
 
 
 def decoding(args) -> str:
-    """How the written tables' programs were decoded, for their notes."""
-    return f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
+    """How the written tables' programs were decoded, for their notes (the precision where it is not float32)."""
+    precision = getattr(args, "precision", "float32")
+    return (f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
+            + ("" if precision == "float32" else f", precision {precision}"))
 
 
 def measured_on() -> str:

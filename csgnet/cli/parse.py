@@ -69,12 +69,13 @@ def _scores_line(iou: float, chamfer: float, program) -> str:
 def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> dict:
     """Infer, optionally refine, report and write one input's program (``parse``: one
     :func:`csgnet.inference.parse_shape`); returns its record for the results file."""
-    from ..inference import parse_shape  # lazy: loaded when the command runs
+    from ..inference import INFER_PRECISION, parse_shape  # lazy: loaded when the command runs
 
     dim = shape.ndim
     parsed = parse_shape(shape, model=model, beam=args.beam, select=args.select, refine=args.refine,
                          rule=args.refine_rule, refine_iters=args.refine_iters, constrained=not args.unconstrained,
-                         graft=not args.no_graft, extend=not args.no_extend)
+                         graft=not args.no_graft, extend=not args.no_extend,
+                         precision=args.precision or INFER_PRECISION)
     res, ref, program = parsed.decoded, parsed.refined, parsed.program
     line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
     if dim == 2:
@@ -209,6 +210,10 @@ def register(sub) -> None:
     p.add_argument("--select", choices=("likelihood", "match"), default="likelihood",
                    help="report the most likely program, or the beam closest to the input")
     p.add_argument("--unconstrained", action="store_true", help="allow invalid programs while decoding")
+    p.add_argument("--precision", choices=common.PRECISIONS, default=None,
+                   help="the model's arithmetic while decoding: auto (default: bfloat16 autocast on a CPU with "
+                   "native bfloat16, AVX512-BF16 or AMX, else float32), float32 (what the docs' tables measure) or "
+                   "bfloat16; scores stay float32")
     p.add_argument("--refine", action="store_true",
                    help="Powell refinement of every valid beam (by chamfer in 2D, by IoU in 3D)")
     p.add_argument("--refine-iters", type=common.int_in(0, common.MAX_REFINE_ITERS), default=None,

@@ -34,12 +34,13 @@ def cmd_evaluate(args) -> int:
             raise SystemExit(f"error: {name} is a {model.config.dim}D model, not {args.dim}D")
         print(f"decoding with {name} ...", flush=True)
         rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
-                               constrained=args.constrained)
+                               constrained=args.constrained, precision=args.precision)
         if args.refined:
             from ..paper.tables import evaluate_refined  # lazy: loaded when the command runs
 
             print(f"parsing with refinement ({name}, {args.refined} per length) ...", flush=True)
-            rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined))
+            rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined,
+                                         precision=args.precision))
     note = "\n\n".join([f"`{command_line(args)}`; beam mode {args.mode!r}, {decoding(args)}; {measured_on()}.",
                         *args.note])
     if write_result_file(args, lambda notes: table_result(rows, args.dim, notes, command_line(args)),
@@ -218,6 +219,10 @@ def register(sub) -> None:
     e.add_argument("--mode", choices=("improved", "reference"), default="improved",
                    help="beam search: improved, or the published reference behaviour")
     e.add_argument("--constrained", action="store_true", help="grammar-constrained decoding")
+    e.add_argument("--precision", choices=common.PRECISIONS, default="float32",
+                   help="the model's arithmetic while decoding: float32 (default, the protocol of the published "
+                   "tables), bfloat16 (autocast; scores stay float32) or auto (bfloat16 on a CPU with native "
+                   "bfloat16, else float32)")
     e.add_argument("--refined", type=common.per_length, default=0, metavar="N",
                    help="add a row of the whole parse (the widest beam, the closest beam, refinement, the short "
                    "rule: what parse --select match --refine writes) on the first N test programs per length")

@@ -46,8 +46,10 @@ class Row:
 
 
 def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), name: str = "model",
-                   batch: int = 50, mode: str = "improved", constrained: bool = False) -> list[Row]:
-    """Score ``model`` on ``{length: programs}`` for each beam width.
+                   batch: int = 50, mode: str = "improved", constrained: bool = False,
+                   precision: str = "float32") -> list[Row]:
+    """Score ``model`` on ``{length: programs}`` for each beam width, decoding in ``precision``
+    (:data:`csgnet.decode.PRECISIONS`; float32, the tables' protocol, by default).
 
     Returns rows ``"{name} k=K top-1"`` and, for K > 1, ``"{name} k=K best-of-k (oracle)"``; their
     ``seconds`` is the decoding + rendering time per image.
@@ -65,7 +67,7 @@ def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), nam
             for lo in range(0, len(progs), batch):
                 tgt = render_programs(progs[lo: lo + batch], dim)
                 t0 = time.perf_counter()
-                dec = decode(model, tgt, k, mode=mode, constrained=constrained)
+                dec = decode(model, tgt, k, mode=mode, constrained=constrained, precision=precision)
                 _, iou, cd = score_beams(dec, tgt)
                 seconds += time.perf_counter() - t0
                 images += tgt.shape[0]
@@ -86,11 +88,11 @@ def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), nam
 
 
 def evaluate_refined(model, tests: dict[int, list[Program]], beam: int = 10, name: str = "model",
-                     per_length: int | None = None, rule: str = "short") -> Row:
+                     per_length: int | None = None, rule: str = "short", precision: str = "float32") -> Row:
     """The whole parse of :func:`csgnet.inference.parse_shape` (beam search, the beam closest to the target,
     refinement of every valid beam, the ``rule``'s choice) on the first ``per_length`` targets per length:
     a row ``"{name} k=K + refinement ({rule})"`` with the chosen programs' IoU (and chamfer in 2D);
-    ``seconds`` per image."""
+    ``seconds`` per image. Decoded in ``precision`` (float32, the tables' protocol, by default)."""
     from ..inference import parse_shape  # lazy: inference brings PIL (users' images)
 
     dim = model.config.dim
@@ -103,7 +105,8 @@ def evaluate_refined(model, tests: dict[int, list[Program]], beam: int = 10, nam
         targets = render_programs(progs, dim).cpu().numpy()
         ious, cds = [], []
         for target in targets:
-            parsed = parse_shape(target, model=model, beam=beam, select="match", refine=True, rule=rule)
+            parsed = parse_shape(target, model=model, beam=beam, select="match", refine=True, rule=rule,
+                                 precision=precision)
             iou, cd = parsed.refined.after if parsed.refined is not None else (parsed.decoded.iou, parsed.decoded.chamfer)
             ious.append(iou)
             cds.append(cd)
