@@ -51,6 +51,8 @@ def test_auto_follows_the_cpu_check(monkeypatch):
     monkeypatch.setattr(D, "native_bf16", lambda: True)
     assert resolve_precision("auto") == "bfloat16"
     assert resolve_precision("auto", "cuda") == "float32"  # GPUs decode in float32 unless asked
+    assert resolve_precision("auto", "cpu", 3) == "float32"  # the 3D model gains nothing from bfloat16
+    assert resolve_precision("bfloat16", "cpu", 3) == "bfloat16"  # unless asked
     assert resolve_precision("float32") == "float32" and resolve_precision("bfloat16", "cuda") == "bfloat16"
 
 
