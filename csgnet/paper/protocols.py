@@ -6,7 +6,7 @@ neighbour; each model at k = 1 and k = 10) after 0 to unlimited refinement itera
 programs; AP per primitive type, mAP and images per second. :func:`table4_markdown` and
 :func:`table6_markdown` print the rows; :func:`subset` draws a subset of images.
 
-See docs/csgnet.md ("`evaluate`, `table4`, `table6`") for the exact protocols.
+See docs/csgnet.md ("Commands" and "Results") for the exact protocols.
 """
 from __future__ import annotations
 
