@@ -29,6 +29,7 @@ def import_viser():
         ImportError: viser is not installed; the message names the extra that installs it.
     """
     try:
+        # lazy: viser is the optional `editor` extra; importing this module must not need it
         import viser
     except ImportError as e:
         raise ImportError(f"the editor needs viser, which is not installed: pip install -e '.[{EDITOR_EXTRA}]' "
@@ -123,6 +124,7 @@ def viser_server(host: str, port: int):
     """
     check_port(port)
     viser = import_viser()
+    # lazy: websockets comes with viser (the optional `editor` extra)
     import websockets.asyncio.server as ws_server
 
     original, installed = ws_server.serve, []

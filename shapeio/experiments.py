@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
+from .results import column, make_result, write_result
+
 __all__ = ["STATUSES", "Step", "Experiment", "check_experiments", "listing", "list_result", "register", "QUICK_DIR"]
 
 #: What an experiment's status may be: built and reproducing its table, built in part, not built, or
@@ -89,8 +91,6 @@ def listing(experiments: Sequence[Experiment], verbose: bool = False, prog: str 
 
 def list_result(experiments: Sequence[Experiment], prog: str, path: str) -> dict:
     """The list as a result file's content (:mod:`shapeio.results`): id, status, description, reason, result."""
-    from .results import column, make_result
-
     rows = [{"id": e.id, "status": e.status, "description": e.description, "why": e.why or "",
              "result": e.result or "", "scale": e.scale or ""} for e in experiments]
     cols = [column("id", "id"), column("status", "status"), column("description", "experiment"),
@@ -126,8 +126,6 @@ def register(sub, experiments: Sequence[Experiment], main: Callable[[list[str]],
                 p.error("give 'run ID' to run an experiment, or --list")
             print(listing(experiments, args.verbose, prog))
             if args.json:
-                from .results import write_result
-
                 print(f"wrote {write_result(args.json, list_result(experiments, prog, args.json))}")
             return 0
         if args.id is None:

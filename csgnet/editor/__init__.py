@@ -35,12 +35,16 @@ from pathlib import Path
 from typing import Mapping, Union
 
 import numpy as np
+from PIL import Image
 
 from shapeedit import History, UndoableSession, export_stem
 from shapeedit.control import CHOICE, INT, BaseControl, page_value
 from shapeio.files import write_new_set
+from shapeio.mesh import obj_text
 
 from .. import primitives as P
+from .. import render
+from ..export import voxels_to_mesh
 from ..lang import OPERATORS, Draw, Op, ParseError, Program, parse
 
 __all__ = ["CHOICE", "INT", "CSGEditError", "CSGEditSession", "Control", "apply", "controls", "page_value",
@@ -167,8 +171,6 @@ def apply(program: Program, values: Mapping[str, Value]) -> Program:
 
 def render_png_bytes(canvas: np.ndarray, scale: int = PNG_SCALE) -> bytes:
     """A ``(64, 64) bool`` canvas as PNG bytes, black on white, upscaled by nearest neighbour."""
-    from PIL import Image
-
     img = np.where(np.asarray(canvas, bool), 0, 255).astype(np.uint8)
     img = np.repeat(np.repeat(img, scale, 0), scale, 1)
     buf = io.BytesIO()
@@ -216,8 +218,6 @@ class CSGEditSession(UndoableSession):
                 return 2
 
     def _render(self, program: Program) -> np.ndarray:
-        from .. import render
-
         return render(program, self.dim)[0]
 
     def _sync(self) -> None:
@@ -260,10 +260,6 @@ class CSGEditSession(UndoableSession):
     def export(self, folder) -> list[Path]:
         """Write ``<name>_edit<NNN>.txt`` and the render (``.png`` in 2D, marching-cubes ``.obj`` in 3D) as new
         files in ``folder`` (NNN one more than the largest there; never replacing a file)."""
-        from shapeio.mesh import obj_text
-
-        from ..export import voxels_to_mesh
-
         if self.program is None:
             raise ValueError("there is no program to export (it did not parse)")
         folder = Path(folder)

@@ -16,6 +16,7 @@ import numpy as np
 from shapeedit import frame_box, show_pose
 from shapeedit.page import EditorPage
 
+from ..export import voxels_to_mesh
 from . import CHOICE, CSGEditSession, Control, page_value
 
 __all__ = ["CSGEditorApp"]
@@ -134,8 +135,6 @@ class CSGEditorApp(EditorPage):
             if s.dim == 2:
                 self.image.image = self._picture()
             else:
-                from ..export import voxels_to_mesh
-
                 v, f = voxels_to_mesh(s.canvas)
                 if len(f):
                     self.server.scene.add_mesh_simple("/shape", (v - VOXEL_CENTRE) / VOXEL_HALF, f,

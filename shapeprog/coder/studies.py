@@ -30,7 +30,9 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+import torch
 
+from ..vae.genmetrics import classifier_features, frechet_distance
 from .execute import ExecutionError, corners, execute
 from .lang import Call, Expr, Library, Num, ProgramError, to_text, walk
 from .proposal import pieces
@@ -80,10 +82,6 @@ def execute_corners(expr: Expr, library: Library, strict: bool = True):
 def shape_features(corner_sets: Sequence, seed: int = 0) -> np.ndarray:
     """PointNet features of shapes given as corners (:func:`shapeprog.vae.genmetrics.classifier_features`:
     the generation tables' classifier, 2,500 surface points per shape from one generator seeded ``seed``)."""
-    import torch
-
-    from ..vae.genmetrics import classifier_features  # lazy: torch and the classifier when features are due
-
     return classifier_features([torch.as_tensor(c, dtype=torch.float32) for c in corner_sets], seed=seed)
 
 
@@ -95,8 +93,6 @@ def perturbation_fd(programs: Sequence[Expr], library: Library, reference, sigma
     reflection that crosses its plane still makes a shape). Draw d of sigma s uses ``random.Random`` seeded with
     ``(seed, s, d)``, the same for every library, so two program sets of the same shapes get the same noise
     stream."""
-    from ..vae.genmetrics import frechet_distance
-
     out = []
     for s in sigmas:
         for d in range(draws if s else 1):

@@ -7,6 +7,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+import torch
+
 from shapeedit.control import BOOL, CHOICE, FLOAT, INT, KINDS, PAGE_DECIMALS, BaseControl, Value, page_value
 
 from ..errors import EditError
@@ -111,8 +113,6 @@ _GRAD_TOL = 1e-6
 def _moved(corners, x):
     """(L, P) derivatives of each leaf's randomly weighted corner sum with respect to each parameter, and
     (L,) the size below which a leaf's derivative counts as zero."""
-    import torch
-
     L, P = corners.shape[0], x.shape[0]
     grads = torch.zeros(L, P, dtype=torch.float64)
     g = torch.Generator().manual_seed(0)

@@ -56,10 +56,16 @@ import dataclasses
 import weakref
 from typing import Mapping
 
+import torch
+
 from .. import limits
 from ..errors import EditError, ExecutionError, ParseError
+from ..execute import ExecutionPlan, program_parameters
 from ..lang import AXES, FACES, Attach, Block, Cuboid, Program, Reflect, Squeeze, Translate, parse, statement_lines
 from ..lang import statement_text, to_text
+from ..macros.hierarchy import MacroHierarchy
+from ..macros.lang import MacroProgram
+from ..macros.library import Library
 from .control import (_ARG_FIELDS, _FLOAT_RANGE, BOOL, CHOICE, FLOAT, INT, KINDS, MAX_DIM, MIN_DIM, PAGE_DECIMALS,
                       Control, Value, _arg_columns, _head, _influence, _moved, _range, _Spec, page_value)
 from .macro_controls import _hier_apply, _hier_influence, _hier_specs, _macro_apply, _macro_influence, _macro_specs
@@ -147,10 +153,6 @@ def _sa_apply(program: Program, specs: list[tuple[_Spec, Value]], file: str) -> 
 
 
 def _sa_influence(program: Program, specs: list[_Spec]) -> list[tuple[int, ...]]:
-    import torch
-
-    from ..execute import ExecutionPlan, program_parameters
-
     plan = ExecutionPlan([program], dtype=torch.float64)
     x = program_parameters(program, torch.float64).requires_grad_(True)
     shape = plan.run([x])[0]
@@ -162,14 +164,10 @@ def _sa_influence(program: Program, specs: list[_Spec]) -> list[tuple[int, ...]]
 
 
 def _is_hier(program) -> bool:
-    from ..macros.hierarchy import MacroHierarchy  # standard library only: cheap
-
     return isinstance(program, MacroHierarchy)
 
 
 def _is_macro(program) -> bool:
-    from ..macros.lang import MacroProgram  # standard library only: cheap
-
     if isinstance(program, MacroProgram) or _is_hier(program):
         return True
     if not isinstance(program, Program):
@@ -194,8 +192,6 @@ def _specs(program, library) -> list[_Spec]:
 
 def _specs_uncached(program, library) -> list[_Spec]:
     if _is_macro(program):
-        from ..macros.library import Library
-
         lib = Library() if library is None else library
         return _hier_specs(program, lib) if _is_hier(program) else _macro_specs(program, lib)
     return _sa_specs(program)
@@ -219,8 +215,6 @@ def controls(program, library=None, cuboids: bool = True) -> list[Control]:
         return [s.control for s in specs]
     try:
         if _is_macro(program):
-            from ..macros.library import Library
-
             lib = Library() if library is None else library
             leaves = (_hier_influence if _is_hier(program) else _macro_influence)(program, lib, specs)
         else:
@@ -264,8 +258,6 @@ def apply(program, values: Mapping[str, Value], library=None, file: str = "<edit
     if not chosen:
         return program
     if _is_macro(program):
-        from ..macros.library import Library
-
         lib = Library() if library is None else library
         return (_hier_apply if _is_hier(program) else _macro_apply)(program, lib, chosen, file)
     return _sa_apply(program, chosen, file)

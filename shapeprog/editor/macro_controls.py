@@ -5,15 +5,20 @@ from __future__ import annotations
 
 import dataclasses
 
+import torch
+
 from .. import limits
 from ..errors import EditError, ParseError
+from ..execute import ExecutionPlan
 from ..lang import AXES, FACES, statement_lines
+from ..macros import hierarchy
+from ..macros.execute import MacroPlan, compile_hierarchy, hierarchy_parameters, program_parameters
+from ..macros.lang import BOOL as T_BOOL, CUBE, FLOAT as T_FLOAT, Call, Linear, Literal, MacroProgram, Name, def_text
+from ..macros.lang import parameters, to_text as macro_text
 from .control import (_FLOAT_RANGE, BOOL, CHOICE, FLOAT, INT, MAX_DIM, Control, Value, _arg_columns, _influence,
                       _moved, _range, _Spec)
 
 def _macro_specs(program, library) -> list[_Spec]:
-    from ..macros.lang import BOOL as T_BOOL, CUBE, FLOAT as T_FLOAT, Linear, Literal, Name, def_text
-
     lib = library.with_program(program)
     offset = sum(def_text(d).count("\n") + 1 for d in program.defs)  # each definition, then a blank line
     names = ["bbox"]
@@ -61,8 +66,6 @@ def _macro_specs(program, library) -> list[_Spec]:
 def _macro_edit(program, specs: list[tuple[_Spec, Value]], block=None):
     """The macro program with the values written at the specs' slots (``(line, arg)``, or
     ``(block, line, arg)`` when ``block`` is given: only that block's slots)."""
-    from ..macros.lang import Call, Linear, MacroProgram, Name, Literal
-
     lines = [list(c.args) for c in program.lines]
     for spec, v in specs:
         for slot in spec.slots:
@@ -88,8 +91,6 @@ def _refused(e: ParseError, specs) -> EditError:
 
 
 def _macro_apply(program, library, specs: list[tuple[_Spec, Value]], file: str):
-    from ..macros.lang import to_text as macro_text
-
     try:
         return library.parse(macro_text(_macro_edit(program, specs)), file)
     except ParseError as e:
@@ -97,10 +98,6 @@ def _macro_apply(program, library, specs: list[tuple[_Spec, Value]], file: str):
 
 
 def _macro_influence(program, library, specs: list[_Spec]) -> list[tuple[int, ...]]:
-    import torch
-
-    from ..macros.execute import MacroPlan, program_parameters
-
     plan = MacroPlan([program], library, dtype=torch.float64)
     x = program_parameters(program, torch.float64).requires_grad_(True)
     shape = plan.run([x])[0]
@@ -116,10 +113,7 @@ def _macro_influence(program, library, specs: list[_Spec]) -> list[tuple[int, ..
 def _hier_specs(h, library) -> list[_Spec]:
     """Every block's macro controls, named ``block:line:function.parameter``; a sub-program's bbox dims
     have none (the parent's cuboid sets its extent: the executor scales the sub-program into it)."""
-    from ..macros.hierarchy import block_line_offsets
-    from ..macros.lang import parameters
-
-    offsets = block_line_offsets(h)
+    offsets = hierarchy.block_line_offsets(h)
     out = []
     k0 = 0
     for bi, (name, p) in enumerate(zip(h.names, h.programs)):
@@ -136,8 +130,6 @@ def _hier_specs(h, library) -> list[_Spec]:
 
 
 def _hier_apply(h, library, specs: list[tuple[_Spec, Value]], file: str):
-    from ..macros import hierarchy
-
     edited = h.replace(_macro_edit(p, specs, bi) for bi, p in enumerate(h.programs))
     try:
         return hierarchy.parse(hierarchy.to_text(edited), file, library)
@@ -146,11 +138,6 @@ def _hier_apply(h, library, specs: list[tuple[_Spec, Value]], file: str):
 
 
 def _hier_influence(h, library, specs: list[_Spec]) -> list[tuple[int, ...]]:
-    import torch
-
-    from ..execute import ExecutionPlan
-    from ..macros.execute import compile_hierarchy, hierarchy_parameters
-
     c = compile_hierarchy(h, library)
     x = hierarchy_parameters(h, torch.float64).requires_grad_(True)
     shape = ExecutionPlan([c.program], dtype=torch.float64).run([c.numbers(x)])[0]

@@ -28,11 +28,21 @@ import torch
 
 from shapeedit import History, UndoableSession, export_stem
 from shapeio.files import write_new_set
+from shapeio.image import png_bytes
 
 from .. import corpus
 from ..errors import EditError, ExecutionError, ParseError
-from ..execute import ExecutedShape, ExecutionPlan, program_parameters
+from ..execute import ExecutedShape, ExecutionPlan, execute, program_parameters
+from ..io import obj_text
 from ..lang import Program, parse, replace_numbers, to_text
+from ..limits import decode
+from ..macros.api import refactor
+from ..macros.execute import compile_hierarchy, compile_program, execute as macro_execute, execute_hierarchy
+from ..macros.hierarchy import MacroHierarchy, is_hierarchy_text, parse as parse_hierarchy, to_text as hierarchy_text
+from ..macros.lang import parameters, replace_parameters, to_text as macro_text
+from ..macros.library import Library
+from ..metrics import chamfer
+from ..picture import render_png
 from .controls import Control, apply, controls
 
 __all__ = ["EXPORT_KINDS", "EditSession", "corner_distance", "is_corpus_text", "load_program", "read_source",
@@ -57,15 +67,9 @@ def load_program(text: str, file: str = "<string>", library=None):
     Raises:
         ParseError: naming file, line and column.
     """
-    from ..macros.hierarchy import is_hierarchy_text
-
     if is_hierarchy_text(text):
-        from ..macros import hierarchy
-
-        return hierarchy.parse(text, file, library)
+        return parse_hierarchy(text, file, library)
     if library is not None or _is_macro_text(text):
-        from ..macros.library import Library
-
         return (Library() if library is None else library).parse(text, file)
     return parse(text, file)
 
@@ -83,8 +87,6 @@ def refactor_source(text: str, file: str, library, category: str = "", shape_id:
         ParseError: the text is not ShapeAssembly.
         ValueError: a block that the modified grammar cannot hold.
     """
-    from ..macros.api import refactor
-
     return refactor(parse(text, file), library, category=category, shape_id=shape_id).text
 
 
@@ -96,8 +98,6 @@ def read_source(spec: str) -> tuple[str, str]:
         KeyError: a corpus id that the corpus does not hold.
         ParseError: a file that is not UTF-8.
     """
-    from ..limits import decode
-
     path = Path(spec)
     cat, _, ident = spec.partition("/")
     if path.is_file():
@@ -111,8 +111,6 @@ def corner_distance(shape: ExecutedShape, target: ExecutedShape) -> float:
     """The goal-directed editing distance: the symmetric chamfer distance between the two shapes' cuboid
     corners (every leaf's 8 corners as points; mean nearest-corner distance each way, unsquared,
     :func:`shapeprog.metrics.chamfer` with ``eps=0``). 0 for equal shapes; ``inf`` when one has no leaf."""
-    from ..metrics import chamfer
-
     a = shape.corners.detach().reshape(-1, 3).to(torch.float64)
     b = target.corners.detach().reshape(-1, 3).to(torch.float64)
     if a.shape[0] == 0 or b.shape[0] == 0:
@@ -175,11 +173,8 @@ class EditSession(UndoableSession):
         if self.program is None:
             return ""
         if self.is_macro:
-            from ..macros import hierarchy
-            from ..macros.lang import to_text as macro_text
-
-            if isinstance(self.program, hierarchy.MacroHierarchy):
-                return hierarchy.to_text(self.program)
+            if isinstance(self.program, MacroHierarchy):
+                return hierarchy_text(self.program)
             return macro_text(self.program)
         return to_text(self.program)
 
@@ -191,9 +186,6 @@ class EditSession(UndoableSession):
         """Execute, reusing the compiled plan while only numbers change (ShapeAssembly)."""
         with torch.no_grad():
             if not isinstance(program, Program):
-                from ..macros.execute import execute as macro_execute, execute_hierarchy
-                from ..macros.hierarchy import MacroHierarchy
-
                 if isinstance(program, MacroHierarchy):
                     return execute_hierarchy(program, self.library)
                 return macro_execute(program, self.library)
@@ -209,9 +201,6 @@ class EditSession(UndoableSession):
         """The program with every number zeroed: equal for programs that differ in numbers only."""
         if isinstance(program, Program):
             return replace_numbers(program, iter(lambda: 0.0, None))
-        from ..macros.hierarchy import MacroHierarchy
-        from ..macros.lang import parameters, replace_parameters
-
         if isinstance(program, MacroHierarchy):
             return program.replace(replace_parameters(p, [0.0] * len(parameters(p))) for p in program.programs)
         return replace_parameters(program, [0.0] * len(parameters(program)))
@@ -277,8 +266,6 @@ class EditSession(UndoableSession):
         Raises:
             ParseError, ExecutionError: the target does not parse or execute.
         """
-        from ..execute import execute
-
         with torch.no_grad():
             self.target = execute(parse(text, file))
 
@@ -294,9 +281,6 @@ class EditSession(UndoableSession):
         parameters); the text itself for a ShapeAssembly program."""
         if not self.is_macro:
             return self.text
-        from ..macros.execute import compile_hierarchy, compile_program
-        from ..macros.hierarchy import MacroHierarchy
-
         if isinstance(self.program, MacroHierarchy):
             return to_text(compile_hierarchy(self.program, self.library).program)
         return to_text(compile_program(self.program, self.library).program)
@@ -320,9 +304,6 @@ class EditSession(UndoableSession):
             ValueError: an unknown kind, or no program.
             FileNotFoundError: ``folder`` is not a directory.
         """
-        from ..io import obj_text
-        from ..picture import render_png
-
         kinds = tuple(kinds)
         bad = [k for k in kinds if k not in EXPORT_KINDS]
         if bad or not kinds:
@@ -339,8 +320,6 @@ class EditSession(UndoableSession):
             elif k == "obj":
                 data[k] = obj_text(self.shape.corners, lines=self.shape.line)
             else:
-                from shapeio.image import png_bytes
-
                 img = render_png(self.shape.corners, None, labels=self.shape.line.numpy(), size=PNG_SIZE)
                 data[k] = png_bytes(img)
         taken = [re.fullmatch(re.escape(self.name) + r"_edit(\d+)\..*", p.name) for p in folder.iterdir()]

@@ -23,12 +23,12 @@ from .state import Discovery, Nodes
 from .config import load_config
 from .lang import from_lines, to_text
 from .refactored import check_target, refactor_corpus, write_refactored
+from .ablation import VARIANTS, ablation_result, run_ablation
 from .table1 import table1_result, table1_rows
 
 SPLITS = ("train", "val", "all")
-#: Table 5's variants (``shapeprog.macros.ablation.VARIANTS``'s keys, repeated so that ``--help`` stays light).
-ABLATION_VARIANTS = ("full", "no P_matches-dist weighting", "no beam", "no bad-order filter", "no generalize",
-                     "no valid-macro criteria")
+#: Table 5's variants (the keys of :data:`shapeprog.macros.ablation.VARIANTS`): the choices of ``ablation --variants``.
+ABLATION_VARIANTS = tuple(VARIANTS)
 #: Most samples per model of ``generation`` (the paper: 1,000).
 MAX_GENERATION_SAMPLES = 10_000
 #: Largest noise sigma accepted by ``perturbation`` (the shapes are about one unit tall).
@@ -250,8 +250,6 @@ def cmd_ablation(args) -> int:
     sub-program after each round and of each final library over all the sub-programs.
 
     Example: macros ablation --category chair --limit 30 --rounds 1 --proposal-steps 20 --json t5.json"""
-    from .ablation import VARIANTS, ablation_result, run_ablation
-
     refuse_existing([args.json], args.overwrite)
     unknown = [v for v in args.variants if v not in VARIANTS]
     if unknown:

@@ -19,6 +19,17 @@ import time
 from typing import Callable, Sequence
 
 import numpy as np
+import torch
+
+from shapeio.files import atomic_write
+
+from .. import corpus
+from ..vae.genmetrics import classifier_clouds, classifier_features, execute_samples, frechet_distance, gaussian_fit
+from ..vae.pointnet import load_classifier
+from . import hierarchy
+from .library import Library
+from .perturb import PerturbablePrograms
+from .refactored import refactor_corpus
 
 __all__ = ["BLOWN_UP", "SIGMAS", "perturbation_study", "perturbation_result", "plot"]
 
@@ -47,18 +58,6 @@ def perturbation_study(category: str, library, library_name: str, n: int = 500,
     Raises:
         ValueError: ``n`` or ``repeats`` below 1, a negative or non-finite sigma.
     """
-    # lazy: the classifier and the generation metrics (torch models) only when the study runs
-    import torch
-
-    from .. import corpus
-    from ..vae.genmetrics import (classifier_clouds, classifier_features, execute_samples, frechet_distance,
-                                  gaussian_fit)
-    from ..vae.pointnet import load_classifier
-    from . import hierarchy
-    from .library import Library
-    from .perturb import PerturbablePrograms
-    from .refactored import refactor_corpus
-
     if n < 1 or repeats < 1:
         raise ValueError(f"n and repeats must be at least 1, got n={n}, repeats={repeats}")
     bad = [s for s in sigmas if not (np.isfinite(s) and s >= 0)]
@@ -142,12 +141,10 @@ def perturbation_result(study: dict, command: str) -> dict:
 
 def plot(study: dict, path) -> None:
     """Write the FD-against-sigma plot (log scale, the draws' range shaded) as a PNG (needs matplotlib)."""
-    import matplotlib  # lazy: only for the plot
+    import matplotlib  # lazy: matplotlib is optional (the `bench` extra), only for the plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from shapeio.files import atomic_write
+    import matplotlib.pyplot as plt  # lazy: as above, once the backend is chosen
 
     fig, ax = plt.subplots(figsize=(5.5, 4), dpi=100)
     for m, style in zip(METHODS, ("o--", "s-")):

@@ -11,7 +11,12 @@ not compare. The Baseline Macros row is a VAE trained on programs refactored wit
 """
 from __future__ import annotations
 
+import time
 from typing import Callable, Mapping, Sequence
+
+from ..vae.commands import draw
+from ..vae.gentable import CHAMFER_POINTS, EVALUATE_TRIES, References, evaluate_generation, table_notes
+from ..vae.pointnet import PRETRAINED_SHA256, load_classifier
 
 __all__ = ["BASELINE_NOTE", "COLUMNS", "PAPER", "paper_rows", "generation_rows", "table2_result"]
 
@@ -40,13 +45,6 @@ def generation_rows(category: str, models: Mapping[str, object], n: int, seed: i
     """Sample ``n`` programs from each of ``models`` (row name -> a loaded VAE) and measure them against the
     category's references. Returns the :class:`~shapeprog.vae.gentable.GenerationRow` s and the settings
     :func:`table2_result` reports (the classifier's metadata and SHA, the sampling lines)."""
-    # lazy: the VAE, its sampling and the generation metrics (torch models) only when the table is computed
-    import time
-
-    from ..vae.commands import draw
-    from ..vae.gentable import EVALUATE_TRIES, References, evaluate_generation
-    from ..vae.pointnet import PRETRAINED_SHA256, load_classifier
-
     model, _, meta = load_classifier()
     refs = References.build(category, model, seed, log=log, classifier_sha=PRETRAINED_SHA256)
     rows, sampling = [], []
@@ -66,8 +64,6 @@ def generation_rows(category: str, models: Mapping[str, object], n: int, seed: i
 def table2_result(category: str, rows: Sequence, settings: Mapping, n: int, seed: int, command: str) -> dict:
     """The rows (ours, then the paper's) as a result file's content (:mod:`shapeio.results`)."""
     from shapeio.results import column, make_result  # lazy: loaded when a result is written
-
-    from ..vae.gentable import CHAMFER_POINTS, table_notes
 
     out = []
     for r in rows:

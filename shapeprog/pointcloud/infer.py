@@ -44,8 +44,9 @@ from ..metrics import chamfer, fscore
 from ..sampling import sample_surface
 from .data import TRAIN_POINTS
 from .normalize import CANONICAL_DIAGONAL, Transform, _corners_of, align_program, normalize, scale_program
-from .search import (SEARCH_POINTS, SEARCH_SCHEDULE, check_schedule, latent_search, parse_schedule, selection_chamfers,
-                     selection_target)
+from .retrieval import RetrievalIndex
+from .search import (SEARCH_POINTS, SEARCH_SCHEDULE, aligned_corners, check_schedule, latent_search, parse_schedule,
+                     selection_chamfers, selection_target)
 from ..physics import rootedness, stability as stable_fn
 from .selection import (FSCORE_THRESHOLD, SELECT_POINTS, UP_CANDIDATES, UP_RATIO, UpAxisWarning, orientation_scores,
                         selection_scores, warn_up_axis)
@@ -391,16 +392,12 @@ def default_index(category: str):
     and kept in the on-disk cache (:meth:`~shapeprog.pointcloud.retrieval.RetrievalIndex.from_corpus`; the first
     call per machine takes about a minute for chairs, later processes read it in about half a second), one per
     process."""
-    from .retrieval import RetrievalIndex
-
     return RetrievalIndex.from_corpus(category)
 
 
 def _robust(x, unit, t, model, fit, fit_steps, fit_lr, physics, stability, seed, search, search_schedule, index, k,
             subsets, polish_steps, select) -> Inference:
     """:func:`infer`'s robust method (see there)."""
-    from .search import aligned_corners
-
     if isinstance(subsets, bool) or not isinstance(subsets, int) or subsets < 1:
         raise ValueError(f"subsets must be an integer >= 1, got {subsets!r}")
     if isinstance(polish_steps, bool) or not isinstance(polish_steps, int) or polish_steps < 0:
@@ -436,8 +433,6 @@ def _robust(x, unit, t, model, fit, fit_steps, fit_lr, physics, stability, seed,
     all_codes = list(codes)
     scores = selection_scores(sampled(programs), target)
     if search:
-        from .search import SEARCH_SCHEDULE, check_schedule, parse_schedule
-
         schedule = SEARCH_SCHEDULE if search_schedule is None else (
             parse_schedule(search_schedule) if isinstance(search_schedule, str) else check_schedule(search_schedule))
         best = min(range(len(scores)), key=lambda i: (key(scores[i]), i))

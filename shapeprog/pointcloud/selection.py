@@ -37,7 +37,7 @@ def selection_scores(clouds, target: torch.Tensor, threshold: float = FSCORE_THR
     """``[fscore, cd]`` of each candidate cloud ``(M_i, 3)`` (None: no shape, scored ``[0, inf]``) against
     ``target`` ``(N, 3)``: the F-score at ``threshold`` (0-100) and the chamfer distance (unsquared, both
     directions, as :func:`shapeprog.metrics.chamfer` with ``eps = 0``), by k-d trees in float64."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # lazy: scipy.spatial costs import time
 
     tgt = np.asarray(torch.as_tensor(target, dtype=torch.float64))
     tree = cKDTree(tgt)
