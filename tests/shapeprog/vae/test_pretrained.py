@@ -111,3 +111,16 @@ def test_reconstruct_and_interpolate_write_corpus_precision():
     for d in [decode(vae, encode(vae, a))] + interpolate(vae, a, b, 3):
         assert shapeprog.parse(d.text) == d.program and shapeprog.to_text(d.program) == d.text
         assert_corpus_precision(d.text)
+
+
+def test_the_shipped_baseline_macros_model_speaks_the_shipped_baseline_library():
+    from pathlib import Path
+
+    from shapeprog.macros import Library
+    from shapeprog.vae.pretrained import load_model
+
+    root = Path(__file__).resolve().parents[3] / "shapeprog"
+    vae = load_model(root / "weights" / "vae_chair_baseline_macros.pt", category="chair")
+    lib = Library.from_text((root / "macros" / "libs" / "chair_baseline.txt").read_text())
+    assert vae.category == "chair" and vae.layout.library.to_text() == lib.to_text()
+    assert vae.meta["epoch"] == 44 and len(lib.macros) == 51
