@@ -30,7 +30,8 @@ BASELINE_NOTE = ("Baseline Macros: the VAE over the corpus refactored with the B
                  "(shapeprog/macros/libs/chair_baseline.txt), trained with the ShapeMOD model's recipe and epochs "
                  "(configs/shapeassembly/vae_chair_baseline_macros.yaml).")
 #: Table 2's columns (keys of :class:`shapeprog.vae.gentable.GenerationRow`), labels and digits.
-COLUMNS = (("rooted", "% rooted", 1), ("stable", "% stable", 1), ("fool", "% fool", 2), ("fd", "FD", 2),
+COLUMNS = (("rooted", "% rooted", 1), ("stable", "% stable (code rule, 2.5 %)", 1),
+           ("stable_paper", "% stable (paper rule, 10 %)", 1), ("fool", "% fool", 2), ("fd", "FD", 2),
            ("leaf_parts", "leaf parts", 2))
 
 
@@ -69,7 +70,8 @@ def table2_result(category: str, rows: Sequence, settings: Mapping, n: int, seed
     for r in rows:
         out.append({"method": r.name, "samples": f"{r.valid} of {r.samples}",
                     **{k: getattr(r, k) for k, _, _ in COLUMNS}})
-    for label, vals in paper_rows(category).items():
+    for label, vals in paper_rows(category).items():  # the paper's % stable is under its own 10 % rule
+        vals = {**vals, "stable": None, "stable_paper": vals.get("stable")}
         out.append({"method": label, "samples": "1,000 (paper)", **{k: vals.get(k) for k, _, _ in COLUMNS}})
     baseline = any(r.name == "Baseline Macros" for r in rows)
     if not baseline:

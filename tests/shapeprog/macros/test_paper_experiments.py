@@ -240,13 +240,18 @@ def test_table2_result_rows():
     from shapeprog.macros.table2 import table2_result
     from shapeprog.vae.gentable import GenerationRow
 
-    rows = [GenerationRow("No Macros", 10, 9, rooted=90.0, stable=80.0, fool=20.0, fd=30.0, leaf_parts=7.0),
+    rows = [GenerationRow("No Macros", 10, 9, rooted=90.0, stable=80.0, stable_paper=82.0, fool=20.0, fd=30.0,
+                          leaf_parts=7.0),
             GenerationRow("ShapeMOD", 10, 10, rooted=95.0, stable=85.0, fool=25.0, fd=28.0, leaf_parts=8.0)]
     res = table2_result("chair", rows, {"meta": {}, "sha": "ab" * 32, "sampling": ["x"], "fool_epochs": 12,
                                         "stability": True}, 10, 0, "cmd")
     assert [r["method"] for r in res["rows"]] == ["No Macros", "ShapeMOD", "paper (ShapeMOD Table 2): No Macros",
                                                   "paper (ShapeMOD Table 2): ShapeMOD", "Baseline Macros"]
     assert res["rows"][0]["samples"] == "9 of 10" and res["rows"][3]["fd"] == 16.7
+    # the paper's stability is under its 10 % rule: its column, not the code rule's
+    assert res["rows"][3]["stable_paper"] == 79.5 and res["rows"][3]["stable"] is None
+    assert res["rows"][0]["stable"] == 80.0 and [c["label"] for c in res["columns"]][3:5] == [
+        "% stable (code rule, 2.5 %)", "% stable (paper rule, 10 %)"]
     assert res["rows"][4]["rooted"] is None
     res = table2_result("storage", rows, {"meta": {}, "sha": None, "sampling": [], "fool_epochs": 12,
                                           "stability": False}, 10, 0, "cmd")
