@@ -141,7 +141,7 @@ def markdown(result: dict) -> str:
         values = [r.get(c["key"]) for r in result["rows"]]
         return any(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
 
-    lines = ["| " + " | ".join(c["label"] for c in cols) + " |",
+    lines = ["| " + " | ".join(re.sub(r"(?<!\\)\|", r"\\|", c["label"]) for c in cols) + " |",
              "|" + "|".join("---:" if numeric(c) else "---" for c in cols) + "|"]
     for r in result["rows"]:
         lines.append("| " + " | ".join(_cell(r.get(c["key"]), c) for c in cols) + " |")

@@ -261,7 +261,7 @@ def markdown_result(text: str, title: str, command: str) -> dict:
     for line in text.splitlines():
         s = line.strip()
         if s.startswith("|") and s.endswith("|"):
-            cells = [c.strip() for c in s.strip("|").split("|")]
+            cells = [c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", s[1:-1])]
             if header is None:
                 header = cells
                 for label in cells:

@@ -368,3 +368,18 @@ def test_a_worker_pool_of_one_is_this_process_and_a_larger_one_is_shut_down_on_l
         assert list(pool.map(abs, [-1, -2, 3])) == [1, 2, 3]
     with pytest.raises(RuntimeError, match="after shutdown"):
         pool.submit(abs, -4)
+
+
+def test_markdown_result_keeps_escaped_pipes_inside_a_cell():
+    from shapeio.results import markdown
+    from shapeprog.cli import markdown_result
+
+    text = "**T**\n\n| row | F | \\|L\\| | Num |\n|---|---:|---:|---:|\n| a \\| b | 1.5 | 27 | 9 |\n"
+    r = markdown_result(text, "x", "cmd")
+    assert [c["label"] for c in r["columns"]] == ["table", "row", "F", "|L|", "Num"]
+    assert r["rows"] == [{"table": "T", "row": "a | b", "f": 1.5, "l": 27, "num": 9}]
+    table = markdown(r).splitlines()
+    assert table[2] == "| table | row | F | \\|L\\| | Num |" and table[4] == "| T | a \\| b | 1.5 | 27 | 9 |"
+    # a label already written escaped is not escaped twice
+    r["columns"][3]["label"] = "\\|L\\|"
+    assert markdown(r).splitlines()[2] == "| table | row | F | \\|L\\| | Num |"
