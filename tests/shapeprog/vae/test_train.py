@@ -326,8 +326,9 @@ def test_reconstruction_hook_logs_fscore_and_images(tmp_path, monkeypatch):
 
 
 def test_shipped_configs_parse_through_train_py(train_main):
-    assert [p.name for p in CONFIGS] == ["vae_all.yaml", "vae_chair.yaml", "vae_chair_macros.yaml", "vae_storage.yaml",
-                                         "vae_storage_macros.yaml", "vae_table.yaml", "vae_table_macros.yaml"]
+    assert [p.name for p in CONFIGS] == ["vae_all.yaml", "vae_chair.yaml", "vae_chair_baseline_macros.yaml",
+                                         "vae_chair_macros.yaml", "vae_storage.yaml", "vae_storage_macros.yaml",
+                                         "vae_table.yaml", "vae_table_macros.yaml"]
     for path in CONFIGS:
         cat = path.stem.split("_")[1]
         run = path.stem
@@ -336,11 +337,15 @@ def test_shipped_configs_parse_through_train_py(train_main):
         cli = train_main(["--config", str(path)], run=False)
         assert isinstance(cli.model, VAEModule) and isinstance(cli.datamodule, VAEDataModule)
         assert cli.model.hparams.category == cli.datamodule.category == cat
-        assert cli.model.hparams.lr == 1e-4 and cli.model.hparams.eps == 1e-6 and cli.model.hparams.hidden_dim == 256
+        baseline = run == "vae_chair_baseline_macros"  # the shipped macro VAEs' recipe: 8 shapes a step, lr 3e-4
+        assert cli.model.hparams.lr == (3e-4 if baseline else 1e-4)
+        assert cli.model.hparams.eps == 1e-6 and cli.model.hparams.hidden_dim == 256
         assert cli.trainer.logger.log_dir.startswith(f"runs/{run}/")
         dirs = {cb.dirpath for cb in cli.trainer.checkpoint_callbacks}
         assert dirs == {str(ROOT / "runs" / run / "checkpoints")} or dirs == {f"runs/{run}/checkpoints"}
-        assert cli.model.hparams.library == cli.datamodule.library == (cat if run.endswith("_macros") else None)
+        library = ("shapeprog/macros/libs/chair_baseline.txt" if baseline else cat if run.endswith("_macros")
+                   else None)
+        assert cli.model.hparams.library == cli.datamodule.library == library
 
 
 def test_fit_and_resume_through_train_py(tmp_path, train_main, tiny_vae_config):
