@@ -105,6 +105,25 @@ def write_silhouettes(path: PathLike, data: Mapping[str, SilhouetteSplit], margi
     return atomic_write(path, lambda f: np.savez_compressed(f, **arrays))
 
 
+
+def open_npz(path, what: str):
+    """``(Path, NpzFile)`` of an ``.npz`` file of ``what`` (e.g. "a volume set"), read without pickles.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file: not a readable ``.npz`` archive.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    try:
+        z = np.load(p, allow_pickle=False)
+    except Exception as e:  # numpy and zipfile raise many types for damaged files
+        raise ValueError(f"{p}: not a readable .npz file ({type(e).__name__}: {e})") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ValueError(f"{p}: not {what}: a single array, not an .npz archive")
+    return p, z
+
 def read_silhouettes(path: PathLike, split: str) -> SilhouetteSplit:
     """Read one split of a silhouette file.
 
@@ -123,15 +142,7 @@ def read_silhouettes(path: PathLike, split: str) -> SilhouetteSplit:
             version, or arrays of the wrong dtype or shape.
     """
     check_split(split)
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: no such file")
-    try:
-        z = np.load(p, allow_pickle=False)
-    except Exception as e:  # numpy and zipfile raise many types for damaged files
-        raise ValueError(f"{p}: not a readable .npz file ({type(e).__name__}: {e})") from None
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise ValueError(f"{p}: not a silhouette set: a single array, not an .npz archive")
+    p, z = open_npz(path, "a silhouette set")
     key_images, key_ids, key_views = split_keys(split)
     try:
         with z:

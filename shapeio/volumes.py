@@ -21,7 +21,7 @@ from typing import Mapping, Union
 import numpy as np
 
 from .files import atomic_write
-from .silhouettes import SPLITS, check_split
+from .silhouettes import SPLITS, check_split, open_npz
 
 __all__ = ["FORMAT_VERSION", "MAX_SIZE", "SPLITS", "VolumeSplit", "pack_volumes", "unpack_volumes", "write_volumes",
            "read_volumes"]
@@ -116,15 +116,7 @@ def read_volumes(path: PathLike, split: str) -> VolumeSplit:
             version, or arrays of the wrong dtype or shape.
     """
     check_split(split)
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: no such file")
-    try:
-        z = np.load(p, allow_pickle=False)
-    except Exception as e:  # numpy and zipfile raise many types for damaged files
-        raise ValueError(f"{p}: not a readable .npz file ({type(e).__name__}: {e})") from None
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise ValueError(f"{p}: not a volume set: a single array, not an .npz archive")
+    p, z = open_npz(path, "a volume set")
     need = {f"{split}_volumes", f"{split}_ids", "size", "version"}
     try:
         with z:
