@@ -129,6 +129,23 @@ def split_ids(category: str) -> dict[str, list[int]]:
     return {"train": corpus.ids(category, "train"), "val": val[0::2], "test": val[1::2]}
 
 
+
+def execute_items(items) -> tuple[list, list, list]:
+    """Parse and execute corpus programs ``(split, category, id)`` in one batch: ``(kept, shapes, skipped)``,
+    ``kept`` the ``(split, "category/id")`` of each executed shape, ``skipped`` a line per program that did not
+    parse or is missing."""
+    progs, kept, skipped = [], [], []
+    for split, cat, i in items:
+        name = f"{cat}/{i}"
+        try:
+            progs.append(parse(corpus.read(cat, i), file=f"{name}.txt"))
+            kept.append((split, name))
+        except (ParseError, KeyError) as e:
+            skipped.append(f"{name}: {e}")
+    with torch.no_grad():
+        shapes = execute_batch(progs, dtype=torch.float64)
+    return kept, shapes, skipped
+
 def build(categories=("chair", "table", "storage"), size: int = SIZE, margin: int = MARGIN,
           limit: int | None = None, batch: int = 200, progress: bool = True) -> dict[str, Silhouettes]:
     """Execute the corpus programs and render their front and side silhouettes.
@@ -159,16 +176,8 @@ def build(categories=("chair", "table", "storage"), size: int = SIZE, margin: in
     bar = tqdm(total=len(jobs), desc="silhouettes", unit="shape", disable=not progress)
     for k in range(0, len(jobs), batch):
         chunk = jobs[k:k + batch]
-        progs, kept = [], []
-        for split, cat, i in chunk:
-            name = f"{cat}/{i}"
-            try:
-                progs.append(parse(corpus.read(cat, i), file=f"{name}.txt"))
-                kept.append((split, name))
-            except (ParseError, KeyError) as e:
-                skipped.append(f"{name}: {e}")
-        with torch.no_grad():
-            shapes = execute_batch(progs, dtype=torch.float64)
+        kept, shapes, failed = execute_items(chunk)
+        skipped += failed
         for (split, name), shape in zip(kept, shapes):
             try:
                 imgs = silhouettes(shape.corners, VIEWS, size, margin)

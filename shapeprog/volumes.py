@@ -22,17 +22,14 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-import torch
 from tqdm import tqdm
 
 from shapeio.volumes import SPLITS, VolumeSplit, pack_volumes, write_volumes
 
 from . import corpus
-from .execute import execute_batch
 from .geometry import numpy_corners
-from .lang import ParseError, parse
 from .parallel import ordered_map
-from .silhouettes import split_ids
+from .silhouettes import execute_items, split_ids
 
 __all__ = ["CATEGORIES", "MAX_SIZE", "ORDER_SEED", "VolumeSplit", "volume", "build", "write"]
 
@@ -102,16 +99,7 @@ def _voxelise_chunk(job) -> tuple[list, list, list[str]]:
     """One pool job: ``(items [(split, category, id)], size, margin)`` -> ``(kept [(split, name)], packed
     volumes, skipped messages)``."""
     items, size, margin = job
-    progs, kept, skipped = [], [], []
-    for split, cat, i in items:
-        name = f"{cat}/{i}"
-        try:
-            progs.append(parse(corpus.read(cat, i), file=f"{name}.txt"))
-            kept.append((split, name))
-        except (ParseError, KeyError) as e:
-            skipped.append(f"{name}: {e}")
-    with torch.no_grad():
-        shapes = execute_batch(progs, dtype=torch.float64)
+    kept, shapes, skipped = execute_items(items)
     done, packed = [], []
     for (split, name), shape in zip(kept, shapes):
         try:
