@@ -124,6 +124,43 @@ def open_npz(path, what: str):
         raise ValueError(f"{p}: not {what}: a single array, not an .npz archive")
     return p, z
 
+
+def read_set(path, kind: str, need: tuple[str, ...], version: int, missing: str,
+             default_size: int | None = None) -> tuple[Path, list[np.ndarray], int]:
+    """The entries ``need`` of a ``kind`` set's ``.npz`` (``"silhouette"``, ``"volume"``), its format checked.
+
+    ``version`` is the format version the caller reads; ``missing`` names the file in the error for absent
+    entries. With ``default_size``, a file without ``version`` / ``size`` entries is read as ``version`` /
+    ``default_size`` sided (the first silhouette files); without it both entries are required.
+
+    Returns:
+        ``(path, [the arrays of need], size)``.
+
+    Raises:
+        FileNotFoundError, ValueError: as :func:`open_npz`; a missing entry, another version, a size
+            outside ``1..MAX_SIZE``, or a damaged member (each naming the file).
+    """
+    p, z = open_npz(path, f"a {kind} set")
+    try:
+        with z:
+            keys = set(z.files)
+            required = set(need) | (set() if default_size else {"size", "version"})
+            if not required <= keys:
+                raise ValueError(f"{p}: not {missing}: missing {', '.join(sorted(required - keys))} "
+                                 f"(found {', '.join(sorted(keys)) or 'nothing'})")
+            found = _int_entry(z["version"], p, "version", 0, 2**31) if "version" in keys else version
+            if found != version:
+                raise ValueError(f"{p}: {kind} file version {found}; this reader reads version {version}")
+            size = _int_entry(z["size"], p, "size", 1, MAX_SIZE) if "size" in keys else default_size
+            return p, [z[k] for k in need], size
+    except ValueError as e:
+        if str(e).startswith(f"{p}: "):
+            raise
+        raise ValueError(f"{p}: corrupt .npz file ({e})") from None
+    except Exception as e:  # zipfile, zlib and numpy's readers raise many types for damaged members
+        raise ValueError(f"{p}: corrupt .npz file ({type(e).__name__}: {e})") from None
+
+
 def read_silhouettes(path: PathLike, split: str) -> SilhouetteSplit:
     """Read one split of a silhouette file.
 
@@ -142,26 +179,9 @@ def read_silhouettes(path: PathLike, split: str) -> SilhouetteSplit:
             version, or arrays of the wrong dtype or shape.
     """
     check_split(split)
-    p, z = open_npz(path, "a silhouette set")
     key_images, key_ids, key_views = split_keys(split)
-    try:
-        with z:
-            keys = set(z.files)
-            need = {key_images, key_ids, key_views}
-            if not need <= keys:
-                raise ValueError(f"{p}: not a silhouette set: missing {', '.join(sorted(need - keys))} "
-                                 f"(found {', '.join(sorted(keys)) or 'nothing'})")
-            version = _int_entry(z["version"], p, "version", 0, 2**31) if "version" in keys else FORMAT_VERSION
-            if version != FORMAT_VERSION:
-                raise ValueError(f"{p}: silhouette file version {version}; this reader reads version {FORMAT_VERSION}")
-            size = _int_entry(z["size"], p, "size", 1, MAX_SIZE) if "size" in keys else SIZE
-            raw, ids, views = z[key_images], z[key_ids], z[key_views]
-    except ValueError as e:
-        if str(e).startswith(f"{p}: "):
-            raise
-        raise ValueError(f"{p}: corrupt .npz file ({e})") from None
-    except Exception as e:  # zipfile, zlib and numpy's readers raise many types for damaged members
-        raise ValueError(f"{p}: corrupt .npz file ({type(e).__name__}: {e})") from None
+    p, (raw, ids, views), size = read_set(path, "silhouette", (key_images, key_ids, key_views), FORMAT_VERSION,
+                                          "a silhouette set", default_size=SIZE)
     if raw.dtype == np.uint8 and raw.ndim == 3 and raw.shape[1:] == (size, -(-size // 8)):
         images = np.unpackbits(raw, axis=-1, count=size).astype(bool)
     elif raw.dtype == np.bool_ and raw.ndim == 3 and raw.shape[1:] == (size, size):

@@ -21,7 +21,7 @@ from typing import Mapping, Union
 import numpy as np
 
 from .files import atomic_write
-from .silhouettes import SPLITS, check_split, open_npz
+from .silhouettes import SPLITS, check_split, read_set
 
 __all__ = ["FORMAT_VERSION", "MAX_SIZE", "SPLITS", "VolumeSplit", "pack_volumes", "unpack_volumes", "write_volumes",
            "read_volumes"]
@@ -64,13 +64,6 @@ def pack_volumes(volumes: np.ndarray) -> np.ndarray:
 def unpack_volumes(packed: np.ndarray, size: int) -> np.ndarray:
     """The inverse of :func:`pack_volumes` for volumes of side ``size``."""
     return np.unpackbits(packed, axis=-1, count=size).astype(bool)
-
-
-def _int_entry(value: np.ndarray, p: Path, name: str, low: int, high: int) -> int:
-    if np.ndim(value) != 0 or not np.issubdtype(np.asarray(value).dtype, np.integer) or not low <= int(value) <= high:
-        raise ValueError(f"{p}: the entry {name!r} is not an integer in [{low}, {high}]: "
-                         f"dtype {np.asarray(value).dtype}, shape {np.shape(value)}")
-    return int(value)
 
 
 def write_volumes(path: PathLike, data: Mapping[str, VolumeSplit], margin: int) -> Path:
@@ -116,25 +109,8 @@ def read_volumes(path: PathLike, split: str) -> VolumeSplit:
             version, or arrays of the wrong dtype or shape.
     """
     check_split(split)
-    p, z = open_npz(path, "a volume set")
-    need = {f"{split}_volumes", f"{split}_ids", "size", "version"}
-    try:
-        with z:
-            keys = set(z.files)
-            if not need <= keys:
-                raise ValueError(f"{p}: not a volume set with a {split} split: missing "
-                                 f"{', '.join(sorted(need - keys))} (found {', '.join(sorted(keys)) or 'nothing'})")
-            version = _int_entry(z["version"], p, "version", 0, 2**31)
-            if version != FORMAT_VERSION:
-                raise ValueError(f"{p}: volume file version {version}; this reader reads version {FORMAT_VERSION}")
-            size = _int_entry(z["size"], p, "size", 1, MAX_SIZE)
-            packed, ids = z[f"{split}_volumes"], z[f"{split}_ids"]
-    except ValueError as e:
-        if str(e).startswith(f"{p}: "):
-            raise
-        raise ValueError(f"{p}: corrupt .npz file ({e})") from None
-    except Exception as e:  # zipfile, zlib and numpy's readers raise many types for damaged members
-        raise ValueError(f"{p}: corrupt .npz file ({type(e).__name__}: {e})") from None
+    p, (packed, ids), size = read_set(path, "volume", (f"{split}_volumes", f"{split}_ids"), FORMAT_VERSION,
+                                      f"a volume set with a {split} split")
     want = (size, size, -(-size // 8))
     if packed.dtype != np.uint8 or packed.ndim != 4 or packed.shape[1:] != want:
         raise ValueError(f"{p}: {split}_volumes has dtype {packed.dtype} and shape {packed.shape}; expected "
