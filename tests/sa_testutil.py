@@ -29,3 +29,13 @@ def rotation(axis, angle, dtype=torch.float64):
     k = k / k.norm()
     K = torch.tensor([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]], dtype=dtype)
     return torch.eye(3, dtype=dtype) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def random_cuboids(g: torch.Generator, n: int, min_dim: float = 0.05) -> torch.Tensor:
+    """``(n, 8, 3)`` float64 corners of ``n`` randomly placed, sized (``min_dim`` to ``min_dim + 0.6``) and
+    rotated cuboids, drawn from ``g``."""
+    centers = torch.rand(n, 3, generator=g, dtype=torch.float64) - 0.5
+    dims = min_dim + torch.rand(n, 3, generator=g, dtype=torch.float64) * 0.6
+    axes = torch.stack([rotation(torch.randn(3, generator=g).tolist(), float(torch.rand(1, generator=g)) * 3)
+                        for _ in range(n)])
+    return cuboid_corners(centers, dims, axes)

@@ -7,11 +7,10 @@ import torch
 from scipy.spatial import ConvexHull
 
 from csgnet.shapes2d import load_silhouettes
-from sa_testutil import boxes, rotation
+from sa_testutil import boxes, random_cuboids
 from shapeprog import corpus, execute, parse
 from shapeprog import silhouettes as S
 from shapeprog.__main__ import main
-from shapeprog.geometry import cuboid_corners
 
 
 def rect(r0, r1, c0, c1, size=64):
@@ -62,11 +61,7 @@ def test_rotated_cuboids_match_their_convex_hull():
     g = torch.Generator().manual_seed(0)
     for trial in range(12):
         n = 1 + trial % 3
-        centers = torch.rand(n, 3, generator=g, dtype=torch.float64) - 0.5
-        dims = 0.05 + torch.rand(n, 3, generator=g, dtype=torch.float64) * 0.6
-        axes = torch.stack([rotation(torch.randn(3, generator=g).tolist(), float(torch.rand(1, generator=g)) * 3)
-                            for _ in range(n)])
-        corners = cuboid_corners(centers, dims, axes)
+        corners = random_cuboids(g, n, min_dim=0.05)
         for view in S.VIEWS:
             img = S.silhouette(corners, view)
             pts = S._project(corners.numpy(), view).reshape(-1, 2)

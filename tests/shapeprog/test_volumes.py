@@ -8,11 +8,10 @@ import pytest
 import torch
 
 from csgnet.shapes3d import load_volumes
-from sa_testutil import boxes, rotation
+from sa_testutil import boxes, random_cuboids
 from shapeprog import corpus, execute, parse
 from shapeprog import volumes as V
 from shapeprog.__main__ import main
-from shapeprog.geometry import cuboid_corners
 from shapeprog.sampling import inside_cuboids
 from shapeprog.silhouettes import split_ids
 
@@ -30,11 +29,7 @@ def test_rotated_cuboids_match_the_inside_test_at_voxel_centres():
     g = torch.Generator().manual_seed(0)
     for trial in range(6):
         n = 1 + trial % 3
-        centers = torch.rand(n, 3, generator=g, dtype=torch.float64) - 0.5
-        dims = 0.2 + torch.rand(n, 3, generator=g, dtype=torch.float64) * 0.6
-        axes = torch.stack([rotation(torch.randn(3, generator=g).tolist(), float(torch.rand(1, generator=g)) * 3)
-                            for _ in range(n)])
-        corners = cuboid_corners(centers, dims, axes)
+        corners = random_cuboids(g, n, min_dim=0.2)
         vol = V.volume(corners)
         flat = corners.reshape(-1, 3)
         lo, hi = flat.min(0).values, flat.max(0).values
