@@ -39,3 +39,14 @@ def random_cuboids(g: torch.Generator, n: int, min_dim: float = 0.05) -> torch.T
     axes = torch.stack([rotation(torch.randn(3, generator=g).tolist(), float(torch.rand(1, generator=g)) * 3)
                         for _ in range(n)])
     return cuboid_corners(centers, dims, axes)
+
+
+#: A one-block program with attach, reflect and translate lines.
+FLAT = """bbox = Cuboid(1.0, 1.0, 1.0, True)
+cube0 = Cuboid(0.2, 0.5, 0.2, True)
+cube1 = Cuboid(1.0, 0.1, 1.0, True)
+attach(cube0, bbox, 0.5, 0.0, 0.5, 0.1, 0.0, 0.1)
+attach(cube1, cube0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)
+reflect(cube0, X)
+translate(cube0, Z, 2, 0.8)
+"""

@@ -32,6 +32,7 @@ from shapeprog.vae.structure import structure_key
 from shapeprog.metrics import chamfer
 from shapeprog.vae.pointnet import (PRETRAINED, PRETRAINED_SHA256, PointNetCls, accuracy, fit_classifier,
                                 load_classifier, save_classifier, sha256_file)
+from sa_testutil import FLAT
 
 TINY = dict(widths=(8, 16, 32), head=(16, 8))
 
@@ -54,14 +55,6 @@ def val_shapes():
 # ---------------------------------------------------------------- leaf parts
 
 
-FLAT = """bbox = Cuboid(1.0, 1.0, 1.0, True)
-cube0 = Cuboid(0.2, 0.5, 0.2, True)
-cube1 = Cuboid(1.0, 0.1, 1.0, True)
-attach(cube0, bbox, 0.5, 0.0, 0.5, 0.1, 0.0, 0.1)
-attach(cube1, cube0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)
-reflect(cube0, X)
-translate(cube0, Z, 2, 0.8)
-"""
 
 
 def test_leaf_parts_of_a_hand_written_program():

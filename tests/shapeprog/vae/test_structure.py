@@ -10,15 +10,8 @@ from shapeprog.vae import load_pretrained, structural_novelty, structure_key
 from shapeprog.vae.smoothness import interpolation_smoothness, step_distances
 from shapeprog.vae.structure import (EDITABILITY_KEYS, edit_distance, editability, mean_editability, program_tokens,
                                      training_structures)
+from sa_testutil import FLAT
 
-FLAT = """bbox = Cuboid(1.0, 1.0, 1.0, True)
-cube0 = Cuboid(0.2, 0.5, 0.2, True)
-cube1 = Cuboid(1.0, 0.1, 1.0, True)
-attach(cube0, bbox, 0.5, 0.0, 0.5, 0.1, 0.0, 0.1)
-attach(cube1, cube0, 0.5, 0.0, 0.5, 0.5, 1.0, 0.5)
-reflect(cube0, X)
-translate(cube0, Z, 2, 0.8)
-"""
 
 
 def perturbed(program, rng, sigma=0.1):
