@@ -37,7 +37,7 @@ from .renderer import StackMachine, primitive_cache, unpack
 from .vocab import codes, vocabulary
 
 __all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled", "MAX_BEAM", "check_beam",
-           "PRECISIONS", "AUTO_BF16_DIMS", "native_bf16", "resolve_precision", "precision_context"]
+           "PRECISIONS", "AUTO_BF16_DIMS", "native_bf16", "resolve_precision"]
 
 _MODES = ("improved", "reference")
 MAX_BEAM = 256
@@ -78,13 +78,6 @@ def resolve_precision(precision: str, device="cpu", dim: int = 2) -> str:
         fast = dim in AUTO_BF16_DIMS and torch.device(device).type == "cpu" and native_bf16()
         return "bfloat16" if fast else "float32"
     return precision
-
-
-def precision_context(precision: str, device="cpu"):
-    """The context the model's layers run in for ``precision`` on ``device``: bfloat16 autocast, or nothing."""
-    if resolve_precision(precision, device) == "bfloat16":
-        return torch.autocast(torch.device(device).type, dtype=torch.bfloat16)
-    return contextlib.nullcontext()
 
 
 @dataclass
@@ -172,7 +165,9 @@ class _Rows:
 
     def _layers(self):
         """The context of the model's layers: bfloat16 autocast with ``precision="bfloat16"``."""
-        return precision_context("bfloat16", self.device) if self.bf16 else contextlib.nullcontext()
+        if not self.bf16:
+            return contextlib.nullcontext()  # float32: whatever autocast the caller runs under stays in force
+        return torch.autocast(self.device.type, dtype=torch.bfloat16)
 
     def scope(self):
         """The context of a whole decoding loop. With bfloat16, a disabled autocast around the steps' enabled
@@ -185,16 +180,12 @@ class _Rows:
 
     def logits(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``(logits (B, V), new GRU state (B, H))`` of the current rows, both float32."""
-        if not self.bf16:
-            if self.machine is not None:
-                return self.model.step(self._stack_features(), self.prev, self.h)
-            return self.model.step_projected(self.projected, self.prev, self.h, self.w_tok)
         with self._layers():
             if self.machine is not None:
                 logits, h = self.model.step(self._stack_features(), self.prev, self.h)
             else:
                 logits, h = self.model.step_projected(self.projected, self.prev, self.h, self.w_tok)
-        return logits.float(), h.float()  # the state carried between steps stays float32
+        return logits.float(), h.float()  # the state carried between steps stays float32 (a no-op in float32)
 
     def _stack_features(self) -> torch.Tensor:
         """CSGNetStack's encoder features of every row, computed only where they can differ: at the first
