@@ -288,9 +288,10 @@ def cmd_generation(args) -> int:
     shipped = Path(__file__).resolve().parents[1] / "weights"
     weights = args.weights or str(shipped / f"vae_{args.category}_macros.pt")
     baseline = args.baseline_weights or shipped / f"vae_{args.category}_baseline_macros.pt"
-    named = [("No Macros", args.base_weights), ("Baseline Macros", baseline), ("ShapeMOD", weights)]
-    if not args.baseline_weights and not Path(baseline).is_file():
-        named.pop(1)  # no shipped Baseline Macros model for this category: the table says so
+    # without a Baseline Macros model (none ships for this category) the table says so in its row
+    named = [("No Macros", args.base_weights),
+             *([("Baseline Macros", baseline)] if Path(baseline).is_file() or args.baseline_weights else []),
+             ("ShapeMOD", weights)]
     for name, path in named:
         try:
             models[name] = load_model(path, category=args.category) if path else load_pretrained(args.category)
