@@ -38,6 +38,12 @@ class Step:
     def text(self, prog: str, out: str) -> str:
         return " ".join([prog, *(shlex.quote(a.replace("{out}", out)) for a in self.argv)])
 
+    @classmethod
+    def of(cls, words: str, result: bool = True, creates: str | None = None) -> "Step":
+        """A step from its command's words (split on spaces), followed by ``--json {out} --overwrite`` when it
+        writes the experiment's result file (``result``)."""
+        return cls((*words.split(), *(("--json", "{out}", "--overwrite") if result else ())), creates)
+
 
 @dataclass(frozen=True)
 class Experiment:

@@ -37,3 +37,12 @@ def test_the_docs_list_of_shapeprog_experiments_is_the_code_list():
     rows = read_result(ROOT / "docs" / "results" / "shapeassembly" / "experiments.json")["rows"]
     assert [(r["id"], r["status"], r["description"], r["why"]) for r in rows] == [
         (e.id, e.status, e.description, e.why) for e in SHAPEPROG]
+
+
+def test_a_step_from_its_words():
+    from shapeio.experiments import Step
+
+    assert Step.of("vae novelty --category chair -n 5").argv == (
+        "vae", "novelty", "--category", "chair", "-n", "5", "--json", "{out}", "--overwrite")
+    assert Step.of("pointcloud make-clouds --out c", result=False, creates="c/x.npz") == Step(
+        ("pointcloud", "make-clouds", "--out", "c"), "c/x.npz")

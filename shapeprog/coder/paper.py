@@ -19,7 +19,7 @@ _NOT_RUN = ("built and quick-checked in parts; the full run has not written its 
 
 def _coder(words: str) -> Step:
     """A ``coder`` command (its words after ``coder``) writing its figures to the result file, quietly."""
-    return Step(("coder", *words.split(), "--quiet", "--overwrite", "--json", "{out}"))
+    return Step.of(f"coder {words} --quiet")
 
 
 EXPERIMENTS: tuple[Experiment, ...] = (

@@ -4,7 +4,7 @@ Each entry names the commands that rebuild its table and the result file they wr
 """
 from __future__ import annotations
 
-from shapeio.experiments import Experiment, Step  # noqa: F401  (Step: the entries' commands)
+from shapeio.experiments import Experiment, Step
 
 __all__ = ["EXPERIMENTS", "RESULTS"]
 
@@ -24,15 +24,11 @@ SMOOTHNESS_SEQUENCES, SMOOTHNESS_STEPS = 50, 100
 _TABLE7_WEIGHTS = "shapeprog/weights/pointcloud_latent_chair.pt"
 
 
-def step(words: str, result: bool = True, creates: str | None = None) -> Step:
-    """A command (its words after ``python -m shapeprog``), writing its figures to the result file unless
-    ``result`` is False."""
-    return Step((*words.split(), *(("--json", "{out}", "--overwrite") if result else ())), creates=creates)
-
-_GENERATION = step(f"vae evaluate --category chair table storage -n {GENERATION_SAMPLES} --max-tries 10 1 "
-                   "--paper-decoding --workers 2 --quiet")
-_GENERATION_QUICK = step("vae evaluate --category storage -n 30 --max-tries 10 1 --paper-decoding --no-ground-truth "
-                         "--no-stability --fool-epochs 2 --fool-average-last 1 --candidates 4 --quiet")
+_GENERATION = Step.of(f"vae evaluate --category chair table storage -n {GENERATION_SAMPLES} --max-tries 10 1 "
+                      "--paper-decoding --workers 2 --quiet")
+_GENERATION_QUICK = Step.of("vae evaluate --category storage -n 30 --max-tries 10 1 --paper-decoding "
+                            "--no-ground-truth --no-stability --fool-epochs 2 --fool-average-last 1 --candidates 4 "
+                            "--quiet")
 _GENERATION_RESULT = f"{RESULTS}/generation.json"
 _GENERATION_SCALE = (f"{GENERATION_SAMPLES} samples per category and decoding (the paper: 1,000), the val split as "
                      "ground truth, % fool with 12 epochs (the paper: 300)")
@@ -49,8 +45,8 @@ EXPERIMENTS: tuple[Experiment, ...] = (
         "sa-t3", "done", "Table 3: editability (lines per program, share of squeeze / reflect / translate lines and "
         "of the parts they make) of the val split and of VAE samples",
         result=f"{RESULTS}/editability.json",
-        steps=(step(f"vae editability --category chair table storage -n {NOVELTY_SAMPLES}"),),
-        quick=(step("vae editability --category storage -n 30"),),
+        steps=(Step.of(f"vae editability --category chair table storage -n {NOVELTY_SAMPLES}"),),
+        quick=(Step.of("vae editability --category storage -n 30"),),
         scale=f"the val split and {NOVELTY_SAMPLES} samples per category; the paper's figures are not in the "
               "specification"),
     Experiment(
@@ -64,29 +60,30 @@ EXPERIMENTS: tuple[Experiment, ...] = (
     Experiment(
         "sa-t6", "done", "Table 6: interpolation smoothness (geometric and program steps between random latents)",
         result=f"{RESULTS}/smoothness.json",
-        steps=(step(f"vae smoothness --category chair table storage --sequences {SMOOTHNESS_SEQUENCES} "
-                    f"--steps {SMOOTHNESS_STEPS} --quiet"),),
-        quick=(step("vae smoothness --category storage --sequences 3 --steps 20 --quiet"),),
+        steps=(Step.of(f"vae smoothness --category chair table storage --sequences {SMOOTHNESS_SEQUENCES} "
+                       f"--steps {SMOOTHNESS_STEPS} --quiet"),),
+        quick=(Step.of("vae smoothness --category storage --sequences 3 --steps 20 --quiet"),),
         scale=f"{SMOOTHNESS_SEQUENCES} sequences of {SMOOTHNESS_STEPS} steps per category (the paper: 100 of 100); "
               "the paper's figures are not in the specification"),
     Experiment(
         "sa-t7", "done", "Table 7: point cloud to program on the chair val split (latent projection, optimised program, cuboids)",
         result=f"{RESULTS}/table7_chair.json",
-        steps=(step(f"pointcloud make-clouds --category chair --workers 2 --out {CLOUDS}", result=False,
-                    creates=f"{CLOUDS}/chair_clouds.npz"),
-               step(f"pointcloud tables --category chair --clouds {CLOUDS} --weights {_TABLE7_WEIGHTS} "
-                    f"--limit {TABLE7_SHAPES} --workers 2 --quiet --out {CLOUDS}/table7_chair.md")),
-        quick=(step(f"pointcloud make-clouds --category chair --limit 30 --out {CLOUDS_QUICK}", result=False,
-                    creates=f"{CLOUDS_QUICK}/chair_clouds.npz"),
-               step(f"pointcloud tables --category chair --clouds {CLOUDS_QUICK} --weights {_TABLE7_WEIGHTS} "
-                    f"--limit 10 --steps 20 --no-retrieval --no-stability --quiet --out {CLOUDS_QUICK}/table7_chair.md")),
+        steps=(Step.of(f"pointcloud make-clouds --category chair --workers 2 --out {CLOUDS}", result=False,
+                       creates=f"{CLOUDS}/chair_clouds.npz"),
+               Step.of(f"pointcloud tables --category chair --clouds {CLOUDS} --weights {_TABLE7_WEIGHTS} "
+                       f"--limit {TABLE7_SHAPES} --workers 2 --quiet --out {CLOUDS}/table7_chair.md")),
+        quick=(Step.of(f"pointcloud make-clouds --category chair --limit 30 --out {CLOUDS_QUICK}", result=False,
+                       creates=f"{CLOUDS_QUICK}/chair_clouds.npz"),
+               Step.of(f"pointcloud tables --category chair --clouds {CLOUDS_QUICK} --weights {_TABLE7_WEIGHTS} "
+                       f"--limit 10 --steps 20 --no-retrieval --no-stability --quiet "
+                       f"--out {CLOUDS_QUICK}/table7_chair.md")),
         scale=f"the first {TABLE7_SHAPES} of the 496 val-split chairs, noisy 2,048-point cuboid-surface clouds, "
               "150 fitting steps (the paper: every val chair, PartNet mesh samples)"),
     Experiment(
         "sa-novelty", "done", "Section 7.1.3: structural novelty of samples and of the val split against the "
         "training split",
         result=f"{RESULTS}/novelty.json",
-        steps=(step(f"vae novelty --category chair table storage -n {NOVELTY_SAMPLES}"),),
-        quick=(step("vae novelty --category storage -n 50"),),
+        steps=(Step.of(f"vae novelty --category chair table storage -n {NOVELTY_SAMPLES}"),),
+        quick=(Step.of("vae novelty --category storage -n 50"),),
         scale=f"{NOVELTY_SAMPLES} samples per category, as the paper; its figures are not in the specification"),
 )
