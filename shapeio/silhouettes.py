@@ -71,6 +71,20 @@ def split_keys(split: str) -> tuple[str, str, str]:
     return f"{split}_images", f"{split}_ids", f"{split}_views"
 
 
+def set_header(path, size: int | None, margin: int, version: int, what: str) -> dict:
+    """The entries every set file starts with (``size``, ``margin``, ``version``); ``size`` None: no split.
+
+    Raises:
+        ValueError: naming ``path``: no split, or ``what`` (``"images"``, ``"volumes"``) of a side outside
+            ``1..MAX_SIZE``.
+    """
+    if size is None:
+        raise ValueError(f"{path}: no split to write")
+    if not 1 <= size <= MAX_SIZE:
+        raise ValueError(f"{path}: {what} of side {size}; at most MAX_SIZE = {MAX_SIZE} are written (and read)")
+    return {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(version)}
+
+
 def write_silhouettes(path: PathLike, data: Mapping[str, SilhouetteSplit], margin: int) -> Path:
     """Write a silhouette set as a compressed ``.npz``, atomically.
 
@@ -85,12 +99,8 @@ def write_silhouettes(path: PathLike, data: Mapping[str, SilhouetteSplit], margi
     Raises:
         ValueError: naming ``path``: no split, an unknown split, or arrays of mismatched shapes.
     """
-    if not data:
-        raise ValueError(f"{path}: no split to write")
-    size = next(iter(data.values())).images.shape[-1]
-    if not 1 <= size <= MAX_SIZE:
-        raise ValueError(f"{path}: images of side {size}; at most MAX_SIZE = {MAX_SIZE} are written (and read)")
-    arrays = {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(FORMAT_VERSION)}
+    size = next(iter(data.values())).images.shape[-1] if data else None
+    arrays = set_header(path, size, margin, FORMAT_VERSION, "images")
     for split, s in data.items():
         check_split(split)
         images = np.asarray(s.images)

@@ -21,7 +21,7 @@ from typing import Mapping, Union
 import numpy as np
 
 from .files import atomic_write
-from .silhouettes import SPLITS, check_split, read_set
+from .silhouettes import SPLITS, check_split, read_set, set_header
 
 __all__ = ["FORMAT_VERSION", "MAX_SIZE", "SPLITS", "VolumeSplit", "pack_volumes", "unpack_volumes", "write_volumes",
            "read_volumes"]
@@ -67,26 +67,12 @@ def unpack_volumes(packed: np.ndarray, size: int) -> np.ndarray:
 
 
 def write_volumes(path: PathLike, data: Mapping[str, VolumeSplit], margin: int) -> Path:
-    """Write a volume set as a compressed ``.npz``, atomically.
-
-    Args:
-        path: the output file.
-        data: ``{split: VolumeSplit}`` (any of ``train``, ``val``, ``test``), all of one size.
-        margin: the fitting margin the volumes were drawn with (stored for readers).
-
-    Returns:
-        The path written.
-
-    Raises:
-        ValueError: naming ``path``: no split, an unknown split, or arrays of mismatched shapes.
-    """
-    if not data:
-        raise ValueError(f"{path}: no split to write")
-    size = next(iter(data.values())).size
-    if not 1 <= size <= MAX_SIZE:
-        raise ValueError(f"{path}: volumes of side {size}; at most MAX_SIZE = {MAX_SIZE} are written (and read)")
+    """Write ``{split: VolumeSplit}`` (all of one size) and the fitting ``margin`` they were drawn with as a
+    compressed ``.npz``, atomically, as :func:`shapeio.silhouettes.write_silhouettes` writes images; returns the
+    path. Raises ``ValueError`` naming ``path`` for no split, an unknown split or mismatched arrays."""
+    size = next(iter(data.values())).size if data else None
+    arrays = set_header(path, size, margin, FORMAT_VERSION, "volumes")
     want = (size, size, -(-size // 8))
-    arrays = {"size": np.int64(size), "margin": np.int64(margin), "version": np.int64(FORMAT_VERSION)}
     for split, s in data.items():
         check_split(split)
         packed = np.asarray(s.packed)
