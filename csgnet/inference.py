@@ -351,7 +351,7 @@ class Parsed:
 
 def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, beam: int = 10,
                 select: str = "match", refine: bool = True, rule: str = "short", refine_iters: int | None = None,
-                constrained: bool = True, graft: bool = True, extend: bool = True,
+                constrained: bool = True, graft: bool = True, extend: bool = True, fit: bool = True,
                 precision: str = INFER_PRECISION) -> Parsed:
     """Infer a program for one shape the way ``python -m csgnet parse --select match --refine`` does.
 
@@ -370,6 +370,8 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
             (:func:`csgnet.rewrite.graft`).
         extend: with the ``"short"`` rule, also try adding any primitive of the vocabulary
             (:func:`csgnet.rewrite.extend`).
+        fit: with the ``"short"`` rule, also try primitives fitted to the parts the choice gets wrong, and
+            to the shape from nothing (:func:`csgnet.rewrite.fit`).
         precision: the decoder's arithmetic (:func:`infer`; default :data:`INFER_PRECISION`).
     """
     resolve_precision(precision)  # a bad name is refused before the shape is read
@@ -398,6 +400,6 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
             if is_valid(p):
                 beams.append(p)
         refined = refine_guarded(program, beams, shape, rule=rule, maxiter=refine_iters, use_graft=graft,
-                                 use_extend=extend)
+                                 use_extend=extend, use_fit=fit)
         program = refined.program
     return Parsed(program, decoded, refined, shape, frame, len(beams) if refined is not None else 0)

@@ -32,7 +32,7 @@ from .lang import Draw, Program, is_valid
 from .metrics import CHAMFER_PENALTY
 from .primitives import MAX_PARAMS, SIZE, primitive
 from .renderer import draw_packed
-from .rewrite import choose, extend, graft, prune
+from .rewrite import choose, extend, fit, graft, prune
 from .score import _check_program, _check_target, program_scores
 from .vocab import codes
 
@@ -454,7 +454,8 @@ class Refined:
 
 def refine_guarded(start: Program | str, programs: Sequence[Program | str], target, rule: str = "short",
                    maxiter: int | None = None, max_iou_drop: float = MAX_IOU_DROP,
-                   penalty: float | None = None, use_graft: bool = True, use_extend: bool = True) -> Refined:
+                   penalty: float | None = None, use_graft: bool = True, use_extend: bool = True,
+                   use_fit: bool = True) -> Refined:
     """Refine candidates and decide what a parser should write.
 
     2D candidates are refined by chamfer (the paper's objective), 3D ones by IoU.
@@ -479,6 +480,9 @@ def refine_guarded(start: Program | str, programs: Sequence[Program | str], targ
         use_extend: the ``"short"`` rule also tries adding any primitive of the vocabulary
             (:func:`csgnet.rewrite.extend`; one to two seconds per 3D shape on a CPU core, and 217 MB for the
             3D primitives' canvases, drawn once per process) after grafting.
+        use_fit: the ``"short"`` rule also fits primitives to the parts its choice gets wrong, and to the
+            target from nothing (:func:`csgnet.rewrite.fit`; parts thinner or larger than the grammar's
+            primitives), refines each fitted program again and keeps one if it scores better.
 
     Returns:
         A :class:`Refined` with the chosen program and both programs' IoU and chamfer.
@@ -499,14 +503,21 @@ def refine_guarded(start: Program | str, programs: Sequence[Program | str], targ
                 if c not in cands:
                     cands.append(c)
         chosen = cands[choose(cands, target, penalty)[0]]
+        changed = []
         if use_graft or use_extend:
             grafted = graft(chosen, cands, target, penalty) if use_graft else chosen
             if use_extend:
                 grafted = extend(grafted, target, penalty)
-            if grafted != chosen:
-                polished = refine_each([grafted], target, maxiter=maxiter)[0].program
-                more = [grafted, polished, prune(polished, target, penalty)]
-                chosen = ([chosen] + more)[choose([chosen] + more, target, penalty)[0]]
+            changed.append(grafted)
+        if use_fit:
+            changed += [fit(chosen, target, penalty), fit(None, target, penalty)]
+        more = []
+        for p in changed:
+            if p is not None and p != chosen and p not in more:
+                polished = refine_each([p], target, maxiter=maxiter)[0].program
+                more += [p, polished, prune(polished, target, penalty)]
+        if more:
+            chosen = ([chosen] + more)[choose([chosen] + more, target, penalty)[0]]
     elif rule == "guarded":
         before_iou = program_scores([start, result.program], target)
         chosen = start if before_iou[1][0] < before_iou[0][0] - max_iou_drop else result.program

@@ -7,6 +7,10 @@ operator it tries keeping only the left or only the right operand, and takes the
 ``IoU - penalty * primitives`` most, until no change raises it. :func:`graft` goes the other way: it
 adds a primitive of another candidate (e.g. another beam) by union, intersection or difference where
 that raises the same objective, and :func:`extend` searches the whole vocabulary for such a primitive.
+:func:`fit` is not bound to the vocabulary: it fits primitives to the parts of the shape a program misses
+(added by union) or covers wrongly (taken away by difference), sized from each part's bounding box, so
+that parts thinner or larger than the grammar's primitives (a table's 5-voxel legs, its 56-voxel top)
+can be drawn; an axis-aligned box of any size is the intersection of two squares or cubes.
 :func:`choose` picks, among candidate programs, the one with the
 highest ``IoU - penalty * primitives`` (ties: the earlier).
 
@@ -24,10 +28,12 @@ Example:
 from __future__ import annotations
 
 from functools import lru_cache
+from math import trunc
 from typing import Sequence
 
 import numpy as np
 import torch
+from scipy import ndimage
 
 from . import render
 from .lang import OPERATORS, Draw, Op, Program, is_valid, parse
@@ -36,7 +42,8 @@ from .score import _check_target, program_scores
 from .vocab import vocabulary
 
 __all__ = ["LENGTH_PENALTY", "MAX_PRUNE_ROUNDS", "MAX_GRAFT_ROUNDS", "MAX_EXTEND_ROUNDS", "MAX_GRAFT_DRAWS",
-           "MAX_VAL_IOU_COST", "objective", "removals", "prune", "graft", "extend", "choose"]
+           "MAX_FIT_ROUNDS", "MAX_FIT_DRAWS", "MAX_FIT_PARTS", "MAX_VAL_IOU_COST", "objective", "removals",
+           "prune", "graft", "extend", "part_candidates", "fit", "choose"]
 
 LENGTH_PENALTY = {2: 0.02, 3: 0.01}
 """IoU given up per primitive saved (by dimension), chosen on the validation split (module docstring)."""
@@ -53,6 +60,13 @@ MAX_GRAFT_ROUNDS = 3
 """Primitives :func:`graft` adds at most."""
 MAX_GRAFT_DRAWS = 8
 """The most primitives a grafted program may reach (twice the longest 3D training program's)."""
+MAX_FIT_ROUNDS = 8
+"""Changes :func:`fit` makes at most (each adds one part: one primitive, or two for a box)."""
+MAX_FIT_DRAWS = 16
+"""The most primitives a fitted program may reach."""
+MAX_FIT_PARTS = 8
+"""The largest parts (connected components of what is missing and of what is wrong) :func:`fit` tries
+per round."""
 
 
 def _program(program: Program | str, dim: int) -> Program:
@@ -217,4 +231,116 @@ def extend(program: Program | str, target, penalty: float | None = None, max_rou
             break
         best = Program(best.tokens + (vocab._draws[top[1]], Op(top[2])), dim)
         best_score = objective(_scores([best], t)[0], best, penalty)
+    return best
+
+
+def _box(lo: np.ndarray, hi: np.ndarray, dim: int) -> list[Draw]:
+    """Two squares (2D) or cubes (3D) whose intersection is the box ``[lo, hi]`` (inclusive cell
+    indices, by axis: row, column[, depth]): the first square or cube shares the box's low corner, the
+    second its high corner, and both reach past the other end."""
+    ext = int((hi - lo).max()) + 1
+    if dim == 3:
+        q = ext // 2  # cu(x, y, z, r) covers x - q .. x + q with q = (r - 1) // 2; edge 2q + 1 >= ext
+        return [Draw("u", tuple(int(v) for v in lo + q) + (2 * q + 1,)),
+                Draw("u", tuple(int(v) for v in hi - q) + (2 * q + 1,))]
+    # s(x, y, r) covers rows trunc(y -+ r * 1.412 / 2) (x: columns): the smallest r whose integer centres
+    # put one square's low edges and the other's high edges on the box's
+    for r in range(int(np.ceil(ext / 1.412)), int(np.ceil(ext / 1.412)) + 8):
+        half = r * 1.412 / 2
+        if trunc(half) * 2 + 1 < ext:
+            continue
+        a = [next((c for c in range(int(v + half) - 2, int(v + half) + 3) if trunc(c - half) == v), None)
+             for v in (lo[1], lo[0])]
+        b = [next((c for c in range(int(v - half) - 2, int(v - half) + 3) if trunc(c + half) == v), None)
+             for v in (hi[1], hi[0])]
+        if None not in a + b and all(trunc(c + half) >= h for c, h in zip(a, (hi[1], hi[0]))) \
+                and all(trunc(c - half) <= v for c, v in zip(b, (lo[1], lo[0]))):
+            return [Draw("s", (a[0], a[1], r)), Draw("s", (b[0], b[1], r))]
+    raise AssertionError(f"no square pair draws the box {lo}..{hi}")  # pragma: no cover - every box has one
+
+
+def part_candidates(mask: np.ndarray) -> list[list[Draw]]:
+    """Primitives sized to one part (a bool image or volume holding one connected component): its
+    bounding box (two squares or cubes, :func:`_box`), a circle or, in 3D, a cylinder (along the last
+    axis) and a sphere, centred on the box and sized to it. Each candidate is a list of draws whose
+    intersection draws the part."""
+    dim = mask.ndim
+    idx = np.argwhere(mask)
+    lo, hi = idx.min(0), idx.max(0)
+    ext = hi - lo + 1
+    mid = np.rint((lo + hi) / 2).astype(int)
+    out = [_box(lo, hi, dim)]
+    if dim == 2:  # c(x, y, r): cells with distance < r; x along columns
+        out.append([Draw("c", (int(mid[1]), int(mid[0]), max(1, int(np.ceil(ext.max() / 2)))))])
+    else:  # cy(x, y, z, r, h): distance^2 <= (r - 1)^2 across, |dz| <= (h - 1) // 2; sp: distance <= r - 1
+        r_across = int(np.ceil(ext[:2].max() / 2)) + 1
+        out.append([Draw("y", (int(mid[0]), int(mid[1]), int(mid[2]), r_across, int(ext[2]) | 1))])
+        out.append([Draw("p", tuple(int(v) for v in mid) + (int(np.ceil(ext.max() / 2)) + 1,))])
+    return out
+
+
+def _parts(residual: np.ndarray, limit: int, smallest: int) -> list[np.ndarray]:
+    """The ``limit`` largest connected components of ``residual`` with at least ``smallest`` cells."""
+    labels, n = ndimage.label(residual)
+    if n == 0:
+        return []
+    sizes = np.bincount(labels.ravel())[1:]
+    order = [i + 1 for i in np.argsort(-sizes, kind="stable")[:limit] if sizes[i] >= smallest]
+    return [labels == k for k in order]
+
+
+def _with_part(program: Program | None, part: list[Draw], op: str, dim: int) -> Program:
+    tokens: tuple = tuple(part[:1]) + tuple(t for d in part[1:] for t in (d, Op("*")))
+    if program is None:
+        return Program(tokens, dim)
+    return Program(program.tokens + tokens + (Op(op),), dim)
+
+
+def fit(program: Program | str | None, target, penalty: float | None = None, max_rounds: int = MAX_FIT_ROUNDS,
+        max_draws: int = MAX_FIT_DRAWS, max_parts: int = MAX_FIT_PARTS) -> Program | None:
+    """Add parts fitted to what ``program`` gets wrong while that raises :func:`objective`.
+
+    Each round finds the connected components of the target cells the program misses and of the cells it
+    draws outside the target (the ``max_parts`` largest of each that could pay for a primitive), tries
+    every :func:`part_candidates` of each, by union for a missed part and by difference for a wrong one,
+    and keeps the best change; it stops when no change raises the objective, after ``max_rounds`` changes,
+    or at ``max_draws`` primitives. The parts' parameters come from their bounding boxes and may lie
+    outside the grammar's ranges (refinement polishes them).
+
+    Args:
+        program: a program or its text, or ``None`` to fit from nothing (the first part is the program).
+        target: ``(64, 64)`` image or ``(64, 64, 64)`` volume (non-zero = on).
+        penalty: IoU per primitive (default ``LENGTH_PENALTY`` of the dimension).
+
+    Returns:
+        The fitted program; ``program`` itself when it is invalid or nothing helps (``None`` when fitting
+        from nothing finds no part).
+    """
+    t = _check_target(target).astype(bool)
+    dim = t.ndim
+    penalty = LENGTH_PENALTY[dim] if penalty is None else float(penalty)
+    best = None if program is None else _program(program, dim)
+    if best is not None and not is_valid(best):
+        return best
+    best_score = 0.0 if best is None else objective(_scores([best], t)[0], best, penalty)
+    for _ in range(int(max_rounds)):
+        drawn = np.zeros_like(t) if best is None else render(best, dim)[0].astype(bool)
+        union = int((drawn | t).sum())
+        smallest = max(1, int(penalty * union))  # a part below this cannot pay for its primitive
+        cands: list[Program] = []
+        for residual, op in ((t & ~drawn, "+"), (drawn & ~t, "-")):
+            if best is None and op == "-":
+                continue
+            for part in _parts(residual, max_parts, smallest):
+                for draws in part_candidates(part):
+                    n = len(draws) + (0 if best is None else len(best.draws))
+                    if n <= max_draws:
+                        cands.append(_with_part(best, draws, op, dim))
+        if not cands:
+            break
+        scored = [objective(s, c, penalty) for s, c in zip(_scores(cands, t), cands)]
+        i = max(range(len(cands)), key=lambda j: (scored[j], -j))
+        if scored[i] <= best_score:
+            break
+        best, best_score = cands[i], scored[i]
     return best

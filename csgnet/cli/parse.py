@@ -74,7 +74,7 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
     dim = shape.ndim
     parsed = parse_shape(shape, model=model, beam=args.beam, select=args.select, refine=args.refine,
                          rule=args.refine_rule, refine_iters=args.refine_iters, constrained=not args.unconstrained,
-                         graft=not args.no_graft, extend=not args.no_extend,
+                         graft=not args.no_graft, extend=not args.no_extend, fit=not args.no_fit,
                          precision=args.precision or INFER_PRECISION)
     res, ref, program = parsed.decoded, parsed.refined, parsed.program
     line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
@@ -227,6 +227,9 @@ def register(sub) -> None:
                    help="with the short rule, do not try adding other beams' primitives to the chosen program")
     p.add_argument("--no-extend", action="store_true",
                    help="with the short rule, do not search the whole vocabulary for primitives to add")
+    p.add_argument("--no-fit", action="store_true",
+                   help="with the short rule, do not fit primitives of any size to the parts the program gets "
+                        "wrong (csgnet.rewrite.fit)")
     p.add_argument("--model", choices=("csgnet", "csgnetstack"), default=None,
                    help="the shipped model to use (default: the strongest of each dimension, CSGNetStack in 2D and "
                    "CSGNet in 3D; docs/csgnet.md)")

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import csgnet
-from csgnet.lang import parse
+from csgnet.lang import Op, Program, parse
 from csgnet.refinement import refine_guarded
 from csgnet.score import program_scores
 from csgnet.rewrite import LENGTH_PENALTY, choose, objective, prune, removals
@@ -87,10 +87,10 @@ def test_graft_adds_a_donor_primitive_only_where_it_pays():
 def test_short_rule_grafts_a_missing_part_from_another_beam():
     target = csgnet.render("c(20,32,12)s(44,32,12)+")[0]
     without = refine_guarded("c(20,32,12)", ["c(20,32,12)", "s(44,32,12)c(8,8,8)*"], target, maxiter=0,
-                             use_graft=False, use_extend=False)
+                             use_graft=False, use_extend=False, use_fit=False)
     assert without.program.text() == "c(20,32,12)"
     grafted = refine_guarded("c(20,32,12)", ["c(20,32,12)", "s(44,32,12)c(8,8,8)*"], target, maxiter=0,
-                             use_extend=False)
+                             use_extend=False, use_fit=False)
     assert grafted.program.text() == "c(20,32,12)s(44,32,12)+" and grafted.after[0] == 1.0
 
 
@@ -104,3 +104,71 @@ def test_extend_finds_the_missing_primitive_in_the_whole_vocabulary():
     assert extend("s(16,16,12)", target, penalty=1.0).text() == "s(16,16,12)"  # nothing pays at that price
     vol = csgnet.render("sp(32,32,32,16)cy(32,32,24,8,28)-", dim=3)[0]
     assert extend("sp(32,32,32,16)", vol).text() == "sp(32,32,32,16)cy(32,32,24,8,28)-"
+
+
+def test_two_cubes_draw_any_box_exactly():
+    from csgnet.rewrite import _box
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        lo = rng.integers(0, 40, size=3)
+        hi = lo + rng.integers(0, 24, size=3)
+        a, b = _box(lo, hi, 3)
+        vol = csgnet.render(Program((a, b, Op("*")), 3).text(), 3)[0]
+        want = np.zeros((64,) * 3, bool)
+        want[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1] = True
+        assert np.array_equal(vol, want)
+    for _ in range(50):  # squares: trunc(centre -+ r * 1.412 / 2) bounds
+        lo = rng.integers(0, 50, size=2)
+        hi = lo + rng.integers(0, 64 - lo.max(), size=2)
+        a, b = _box(lo, hi, 2)
+        img = csgnet.render(Program((a, b, Op("*")), 2).text())[0]
+        want = np.zeros((64, 64), bool)
+        want[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1] = True
+        assert np.array_equal(img, want), (lo, hi, a, b)
+
+
+def _thin_table() -> np.ndarray:
+    """A table whose 4-voxel legs and 6-voxel top are thinner than any primitive of the grammar (8)."""
+    vol = np.zeros((64,) * 3, bool)
+    vol[4:60, 16:48, 42:48] = True
+    for x in (7, 52):
+        for y in (18, 41):
+            vol[x:x + 4, y:y + 4, 16:42] = True
+    return vol
+
+
+def test_fit_draws_parts_thinner_than_the_grammar():
+    from csgnet.rewrite import MAX_FIT_DRAWS, fit
+    vol = _thin_table()
+    got = fit(None, vol)
+    (iou, _), = program_scores([got], vol)
+    assert iou > 0.9 and len(got.draws) <= MAX_FIT_DRAWS
+    # from a wrong start, the missed parts are added and the wrong ones taken away
+    start = parse("sp(32,32,20,12)", 3)
+    better = fit(start, vol)
+    (a, _), (b, _) = program_scores([start, better], vol)
+    assert b > a + 0.5 and better.tokens[:1] == start.tokens
+    # nothing pays at a price of one IoU per primitive; an exact program is left as it is
+    assert fit(start, vol, penalty=1.0) == start
+    assert fit(None, vol, penalty=1.0) is None
+    exact = parse("cu(32,32,32,17)", 3)
+    assert fit(exact, csgnet.render(exact.text(), 3)[0]) == exact
+    bad = parse("cu(32,32,32,17)+", 3, strict=False)
+    assert fit(bad, vol) == bad
+
+
+def test_fit_in_2d_draws_a_bar_thinner_than_the_smallest_square():
+    from csgnet.rewrite import fit
+    img = np.zeros((64, 64), bool)
+    img[30:34, 8:56] = True  # 4 rows by 48 columns
+    got = fit(None, img)
+    (iou, _), = program_scores([got], img)
+    assert iou > 0.85
+
+
+def test_short_rule_fits_the_thin_table():
+    vol = _thin_table()
+    start = parse("cu(32,32,40,25)", 3)
+    without = refine_guarded(start, [start], vol, maxiter=0, use_extend=False, use_fit=False)
+    fitted = refine_guarded(start, [start], vol, maxiter=0, use_extend=False)
+    assert fitted.after[0] > 0.9 > without.after[0]
