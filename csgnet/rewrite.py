@@ -109,10 +109,11 @@ def _scores(programs: Sequence[Program], target) -> list[float]:
     return [iou for iou, _ in program_scores(programs, target)]
 
 
-def _improve(best: Program, changes, target, penalty: float, max_rounds: int) -> Program:
+def _improve(best: Program | None, changes, target, penalty: float, max_rounds: int) -> Program:
     """Hill climbing on :func:`objective`: each round takes the best of ``changes(best)`` (the earliest on
-    ties) if it scores higher, for at most ``max_rounds`` rounds."""
-    best_score = objective(_scores([best], target)[0], best, penalty)
+    ties) if it scores higher, for at most ``max_rounds`` rounds. ``best=None`` starts from nothing
+    (objective 0)."""
+    best_score = 0.0 if best is None else objective(_scores([best], target)[0], best, penalty)
     for _ in range(int(max_rounds)):
         cands = changes(best)
         if not cands:
@@ -319,28 +320,19 @@ def fit(program: Program | str | None, target, penalty: float | None = None, max
     t = _check_target(target).astype(bool)
     dim = t.ndim
     penalty = LENGTH_PENALTY[dim] if penalty is None else float(penalty)
-    best = None if program is None else _program(program, dim)
-    if best is not None and not is_valid(best):
-        return best
-    best_score = 0.0 if best is None else objective(_scores([best], t)[0], best, penalty)
-    for _ in range(int(max_rounds)):
+    start = None if program is None else _program(program, dim)
+    if start is not None and not is_valid(start):
+        return start
+
+    def changes(best: Program | None) -> list[Program]:
         drawn = np.zeros_like(t) if best is None else render(best, dim)[0].astype(bool)
-        union = int((drawn | t).sum())
-        smallest = max(1, int(penalty * union))  # a part below this cannot pay for its primitive
+        smallest = max(1, int(penalty * (drawn | t).sum()))  # a part below this cannot pay for its primitive
         cands: list[Program] = []
         for residual, op in ((t & ~drawn, "+"), (drawn & ~t, "-")):
-            if best is None and op == "-":
-                continue
-            for part in _parts(residual, max_parts, smallest):
+            for part in _parts(residual, max_parts, smallest) if best is not None or op == "+" else []:
                 for draws in part_candidates(part):
-                    n = len(draws) + (0 if best is None else len(best.draws))
-                    if n <= max_draws:
+                    if len(draws) + (0 if best is None else len(best.draws)) <= max_draws:
                         cands.append(_with_part(best, draws, op, dim))
-        if not cands:
-            break
-        scored = [objective(s, c, penalty) for s, c in zip(_scores(cands, t), cands)]
-        i = max(range(len(cands)), key=lambda j: (scored[j], -j))
-        if scored[i] <= best_score:
-            break
-        best, best_score = cands[i], scored[i]
-    return best
+        return cands
+
+    return _improve(start, changes, t, penalty, max_rounds)
