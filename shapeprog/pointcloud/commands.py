@@ -2,6 +2,8 @@
 the cloud cache they read (make-clouds), and the export of trained weights."""
 from __future__ import annotations
 
+import argparse
+
 import json
 import sys
 import time
@@ -41,7 +43,7 @@ def fmt_metrics(m: dict) -> str:
     cd = "n/a" if m["cd"] is None else f"{1000 * m['cd']:.1f}"
     yes = {True: "yes", False: "no", None: "not run"}
     return (f"CD x1000 {cd}, F-score @{FSCORE_THRESHOLD:g} {m['fscore']:.1f}, rooted {yes[m['rooted']]}, "
-            f"stable {yes[m['stable']]}")
+            f"stable {yes[m['stable']]}" + (" (--stability)" if m["stable"] is None else ""))
 
 
 def retrieval_index(category: str, clouds):
@@ -111,7 +113,7 @@ def cmd_infer(args) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", UpAxisWarning)
             r = infer(points, args.category, fit=args.fit, model=model, up=args.up, fit_steps=args.steps,
-                      stability=not args.no_stability, seed=args.seed, search=search, search_schedule=schedule,
+                      stability=args.stability, seed=args.seed, search=search, search_schedule=schedule,
                       retrieval=index, retrieval_candidates=candidates, method=method, subsets=args.subsets,
                       polish_steps=args.polish_steps, select=args.select, check_up=not args.no_up_check)
         for w in caught:  # the up-axis hint as one line; other warnings as they came
@@ -300,7 +302,9 @@ def register(sub) -> None:
     i.add_argument("--no-up-check", action="store_true",
                    help="robust method: do not compare the other up axes (a warning names --up when one fits "
                         "clearly better)")
-    i.add_argument("--no-stability", action="store_true", help="skip the stability test (about 0.5 s)")
+    i.add_argument("--stability", action="store_true",
+                   help="also run the physics stability test of the result (about 0.5 s per cloud)")
+    i.add_argument("--no-stability", action="store_true", help=argparse.SUPPRESS)  # the default since --stability
     i.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=256, help="picture cell size in pixels")
     add_seed(i, "seed of the point subsets")
     i.add_argument("--out", required=True, help="output folder (created if missing)")

@@ -80,6 +80,15 @@ def test_fitting_improves_the_chamfer_distance_and_keeps_the_structure(model):
     assert strip(r.program) == strip(plain.program)
 
 
+def test_the_stability_test_runs_only_when_asked(model):
+    cloud = corpus_cloud("chair", CHAIR, n_points=3000)
+    plain = infer(cloud, model=model, method="decode")
+    assert isinstance(plain.metrics["rooted"], bool) and plain.metrics["stable"] is None
+    tested = infer(cloud, model=model, method="decode", stability=True)
+    assert isinstance(tested.metrics["stable"], bool) and tested.text == plain.text
+    assert tested.metrics["stable"] is False or tested.metrics["rooted"]  # stable implies rooted
+
+
 def test_metrics_of_a_shape_against_its_own_surface():
     p = parse(corpus.read("chair", CHAIR))
     c = execute(p).corners
