@@ -343,7 +343,9 @@ def register(sub) -> None:
                                                             "(default: 1000)")
     d.add_argument("--selection", choices=("greedy", "milp"), help="greedy (the reference) or milp (exact)")
     d.add_argument("--search", choices=SEARCHES, help="best-program search: beam (reference) or exact")
-    d.add_argument("--split", default="all", choices=SPLITS, help="the corpus split whose shapes are used")
+    d.add_argument("--split", default="train", choices=SPLITS,
+                   help="the corpus split whose shapes are used (train: the val split, the test split of the "
+                        "macro models' tables, takes no part)")
     d.add_argument("--limit", type=int_at_least(1), help="a random subset of N shapes (per category)")
     add_seed(d, "seed of --limit's subset and of the searches")
     add_workers(d, "processes for the searches (1: none)")

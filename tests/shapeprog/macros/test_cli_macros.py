@@ -12,6 +12,7 @@ def test_discover_macros_writes_a_library_and_resumes(tmp_path, capsys):
     assert main(argv) == 0
     text = (out / "library.txt").read_text()
     assert "# command: python -m shapeprog macros discover --category chair --limit 15" in text
+    assert "of split 'train'" in text  # the default: the val split (the models' test split) takes no part
     Library.from_text(text)
     assert (out / "state.json").exists()
     argv[argv.index("--rounds") + 1] = "1"
