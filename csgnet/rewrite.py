@@ -42,7 +42,7 @@ from .score import _check_target, program_scores
 from .vocab import vocabulary
 
 __all__ = ["LENGTH_PENALTY", "MAX_PRUNE_ROUNDS", "MAX_GRAFT_ROUNDS", "MAX_EXTEND_ROUNDS", "MAX_GRAFT_DRAWS",
-           "MAX_FIT_ROUNDS", "MAX_FIT_DRAWS", "MAX_FIT_PARTS", "MAX_VAL_IOU_COST", "objective", "removals",
+           "MAX_FIT_ROUNDS", "MAX_FIT_DRAWS", "MAX_FIT_PARTS", "GROW_FILL", "MAX_VAL_IOU_COST", "objective", "removals",
            "prune", "graft", "extend", "part_candidates", "fit", "choose"]
 
 LENGTH_PENALTY = {2: 0.02, 3: 0.01}
@@ -67,6 +67,8 @@ MAX_FIT_DRAWS = 16
 MAX_FIT_PARTS = 8
 """The largest parts (connected components of what is missing and of what is wrong) :func:`fit` tries
 per round."""
+GROW_FILL = 0.9
+"""The share of a new layer that must lie in the part for :func:`fit`'s grown box to take it."""
 
 
 def _program(program: Program | str, dim: int) -> Program:
@@ -260,17 +262,45 @@ def _box(lo: np.ndarray, hi: np.ndarray, dim: int) -> list[Draw]:
     raise AssertionError(f"no square pair draws the box {lo}..{hi}")  # pragma: no cover - every box has one
 
 
+def _grown_box(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A box inside a part: grown from the cell deepest inside it (the largest distance to its outside),
+    one face at a time, the face whose new layer is fullest first, while that layer is at least
+    ``GROW_FILL`` full. Returns inclusive ``(lo, hi)`` cell indices."""
+    dist = ndimage.distance_transform_edt(np.pad(mask, 1))[(slice(1, -1),) * mask.ndim]
+    lo = np.array(np.unravel_index(int(np.argmax(dist)), mask.shape))
+    hi = lo.copy()
+    while True:
+        best = (GROW_FILL, None)
+        for axis in range(mask.ndim):
+            for side, edge in ((0, lo[axis] - 1), (1, hi[axis] + 1)):
+                if not 0 <= edge < mask.shape[axis]:
+                    continue
+                box = tuple(slice(edge, edge + 1) if a == axis else slice(lo[a], hi[a] + 1)
+                            for a in range(mask.ndim))
+                fill = float(mask[box].mean())
+                if fill >= best[0]:
+                    best = (fill, (axis, side, edge))
+        if best[1] is None:
+            return lo, hi
+        axis, side, edge = best[1]
+        (hi if side else lo)[axis] = edge
+
+
 def part_candidates(mask: np.ndarray) -> list[list[Draw]]:
     """Primitives sized to one part (a bool image or volume holding one connected component): its
-    bounding box (two squares or cubes, :func:`_box`), a circle or, in 3D, a cylinder (along the last
-    axis) and a sphere, centred on the box and sized to it. Each candidate is a list of draws whose
-    intersection draws the part."""
+    bounding box and a box grown inside it (:func:`_grown_box`; each two squares or cubes, :func:`_box`),
+    a circle or, in 3D, a cylinder (along the last axis) and a sphere, centred on the bounding box and
+    sized to it. Each candidate is a list of draws whose intersection draws the part."""
     dim = mask.ndim
     idx = np.argwhere(mask)
     lo, hi = idx.min(0), idx.max(0)
     ext = hi - lo + 1
     mid = np.rint((lo + hi) / 2).astype(int)
     out = [_box(lo, hi, dim)]
+    crop = tuple(slice(a, b + 1) for a, b in zip(lo, hi))
+    glo, ghi = _grown_box(mask[crop])
+    if not (np.array_equal(glo, 0 * glo) and np.array_equal(ghi, ext - 1)):  # not the bounding box again
+        out.append(_box(glo + lo, ghi + lo, dim))
     if dim == 2:  # c(x, y, r): cells with distance < r; x along columns
         out.append([Draw("c", (int(mid[1]), int(mid[0]), max(1, int(np.ceil(ext.max() / 2)))))])
     else:  # cy(x, y, z, r, h): distance^2 <= (r - 1)^2 across, |dz| <= (h - 1) // 2; sp: distance <= r - 1

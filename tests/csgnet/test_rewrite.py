@@ -172,3 +172,16 @@ def test_short_rule_fits_the_thin_table():
     without = refine_guarded(start, [start], vol, maxiter=0, use_extend=False, use_fit=False)
     fitted = refine_guarded(start, [start], vol, maxiter=0, use_extend=False)
     assert fitted.after[0] > 0.9 > without.after[0]
+
+
+def test_the_grown_box_fills_the_thickest_arm_of_an_l_shaped_part():
+    from csgnet.rewrite import _grown_box, part_candidates
+    img = np.zeros((64, 64), bool)
+    img[10:50, 10:30] = True   # the thick arm, 40 x 20
+    img[40:50, 30:60] = True   # the thin arm, 10 x 30
+    lo, hi = _grown_box(img)
+    assert (lo.tolist(), hi.tolist()) == ([10, 10], [49, 29])
+    cands = [Program(tuple(c[:1]) + tuple(t for d in c[1:] for t in (d, Op("*"))), 2) for c in part_candidates(img)]
+    ious = [iou for iou, _ in program_scores(cands, img)]
+    assert ious[1] == pytest.approx(800 / 1100)  # the grown box: exactly the thick arm
+    assert max(ious) < 1.0
