@@ -4,8 +4,9 @@ the validation split of a synthetic dataset.
 For each validation program (``--per-length`` per length) the script renders its target, decodes it with
 beam search (``--beam``), takes the beam closest to the target as the start (``parse --select match``),
 and then, for each price λ of ``--penalties``, runs the short refinement rule with that price
-(``csgnet.refinement.refine_guarded(..., penalty=λ)``: every valid beam refined, pruned, the choice grafted
-and extended; what ``parse --refine`` does). It prints, per λ, the chosen programs' mean IoU, mean primitives, the mean
+(``csgnet.refinement.refine_guarded(..., penalty=λ, use_fit=False)``: every valid beam refined, pruned, the
+choice grafted and extended; what ``parse --refine --no-fit`` does: at a price near 0 fitting would draw
+single cells, so the price is chosen without it and fitting uses the chosen one). It prints, per λ, the chosen programs' mean IoU, mean primitives, the mean
 absolute difference from the true program's primitives, and the share of programs longer than the truth;
 then the chosen λ: the largest price whose mean IoU is at most ``MAX_VAL_IOU_COST`` below λ = 0's (the shortest
 programs for a bounded cost). The true programs' length is shown, not used: the generator's programs are
@@ -72,7 +73,8 @@ def main(argv=None) -> int:
             if not start.valid:
                 per_penalty[lam].append((0.0, 0, len(prog.draws)))
                 continue
-            ref = refine_guarded(start.program, valid, target, maxiter=args.refine_iters, penalty=lam)
+            ref = refine_guarded(start.program, valid, target, maxiter=args.refine_iters, penalty=lam,
+                                 use_fit=False)
             per_penalty[lam].append((ref.after[0], len(ref.program.draws), len(prog.draws)))
     seconds = time.process_time() - t0
     rows = []

@@ -2,7 +2,8 @@
 
 For the first ``--shapes`` programs of a category's val split (the test split of every ShapeAssembly table), each
 model encodes the program to its mean code and decodes it back (``decode_latent``, semantic validity, no
-rejection: the VAE's reconstruction). Both shapes are sampled (10,000 surface points each, seeded by the shape),
+rejection: the VAE's reconstruction; one that decodes to nothing scores F 0). Both shapes are sampled (10,000
+surface points each; the input's seeded by its id, the reconstruction's by ``--seed``),
 mapped into the canonical frame of the input's cloud (AABB diagonal 2, the point-cloud tables' frame), and
 scored with ``shapeprog.pointcloud.infer.shape_metrics``: F-score at 0.03, chamfer, rooted. It prints, per model,
 the mean F-score, the mean chamfer x1000, % of reconstructions that decode to at least one cuboid, % rooted and
@@ -17,6 +18,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 
 import numpy as np
@@ -29,9 +31,9 @@ from shapeprog.lang import parse
 from shapeprog.pointcloud.data import corpus_cloud
 from shapeprog.pointcloud.infer import shape_metrics
 from shapeprog.pointcloud.normalize import normalize
-from shapeprog.sampling import sample_surface
 from shapeprog.vae.decode import decode_latent, encode
 from shapeprog.vae.pretrained import PRETRAINED, load_model, load_pretrained
+from shapeprog.vae.validity import InvalidSample
 
 POINTS = 10_000
 
@@ -43,8 +45,10 @@ def reconstruct_row(name: str, vae, category: str, ids: list[int], seed: int) ->
         text = corpus.read(category, shape_id)
         target = corpus_cloud(category, shape_id, POINTS, seed)
         unit, t = normalize(target)
-        result = decode_latent(vae.decoder, encode(vae, text, file=f"{category}/{shape_id}"))
-        corners = execute(result.program).corners if result.program is not None else torch.zeros(0, 8, 3)
+        try:
+            corners = execute(decode_latent(vae.decoder, encode(vae, text, file=f"{category}/{shape_id}")).program).corners
+        except (ValueError, InvalidSample):  # decoded to no program: F 0, nothing rooted
+            corners = torch.zeros(0, 8, 3)
         back = torch.from_numpy(t.apply(corners.detach().double().numpy().reshape(-1, 3)).reshape(-1, 8, 3))
         m = shape_metrics(back, torch.from_numpy(unit), points=POINTS, seed=seed, stability=False)
         fs.append(m["fscore"])
@@ -83,7 +87,7 @@ def main(argv=None) -> int:
         r = rows[-1]
         print(f"{label}: F {r['fscore']:.1f}  CD x1000 {r['cd']:.1f}  decoded {r['decoded']:.1f} %  rooted "
               f"{r['rooted']:.1f} %  leaves {r['leaves']:.1f} (inputs {r['input_leaves']:.1f})", flush=True)
-    command = "python bench/vae_reconstruct.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = shlex.join(["python", "bench/vae_reconstruct.py", *(sys.argv[1:] if argv is None else argv)])
     cols = [column("model", "model"), column("shapes", "shapes"), column("fscore", "F-score @0.03", 1),
             column("cd", "CD x1000", 1), column("decoded", "% decoded", 1), column("rooted", "% rooted", 1),
             column("leaves", "leaf cuboids", 1), column("input_leaves", "input leaf cuboids", 1)]

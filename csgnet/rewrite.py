@@ -111,7 +111,7 @@ def _scores(programs: Sequence[Program], target) -> list[float]:
     return [iou for iou, _ in program_scores(programs, target)]
 
 
-def _improve(best: Program | None, changes, target, penalty: float, max_rounds: int) -> Program:
+def _improve(best: Program | None, changes, target, penalty: float, max_rounds: int) -> Program | None:
     """Hill climbing on :func:`objective`: each round takes the best of ``changes(best)`` (the earliest on
     ties) if it scores higher, for at most ``max_rounds`` rounds. ``best=None`` starts from nothing
     (objective 0)."""
@@ -240,12 +240,12 @@ def extend(program: Program | str, target, penalty: float | None = None, max_rou
 def _box(lo: np.ndarray, hi: np.ndarray, dim: int) -> list[Draw]:
     """Two squares (2D) or cubes (3D) whose intersection is the box ``[lo, hi]`` (inclusive cell
     indices, by axis: row, column[, depth]): the first square or cube shares the box's low corner, the
-    second its high corner, and both reach past the other end."""
+    second its high corner, and both reach past the other end; one when the two are the same."""
     ext = int((hi - lo).max()) + 1
     if dim == 3:
         q = ext // 2  # cu(x, y, z, r) covers x - q .. x + q with q = (r - 1) // 2; edge 2q + 1 >= ext
-        return [Draw("u", tuple(int(v) for v in lo + q) + (2 * q + 1,)),
-                Draw("u", tuple(int(v) for v in hi - q) + (2 * q + 1,))]
+        a, b = (Draw("u", tuple(int(v) for v in c) + (2 * q + 1,)) for c in (lo + q, hi - q))
+        return [a] if a == b else [a, b]  # a cube of odd edge is one cube
     # s(x, y, r) covers rows trunc(y -+ r * 1.412 / 2) (x: columns): the smallest r whose integer centres
     # put one square's low edges and the other's high edges on the box's
     for r in range(int(np.ceil(ext / 1.412)), int(np.ceil(ext / 1.412)) + 8):
@@ -258,7 +258,8 @@ def _box(lo: np.ndarray, hi: np.ndarray, dim: int) -> list[Draw]:
              for v in (hi[1], hi[0])]
         if None not in a + b and all(trunc(c + half) >= h for c, h in zip(a, (hi[1], hi[0]))) \
                 and all(trunc(c - half) <= v for c, v in zip(b, (lo[1], lo[0]))):
-            return [Draw("s", (a[0], a[1], r)), Draw("s", (b[0], b[1], r))]
+            first, second = Draw("s", (a[0], a[1], r)), Draw("s", (b[0], b[1], r))
+            return [first] if first == second else [first, second]
     raise AssertionError(f"no square pair draws the box {lo}..{hi}")  # pragma: no cover - every box has one
 
 

@@ -26,8 +26,8 @@ _S65_NOTE = ("ShapeMOD rows: each category's own library discovered at this scal
 def _cross_steps(root: str, limit: int, rounds: int, steps: int, out: str) -> tuple[Step, ...]:
     """Discover one library over the three categories and one per category (same scale, same shapes), then
     Table 1 of each category with its own library (the ShapeMOD row) and the cross-category one."""
-    common = ("--limit", str(limit), "--rounds", str(rounds), "--proposal-steps", str(steps), "--workers", "2",
-              "--quiet")
+    common = ("--split", "all", "--limit", str(limit), "--rounds", str(rounds), "--proposal-steps", str(steps),
+              "--workers", "2", "--quiet")  # Table 1's shapes: compression of the corpus, as the paper
     found = [Step(("macros", "discover", "--category", *CATEGORIES, *common, "--out", f"{root}/cross"),
                   creates=f"{root}/cross/library.txt")]
     found += [Step(("macros", "discover", "--category", c, *common, "--out", f"{root}/{c}"),

@@ -106,25 +106,28 @@ def test_extend_finds_the_missing_primitive_in_the_whole_vocabulary():
     assert extend("sp(32,32,32,16)", vol).text() == "sp(32,32,32,16)cy(32,32,24,8,28)-"
 
 
+def _intersection(draws, dim: int) -> Program:
+    return Program(tuple(draws[:1]) + tuple(t for d in draws[1:] for t in (d, Op("*"))), dim)
+
+
 def test_two_cubes_draw_any_box_exactly():
     from csgnet.rewrite import _box
     rng = np.random.default_rng(3)
     for _ in range(20):
         lo = rng.integers(0, 40, size=3)
         hi = lo + rng.integers(0, 24, size=3)
-        a, b = _box(lo, hi, 3)
-        vol = csgnet.render(Program((a, b, Op("*")), 3).text(), 3)[0]
+        vol = csgnet.render(_intersection(_box(lo, hi, 3), 3).text(), 3)[0]
         want = np.zeros((64,) * 3, bool)
         want[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1] = True
         assert np.array_equal(vol, want)
+    assert _box(np.array([3, 3, 3]), np.array([7, 7, 7]), 3) == [parse("cu(5,5,5,5)", 3).draws[0]]  # one cube
     for _ in range(50):  # squares: trunc(centre -+ r * 1.412 / 2) bounds
         lo = rng.integers(0, 50, size=2)
         hi = lo + rng.integers(0, 64 - lo.max(), size=2)
-        a, b = _box(lo, hi, 2)
-        img = csgnet.render(Program((a, b, Op("*")), 2).text())[0]
+        img = csgnet.render(_intersection(_box(lo, hi, 2), 2).text())[0]
         want = np.zeros((64, 64), bool)
         want[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1] = True
-        assert np.array_equal(img, want), (lo, hi, a, b)
+        assert np.array_equal(img, want), (lo, hi)
 
 
 def _thin_table() -> np.ndarray:
@@ -181,7 +184,7 @@ def test_the_grown_box_fills_the_thickest_arm_of_an_l_shaped_part():
     img[40:50, 30:60] = True   # the thin arm, 10 x 30
     lo, hi = _grown_box(img)
     assert (lo.tolist(), hi.tolist()) == ([10, 10], [49, 29])
-    cands = [Program(tuple(c[:1]) + tuple(t for d in c[1:] for t in (d, Op("*"))), 2) for c in part_candidates(img)]
+    cands = [_intersection(c, 2) for c in part_candidates(img)]
     ious = [iou for iou, _ in program_scores(cands, img)]
     assert ious[1] == pytest.approx(800 / 1100)  # the grown box: exactly the thick arm
     assert max(ious) < 1.0
