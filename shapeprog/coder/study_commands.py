@@ -221,6 +221,14 @@ def cmd_sample(args) -> int:
     return 0
 
 
+def _heldout_command(sub, name: str, fn, heldout: int, heldout_help: str, low: int = 2):
+    """A study command writing JSON rows, with ``--category`` and ``--heldout`` (the first N held-out shapes)."""
+    p = add_command(sub, name, fn, outputs={"json": "file+"})
+    add_category(p)
+    p.add_argument("--heldout", type=int_at_least(low), default=heldout, help=heldout_help)
+    return p
+
+
 def register(sub) -> None:
     """Add the study commands to ``sub``."""
     ab = add_command(sub, "ablation", cmd_ablation, outputs={"json": "file+"})
@@ -245,27 +253,21 @@ def register(sub) -> None:
                          "about the paper's 1 s; less keeps the row to minutes on a CPU)")
     add_workers(ab, "processes for the refactors", default=2)
     add_result_options(ab, "the rows")
-    pe = add_command(sub, "perturbation", cmd_perturbation, outputs={"json": "file+"})
-    add_category(pe)
+    pe = _heldout_command(sub, "perturbation", cmd_perturbation, 700, "the first N held-out shapes (reference)")
     pe.add_argument("--shapes", type=int_at_least(2), default=400, help="the first N discovery shapes' programs")
-    pe.add_argument("--heldout", type=int_at_least(2), default=700, help="the first N held-out shapes (reference)")
     pe.add_argument("--sigmas", type=float_in(0, 10), nargs="+", default=[0.0, 0.025, 0.05, 0.1],
                     help="noise standard deviations")
     pe.add_argument("--draws", type=int_at_least(1), default=2, help="noise draws per sigma > 0")
     add_seed(pe, "seed of the noise and the surface points")
     add_result_options(pe, "the rows")
-    no = add_command(sub, "noise", cmd_noise, outputs={"json": "file+"})
-    add_category(no)
-    no.add_argument("--heldout", type=int_at_least(1), default=100, help="the first N held-out shapes")
+    no = _heldout_command(sub, "noise", cmd_noise, 100, "the first N held-out shapes", low=1)
     no.add_argument("--sigmas", type=float_in(0, 1), nargs="+", default=[0.0, 0.01, 0.02, 0.03],
                     help="noise standard deviations (0: the clean shapes)")
     add_seed(no, "seed of the noise")
     no.add_argument("--network", action="store_true", help="with the recognition network's search as well")
     add_workers(no, "processes for the inference", default=2)
     add_result_options(no, "the rows")
-    sa = add_command(sub, "sample", cmd_sample, outputs={"json": "file+"})
-    add_category(sa)
+    sa = _heldout_command(sub, "sample", cmd_sample, 700, "the first N held-out shapes (reference)")
     sa.add_argument("-n", type=int_at_least(2), default=300, help="samples per model")
-    sa.add_argument("--heldout", type=int_at_least(2), default=700, help="the first N held-out shapes (reference)")
     add_seed(sa, "seed of the samples and the surface points")
     add_result_options(sa, "the rows")

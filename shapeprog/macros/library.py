@@ -35,7 +35,7 @@ from ..errors import ParseError
 from .grammar import (BBOX, AttachLine, CuboidLine, Line, LineError, ReflectLine, SqueezeLine, TranslateLine,
                       check_lines)
 from .lang import (BASE, BB_DIMS, CUBE, FLOAT, Call, FunctionInfo, Linear, Literal, MacroDef, MacroError,
-                   MacroProgram, Name, Param, _parse, check_def, check_program, def_text,
+                   MacroProgram, Name, _parse, check_def, check_program, def_text,
                    from_lines)
 
 __all__ = ["Affine", "Expansion", "Function", "Library", "parse"]
@@ -60,21 +60,12 @@ class Function:
     info: FunctionInfo
     definition: MacroDef | None = None
 
-    @property
-    def name(self) -> str:
-        return self.info.name
-
-    @property
-    def params(self) -> tuple[Param, ...]:
-        return self.info.params
-
-    @property
-    def n_cuboids(self) -> int:
-        return self.info.n_cuboids
-
-    @property
-    def structure(self) -> tuple[str, ...]:
-        return self.info.structure
+    # the signature's fields, read through: name (str), params (tuple of Param), n_cuboids (int), structure
+    # (tuple of str)
+    name = property(lambda self: self.info.name)
+    params = property(lambda self: self.info.params)
+    n_cuboids = property(lambda self: self.info.n_cuboids)
+    structure = property(lambda self: self.info.structure)
 
     @property
     def is_base(self) -> bool:

@@ -33,30 +33,38 @@ _GENERATION_RESULT = f"{RESULTS}/generation.json"
 _GENERATION_SCALE = (f"{GENERATION_SAMPLES} samples per category and decoding (the paper: 1,000), the val split as "
                      "ground truth, % fool with 12 epochs (the paper: 300)")
 
+
+def _generation(eid: str, status: str, title: str, scale: str = _GENERATION_SCALE, **kwargs) -> Experiment:
+    """An experiment whose rows are in the generation table (one run of :data:`_GENERATION` serves them all)."""
+    return Experiment(eid, status, title, result=_GENERATION_RESULT, steps=(_GENERATION,), quick=(_GENERATION_QUICK,),
+                      scale=scale, **kwargs)
+
+
+def _samples(eid: str, title: str, verb: str, quick_n: int, scale: str) -> Experiment:
+    """A measurement of :data:`NOVELTY_SAMPLES` VAE samples per category (``vae <verb>``, writing
+    ``<verb>.json``); its quick variant ``quick_n`` storage samples."""
+    return Experiment(eid, "done", title, result=f"{RESULTS}/{verb}.json",
+                      steps=(Step.of(f"vae {verb} --category chair table storage -n {NOVELTY_SAMPLES}"),),
+                      quick=(Step.of(f"vae {verb} --category storage -n {quick_n}"),), scale=scale)
+
+
 EXPERIMENTS: tuple[Experiment, ...] = (
-    Experiment(
+    _generation(
         "sa-t2", "partial", "Table 2: generation (rooted, stable under both rules, fool, FD) per category, and its "
         "decoding ablations (No Reject, the paper's decoding rules)",
-        result=_GENERATION_RESULT, steps=(_GENERATION,), quick=(_GENERATION_QUICK,), scale=_GENERATION_SCALE,
         why="the decoding ablations are rows (--max-tries 1 is No Reject; --paper-decoding the paper's bbox rules); "
             "the training ablations of Table 2 need a VAE retrained per variant (hours each on this CPU) and are "
             "not run; the paper's ablation figures are not in the specification"),
-    Experiment(
-        "sa-t3", "done", "Table 3: editability (lines per program, share of squeeze / reflect / translate lines and "
-        "of the parts they make) of the val split and of VAE samples",
-        result=f"{RESULTS}/editability.json",
-        steps=(Step.of(f"vae editability --category chair table storage -n {NOVELTY_SAMPLES}"),),
-        quick=(Step.of("vae editability --category storage -n 30"),),
-        scale=f"the val split and {NOVELTY_SAMPLES} samples per category; the paper's figures are not in the "
+    _samples(
+        "sa-t3", "Table 3: editability (lines per program, share of squeeze / reflect / translate lines and "
+        "of the parts they make) of the val split and of VAE samples", "editability", 30,
+        f"the val split and {NOVELTY_SAMPLES} samples per category; the paper's figures are not in the "
               "specification"),
-    Experiment(
+    _generation(
         "sa-t4", "done", "Table 4: generalization, coverage and variety of samples (in the generation table)",
-        result=_GENERATION_RESULT, steps=(_GENERATION,), quick=(_GENERATION_QUICK,),
         scale=_GENERATION_SCALE + "; chamfer on unit-diagonal shapes, 1,024 points (the paper's normalisation "
                                   "differs: orderings only)"),
-    Experiment(
-        "sa-t5", "done", "Table 5: leaf parts per sample (in the generation table)",
-        result=_GENERATION_RESULT, steps=(_GENERATION,), quick=(_GENERATION_QUICK,), scale=_GENERATION_SCALE),
+    _generation("sa-t5", "done", "Table 5: leaf parts per sample (in the generation table)"),
     Experiment(
         "sa-t6", "done", "Table 6: interpolation smoothness (geometric and program steps between random latents)",
         result=f"{RESULTS}/smoothness.json",
@@ -79,11 +87,8 @@ EXPERIMENTS: tuple[Experiment, ...] = (
                        f"--out {CLOUDS_QUICK}/table7_chair.md")),
         scale=f"the first {TABLE7_SHAPES} of the 496 val-split chairs, noisy 2,048-point cuboid-surface clouds, "
               "150 fitting steps (the paper: every val chair, PartNet mesh samples)"),
-    Experiment(
-        "sa-novelty", "done", "Section 7.1.3: structural novelty of samples and of the val split against the "
-        "training split",
-        result=f"{RESULTS}/novelty.json",
-        steps=(Step.of(f"vae novelty --category chair table storage -n {NOVELTY_SAMPLES}"),),
-        quick=(Step.of("vae novelty --category storage -n 50"),),
-        scale=f"{NOVELTY_SAMPLES} samples per category, as the paper; its figures are not in the specification"),
+    _samples(
+        "sa-novelty", "Section 7.1.3: structural novelty of samples and of the val split against the training split",
+        "novelty", 50,
+        f"{NOVELTY_SAMPLES} samples per category, as the paper; its figures are not in the specification"),
 )
