@@ -215,18 +215,19 @@ def progress_log(args):
     return None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
 
 
-def add_export_weights(sub, export, *, help: str, example: str, checkpoint_help: str) -> None:
+def add_export_weights(sub, export, *, help: str, example: str, checkpoint_help: str, average: bool = False) -> None:
     """The ``export-weights`` command of a model family: ``export(checkpoint, out, half=...)`` writes the weights
     file of a training checkpoint and returns its path (a usage error raises SystemExit; an unreadable or
     foreign checkpoint FileNotFoundError or ValueError, naming the file); its docstring is the command's
-    description."""
+    description. With ``average`` the command takes several checkpoints and ``export`` gets their list."""
 
     def run(args) -> int:
+        inputs = args.checkpoint if average else [args.checkpoint]
         check_outputs(others=[args.out])
-        refuse_inputs([args.out], [args.checkpoint])
+        refuse_inputs([args.out], inputs)
         refuse_existing([args.out], args.overwrite)
         try:
-            path = export(args.checkpoint, args.out, half=not args.float32)
+            path = export(inputs if average else args.checkpoint, args.out, half=not args.float32)
         except (FileNotFoundError, ValueError) as e:
             raise SystemExit(f"error: {e}") from None
         print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB)")
@@ -234,7 +235,10 @@ def add_export_weights(sub, export, *, help: str, example: str, checkpoint_help:
 
     x = add_command(sub, "export-weights", run, help=help, description=inspect.getdoc(export), example=example,
                     outputs={"out": "file"})
-    x.add_argument("checkpoint", help=checkpoint_help)
+    if average:
+        x.add_argument("checkpoint", nargs="+", help=checkpoint_help + "; several: their weights averaged")
+    else:
+        x.add_argument("checkpoint", help=checkpoint_help)
     x.add_argument("--out", required=True, help="the weights file to write (.pt)")
     x.add_argument("--float32", action="store_true", help="keep float32 (float16 storage otherwise)")
     add_overwrite(x)

@@ -19,7 +19,7 @@ from ..vae.layout import LineLayout
 from ..vae.macro_decode import decode_macro
 from ..vae.macro_model import MacroVAE
 from ..vae.model import VAE
-from ..vae.pretrained import load_pretrained as load_vae
+from ..vae.pretrained import decoder_fingerprint, load_pretrained as load_vae
 from .encoder import PointNet2SSG
 
 __all__ = ["PRETRAINED", "WEIGHTS", "CloudModel", "cloud_corners", "decode_codes", "load_encoder", "load_model",
@@ -161,6 +161,10 @@ def load_model(path, category: Optional[str] = None) -> CloudModel:
             vae.decoder.load_state_dict({k: v.float() for k, v in payload["decoder"].items()})
         else:
             vae = load_vae(cat)
+            want = payload.get("vae_decoder")  # absent in files written before it was recorded
+            if want is not None and want != decoder_fingerprint(vae.decoder.state_dict()):
+                raise ValueError(f"{path}: a latent-regression model trained for another {cat} VAE than the shipped "
+                                 f"one (decoder {want}); retrain it with configs/pointcloud/latent_{cat}.yaml")
     except RuntimeError as e:
         raise ValueError(f"{path}: tensors do not fit the recorded sizes: {str(e).splitlines()[0]}") from None
     return CloudModel(encoder, vae, cat, payload["recipe"], payload.get("meta"))

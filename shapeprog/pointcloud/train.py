@@ -51,7 +51,7 @@ from ..vae.layout import LineLayout
 from ..vae.losses import LOSS_WEIGHTS, MACRO_LOSS_WEIGHTS
 from ..vae.macro_model import MacroVAE
 from ..vae.model import VAE
-from ..vae.pretrained import load_model, load_pretrained
+from ..vae.pretrained import decoder_fingerprint, load_model, load_pretrained
 from ..vae.train import check_data_category
 from ..vae.reconstruct import _corners, reconstruction_fscores, target_surfaces
 from ..vae.data import _read_macro_programs, load_macro_library, load_macro_trees, load_trees
@@ -519,6 +519,9 @@ def export_weights(checkpoint, out, half: bool = True, meta: Optional[dict] = No
                      **(meta or {})}}
     if info["recipe"] == "e2e":
         body["decoder"] = part("vae.decoder.")
+    else:  # the VAE whose latent codes the encoder regresses; the file is refused with another
+        body["vae_decoder"] = decoder_fingerprint(
+            {k[len("vae.decoder."):]: v for k, v in state.items() if k.startswith("vae.decoder.")})
     if info.get("library") is not None:
         body["library"] = info["library"]
     return write_weights(out, WEIGHTS_FORMAT, CHECKPOINT_FORMAT, body)

@@ -217,13 +217,16 @@ def is_pointcloud_checkpoint(path: str) -> bool:
     return isinstance(payload, dict) and "shapeprog_pointcloud" in payload
 
 
-def export_vae_weights(checkpoint: str, out: str, half: bool = True) -> Path:
+def export_vae_weights(checkpoints: list[str], out: str, half: bool = True) -> Path:
     """Write the VAE of a Lightning checkpoint (or weights file) as a weights file that --weights and
-    shapeprog.vae.load_pretrained read (a point-cloud model's checkpoint: `pointcloud export-weights`)."""
-    if Path(checkpoint).is_file() and is_pointcloud_checkpoint(checkpoint):
-        raise SystemExit(f"error: {checkpoint}: a checkpoint of a point-cloud model; export it with "
-                         "`python -m shapeprog pointcloud export-weights`")
-    return export_weights(checkpoint, out, half=half)
+    shapeprog.vae.load_pretrained read (a point-cloud model's checkpoint: `pointcloud export-weights`).
+    Several checkpoints of one run give the average of their weights (the shipped chair VAE averages the
+    five-epoch checkpoints of configs/shapeassembly/vae_chair_kl.yaml)."""
+    for checkpoint in checkpoints:
+        if Path(checkpoint).is_file() and is_pointcloud_checkpoint(checkpoint):
+            raise SystemExit(f"error: {checkpoint}: a checkpoint of a point-cloud model; export it with "
+                             "`python -m shapeprog pointcloud export-weights`")
+    return export_weights(checkpoints[0] if len(checkpoints) == 1 else checkpoints, out, half=half)
 
 
 def read_programs(folder: str) -> list:
@@ -450,4 +453,4 @@ def register(sub) -> None:
     add_export_weights(sub, export_vae_weights, help="write a VAE training checkpoint as a small weights file",
                        example="vae export-weights runs/vae_chair/checkpoints/last.ckpt --out vae_chair.pt",
                        checkpoint_help="a .ckpt file written by `python train.py fit --config "
-                                       "configs/shapeassembly/...`")
+                                       "configs/shapeassembly/...`", average=True)

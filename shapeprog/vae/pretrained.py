@@ -20,7 +20,11 @@ Example:
 """
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
+from typing import Mapping
+
+import torch
 
 from shapeio.weights import check_weights, load_payload, write_weights
 
@@ -29,10 +33,12 @@ from .layout import LineLayout
 from .macro_model import MacroVAE
 from .model import VAE
 
-__all__ = ["FORMAT", "PRETRAINED", "PRETRAINED_MACROS", "VERSION", "WEIGHTS", "export_weights", "load_model", "load_pretrained",
-           "read_weights", "save_weights"]
+__all__ = ["FORMAT", "PRETRAINED", "PRETRAINED_MACROS", "VERSION", "WEIGHTS", "decoder_fingerprint", "export_weights",
+           "load_model", "load_pretrained", "read_weights", "save_weights"]
 
 FORMAT = "shapeprog-vae"
+#: Checkpoints :func:`export_weights` averages at the most.
+MAX_AVERAGED = 100
 VERSION = 1
 WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
 # category -> file shipped under shapeprog/weights (docs/benchmarks.md names the command that trained each)
@@ -119,9 +125,53 @@ def save_weights(vae: VAE, out, category: str, meta: dict | None = None, half: b
 
 
 def export_weights(checkpoint, out, half: bool = True, meta: dict | None = None) -> Path:
-    """Write the VAE of a training checkpoint as a small weights file (``meta`` adds to the recorded)."""
-    vae = load_model(checkpoint)  # its category and meta come with it
-    return save_weights(vae, out, vae.category, {**vae.meta, **(meta or {})}, half)
+    """Write the VAE of a training checkpoint as a small weights file (``meta`` adds to the recorded).
+
+    ``checkpoint`` may be a list of checkpoints (or weights files) of one model, e.g. the epochs a run kept: the
+    file then holds the mean of their weights (stochastic weight averaging) and ``meta["averaged"]`` names them;
+    the last one's meta is kept. Models of another category, size or library are refused, naming the file.
+    """
+    if isinstance(checkpoint, (str, Path)):
+        vae = load_model(checkpoint)  # its category and meta come with it
+        return save_weights(vae, out, vae.category, {**vae.meta, **(meta or {})}, half)
+    paths = [Path(p) for p in checkpoint]
+    if not paths:
+        raise ValueError("no checkpoint to export")
+    if len(paths) > MAX_AVERAGED:
+        raise ValueError(f"{len(paths)} checkpoints to average; at most {MAX_AVERAGED}")
+    vae = load_model(paths[-1])
+    want = _signature(vae)
+    total = {k: v.detach().double().clone() for k, v in vae.state_dict().items() if v.is_floating_point()}
+    for p in paths[:-1]:
+        other = load_model(p)
+        if _signature(other) != want:
+            raise ValueError(f"{p}: not a model of the same kind as {paths[-1]} (category, hidden size, library), "
+                             "so the two cannot be averaged")
+        for k, v in other.state_dict().items():
+            if k in total:
+                total[k] += v.detach().double()
+    vae.load_state_dict({k: (total[k] / len(paths)).float() if k in total else v
+                         for k, v in vae.state_dict().items()})
+    return save_weights(vae, out, vae.category,
+                        {**vae.meta, "averaged": [str(p) for p in paths], **(meta or {})}, half)
+
+
+def _signature(vae) -> tuple:
+    """What two models must share to be averaged: category, hidden size and macro library text."""
+    layout = getattr(vae, "layout", None)
+    return vae.category, int(vae.decoder.hidden_dim), None if layout is None else layout.library.to_text()
+
+
+def decoder_fingerprint(state: Mapping[str, torch.Tensor]) -> str:
+    """A short hash of a decoder's parameters (its ``state_dict``), at float16 precision so that a model and its
+    float16 weights file agree: a model that regresses this decoder's latent codes records it, and is refused
+    with another decoder."""
+    h = hashlib.sha256()
+    for k in sorted(state):
+        v = state[k].detach().cpu()
+        h.update(k.encode())
+        h.update((v.half() if v.is_floating_point() else v).contiguous().numpy().tobytes())
+    return h.hexdigest()[:16]
 
 
 def load_pretrained(category: str = "chair", device=None, macros: bool = False) -> VAE:

@@ -10,6 +10,7 @@ from csgnet.train.checkpoint import AtomicCheckpointIO
 from shapeprog.lang import to_text
 from shapeprog.pointcloud.data import corpus_splits, make_clouds
 from shapeprog.pointcloud.infer import load_model
+from shapeprog.vae.pretrained import decoder_fingerprint
 from shapeprog.pointcloud.train import CloudDataModule, EndToEndModule, LatentRegressionModule, export_weights
 from shapeprog.vae.batch import TreeBatch
 from shapeprog.vae.macro_batch import MacroTreeBatch, macro_batch_loss
@@ -125,6 +126,11 @@ def test_fit_logs_images_and_resumes_from_last(clouds, tmp_path, cls):
     path = export_weights(last, tmp_path / "w.pt", half=False)
     payload = torch.load(path, weights_only=True)
     assert payload["recipe"] == cls.recipe and ("decoder" in payload) == (cls is EndToEndModule)
+    if cls is LatentRegressionModule:  # it records the VAE it regresses, and is refused with another
+        assert payload["vae_decoder"] == decoder_fingerprint(m.vae.decoder.state_dict())
+        torch.save({**payload, "vae_decoder": "0" * 16}, tmp_path / "other_vae.pt")
+        with pytest.raises(ValueError, match="other_vae.pt: a latent-regression model trained for another chair VAE"):
+            load_model(tmp_path / "other_vae.pt", "chair")
     model = load_model(path, "chair")
     x = torch.rand(2, 64, 3) - 0.5
     m2.eval()

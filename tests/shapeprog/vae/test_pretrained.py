@@ -6,8 +6,8 @@ import torch
 
 from shapeprog.macros import load_library
 from shapeprog.vae import VAE
-from shapeprog.vae.pretrained import (FORMAT, PRETRAINED_MACROS, VERSION, export_weights, load_model, load_pretrained, read_weights,
-                                      save_weights)
+from shapeprog.vae.pretrained import (FORMAT, PRETRAINED_MACROS, VERSION, decoder_fingerprint, export_weights,
+                                      load_model, load_pretrained, read_weights, save_weights)
 
 
 @pytest.fixture()
@@ -41,6 +41,35 @@ def test_lightning_checkpoint_layout_and_export(vae, tmp_path):
     out = export_weights(tmp_path / "last.ckpt", tmp_path / "w.pt", meta={"command": "x"})
     back = load_model(out, category="table")
     assert _same(back, vae, half=True) and back.meta == {"epoch": 7, "global_step": 70, "command": "x"}
+
+
+def test_export_of_several_checkpoints_averages_their_weights(vae, tmp_path):
+    torch.manual_seed(1)
+    other, third = VAE(hidden_dim=16), VAE(hidden_dim=16)
+    paths = [save_weights(m, tmp_path / f"{i}.pt", "chair", meta={"epoch": i}, half=False)
+             for i, m in enumerate((vae, other, third))]
+    out = export_weights(paths, tmp_path / "mean.pt", half=False)
+    mean = load_model(out, category="chair")
+    for k, v in mean.state_dict().items():
+        want = (vae.state_dict()[k].double() + other.state_dict()[k].double() + third.state_dict()[k].double()) / 3
+        assert torch.allclose(v.double(), want, atol=1e-6), k
+    assert mean.meta == {"epoch": 2, "averaged": [str(p) for p in paths]}
+    # one checkpoint in a list is that checkpoint; the fingerprint follows the weights, at float16 precision
+    alone = load_model(export_weights(paths[:1], tmp_path / "one.pt", half=False))
+    assert _same(alone, vae)
+    assert decoder_fingerprint(alone.decoder.state_dict()) == decoder_fingerprint(vae.decoder.state_dict())
+    assert decoder_fingerprint(mean.decoder.state_dict()) != decoder_fingerprint(vae.decoder.state_dict())
+    half = load_model(save_weights(vae, tmp_path / "half.pt", "chair"))
+    assert decoder_fingerprint(half.decoder.state_dict()) == decoder_fingerprint(vae.decoder.state_dict())
+    # models that cannot be averaged are refused, naming the file
+    table = save_weights(other, tmp_path / "table.pt", "table", half=False)
+    with pytest.raises(ValueError, match=r"0\.pt: not a model of the same kind as .*table\.pt"):
+        export_weights([paths[0], table], tmp_path / "bad.pt")
+    small = save_weights(VAE(hidden_dim=8), tmp_path / "small.pt", "chair", half=False)
+    with pytest.raises(ValueError, match=r"small\.pt: not a model of the same kind"):
+        export_weights([small, paths[0]], tmp_path / "bad.pt")
+    with pytest.raises(ValueError, match="no checkpoint to export"):
+        export_weights([], tmp_path / "bad.pt")
 
 
 def test_refusals_name_the_file(vae, tmp_path):
