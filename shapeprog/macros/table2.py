@@ -18,7 +18,7 @@ from ..vae.commands import draw
 from ..vae.gentable import CHAMFER_POINTS, EVALUATE_TRIES, References, evaluate_generation, table_notes
 from ..vae.pointnet import PRETRAINED_SHA256, load_classifier
 
-__all__ = ["BASELINE_NOTE", "COLUMNS", "PAPER", "paper_rows", "generation_rows", "table2_result"]
+__all__ = ["BASELINE_NOTE", "COLUMNS", "PAPER", "paper_rows", "generation_rows", "table2_result", "training_summary"]
 
 #: The paper's Table 2 per category and method (the specification gives chair only).
 PAPER: dict = {
@@ -27,8 +27,14 @@ PAPER: dict = {
 }
 #: How the Baseline Macros model was made (shapeprog/weights/vae_chair_baseline_macros.pt).
 BASELINE_NOTE = ("Baseline Macros: the VAE over the corpus refactored with the Baseline macros of the train split "
-                 "(shapeprog/macros/libs/chair_baseline.txt), trained with the ShapeMOD model's recipe and epochs "
-                 "(configs/shapeassembly/vae_chair_baseline_macros.yaml).")
+                 "(shapeprog/macros/libs/chair_baseline.txt; configs/shapeassembly/vae_chair_baseline_macros.yaml).")
+
+
+def training_summary(meta: Mapping) -> str:
+    """How a VAE weights file was trained, from its ``meta``: its ``training`` entry, else the epoch it was kept at."""
+    if meta.get("training"):
+        return str(meta["training"])
+    return f"kept at epoch {meta['epoch']} of one run" if "epoch" in meta else "not recorded"
 #: Table 2's columns (keys of :class:`shapeprog.vae.gentable.GenerationRow`), labels and digits.
 COLUMNS = (("rooted", "% rooted", 1), ("stable", "% stable (code rule, 2.5 %)", 1),
            ("stable_paper", "% stable (paper rule, 10 %)", 1), ("fool", "% fool", 2), ("fd", "FD", 2),
@@ -59,7 +65,8 @@ def generation_rows(category: str, models: Mapping[str, object], n: int, seed: i
                                         executor=executor, stability=stability, fool_epochs=fool_epochs, seed=seed,
                                         log=log))
     return rows, {"meta": meta, "sha": PRETRAINED_SHA256, "sampling": sampling, "fool_epochs": fool_epochs,
-                  "stability": stability}
+                  "stability": stability,
+                  "training": {name: training_summary(getattr(vae, "meta", None) or {}) for name, vae in models.items()}}
 
 
 def table2_result(category: str, rows: Sequence, settings: Mapping, n: int, seed: int, command: str) -> dict:
@@ -86,6 +93,9 @@ def table2_result(category: str, rows: Sequence, settings: Mapping, n: int, seed
              BASELINE_NOTE if baseline else
              "Baseline Macros: needs a VAE trained on the corpus refactored with the category's Baseline macros "
              "(shipped for chair only).",
+             *(["Training of each model (its weights file's meta): " + "; ".join(
+                 f"{name}: {how}" for name, how in settings["training"].items()) + "."]
+               if settings.get("training") else []),
              *[n for i, n in enumerate(table_notes(settings["meta"], settings["sha"], settings["fool_epochs"], 4, 512,
                                                    CHAMFER_POINTS, 16, settings["stability"])) if i in (0, 1, 3)]]
     return make_result(f"ShapeMOD Table 2: generation without and with macros ({category})", cols, out, notes,

@@ -267,6 +267,16 @@ def test_table2_result_rows():
                                                   "paper (ShapeMOD Table 2): ShapeMOD"]
     assert res["rows"][1]["samples"] == "8 of 10" and res["rows"][1]["fd"] == 40.0
     assert BASELINE_NOTE in res["notes"]
+    # each model's training, from its weights file's meta, is a note
+    from shapeprog.macros.table2 import training_summary
+    assert training_summary({"training": "40 epochs", "epoch": 39}) == "40 epochs"
+    assert training_summary({"epoch": 44}) == "kept at epoch 44 of one run" and training_summary({}) == "not recorded"
+    res = table2_result("chair", rows, {"meta": {}, "sha": "ab" * 32, "sampling": ["x"], "fool_epochs": 12,
+                                        "stability": True, "training": {"No Macros": "170 epochs",
+                                                                        "ShapeMOD": "kept at epoch 44 of one run"}},
+                        10, 0, "cmd")
+    assert ("Training of each model (its weights file's meta): No Macros: 170 epochs; ShapeMOD: kept at epoch 44 "
+            "of one run.") in res["notes"]
 
 
 def test_table3_result_and_weights():

@@ -327,8 +327,9 @@ def test_reconstruction_hook_logs_fscore_and_images(tmp_path, monkeypatch):
 
 def test_shipped_configs_parse_through_train_py(train_main):
     assert [p.name for p in CONFIGS] == ["vae_all.yaml", "vae_chair.yaml", "vae_chair_baseline_macros.yaml",
-                                         "vae_chair_macros.yaml", "vae_storage.yaml", "vae_storage_macros.yaml",
-                                         "vae_table.yaml", "vae_table_macros.yaml"]
+                                         "vae_chair_kl.yaml", "vae_chair_macros.yaml", "vae_chair_macros_kl.yaml",
+                                         "vae_storage.yaml", "vae_storage_macros.yaml", "vae_table.yaml",
+                                         "vae_table_macros.yaml"]
     for path in CONFIGS:
         cat = path.stem.split("_")[1]
         run = path.stem
@@ -338,13 +339,16 @@ def test_shipped_configs_parse_through_train_py(train_main):
         assert isinstance(cli.model, VAEModule) and isinstance(cli.datamodule, VAEDataModule)
         assert cli.model.hparams.category == cli.datamodule.category == cat
         baseline = run == "vae_chair_baseline_macros"  # the shipped macro VAEs' recipe: 8 shapes a step, lr 3e-4
-        assert cli.model.hparams.lr == (3e-4 if baseline else 1e-4)
+        kl = run.endswith("_kl")  # the chair recipe's last step: continues a file with the KL weight 0.3
+        assert cli.model.hparams.lr == (3e-4 if baseline else 2e-4 if kl else 1e-4)
+        assert cli.model.weights["kl"] == (0.3 if kl else 0.1)
+        if kl:
+            assert (ROOT / cli.model.hparams.init).is_file() and cli.model.hparams.batch_shapes == 8
         assert cli.model.hparams.eps == 1e-6 and cli.model.hparams.hidden_dim == 256
         assert cli.trainer.logger.log_dir.startswith(f"runs/{run}/")
         dirs = {cb.dirpath for cb in cli.trainer.checkpoint_callbacks}
         assert dirs == {str(ROOT / "runs" / run / "checkpoints")} or dirs == {f"runs/{run}/checkpoints"}
-        library = ("shapeprog/macros/libs/chair_baseline.txt" if baseline else cat if run.endswith("_macros")
-                   else None)
+        library = ("shapeprog/macros/libs/chair_baseline.txt" if baseline else cat if "_macros" in run else None)
         assert cli.model.hparams.library == cli.datamodule.library == library
 
 
