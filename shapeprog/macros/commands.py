@@ -299,7 +299,8 @@ def cmd_generation(args) -> int:
             raise SystemExit(f"error: {e}") from None
     with worker_pool(args.workers, "spawn") as pool:
         rows, settings = generation_rows(args.category, models, args.n, args.seed, stability=not args.no_stability,
-                                         fool_epochs=args.fool_epochs, executor=pool, log=progress_log(args))
+                                         fool_epochs=args.fool_epochs, executor=pool, log=progress_log(args),
+                                         ground_truth=not args.no_ground_truth)
     return report(args, table2_result(args.category, rows, settings, args.n, args.seed, command_line(args)))
 
 
@@ -412,6 +413,8 @@ def register(sub) -> None:
     add_seed(gn, "seed of the samples and the metrics")
     gn.add_argument("--fool-epochs", type=int_at_least(4), default=12, help="epochs of the %% fool classifier")
     gn.add_argument("--no-stability", action="store_true", help="skip the physics stability test")
+    gn.add_argument("--no-ground-truth", action="store_true",
+                    help="leave out the corpus val split's row (measured once, then cached on disk)")
     add_workers(gn)
     add_result_options(gn, "the table")
     pc = add_command(sub, "pointcloud", cmd_pointcloud, outputs={"json": "file+"})

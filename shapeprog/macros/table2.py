@@ -15,7 +15,8 @@ import time
 from typing import Callable, Mapping, Sequence
 
 from ..vae.commands import draw
-from ..vae.gentable import CHAMFER_POINTS, EVALUATE_TRIES, References, evaluate_generation, table_notes
+from ..vae.gentable import (CHAMFER_POINTS, EVALUATE_TRIES, References, evaluate_generation, ground_truth_row,
+                             table_notes)
 from ..vae.pointnet import PRETRAINED_SHA256, load_classifier
 
 __all__ = ["BASELINE_NOTE", "COLUMNS", "PAPER", "paper_rows", "generation_rows", "table2_result", "training_summary"]
@@ -48,9 +49,10 @@ def paper_rows(category: str) -> dict[str, dict]:
 
 
 def generation_rows(category: str, models: Mapping[str, object], n: int, seed: int = 0, stability: bool = True,
-                    fool_epochs: int = 12, executor=None, log: Callable[[str], None] | None = None) -> tuple[list, dict]:
+                    fool_epochs: int = 12, executor=None, log: Callable[[str], None] | None = None,
+                    ground_truth: bool = True) -> tuple[list, dict]:
     """Sample ``n`` programs from each of ``models`` (row name -> a loaded VAE) and measure them against the
-    category's references. Returns the :class:`~shapeprog.vae.gentable.GenerationRow` s and the settings
+    category's references, then (``ground_truth``) the corpus val split the same way. Returns the :class:`~shapeprog.vae.gentable.GenerationRow` s and the settings
     :func:`table2_result` reports (the classifier's metadata and SHA, the sampling lines)."""
     model, _, meta = load_classifier()
     refs = References.build(category, model, seed, log=log, classifier_sha=PRETRAINED_SHA256)
@@ -64,6 +66,9 @@ def generation_rows(category: str, models: Mapping[str, object], n: int, seed: i
         rows.append(evaluate_generation([r.program for r in results], refs, name=name, model=model,
                                         executor=executor, stability=stability, fool_epochs=fool_epochs, seed=seed,
                                         log=log))
+    if ground_truth:  # the val split through the same metrics and classifier, beside the models
+        rows.append(ground_truth_row(refs, PRETRAINED_SHA256, model=model, executor=executor, stability=stability,
+                                     fool_epochs=fool_epochs, seed=seed, log=log))
     return rows, {"meta": meta, "sha": PRETRAINED_SHA256, "sampling": sampling, "fool_epochs": fool_epochs,
                   "stability": stability,
                   "training": {name: training_summary(getattr(vae, "meta", None) or {}) for name, vae in models.items()}}
