@@ -125,6 +125,19 @@ def test_export_weights_from_a_checkpoint(tmp_path, capsys):
         main(["vae", "export-weights", str(tmp_path / "missing.ckpt"), "--out", str(tmp_path / "x.pt")])
     with pytest.raises(SystemExit, match="is also an input|same file|input"):
         main(["vae", "export-weights", str(tmp_path / "w.pt"), "--out", str(tmp_path / "w.pt")])
+    # several checkpoints: the mean of their weights, in float32 with --float32
+    other = VAE(hidden_dim=8)
+    torch.save({**ckpt, "state_dict": {f"vae.{k}": v for k, v in other.state_dict().items()}, "epoch": 9},
+               tmp_path / "e9.ckpt")
+    assert main(["vae", "export-weights", str(tmp_path / "last.ckpt"), str(tmp_path / "e9.ckpt"), "--out",
+                 str(tmp_path / "mean.pt"), "--float32"]) == 0
+    mean = load_model(tmp_path / "mean.pt", category="storage")
+    w = "decoder.bbdimNet.l1.weight"
+    assert torch.allclose(mean.state_dict()[w], (vae.state_dict()[w] + other.state_dict()[w]) / 2, atol=1e-7)
+    assert mean.meta["epoch"] == 9 and len(mean.meta["averaged"]) == 2
+    with pytest.raises(SystemExit, match="is also an input|same file|input"):
+        main(["vae", "export-weights", str(tmp_path / "last.ckpt"), str(tmp_path / "mean.pt"), "--out",
+              str(tmp_path / "mean.pt"), "--overwrite"])
 
 
 def test_evaluate_generation_of_vae_samples(weights, tmp_path, monkeypatch):
