@@ -30,16 +30,17 @@ PAPER: dict = {
 BASELINE_NOTE = ("Baseline Macros: the VAE over the corpus refactored with the Baseline macros of the train split "
                  "(shapeprog/macros/libs/chair_baseline.txt; configs/shapeassembly/vae_chair_baseline_macros.yaml).")
 
+#: Table 2's columns (keys of :class:`shapeprog.vae.gentable.GenerationRow`), labels and digits.
+COLUMNS = (("rooted", "% rooted", 1), ("stable", "% stable (code rule, 2.5 %)", 1),
+           ("stable_paper", "% stable (paper rule, 10 %)", 1), ("fool", "% fool", 2), ("fd", "FD", 2),
+           ("leaf_parts", "leaf parts", 2))
+
 
 def training_summary(meta: Mapping) -> str:
     """How a VAE weights file was trained, from its ``meta``: its ``training`` entry, else the epoch it was kept at."""
     if meta.get("training"):
         return str(meta["training"])
     return f"kept at epoch {meta['epoch']} of one run" if "epoch" in meta else "not recorded"
-#: Table 2's columns (keys of :class:`shapeprog.vae.gentable.GenerationRow`), labels and digits.
-COLUMNS = (("rooted", "% rooted", 1), ("stable", "% stable (code rule, 2.5 %)", 1),
-           ("stable_paper", "% stable (paper rule, 10 %)", 1), ("fool", "% fool", 2), ("fd", "FD", 2),
-           ("leaf_parts", "leaf parts", 2))
 
 
 def paper_rows(category: str) -> dict[str, dict]:
@@ -52,8 +53,9 @@ def generation_rows(category: str, models: Mapping[str, object], n: int, seed: i
                     fool_epochs: int = 12, executor=None, log: Callable[[str], None] | None = None,
                     ground_truth: bool = True) -> tuple[list, dict]:
     """Sample ``n`` programs from each of ``models`` (row name -> a loaded VAE) and measure them against the
-    category's references, then (``ground_truth``) the corpus val split the same way. Returns the :class:`~shapeprog.vae.gentable.GenerationRow` s and the settings
-    :func:`table2_result` reports (the classifier's metadata and SHA, the sampling lines)."""
+    category's references, then (``ground_truth``) the corpus val split the same way. Returns the
+    :class:`~shapeprog.vae.gentable.GenerationRow` s and the settings :func:`table2_result` reports (the
+    classifier's metadata and SHA, the sampling lines, each model's :func:`training_summary`)."""
     model, _, meta = load_classifier()
     refs = References.build(category, model, seed, log=log, classifier_sha=PRETRAINED_SHA256)
     rows, sampling = [], []

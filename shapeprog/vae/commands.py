@@ -226,7 +226,7 @@ def export_vae_weights(checkpoints: list[str], out: str, half: bool = True) -> P
         if Path(checkpoint).is_file() and is_pointcloud_checkpoint(checkpoint):
             raise SystemExit(f"error: {checkpoint}: a checkpoint of a point-cloud model; export it with "
                              "`python -m shapeprog pointcloud export-weights`")
-    return export_weights(checkpoints[0] if len(checkpoints) == 1 else checkpoints, out, half=half)
+    return export_weights(checkpoints, out, half=half)
 
 
 def read_programs(folder: str) -> list:

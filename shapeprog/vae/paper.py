@@ -59,7 +59,7 @@ EXPERIMENTS: tuple[Experiment, ...] = (
         "sa-t3", "Table 3: editability (lines per program, share of squeeze / reflect / translate lines and "
         "of the parts they make) of the val split and of VAE samples", "editability", 30,
         f"the val split and {NOVELTY_SAMPLES} samples per category; the paper's figures are not in the "
-              "specification"),
+        "specification"),
     _generation(
         "sa-t4", "done", "Table 4: generalization, coverage and variety of samples (in the generation table)",
         scale=_GENERATION_SCALE + "; chamfer on unit-diagonal shapes, 1,024 points (the paper's normalisation "

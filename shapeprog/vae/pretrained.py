@@ -37,9 +37,9 @@ __all__ = ["FORMAT", "PRETRAINED", "PRETRAINED_MACROS", "VERSION", "WEIGHTS", "d
            "load_model", "load_pretrained", "read_weights", "save_weights"]
 
 FORMAT = "shapeprog-vae"
+VERSION = 1
 #: Checkpoints :func:`export_weights` averages at the most.
 MAX_AVERAGED = 100
-VERSION = 1
 WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
 # category -> file shipped under shapeprog/weights (docs/benchmarks.md names the command that trained each)
 PRETRAINED = {"chair": "vae_chair.pt", "table": "vae_table.pt", "storage": "vae_storage.pt"}
@@ -131,29 +131,27 @@ def export_weights(checkpoint, out, half: bool = True, meta: dict | None = None)
     file then holds the mean of their weights (stochastic weight averaging) and ``meta["averaged"]`` names them;
     the last one's meta is kept. Models of another category, size or library are refused, naming the file.
     """
-    if isinstance(checkpoint, (str, Path)):
-        vae = load_model(checkpoint)  # its category and meta come with it
-        return save_weights(vae, out, vae.category, {**vae.meta, **(meta or {})}, half)
-    paths = [Path(p) for p in checkpoint]
+    paths = [Path(checkpoint)] if isinstance(checkpoint, (str, Path)) else [Path(p) for p in checkpoint]
     if not paths:
         raise ValueError("no checkpoint to export")
     if len(paths) > MAX_AVERAGED:
         raise ValueError(f"{len(paths)} checkpoints to average; at most {MAX_AVERAGED}")
-    vae = load_model(paths[-1])
-    want = _signature(vae)
-    total = {k: v.detach().double().clone() for k, v in vae.state_dict().items() if v.is_floating_point()}
-    for p in paths[:-1]:
-        other = load_model(p)
-        if _signature(other) != want:
-            raise ValueError(f"{p}: not a model of the same kind as {paths[-1]} (category, hidden size, library), "
-                             "so the two cannot be averaged")
-        for k, v in other.state_dict().items():
-            if k in total:
-                total[k] += v.detach().double()
-    vae.load_state_dict({k: (total[k] / len(paths)).float() if k in total else v
-                         for k, v in vae.state_dict().items()})
-    return save_weights(vae, out, vae.category,
-                        {**vae.meta, "averaged": [str(p) for p in paths], **(meta or {})}, half)
+    vae = load_model(paths[-1])  # its category and meta come with it
+    if len(paths) > 1:
+        want = _signature(vae)
+        total = {k: v.detach().double().clone() for k, v in vae.state_dict().items() if v.is_floating_point()}
+        for p in paths[:-1]:
+            other = load_model(p)
+            if _signature(other) != want:
+                raise ValueError(f"{p}: not a model of the same kind as {paths[-1]} (category, hidden size, "
+                                 "library), so the two cannot be averaged")
+            for k, v in other.state_dict().items():
+                if k in total:
+                    total[k] += v.detach().double()
+        vae.load_state_dict({k: (total[k] / len(paths)).float() if k in total else v
+                             for k, v in vae.state_dict().items()})
+        meta = {"averaged": [str(p) for p in paths], **(meta or {})}
+    return save_weights(vae, out, vae.category, {**vae.meta, **(meta or {})}, half)
 
 
 def _signature(vae) -> tuple:

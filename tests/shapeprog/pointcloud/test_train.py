@@ -10,12 +10,12 @@ from csgnet.train.checkpoint import AtomicCheckpointIO
 from shapeprog.lang import to_text
 from shapeprog.pointcloud.data import corpus_splits, make_clouds
 from shapeprog.pointcloud.infer import load_model
-from shapeprog.vae.pretrained import decoder_fingerprint
 from shapeprog.pointcloud.train import CloudDataModule, EndToEndModule, LatentRegressionModule, export_weights
 from shapeprog.vae.batch import TreeBatch
 from shapeprog.vae.macro_batch import MacroTreeBatch, macro_batch_loss
 from shapeprog.vae.losses import macro_program_loss, program_loss
 from shapeprog.vae.macro_model import MacroVAE
+from shapeprog.vae.pretrained import decoder_fingerprint
 from shapeprog.vae.model import VAEOutput
 
 ROOT = Path(__file__).resolve().parents[3]
