@@ -10,7 +10,7 @@ import numpy as np
 
 from .files import InputError
 
-__all__ = ["as_numpy", "read_grid", "MAX_GRID_CELLS"]
+__all__ = ["as_numpy", "int_entry", "read_grid", "MAX_GRID_CELLS"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -24,6 +24,18 @@ def as_numpy(x) -> np.ndarray:
     if type(x).__module__.startswith("torch"):
         x = x.detach().cpu().numpy()
     return np.asarray(x)
+
+
+def int_entry(value, path: PathLike, name: str, low: int | None = None, high: int | None = None) -> int:
+    """A stored integer scalar (an ``.npz`` entry ``name`` of ``path``) within ``[low, high]`` (a bound of None is
+    open), or an :class:`~shapeio.files.InputError` naming the file, the entry and what it holds."""
+    arr = np.asarray(value)
+    ok = arr.ndim == 0 and np.issubdtype(arr.dtype, np.integer)
+    if ok and (low is None or int(arr) >= low) and (high is None or int(arr) <= high):
+        return int(arr)
+    bounds = (f" in [{low}, {high}]" if low is not None and high is not None else f" >= {low}" if low is not None
+              else f" <= {high}" if high is not None else "")
+    raise InputError(f"{path}: the entry {name!r} is not an integer{bounds}: dtype {arr.dtype}, shape {arr.shape}")
 
 
 def read_grid(path: PathLike, ndims: Sequence[int] = (2, 3), max_cells: int = MAX_GRID_CELLS) -> np.ndarray:

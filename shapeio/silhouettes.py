@@ -19,6 +19,7 @@ from typing import Mapping, Union
 
 import numpy as np
 
+from .arrays import int_entry
 from .files import atomic_write
 
 __all__ = ["FORMAT_VERSION", "MAX_SIZE", "SPLITS", "SilhouetteSplit", "check_split", "split_keys", "write_silhouettes",
@@ -32,14 +33,6 @@ SPLITS = ("train", "val", "test")
 SIZE = 64  # the image side of files without a ``size`` entry
 MAX_SIZE = 1024
 """The largest image side a silhouette file may declare."""
-
-
-def _int_entry(value: np.ndarray, p: Path, name: str, low: int, high: int) -> int:
-    """A stored integer scalar in ``[low, high]``, or a ValueError naming the file and the entry."""
-    if np.ndim(value) != 0 or not np.issubdtype(np.asarray(value).dtype, np.integer) or not low <= int(value) <= high:
-        raise ValueError(f"{p}: the entry {name!r} is not an integer in [{low}, {high}]: "
-                         f"dtype {np.asarray(value).dtype}, shape {np.shape(value)}")
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -158,10 +151,10 @@ def read_set(path, kind: str, need: tuple[str, ...], version: int, missing: str,
             if not required <= keys:
                 raise ValueError(f"{p}: not {missing}: missing {', '.join(sorted(required - keys))} "
                                  f"(found {', '.join(sorted(keys)) or 'nothing'})")
-            found = _int_entry(z["version"], p, "version", 0, 2**31) if "version" in keys else version
+            found = int_entry(z["version"], p, "version", 0, 2**31) if "version" in keys else version
             if found != version:
                 raise ValueError(f"{p}: {kind} file version {found}; this reader reads version {version}")
-            size = _int_entry(z["size"], p, "size", 1, MAX_SIZE) if "size" in keys else default_size
+            size = int_entry(z["size"], p, "size", 1, MAX_SIZE) if "size" in keys else default_size
             return p, [z[k] for k in need], size
     except ValueError as e:
         if str(e).startswith(f"{p}: "):

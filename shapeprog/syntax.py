@@ -35,7 +35,7 @@ AXES = ("X", "Y", "Z")
 # ----------------------------------------------------------------------------- AST
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Cuboid:
     """``name = Cuboid(l, h, w, aligned)``; extents along local x, y (up), z."""
 
@@ -46,7 +46,7 @@ class Cuboid:
     aligned: bool
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Attach:
     """``attach(a, b, x1, y1, z1, x2, y2, z2)``: move ``a`` so that its local point
     (x1, y1, z1) meets the local point (x2, y2, z2) of ``b``."""
@@ -61,7 +61,7 @@ class Attach:
     z2: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Squeeze:
     """``squeeze(a, b, c, face, u, v)``: place ``a`` between ``b`` (on side ``face``)
     and ``c`` (opposite side); (u, v) are the free coordinates in increasing axis order."""
@@ -74,7 +74,7 @@ class Squeeze:
     v: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Reflect:
     """``reflect(a, axis)``: a mirrored copy of ``a`` through the bbox's centre plane."""
 
@@ -82,7 +82,7 @@ class Reflect:
     axis: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Translate:
     """``translate(a, axis, n, d)``: ``n`` copies of ``a``, the last one ``d`` (a fraction
     of the bbox extent along ``axis``) away from ``a``."""
@@ -106,7 +106,7 @@ NUM_FIELDS = {
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Block:
     """``Assembly <name> { statements }``; ``statements[0]`` is ``bbox = Cuboid(...)``."""
 
@@ -121,7 +121,7 @@ class Block:
         return [s for s in self.statements if isinstance(s, Cuboid)]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Program:
     """A ShapeAssembly program: blocks in breadth-first (file) order, root first.
 

@@ -11,6 +11,7 @@ from typing import Sequence, Union
 import numpy as np
 import torch
 
+from shapeio.arrays import int_entry
 from shapeio.files import InputError, parse_json
 
 from .. import corpus
@@ -77,10 +78,7 @@ def load_cache(root: PathLike, category: str) -> CloudCache:
     if missing:
         raise InputError(f"{path}: not a cloud cache (missing {', '.join(missing)})")
     for k in ("version", "n_points", "seed"):  # any integer seed; counts and versions are >= 0
-        v = d[k]
-        if np.ndim(v) != 0 or not np.issubdtype(v.dtype, np.integer) or (k != "seed" and int(v) < 0):
-            raise InputError(f"{path}: not a cloud cache ('{k}' is not a{'n' if k == 'seed' else ' non-negative'} "
-                             f"integer: dtype {v.dtype}, shape {np.shape(v)})")
+        int_entry(d[k], path, k, None if k == "seed" else 0)
     if int(d["version"]) != CACHE_VERSION:
         raise InputError(f"{path}: cache version {int(d['version'])}, this code reads version {CACHE_VERSION}; "
                          "make it again with `python -m shapeprog make-clouds --out NEW_FOLDER`")

@@ -112,8 +112,8 @@ def test_cache_errors_name_the_file(cache, tmp_path):
     # damaged entries of a real cache: each refused by name, none read as something else
     with np.load(root / "chair_clouds.npz", allow_pickle=False) as z:
         good = {k: z[k] for k in z.files}
-    damaged = [({"version": np.array([1, 2])}, "'version' is not a non-negative integer"),
-               ({"n_points": np.array([])}, "'n_points' is not a non-negative integer"),
+    damaged = [({"version": np.array([1, 2])}, "'version' is not an integer >= 0"),
+               ({"n_points": np.array([])}, "'n_points' is not an integer >= 0"),
                ({"points": np.where(np.arange(3) == 0, np.nan, good["points"])}, "'points' holds a non-finite"),
                ({"scale": np.zeros_like(good["scale"])}, "a scale <= 0"),
                ({"scale": np.full_like(good["scale"], -np.inf)}, "'scale' holds a non-finite"),
