@@ -121,7 +121,7 @@ class Block:
         return [s for s in self.statements if isinstance(s, Cuboid)]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, weakref_slot=True)  # the editor caches per program by weak reference
 class Program:
     """A ShapeAssembly program: blocks in breadth-first (file) order, root first.
 
