@@ -25,6 +25,7 @@ import sys
 
 from shapeio import experiments
 from shapeio.files import output_problem
+from shapeio.options import HelpFormatter
 
 from .cli import edit, parse, programs, tables
 from .paper.experiments import EXPERIMENTS
@@ -40,7 +41,30 @@ def build_parser() -> argparse.ArgumentParser:
     for module in COMMAND_MODULES:
         module.register(sub)
     experiments.register(sub, EXPERIMENTS, main, "python -m csgnet")
+    for name, p in sub.choices.items():  # one convention: defaults and an example in every command's help
+        if name in EXAMPLES:
+            p.formatter_class = HelpFormatter
+            p.epilog = f"example:\n  python -m csgnet {name} {EXAMPLES[name]}"
+        if OUTPUTS.get(name) == "file+" or name == "render":
+            p.add_argument("--overwrite", action="store_true", help="replace existing output files (an output that "
+                           "is one of the inputs is always refused)")
     return ap
+
+
+#: One command line per command, shown under its ``--help`` (a test runs each through the parser).
+EXAMPLES = {
+    "render": '"c(32,32,28)s(32,32,20)-" -o out.png',
+    "generate": "--dim 2 --scale 0.001 --out data/synthetic --workers 2",
+    "demo": "--out demo_output",
+    "parse": "examples/house.png examples/snowman.stl --refine --out parse_output",
+    "evaluate": "--dim 3 --data data/synthetic --beams 1 10 --per-length 20 --out table5.json",
+    "export-weights": "runs/csgnet3d_lite/checkpoints/last.ckpt --out csgnet3d.pt",
+    "table4": "--weights csgnet/weights/csgnet2d.pt --images 50 --out table4.json",
+    "table1": "--steps 900 --gammas 1 20 --out table1.json",
+    "datasize": "--data data/synthetic --fractions 0.1 1.0 --steps 300 --out datasize.json",
+    "table6": "--data data/synthetic --weights csgnet/weights/csgnet2d.pt --per-length 20 --out table6.json",
+    "edit": '"c(32,32,28)s(32,32,20)-" --port 8081 --no-browser',
+}
 
 
 #: Each command's output options and what they name: ``"folder"`` (created with its parents) or ``"file+"`` (a
@@ -55,6 +79,8 @@ def main(argv=None) -> int:
     kind = OUTPUTS.get(args.cmd)
     if kind and getattr(args, "out", None):
         problem = output_problem(args.out, folder=kind == "folder")
+        if not problem and kind == "file+" and os.path.exists(args.out) and not args.overwrite:
+            problem = "exists; give --overwrite to replace it, or choose another output"
         if problem:
             print(f"error: --out {args.out}: {problem}", file=sys.stderr)
             return 2

@@ -32,7 +32,7 @@ from pathlib import Path
 from shapeio import atomic_write, refuse_overwrite
 from shapeio.mesh import WRITE_SUFFIXES
 from shapeio.files import NotShippedError
-from shapeio.options import float_in, int_in
+from shapeio.options import HelpFormatter, float_in, int_in
 
 from . import corpus
 from . import io
@@ -62,23 +62,6 @@ MAX_WORKERS = 256
 MAX_SEED = 2 ** 63 - 1
 #: The largest time option, in seconds (``--stop-after``, ``--wake-seconds``; minutes options: this / 60).
 MAX_SECONDS_OPTION = 366 * 24 * 3600.0
-
-
-class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Help that names each option's default (none for options without one, or flags that are off) and keeps
-    the epilog's example lines as written."""
-
-    def _get_help_string(self, action):
-        text = action.help or ""
-        if (action.default is None or action.default is False or action.default is argparse.SUPPRESS
-                or "%(default)" in text or not action.option_strings):
-            return text
-        return text + " (default: %(default)s)"
-
-    def _fill_text(self, text, width, indent):
-        if text.startswith("example:"):
-            return "".join(indent + line for line in text.splitlines(keepends=True))
-        return super()._fill_text(text, width, indent)
 
 
 def add_command(sub, name: str, func, *, outputs: dict | None = None, help: str | None = None,

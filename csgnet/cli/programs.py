@@ -42,6 +42,10 @@ def cmd_render(args) -> int:
     except ParseError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    taken = [out for out in args.output if Path(out).exists()]
+    if taken and not args.overwrite:
+        print(f"error: {taken[0]}: exists; give --overwrite to replace it, or choose another output", file=sys.stderr)
+        return 2
     img = render(program, args.dim)[0]
     print(f"{program.text()}  ({len(program)} tokens, {int(img.sum())} {'pixels' if args.dim == 2 else 'voxels'} on)")
     for out in args.output:
@@ -111,7 +115,7 @@ def register(sub) -> None:
     """Add this module's subcommands to ``python -m csgnet``."""
     r = sub.add_parser("render", help="render one program to .png (2D), .obj (3D), .npy or .scad")
     r.add_argument("program", help='program text, e.g. "c(32,32,28)s(32,32,20)-"')
-    r.add_argument("-o", "--output", action="append", required=True,
+    r.add_argument("-o", "--out", "--output", dest="output", action="append", required=True,
                    help="output file, repeatable: .png (2D image), .obj (3D mesh), .npy (bool grid), .scad (OpenSCAD)")
     r.add_argument("--dim", type=int, choices=(2, 3), default=None, help="2 or 3 (default: guessed from the text)")
     r.set_defaults(func=cmd_render)

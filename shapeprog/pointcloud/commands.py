@@ -2,8 +2,6 @@
 the cloud cache they read (make-clouds), and the export of trained weights."""
 from __future__ import annotations
 
-import argparse
-
 import json
 import sys
 import time
@@ -304,7 +302,8 @@ def register(sub) -> None:
                         "clearly better)")
     i.add_argument("--stability", action="store_true",
                    help="also run the physics stability test of the result (about 0.5 s per cloud)")
-    i.add_argument("--no-stability", action="store_true", help=argparse.SUPPRESS)  # the default since --stability
+    i.add_argument("--no-stability", action="store_true",
+                   help="no stability test: the default, kept for older command lines (see --stability)")
     i.add_argument("--size", type=int_at_least(8, MAX_PICTURE_SIZE), default=256, help="picture cell size in pixels")
     add_seed(i, "seed of the point subsets")
     i.add_argument("--out", required=True, help="output folder (created if missing)")

@@ -1,3 +1,4 @@
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -204,9 +205,35 @@ def test_a_table_is_never_written_over_its_weights(tmp_path):
     for argv in (["table6", "--weights", str(weights), "--per-length", "1", "--out", str(weights)],
                  ["table4", "--weights", f"mine={weights}", "--images", "1", "--out", str(weights)],
                  ["evaluate", "--dim", "2", "--data", str(tmp_path), "--weights", str(weights), "--out", str(weights)]):
-        with pytest.raises(SystemExit, match=r"w\.pt"):
-            main(argv)
+        with pytest.raises(SystemExit, match=r"w\.pt"):  # an input is never replaced, even with --overwrite
+            main([*argv, "--overwrite"])
     assert weights.read_bytes() == before
+
+
+def test_existing_outputs_are_refused_without_overwrite(tmp_path, capsys):
+    table, picture = tmp_path / "t.json", tmp_path / "p.png"
+    table.write_text("mine")
+    picture.write_bytes(b"mine")
+    assert main(["evaluate", "--dim", "2", "--data", str(tmp_path), "--out", str(table)]) == 2
+    assert main(["render", "c(32,32,20)", "-o", str(picture)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("exists; give --overwrite") == 2 and str(table) in err and str(picture) in err
+    assert table.read_text() == "mine" and picture.read_bytes() == b"mine"
+    assert main(["render", "c(32,32,20)", "--out", str(picture), "--overwrite"]) == 0
+    assert picture.read_bytes().startswith(b"\x89PNG")
+
+
+def test_every_command_shows_an_example_that_parses():
+    from csgnet.__main__ import EXAMPLES, build_parser
+
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices
+    assert set(EXAMPLES) == set(commands) - {"paper"}
+    for name, p in commands.items():
+        assert "example:" in (p.epilog or ""), name
+        if name in EXAMPLES:
+            args = parser.parse_args([name, *shlex.split(EXAMPLES[name])])
+            assert args.cmd == name
 
 
 def test_parse_of_a_dotted_name_writes_its_own_names(tmp_path, capsys):
