@@ -28,7 +28,7 @@ EXPERIMENTS: tuple[Experiment, ...] = (
         "coder-t2", "done", "Table 2: F, |L|, structural and parametric terms of the discovered libraries",
         "table2.json",
         "tables --category chair table storage --train 100 --heldout 100 --workers 2 "
-        + " ".join(f"--baseline-{w} {c}=docs/tables/shapecoder_structure_only/{c}_{w}"
+        + " ".join(f"--baseline-{w} {c}=docs/results/shapecoder/runs/structure_only/{c}_{w}"
                    for c in ("chair", "table", "storage") for w in ("input", "wake")),
         "tables --category chair --train 5 --heldout 5 --workers 2",
         scale="the shipped libraries' 400 discovery shapes per category, as the paper; their discovery (hours per "
