@@ -164,6 +164,20 @@ def test_the_readme_names_its_commands():
     assert ("csgnet", "parse") in COMMANDS and ("shapeprog", "assembly run") in COMMANDS
 
 
+#: The commands of ``python -m csgnet``.
+CSGNET_COMMANDS = ["render", "generate", "demo", "parse", "evaluate", "export-weights", "table4", "table1", "datasize",
+                   "table6", "edit", "paper"]
+
+
+def test_csgnet_commands():
+    import argparse
+
+    from csgnet.__main__ import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(sub.choices) == CSGNET_COMMANDS
+
+
 def test_shapeprog_systems_commands_and_aliases():
     import argparse
 
