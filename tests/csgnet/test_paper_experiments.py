@@ -46,7 +46,7 @@ def test_paper_run_quick_writes_its_result_file(tmp_path, capsys):
     out = tmp_path / "t4.json"
     assert main(["paper", "run", "csg-t4", "--quick", "--out", str(out)]) == 0
     result = read_result(out)
-    assert result["command"] == f"python -m csgnet table4 --images 10 --iterations 0 2 --out {out}"
+    assert result["command"] == f"python -m csgnet table4 --images 10 --iterations 0 2 --out {out} --overwrite"
     assert [r["protocol"] for r in result["rows"]][0] == "training silhouette, max IoU"
     assert all(r["cd_0"] >= 0 for r in result["rows"])
 

@@ -61,9 +61,8 @@ def test_every_shipped_weights_file_loads():
     from shapeprog.vae.pretrained import load_model as load_vae
 
     loaded = []
-    for path in sorted((ROOT / "csgnet" / "weights").glob("*.pt")) + [ROOT / "runs_in_progress" / name for name in
-                                                                      ("csgnet3d_lite.pt",
-                                                                       "csgnetstack3d_small_chunk1.pt")]:
+    for path in sorted((ROOT / "csgnet" / "weights").glob("*.pt")) + [ROOT / "runs_in_progress" /
+                                                                      "csgnetstack3d_small_chunk1.pt"]:
         assert not load_csgnet(path).training
         loaded.append(path.name)
     weights = ROOT / "shapeprog" / "weights"
