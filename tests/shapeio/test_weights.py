@@ -61,8 +61,8 @@ def test_every_shipped_weights_file_loads():
     from shapeprog.vae.pretrained import load_model as load_vae
 
     loaded = []
-    for path in sorted((ROOT / "csgnet" / "weights").glob("*.pt")) + [ROOT / "runs_in_progress" /
-                                                                      "csgnetstack3d_small_chunk1.pt"]:
+    runs = ROOT / "runs_in_progress"
+    for path in sorted((ROOT / "csgnet" / "weights").glob("*.pt")) + sorted(runs.glob("*csgnet*.pt")):
         assert not load_csgnet(path).training
         loaded.append(path.name)
     weights = ROOT / "shapeprog" / "weights"
