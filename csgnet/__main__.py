@@ -24,7 +24,7 @@ import os
 import sys
 
 from shapeio import experiments
-from shapeio.files import output_problem
+from shapeio.files import existing_outputs, output_problem
 from shapeio.options import HelpFormatter
 
 from .cli import edit, parse, programs, tables
@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name in EXAMPLES:
             p.formatter_class = HelpFormatter
             p.epilog = f"example:\n  python -m csgnet {name} {EXAMPLES[name]}"
-        if OUTPUTS.get(name) == "file+" or name == "render":
+        if OUTPUTS.get(name) == "file+" or name in ("render", "parse"):
             p.add_argument("--overwrite", action="store_true", help="replace existing output files (an output that "
                            "is one of the inputs is always refused)")
     return ap
@@ -79,10 +79,12 @@ def main(argv=None) -> int:
     kind = OUTPUTS.get(args.cmd)
     if kind and getattr(args, "out", None):
         problem = output_problem(args.out, folder=kind == "folder")
-        if not problem and kind == "file+" and os.path.exists(args.out) and not args.overwrite:
-            problem = "exists; give --overwrite to replace it, or choose another output"
         if problem:
             print(f"error: --out {args.out}: {problem}", file=sys.stderr)
+            return 2
+        problem = kind == "file+" and existing_outputs([args.out], args.overwrite)
+        if problem:
+            print(f"error: {problem}", file=sys.stderr)
             return 2
     args.argv = list(argv) if argv is not None else sys.argv[1:]
     try:

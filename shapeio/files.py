@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Mapping, Union
 
-__all__ = ["InputError", "MAX_JSON_DEPTH", "NotShippedError", "resolve_shipped", "atomic_write", "c_output_silenced", "output_problem", "parse_json", "refuse_overwrite",
+__all__ = ["InputError", "MAX_JSON_DEPTH", "NotShippedError", "resolve_shipped", "atomic_write", "c_output_silenced", "existing_outputs", "output_problem", "parse_json", "refuse_overwrite",
            "remove_stale_temps", "write_new",
            "write_new_set", "STALE_TEMP_SECONDS"]
 
@@ -335,6 +335,19 @@ def refuse_overwrite(outputs: Iterable[PathLike | None], inputs: Iterable[PathLi
     for out in outputs:
         if out is not None and Path(out).resolve() in protected:
             raise FileExistsError(f"{out}: this output would overwrite an input file; choose another name or folder")
+
+
+def existing_outputs(paths: Iterable[PathLike | None], overwrite: bool = False,
+                     hint: str | None = None) -> str | None:
+    """Why a command must not write ``paths`` (None if it may): one of them exists and ``overwrite`` (the
+    command's ``--overwrite``) is not given, so that a second run never silently replaces a first run's files.
+    ``hint`` replaces the advice at the end (for outputs that ``--overwrite`` does not replace)."""
+    taken = [p for p in paths if p and Path(p).exists()]
+    if not taken or overwrite:
+        return None
+    one = len(taken) == 1
+    hint = hint or f"give --overwrite to replace {'it' if one else 'them'}, or choose another output"
+    return f"{taken[0]}: exists ({len(taken)} of the outputs {'does' if one else 'do'}); {hint}"
 
 
 def output_problem(path: PathLike, folder: bool = False, create: bool = True) -> str | None:

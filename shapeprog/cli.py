@@ -31,7 +31,7 @@ from pathlib import Path
 
 from shapeio import atomic_write, refuse_overwrite
 from shapeio.mesh import WRITE_SUFFIXES
-from shapeio.files import NotShippedError
+from shapeio.files import NotShippedError, existing_outputs
 from shapeio.options import HelpFormatter, float_in, int_in
 
 from . import corpus
@@ -334,13 +334,12 @@ def refuse_inputs(outputs, inputs) -> None:
         raise SystemExit(f"error: {e}") from None
 
 
-def refuse_existing(paths, overwrite: bool = False,
-                    hint: str = "give --overwrite to replace them, or choose another output") -> None:
-    """Stop before any work when one of ``paths`` exists, unless ``overwrite``: a second run into the same
-    place would otherwise replace, or mix with, the first run's files."""
-    taken = [p for p in paths if p and Path(p).exists()]
-    if taken and not overwrite:
-        raise SystemExit(f"error: {taken[0]}: exists ({len(taken)} of the outputs do); {hint}")
+def refuse_existing(paths, overwrite: bool = False, hint: str | None = None) -> None:
+    """Stop before any work when one of ``paths`` exists, unless ``overwrite``
+    (:func:`shapeio.files.existing_outputs`; ``hint``: other advice than ``--overwrite``)."""
+    problem = existing_outputs(paths, overwrite, hint)
+    if problem:
+        raise SystemExit(f"error: {problem}")
 
 
 def write_mesh(path: str, shape) -> None:

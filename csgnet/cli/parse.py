@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from shapeio import atomic_write, refuse_overwrite
+from shapeio.files import existing_outputs
 from shapeio.results import column, make_result, write_result
 
 from .. import export, render
@@ -166,6 +167,10 @@ def cmd_parse(args) -> int:
         refuse_overwrite(outputs, args.inputs)
     except FileExistsError as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    problem = existing_outputs(outputs, args.overwrite)  # an earlier parse's files in the folder
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     try:
         models = _parse_models(args)

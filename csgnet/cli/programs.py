@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from shapeio import atomic_write
+from shapeio.files import existing_outputs
 
 from .. import export, render
 from . import common
@@ -42,9 +43,9 @@ def cmd_render(args) -> int:
     except ParseError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    taken = [out for out in args.output if Path(out).exists()]
-    if taken and not args.overwrite:
-        print(f"error: {taken[0]}: exists; give --overwrite to replace it, or choose another output", file=sys.stderr)
+    problem = existing_outputs(args.output, args.overwrite)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     img = render(program, args.dim)[0]
     print(f"{program.text()}  ({len(program)} tokens, {int(img.sum())} {'pixels' if args.dim == 2 else 'voxels'} on)")

@@ -217,10 +217,20 @@ def test_existing_outputs_are_refused_without_overwrite(tmp_path, capsys):
     assert main(["evaluate", "--dim", "2", "--data", str(tmp_path), "--out", str(table)]) == 2
     assert main(["render", "c(32,32,20)", "-o", str(picture)]) == 2
     err = capsys.readouterr().err
-    assert err.count("exists; give --overwrite") == 2 and str(table) in err and str(picture) in err
+    assert err.count("exists (1 of the outputs does); give --overwrite") == 2 and str(table) in err and str(picture) in err
     assert table.read_text() == "mine" and picture.read_bytes() == b"mine"
     assert main(["render", "c(32,32,20)", "--out", str(picture), "--overwrite"]) == 0
     assert picture.read_bytes().startswith(b"\x89PNG")
+    # a second parse into the same folder: its per-shape files are refused, then replaced with --overwrite
+    out = tmp_path / "parsed"
+    assert main(["parse", str(picture), "--beam", "1", "--out", str(out)]) == 0
+    program = (out / "p.txt").read_text()
+    (out / "p.txt").write_text("mine")
+    capsys.readouterr()
+    assert main(["parse", str(picture), "--beam", "1", "--out", str(out)]) == 2
+    assert "exists (" in capsys.readouterr().err and (out / "p.txt").read_text() == "mine"
+    assert main(["parse", str(picture), "--beam", "1", "--out", str(out), "--overwrite"]) == 0
+    assert (out / "p.txt").read_text() == program
 
 
 def test_every_command_shows_an_example_that_parses():
