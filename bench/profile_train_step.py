@@ -48,6 +48,8 @@ MODELS = {
     "csgnetstack3d_small": (3, True, "small", {}, 48),
     "csgnet3d_lite": (3, False, "lite", {}, 48),
     "csgnet3d_lite_fullhead": (3, False, "lite", {"head": "full"}, 48),
+    "csgnet3d_lite_gru512": (3, False, "lite", {"hidden": 512}, 48),
+    "csgnet3d_lite_wide": (3, False, "lite", {"hidden": 512, "channels": [16, 32, 64, 128]}, 48),
     "csgnet3d_lite_64": (3, False, "lite", {"input_pool": 1, "channels": [8, 16, 32, 64, 64]}, 48),
     "csgnet3d_paper": (3, False, "paper", {}, 48),
     "csgnetstack3d_paper": (3, True, "paper", {}, 48),
