@@ -12,6 +12,7 @@ Example:
 """
 from __future__ import annotations
 
+import re
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from importlib import resources
@@ -37,7 +38,7 @@ from .objective import Result, best_program, templates, to_program
 from .. import corpus
 from .execute import compile_hierarchy
 
-__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_text", "load_library", "read_library",
+__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_split", "library_text", "load_library", "read_library",
            "refactor", "program_stats"]
 
 #: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
@@ -79,6 +80,13 @@ def library_text(category: str) -> str:
     if category not in LIBRARY_CATEGORIES:
         raise ValueError(f"no shipped ShapeMOD library for {category!r} (shipped: {', '.join(LIBRARY_CATEGORIES)})")
     return resources.files("shapeprog.macros").joinpath("libs", f"{category}.txt").read_text(encoding="utf-8")
+
+
+def library_split(category: str) -> str | None:
+    """The corpus split the shipped library of ``category`` was discovered on (``"train"`` or ``"all"``), as its
+    header's ``# shapes: N of split 'S'`` line records; None when the header does not say."""
+    m = re.search(r"^# shapes: \d+ of split '([^']+)'", library_text(category), re.MULTILINE)
+    return m.group(1) if m else None
 
 
 def program_stats(program: MacroProgram, library: Library) -> dict:

@@ -290,6 +290,26 @@ def test_table3_result_and_weights():
     assert res["rows"] == rows and "the first 5 test shapes" in res["notes"][0]
 
 
+def test_table3_notes_say_which_split_each_library_was_discovered_on(monkeypatch):
+    from shapeprog.macros import api
+    from shapeprog.macros.table3 import table3_result
+
+    for c in api.LIBRARY_CATEGORIES:  # the shipped headers name a split
+        assert api.library_split(c) in ("train", "all")
+    headers = {"chair": "# shapes: 3339 of split 'train' (seed 0)\n", "table": "# shapes: 10 of split 'all' (seed 0)\n",
+               "storage": "# no shapes line\n"}
+    monkeypatch.setattr(api, "library_text", lambda c: headers[c])
+    assert [api.library_split(c) for c in ("chair", "table", "storage")] == ["train", "all", None]
+    rows = [{"category": c, "method": "No Macros", "cd": 1.0, "fscore": 2.0, "rooted": 3.0, "stable": 4.0, "shapes": 5,
+             "failed": 0} for c in ("table", "chair", "storage")]
+    note = table3_result(rows, "cmd", None, 0)["notes"][1]
+    assert "the chair library was discovered on the train split, without these test shapes; " in note
+    assert "the table library was discovered on split all, so these test shapes took part in discovery" in note
+    assert "the storage library was discovered on a split that the header does not record" in note
+    note = table3_result(rows[1:2], "cmd", None, 0)["notes"][1]
+    assert "the chair library was discovered on the train split" in note and "table" not in note
+
+
 def test_pointcloud_command_refuses_a_missing_cache(tmp_path):
     with pytest.raises(SystemExit, match="no such folder"):
         main(["macros", "pointcloud", "--clouds", f"chair={tmp_path / 'none'}", "--quiet"])
