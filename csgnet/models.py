@@ -22,7 +22,7 @@ from .lang import Draw
 from .vocab import vocabulary
 
 __all__ = ["ModelConfig", "preset", "PRESETS", "CSGNet", "Encoder2D", "Encoder3D", "Encoder3DLite", "FactoredLinear",
-           "token_attributes", "default_stack_k", "ENCODERS", "HEADS"]
+           "token_attributes", "default_stack_k", "widen", "ENCODERS", "HEADS"]
 
 ENCODERS = ("paper", "lite")
 HEADS = ("full", "factored")
@@ -431,3 +431,68 @@ def build(config: ModelConfig | dict) -> CSGNet:
     if isinstance(config, dict):
         config = ModelConfig.from_dict(config)
     return CSGNet(config)
+
+
+def widen(start: CSGNet, config: ModelConfig | dict) -> CSGNet:
+    """A model of ``config`` that computes exactly what ``start`` computes, with more units.
+
+    ``config`` may differ from ``start.config`` only in ``hidden`` and ``channels`` (as many blocks, none
+    narrower). Every unit of ``start`` keeps its weights; each new unit (encoder channel, GRU unit, hidden
+    layer unit) takes the fresh layer's random input weights and zero output weights, so the outputs are
+    unchanged (in eval mode, and in train mode for the same dropout draws) while the gradients reach the
+    new units' output weights from the first step. A warm start for a wider run (``init_widen`` of
+    :class:`csgnet.train.supervised.CSGNetModule`) instead of training the wider model from scratch.
+
+    Raises:
+        ValueError: the configurations differ in anything else, or ``config`` is narrower somewhere.
+    """
+    big = build(config)
+    a, b = start.config, big.config
+    rest = {k: v for k, v in a.to_dict().items() if k not in ("hidden", "channels")}
+    if rest != {k: v for k, v in b.to_dict().items() if k not in ("hidden", "channels")}:
+        raise ValueError(f"widen changes only hidden and channels: {a.to_dict()} against {b.to_dict()}")
+    if len(a.channels) != len(b.channels) or any(x > y for x, y in zip(a.channels, b.channels)) or a.hidden > b.hidden:
+        raise ValueError(f"widen needs as many encoder blocks, none narrower, and no smaller hidden size: "
+                         f"channels {a.channels} -> {b.channels}, hidden {a.hidden} -> {b.hidden}")
+    H, Hb, F0, Fb = a.hidden, b.hidden, a.feature_size, b.feature_size
+
+    def put(dst: torch.Tensor, src: torch.Tensor, zero_rest_of_cols: bool = True) -> None:
+        """``src`` into the leading block of ``dst``; the columns beyond ``src``'s in its rows set to zero."""
+        if dst.dim() == 1:
+            dst[: src.shape[0]] = src
+            return
+        dst[: src.shape[0], : src.shape[1]] = src
+        if zero_rest_of_cols:
+            dst[: src.shape[0], src.shape[1]:] = 0
+
+    with torch.no_grad():
+        for m, n in zip(start.encoder.net, big.encoder.net):
+            if isinstance(m, (nn.Conv2d, nn.Conv3d)):
+                put(n.weight, m.weight)
+                put(n.bias, m.bias)
+            elif isinstance(m, nn.BatchNorm3d):
+                for name in ("weight", "bias", "running_mean", "running_var"):
+                    put(getattr(n, name), getattr(m, name))
+                n.num_batches_tracked.copy_(m.num_batches_tracked)
+        big.token_embed.weight.copy_(start.token_embed.weight)
+        big.token_bias.copy_(start.token_bias)
+        g, gb = start.gru, big.gru
+        for k in range(3):  # gates r, z, n: rows k*H .. (k+1)*H
+            rows, rows_b = slice(k * H, (k + 1) * H), slice(k * Hb, k * Hb + H)
+            wi = gb.weight_ih_l0[rows_b]
+            wi[:, :F0] = g.weight_ih_l0[rows, :F0]  # the features the start's encoder makes
+            wi[:, F0:Fb] = 0  # the new channels' features
+            wi[:, Fb:] = g.weight_ih_l0[rows, F0:]  # the token embedding
+            put(gb.weight_hh_l0[rows_b], g.weight_hh_l0[rows])
+            for name in ("bias_ih_l0", "bias_hh_l0"):
+                getattr(gb, name)[rows_b] = getattr(g, name)[rows]
+        lin, lin_b = start.head[1], big.head[1]
+        put(lin_b.weight, lin.weight)
+        put(lin_b.bias, lin.bias)
+        out, out_b = start.head[-1], big.head[-1]
+        put(out_b.weight, out.weight)
+        out_b.bias.copy_(out.bias)
+        if isinstance(out, FactoredLinear):
+            put(out_b.attr_weight, out.attr_weight)
+            out_b.attr_bias.copy_(out.attr_bias)
+    return big

@@ -31,7 +31,7 @@ from ..synth import sample_programs
 from .augment import jitter, mirror_programs, symmetry_tables
 from ..decode import greedy
 from ..inference import load_model
-from ..models import CSGNet, ModelConfig, preset
+from ..models import CSGNet, ModelConfig, preset, widen
 from ..renderer import render_tokens, stack_trace, unpack
 from ..score import score_renders
 from ..vocab import vocabulary
@@ -280,21 +280,30 @@ class CSGNetModule(L.LightningModule):
         init: a weights file or checkpoint (:func:`csgnet.inference.load_model`) whose tensors the
             model starts from, e.g. to continue a run from its exported weights when its checkpoint is
             gone (the optimiser and schedule start afresh); its configuration must equal this one's.
+        init_widen: ``init`` may be a narrower model (smaller ``hidden`` or ``channels``, all else equal):
+            it is widened to this run's configuration with :func:`csgnet.models.widen`, which keeps its
+            outputs and gives the new units zero output weights, so the run starts where ``init`` ended.
     """
 
     def __init__(self, dim: int = 2, stack: bool = False, size: str = "small", model: dict | None = None,
                  lr: float = 1e-3, loss_norm: str | None = None, augment: bool | None = None,
                  plateau_patience: int = 8, plateau_factor: float = 0.2, log_images: int = 16, seed: int = 0,
-                 init: str | None = None, mirror: bool = False):
+                 init: str | None = None, mirror: bool = False, init_widen: bool = False):
         super().__init__()
         self.save_hyperparameters()
         self.config: ModelConfig = preset(size, dim, stack, **(model or {}))
         self.model = CSGNet(self.config)
         if init is not None:
             start = load_model(init)
+            if init_widen and start.config != self.config:
+                try:
+                    start = widen(start, self.config)
+                except ValueError as e:
+                    raise ValueError(f"{init}: {e}") from None
             if start.config != self.config:
                 raise ValueError(f"{init}: its model configuration differs from this run's "
-                                 f"({start.config.to_dict()} against {self.config.to_dict()})")
+                                 f"({start.config.to_dict()} against {self.config.to_dict()}); "
+                                 "init_widen starts from a narrower model")
             self.model.load_state_dict(start.state_dict())
         self.loss_norm = loss_norm or ("per_step" if dim == 2 else "sum")
         if self.loss_norm not in ("per_step", "sum"):

@@ -5,7 +5,7 @@ import torch.nn.functional as F
 
 import csgnet
 from csgnet.decode import beam_search, greedy, sample
-from csgnet.models import CSGNet, ModelConfig, preset
+from csgnet.models import CSGNet, ModelConfig, preset, widen
 from csgnet.renderer import stack_trace
 from csgnet.vocab import vocabulary
 
@@ -356,3 +356,36 @@ def test_stack_decoders_skip_finished_rows_and_repeated_first_steps_exactly(dim,
         assert torch.equal(a.tokens, b.tokens) and torch.equal(a.logprob, b.logprob)
         assert torch.equal(a.lengths, b.lengths) and torch.equal(a.valid, b.valid)
     assert (fast[0].lengths < fast[0].tokens.shape[-1]).any()  # some rows finished early
+
+
+@pytest.mark.parametrize("dim,size,stack", [(3, "lite", False), (2, "small", True), (3, "small", False)])
+def test_widen_keeps_every_output_and_trains_the_new_units(dim, size, stack):
+    torch.manual_seed(0)
+    small = CSGNet(preset(size, dim, stack, hidden=32, embed=16))
+    channels = [c + 4 for c in small.config.channels]
+    big = widen(small, preset(size, dim, stack, hidden=48, embed=16, channels=channels))
+    assert big.config.hidden == 48 and big.config.channels == tuple(channels)
+    small.eval(), big.eval()
+    target = (torch.rand((3,) + (64,) * dim) > 0.7).float()
+    tokens = torch.randint(0, small.config.vocab_size, (3, 5))
+    st = None
+    if stack:
+        st = (torch.rand((5, 3, small.config.stack_k) + (64,) * dim) > 0.5).float()
+    with torch.no_grad():
+        assert torch.allclose(small(target, tokens, st), big(target, tokens, st), atol=1e-5)  # summation order only
+    # the new hidden units' output weights start at zero and take a gradient at once
+    big.train()
+    head = big.head[-1]
+    assert torch.count_nonzero(head.weight[:, 32:]) == 0
+    big(target, tokens, st).logsumexp(-1).sum().backward()
+    assert head.weight.grad[:, 32:].abs().sum() > 0
+
+
+def test_widen_refuses_other_changes():
+    small = CSGNet(preset("lite", 3, hidden=32))
+    with pytest.raises(ValueError, match="only hidden and channels"):
+        widen(small, preset("lite", 3, hidden=64, embed=64))
+    with pytest.raises(ValueError, match="none narrower"):
+        widen(small, preset("lite", 3, hidden=64, channels=(8, 16, 32)))  # a block fewer
+    with pytest.raises(ValueError, match="none narrower"):
+        widen(small, preset("lite", 3, hidden=16))

@@ -152,6 +152,24 @@ def test_init_starts_from_exported_weights_and_refuses_another_configuration(tmp
         CSGNetModule(dim=2, stack=False, model=TINY, init=str(w))
 
 
+def test_init_widen_starts_a_wider_run_from_a_narrower_models_outputs(tmp_path):
+    m = CSGNetModule(dim=3, size="lite", model=TINY)
+    torch.save({"hyper_parameters": dict(m.hparams), "state_dict": m.state_dict()}, tmp_path / "m.ckpt")
+    w = str(export_weights(tmp_path / "m.ckpt", tmp_path / "w.pt", half=False))
+    wide = {**TINY, "hidden": 24, "channels": [3, 2, 4]}
+    with pytest.raises(ValueError, match="init_widen"):
+        CSGNetModule(dim=3, size="lite", model=wide, init=w)
+    big = CSGNetModule(dim=3, size="lite", model=wide, init=w, init_widen=True)
+    assert big.config.hidden == 24 and big.config.channels == (3, 2, 4)
+    target = torch.rand(2, 64, 64, 64) > 0.6
+    tokens = torch.randint(0, big.config.vocab_size, (2, 4))
+    m.model.eval(), big.model.eval()
+    with torch.no_grad():
+        assert torch.allclose(m.model(target, tokens), big.model(target, tokens), atol=1e-5)  # summation order only
+    with pytest.raises(ValueError, match=r"w\.pt: widen needs"):  # narrower than the weights: refused, named
+        CSGNetModule(dim=3, size="lite", model={**TINY, "hidden": 8}, init=w, init_widen=True)
+
+
 def test_missing_dataset_names_the_generate_command(tmp_path):
     dm = CSGDataModule(dim=2, data_dir=str(tmp_path / "nothing"))
     with pytest.raises(FileNotFoundError, match="csgnet generate"):
