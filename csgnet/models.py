@@ -456,14 +456,14 @@ def widen(start: CSGNet, config: ModelConfig | dict) -> CSGNet:
                          f"channels {a.channels} -> {b.channels}, hidden {a.hidden} -> {b.hidden}")
     H, Hb, F0, Fb = a.hidden, b.hidden, a.feature_size, b.feature_size
 
-    def put(dst: torch.Tensor, src: torch.Tensor, zero_rest_of_cols: bool = True) -> None:
-        """``src`` into the leading block of ``dst``; the columns beyond ``src``'s in its rows set to zero."""
+    def put(dst: torch.Tensor, src: torch.Tensor) -> None:
+        """``src`` into the leading block of ``dst``; the columns beyond ``src``'s in its rows set to zero
+        (the new units' outputs reach the old units with zero weight)."""
         if dst.dim() == 1:
             dst[: src.shape[0]] = src
             return
         dst[: src.shape[0], : src.shape[1]] = src
-        if zero_rest_of_cols:
-            dst[: src.shape[0], src.shape[1]:] = 0
+        dst[: src.shape[0], src.shape[1]:] = 0
 
     with torch.no_grad():
         for m, n in zip(start.encoder.net, big.encoder.net):
