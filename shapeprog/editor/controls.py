@@ -35,7 +35,7 @@ Macro program controls are the arguments of its lines (``line:function.parameter
 [min(0, value), max(:data:`MAX_DIM`, value)]), a base translate count an int, booleans, faces and axes
 literals, cuboid arguments choices among ``bbox`` and the names bound by earlier lines. A hierarchical
 macro program (:class:`~shapeprog.macros.hierarchy.MacroHierarchy`, what ``refactor -o`` writes) has every
-block's macro controls, named ``block:line:function.parameter`` (``Program_1:1:nfunc_14.x0``); a
+block's macro controls, named ``block:line:function.parameter`` (``Program_1:1:nfunc_15.x0``); a
 sub-program's bbox dims have none (its parent's cuboid sets its extent).
 
 Example:

@@ -8,11 +8,11 @@ macro program text follows (its own ``def`` s, then its lines, :func:`shapeprog.
 then a blank line::
 
     # chair/173/Program_0
-    def nfunc_18(x0: float, ...):
+    def nfunc_12(x0: float, ...):
         ...
 
     bbox = Cuboid(0.893, 1.558, 1.019, True)
-    Program_1, cube1, cube2 = nfunc_18(0.528, 1.017, 0.5, 0.188, 0.018, 0.848, 0.28)
+    Program_1, cube1, cube2 = nfunc_12(0.528, 1.017, 0.5, 0.188, 0.018, 0.502, 0.848, 0.28)
 
     # chair/173/Program_1
     ...

@@ -48,7 +48,7 @@ def test_current_values_reproduce_the_base_program(programs, ident):
 
 def test_fewer_controls_with_macros(programs):
     p = parse(corpus.read("chair", 173))
-    assert (len(controls(programs[173], LIB, cuboids=False)), len(controls(p, cuboids=False))) == (14, 54)
+    assert (len(controls(programs[173], LIB, cuboids=False)), len(controls(p, cuboids=False))) == (15, 54)
     for i in CHAIRS:
         assert len(controls(programs[i], LIB, cuboids=False)) < len(controls(parse(corpus.read("chair", i)),
                                                                              cuboids=False))
@@ -96,7 +96,7 @@ def test_edit_command_refactors_a_corpus_program_with_a_shipped_library():
     args = argparse.Namespace(library="chair", sample=False, program="chair/173", target=None, seed=0)
     s, text, file = open_for_edit(args)
     assert s.error is None and file == "chair/173_macros.txt" and text.startswith("# chair/173/Program_0\n")
-    assert len(s.controls(cuboids=False)) == 14
+    assert len(s.controls(cuboids=False)) == 15
     with pytest.raises(SystemExit, match=r"sofa: neither a ShapeMOD library file nor a shipped ShapeMOD library "
                                          r"\(shipped: chair, storage, table\)"):
         open_for_edit(argparse.Namespace(library="sofa", sample=False, program="chair/173", target=None, seed=0))

@@ -390,7 +390,7 @@ def test_refactored_chair_page_moves_every_leg_and_expands(tmp_path):
     text = refactor(parse(corpus.read("chair", 173)), lib, category="chair", shape_id=173).text
     a = EditorApp(EditSession(text, "chair/173_macros.txt", library=lib), port=free_port(), export_dir=tmp_path)
     try:
-        assert len(a._handles) == 14
+        assert len(a._handles) == 15
         name = next(n for n in a._handles if n.startswith("Program_1:1:") and n.endswith(".x0"))  # the legs' width
         before = a.state["corners"].copy()
         a.handle(name).value = 0.25
@@ -399,10 +399,10 @@ def test_refactored_chair_page_moves_every_leg_and_expands(tmp_path):
         assert moved.sum() == 4  # the four legs, nothing else
         corners = a.state["corners"].copy()
         a.expanded.value = True
-        assert len(a._handles) > 14 and "Assembly Program_1 {" in a.state["text"]
+        assert len(a._handles) > 15 and "Assembly Program_1 {" in a.state["text"]
         assert np.allclose(a.state["corners"], corners, atol=1e-5)
         a.expanded.value = False
-        assert len(a._handles) == 14
+        assert len(a._handles) == 15
     finally:
         a.stop()
 
