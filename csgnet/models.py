@@ -434,7 +434,8 @@ def build(config: ModelConfig | dict) -> CSGNet:
 
 
 def widen(start: CSGNet, config: ModelConfig | dict) -> CSGNet:
-    """A model of ``config`` that computes exactly what ``start`` computes, with more units.
+    """A model of ``config`` that computes what ``start`` computes (equal up to the rounding of longer sums),
+    with more units.
 
     ``config`` may differ from ``start.config`` only in ``hidden`` and ``channels`` (as many blocks, none
     narrower). Every unit of ``start`` keeps its weights; each new unit (encoder channel, GRU unit, hidden
@@ -470,7 +471,7 @@ def widen(start: CSGNet, config: ModelConfig | dict) -> CSGNet:
             if isinstance(m, (nn.Conv2d, nn.Conv3d)):
                 put(n.weight, m.weight)
                 put(n.bias, m.bias)
-            elif isinstance(m, nn.BatchNorm3d):
+            elif isinstance(m, (nn.BatchNorm2d, nn.BatchNorm3d)):
                 for name in ("weight", "bias", "running_mean", "running_var"):
                     put(getattr(n, name), getattr(m, name))
                 n.num_batches_tracked.copy_(m.num_batches_tracked)

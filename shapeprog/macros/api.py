@@ -38,7 +38,7 @@ from .objective import Result, best_program, templates, to_program
 from .. import corpus
 from .execute import compile_hierarchy
 
-__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "library_split", "library_text", "load_library", "read_library",
+__all__ = ["BlockRefactor", "LIBRARIES", "LIBRARY_CATEGORIES", "Refactored", "collection", "expand", "header_split", "library_split", "library_text", "load_library", "read_library",
            "refactor", "program_stats"]
 
 #: Categories with a shipped library (``shapeprog/macros/libs/<category>.txt``).
@@ -82,11 +82,17 @@ def library_text(category: str) -> str:
     return resources.files("shapeprog.macros").joinpath("libs", f"{category}.txt").read_text(encoding="utf-8")
 
 
-def library_split(category: str) -> str | None:
-    """The corpus split the shipped library of ``category`` was discovered on (``"train"`` or ``"all"``), as its
-    header's ``# shapes: N of split 'S'`` line records; None when the header does not say."""
-    m = re.search(r"^# shapes: \d+ of split '([^']+)'", library_text(category), re.MULTILINE)
+def header_split(text: str) -> str | None:
+    """The corpus split a library file was discovered on, read from the ``# shapes: N of split 'S'`` line of the
+    header that ``python -m shapeprog macros discover`` writes; None when the text has no such line."""
+    m = re.search(r"^# shapes: \d+ of split '([^']+)'", text, re.MULTILINE)
     return m.group(1) if m else None
+
+
+def library_split(category: str) -> str | None:
+    """The corpus split the shipped library of ``category`` was discovered on (``"train"`` or ``"all"``):
+    :func:`header_split` of its file."""
+    return header_split(library_text(category))
 
 
 def program_stats(program: MacroProgram, library: Library) -> dict:

@@ -3,6 +3,7 @@ import pytest
 
 from shapeprog.__main__ import main
 from shapeprog.macros import Library
+from shapeprog.macros.api import header_split
 
 
 def test_discover_macros_writes_a_library_and_resumes(tmp_path, capsys):
@@ -13,6 +14,7 @@ def test_discover_macros_writes_a_library_and_resumes(tmp_path, capsys):
     text = (out / "library.txt").read_text()
     assert "# command: python -m shapeprog macros discover --category chair --limit 15" in text
     assert "of split 'train'" in text  # the default: the val split (the models' test split) takes no part
+    assert header_split(text) == "train"  # what discover writes, the tables' notes read back
     Library.from_text(text)
     assert (out / "state.json").exists()
     argv[argv.index("--rounds") + 1] = "1"
