@@ -22,6 +22,12 @@ default of these functions, and the protocol of every table), ``"bfloat16"`` (th
 layers under ``torch.autocast`` with bfloat16; the GRU state, the log-softmax and every score stay float32,
 and the stack machine renders as before) or ``"auto"`` (:func:`resolve_precision`: bfloat16 on a CPU that
 computes it natively, float32 elsewhere).
+
+``views`` (:data:`VIEWS`, 3D only; 1, the paper's decoding, by default) decodes one program from several mirror
+images of each target at once: the model reads the target flipped along some axes, its log-probabilities are
+mapped back through the same flip of every primitive's centre, and each step takes the mean log-probability over
+the views (a product of experts). Greedy and beam search then run on that mean exactly as on one model's, so
+``beam=1`` with ``views=8`` is still one arg-max decode, at about ``views`` times the cost.
 """
 from __future__ import annotations
 
@@ -37,7 +43,8 @@ from .renderer import StackMachine, primitive_cache, unpack
 from .vocab import codes, vocabulary
 
 __all__ = ["Decoded", "greedy", "beam_search", "decode", "sample", "Sampled", "MAX_BEAM", "check_beam",
-           "PRECISIONS", "AUTO_BF16_DIMS", "native_bf16", "resolve_precision"]
+           "PRECISIONS", "AUTO_BF16_DIMS", "native_bf16", "resolve_precision", "VIEWS", "check_views",
+           "flip_view", "mirror"]
 
 _MODES = ("improved", "reference")
 MAX_BEAM = 256
@@ -49,6 +56,12 @@ AUTO_BF16_DIMS = (2,)
 """The models ``"auto"`` decodes in bfloat16: the 2D ones (CSGNetStack about 1.9 times faster on a CPU with
 AMX, the same accuracy); the 3D lite CSGNet gains nothing and stays float32 (docs/csgnet.md)."""
 _NATIVE_BF16_CHECKS = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+_FLIPS = ((), (0,), (1,), (2,), (0, 1), (0, 2), (1, 2), (0, 1, 2))
+VIEWS = {1: (((), False),), 2: (((), False), ((0,), False)), 4: tuple((a, False) for a in ((), (0,), (2,), (0, 2))),
+         8: tuple((a, False) for a in _FLIPS), 16: tuple((a, s) for s in (False, True) for a in _FLIPS)}
+"""The ``views`` choices: how many mirror images of a 3D target one decode reads, each ``(axes, swap)``: flipped
+along ``axes`` (0, 1, 2 = a primitive's x, y, z), then with x and y exchanged if ``swap`` (every 3D primitive is
+symmetric under both: the cylinders stand along z). The first is always the target itself."""
 
 
 def native_bf16() -> bool:
@@ -118,6 +131,91 @@ class Decoded:
     def flat_tokens(self) -> torch.Tensor:
         """``(N * k, T)`` tokens with everything from the first ``$`` on set to ``$``."""
         return self.tokens.reshape(-1, self.tokens.shape[-1])
+
+
+def check_views(views, dim: int) -> int:
+    """``views`` as a key of :data:`VIEWS`; more than one only in 3D. Otherwise a ``ValueError`` naming it."""
+    if isinstance(views, bool) or not isinstance(views, numbers.Integral) or int(views) not in VIEWS:
+        raise ValueError(f"views must be one of {sorted(VIEWS)}, got {views!r}")
+    if views > 1 and dim != 3:
+        raise ValueError(f"views > 1 is for 3D models (the 3D primitives are mirror-symmetric); this model is {dim}D")
+    return int(views)
+
+
+def flip_view(targets: torch.Tensor, axes: tuple[int, ...], swap: bool = False) -> torch.Tensor:
+    """``(N, 64, 64, 64)`` targets mirrored along the volume ``axes`` (0, 1, 2 = a primitive's x, y, z) about the
+    centre of the primitives' coordinate grid, then with x and y exchanged if ``swap``: voxel ``i`` holds the
+    point ``i``, so centre ``c`` maps to ``64 - c`` and voxel ``i`` to ``64 - i``; plane 0 takes the (empty)
+    point 64."""
+    out = targets
+    if axes:
+        dims = [a + 1 for a in axes]
+        out = torch.roll(torch.flip(targets, dims), [1] * len(dims), dims)
+        for d in dims:
+            out.select(d, 0).zero_()
+    return out.transpose(1, 2).contiguous() if swap else out
+
+
+_MIRRORS: dict[tuple[int, ...], tuple[torch.Tensor, torch.Tensor]] = {}
+
+
+def mirror(axes: tuple[int, ...], swap: bool = False, dim: int = 3) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(index, missing)``, both ``(V,)``: ``index[t]`` is the token that draws token ``t``'s primitive as
+    :func:`flip_view` maps the volume (operators and ``$`` map to themselves). A primitive whose image is not
+    in the vocabulary (some cubes touching the grid's upper edge: the grid is not symmetric) has ``missing[t]``
+    set and maps to itself."""
+    key = (dim, swap, *axes)
+    if key not in _MIRRORS:
+        v = vocabulary(dim)
+        where = {t: i for i, t in enumerate(v.tokens)}
+        index, missing = list(range(len(v.tokens))), [False] * len(v.tokens)
+        for i, text in enumerate(v.tokens[: v.num_primitives]):
+            head, args = text[:-1].split("(")
+            nums = [int(a) for a in args.split(",")]
+            for a in axes:
+                nums[a] = 64 - nums[a]
+            if swap:
+                nums[0], nums[1] = nums[1], nums[0]
+            j = where.get(f"{head}({','.join(map(str, nums))})")
+            if j is None:
+                missing[i] = True
+            else:
+                index[i] = j
+        _MIRRORS[key] = (torch.tensor(index), torch.tensor(missing))
+    return _MIRRORS[key]
+
+
+class _Views:
+    """The mirror maps of ``views`` views, ``(G, V)`` each, and the combination of their log-probabilities."""
+
+    def __init__(self, views: int, dim: int, device):
+        self.views = VIEWS[views]
+        maps = [mirror(a, s, dim) for a, s in self.views]
+        self.index = torch.stack([m[0] for m in maps]).to(device)
+        self.missing = torch.stack([m[1] for m in maps]).to(device)
+        self.G = len(self.views)
+
+    def targets(self, targets: torch.Tensor) -> torch.Tensor:
+        """``(G·N, ...)``: every view of every target, view-major."""
+        return targets if self.G == 1 else torch.cat([flip_view(targets, a, s) for a, s in self.views])
+
+    def combine(self, logp: torch.Tensor) -> torch.Tensor:
+        """``(G·R, V)`` per-view log-probabilities -> ``(R, V)`` their mean in the target's own frame (a token
+        whose mirror image is missing in a view is averaged over the other views)."""
+        if self.G == 1:
+            return logp
+        per = logp.view(self.G, -1, logp.shape[1])
+        canon = torch.stack([per[g].index_select(1, self.index[g]) for g in range(self.G)])
+        canon = canon.masked_fill(self.missing[:, None, :], float("nan"))
+        return canon.nanmean(0)  # view 0 (the target itself) misses nothing, so no entry is all-NaN
+
+    def tokens(self, tok: torch.Tensor) -> torch.Tensor:
+        """``(R,)`` tokens in the target's frame -> ``(G·R,)`` each view's own."""
+        return tok if self.G == 1 else torch.cat([self.index[g].index_select(0, tok) for g in range(self.G)])
+
+    def rows(self, parent: torch.Tensor, R: int) -> torch.Tensor:
+        """``(R,)`` parents of the target's rows -> ``(G·R,)`` of every view's rows."""
+        return parent if self.G == 1 else torch.cat([parent + g * R for g in range(self.G)])
 
 
 def _token_classes(dim: int, device) -> tuple[torch.Tensor, torch.Tensor, int]:
@@ -285,19 +383,21 @@ def _check(model, targets, max_len, mode, precision="float32"):
 
 @torch.no_grad()
 def beam_search(model, targets, width: int = 10, max_len: int | None = None, mode: str = "improved",
-                constrained: bool = False, precision: str = "float32") -> Decoded:
+                constrained: bool = False, precision: str = "float32", views: int = 1) -> Decoded:
     """Batched beam search: ``N`` targets × ``width`` beams decoded together.
 
     Hypotheses are ranked by the sum of token log-probabilities (the reference multiplies
     probabilities, the same order). Step 1 expands only the START row of each target. ``precision``:
-    :data:`PRECISIONS` (the scores are float32 in every one).
+    :data:`PRECISIONS` (the scores are float32 in every one); ``views``: :data:`VIEWS` (the log-probabilities
+    are the views' mean).
 
     Returns:
         :class:`Decoded` with ``k = width`` hypotheses per target, most likely first.
     """
     targets, T = _check(model, targets, max_len, mode, precision)
     N, w = targets.shape[0], check_beam(width, "width")
-    rows = _Rows(model, targets, w, T, skip_done=mode == "improved", precision=precision)
+    vw = _Views(check_views(views, model.config.dim), model.config.dim, targets.device)
+    rows = _Rows(model, vw.targets(targets), w, T, skip_done=mode == "improved", precision=precision)
     V = model.config.vocab_size
     score = torch.full((N, w), float("-inf"), device=targets.device)
     score[:, 0] = 0.0
@@ -306,39 +406,42 @@ def beam_search(model, targets, width: int = 10, max_len: int | None = None, mod
     with rows.scope():
         for t in range(T):
             logits, rows.h_new = rows.logits()
-            logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+            logp = vw.combine(rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish))
             cand = (score.reshape(-1, 1) + logp).view(N, w * V)
             score, idx = cand.topk(w, dim=1)
             parent = (idx // V + offsets).flatten()
             tok = (idx % V).flatten()
-            rows.reorder(parent)
-            rows.advance(tok)
+            rows.reorder(vw.rows(parent, N * w))
+            rows.advance(vw.tokens(tok))
             if finish and bool(rows.done.all()):
                 break
-    tokens = rows.tokens().view(N, w, -1)
-    return Decoded(tokens, rows.length.view(N, w), score, rows.valid.view(N, w) & torch.isfinite(score),
+    R = N * w  # the target's own rows come first (view 0)
+    tokens = rows.tokens()[:R].view(N, w, -1)
+    return Decoded(tokens, rows.length[:R].view(N, w), score, rows.valid[:R].view(N, w) & torch.isfinite(score),
                    model.config.dim)
 
 
 @torch.no_grad()
 def greedy(model, targets, max_len: int | None = None, mode: str = "improved", constrained: bool = False,
-           precision: str = "float32") -> Decoded:
-    """Arg-max decoding (what the reference validates with). ``k = 1``; ``precision``: :data:`PRECISIONS`."""
+           precision: str = "float32", views: int = 1) -> Decoded:
+    """Arg-max decoding (what the reference validates with). ``k = 1``; ``precision``: :data:`PRECISIONS`;
+    ``views``: :data:`VIEWS` (the arg-max of the views' mean log-probability)."""
     targets, T = _check(model, targets, max_len, mode, precision)
     N = targets.shape[0]
-    rows = _Rows(model, targets, 1, T, skip_done=mode == "improved", precision=precision)
+    vw = _Views(check_views(views, model.config.dim), model.config.dim, targets.device)
+    rows = _Rows(model, vw.targets(targets), 1, T, skip_done=mode == "improved", precision=precision)
     score = torch.zeros(N, device=targets.device)
     finish = mode == "improved"
     with rows.scope():
         for t in range(T):
             logits, rows.h = rows.logits()
-            logp = rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish)
+            logp = vw.combine(rows.mask(F.log_softmax(logits.float(), dim=-1), t, constrained, finish))
             lp, tok = logp.max(dim=1)
             score = score + lp
-            rows.advance(tok)
+            rows.advance(vw.tokens(tok))
             if finish and bool(rows.done.all()):
                 break
-    return Decoded(rows.tokens()[:, None], rows.length[:, None], score[:, None], rows.valid[:, None],
+    return Decoded(rows.tokens()[:N, None], rows.length[:N, None], score[:, None], rows.valid[:N, None],
                    model.config.dim)
 
 
@@ -400,7 +503,7 @@ def sample(model, targets, max_len: int | None = None, generator: torch.Generato
 
 def decode(model, targets, beam: int = 1, **kwargs) -> Decoded:
     """Greedy for ``beam == 1``, else :func:`beam_search`; ``beam`` is 1 to :data:`MAX_BEAM`; the keywords
-    (``max_len``, ``mode``, ``constrained``, ``precision``) are theirs."""
+    (``max_len``, ``mode``, ``constrained``, ``precision``, ``views``) are theirs."""
     beam = check_beam(beam)
     return greedy(model, targets, **kwargs) if beam <= 1 else beam_search(model, targets, beam, **kwargs)
 

@@ -23,14 +23,14 @@ from shapeio.image import IMAGE_SUFFIXES, MARGIN, centre_on_canvas, fit_to_canva
 from shapeio.mesh import MESH_SUFFIXES, load_mesh
 from shapeio.weights import check_weights, load_payload, write_weights
 
-from .decode import PRECISIONS, decode, resolve_precision
+from .decode import PRECISIONS, check_views, decode, resolve_precision
 from .lang import Program, is_valid, parse
 from .models import CSGNet, ModelConfig, preset
 from .score import score_beams
 
 __all__ = ["InputError", "load_shape", "load_shape_framed", "fit_to_canvas", "read_checkpoint", "load_model", "export_weights",
            "load_pretrained", "infer", "Inference", "parse_shape", "Parsed",
-           "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH", "INFER_PRECISION", "PRECISIONS",
+           "WEIGHTS", "PRETRAINED", "SHIPPED", "KINDS", "DEFAULT_KIND", "INFER_BATCH", "INFER_PRECISION", "INFER_VIEWS", "PRECISIONS",
            "FORMAT", "VERSION"]
 
 WEIGHTS = Path(__file__).parent / "weights"
@@ -60,6 +60,10 @@ INFER_PRECISION = "auto"
 bfloat16 autocast on a CPU with native bfloat16 (AVX512-BF16 or AMX), float32 elsewhere; the papers' tables
 (``evaluate``, ``python -m csgnet paper``) decode in float32. docs/csgnet.md, "Decoding speed", has the
 measurement behind it."""
+INFER_VIEWS = {2: 1, 3: 8}
+"""The mirror views (:data:`csgnet.decode.VIEWS`) :func:`infer` and :func:`parse_shape` decode with by default, per
+dimension: in 3D one decode reads the volume and its seven mirror images (``python bench/decode_views.py``
+measures what that buys and costs); 2D decodes the image alone."""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -272,7 +276,8 @@ class Inference:
 
 
 def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", constrained: bool = True,
-          batch: int = INFER_BATCH, mode: str = "improved", precision: str = INFER_PRECISION) -> list[Inference]:
+          batch: int = INFER_BATCH, mode: str = "improved", precision: str = INFER_PRECISION,
+          views: int | None = None) -> list[Inference]:
     """Parse shapes into programs.
 
     Args:
@@ -286,14 +291,17 @@ def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", con
         mode: beam-search behaviour, ``"improved"`` or ``"reference"``.
         precision: the model's arithmetic, ``"auto"``, ``"float32"`` or ``"bfloat16"``
             (:data:`csgnet.decode.PRECISIONS`; default :data:`INFER_PRECISION`); the scores are float32 in all.
+        views: mirror views per decode (:data:`csgnet.decode.VIEWS`, more than 1 in 3D only; default
+            :data:`INFER_VIEWS` of the model's dimension; 1 is the paper's decoding).
 
     Raises:
-        ValueError: a bad ``select``, ``precision``, beam width or shape array (the message names it).
+        ValueError: a bad ``select``, ``precision``, ``views``, beam width or shape array (the message names it).
     """
     if select not in ("likelihood", "match"):
         raise ValueError(f"select must be 'likelihood' or 'match', got {select!r}")
     resolve_precision(precision)
     dim = model.config.dim
+    views = check_views(INFER_VIEWS[dim] if views is None else views, dim)
     x = torch.as_tensor(np.asarray(shapes) if not isinstance(shapes, torch.Tensor) else shapes).bool()
     if x.dim() == dim:
         x = x[None]
@@ -303,7 +311,7 @@ def infer(model: CSGNet, shapes, beam: int = 10, select: str = "likelihood", con
     out: list[Inference] = []
     for lo in range(0, x.shape[0], batch):
         tgt = x[lo: lo + batch]
-        dec = decode(model, tgt, beam, mode=mode, constrained=constrained, precision=precision)
+        dec = decode(model, tgt, beam, mode=mode, constrained=constrained, precision=precision, views=views)
         _, iou, cd = score_beams(dec, tgt)
         n = dec.tokens.shape[0]
         texts = dec.texts()
@@ -352,7 +360,7 @@ class Parsed:
 def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, beam: int = 10,
                 select: str = "match", refine: bool = True, rule: str = "short", refine_iters: int | None = None,
                 constrained: bool = True, graft: bool = True, extend: bool = True, fit: bool = True,
-                precision: str = INFER_PRECISION) -> Parsed:
+                precision: str = INFER_PRECISION, views: int | None = None) -> Parsed:
     """Infer a program for one shape the way ``python -m csgnet parse --select match --refine`` does.
 
     Args:
@@ -373,8 +381,11 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
         fit: with the ``"short"`` rule, also try primitives fitted to the parts the choice gets wrong, and
             to the shape from nothing (:func:`csgnet.rewrite.fit`).
         precision: the decoder's arithmetic (:func:`infer`; default :data:`INFER_PRECISION`).
+        views: mirror views per decode (:func:`infer`; default :data:`INFER_VIEWS` of the shape's dimension).
     """
     resolve_precision(precision)  # a bad name is refused before the shape is read
+    if views is not None:
+        check_views(views, 3)  # likewise a views count no model takes (a 2D shape's model refuses more than 1)
     frame = None
     if isinstance(shape, (str, Path)):
         shape, frame = load_shape_framed(shape)
@@ -385,7 +396,8 @@ def parse_shape(shape, model: CSGNet | None = None, kind: str | None = None, bea
         model = load_pretrained(shape.ndim, kind=kind)
     elif model.config.dim != shape.ndim:
         raise ValueError(f"a {model.config.dim}D model cannot parse a {shape.ndim}D shape")
-    decoded = infer(model, shape[None], beam=beam, select=select, constrained=constrained, precision=precision)[0]
+    decoded = infer(model, shape[None], beam=beam, select=select, constrained=constrained, precision=precision,
+                    views=views)[0]
     program = decoded.program if decoded.valid else None
     refined = None
     if refine and program is not None:

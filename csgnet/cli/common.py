@@ -35,6 +35,8 @@ MAX_REFINE_ITERS = 100_000
 
 #: The ``--precision`` choices: :data:`csgnet.decode.PRECISIONS`, named here so that ``--help`` needs no torch.
 PRECISIONS = ("auto", "float32", "bfloat16")
+#: The ``--views`` choices: the keys of :data:`csgnet.decode.VIEWS`.
+VIEWS = (1, 2, 4, 8, 16)
 
 #: argparse types of the shared number options (one line, exit 2, before any work).
 scale = float_in(0.0, MAX_SCALE, low_open=True)
@@ -89,8 +91,12 @@ def command_line(args) -> str:
 def decoding(args) -> str:
     """How the written tables' programs were decoded, for their notes (the precision where it is not float32)."""
     precision = getattr(args, "precision", "float32")
+    views = getattr(args, "views", None) or [1]
+    views = views if isinstance(views, (list, tuple)) else [views]
     return (f"{'grammar-constrained' if args.constrained else 'unconstrained'} decoding"
-            + ("" if precision == "float32" else f", precision {precision}"))
+            + ("" if precision == "float32" else f", precision {precision}")
+            + ("" if list(views) == [1] else ", rows labelled 'V views' decode V mirror images of each volume "
+               "together (csgnet.decode.VIEWS)"))
 
 
 def measured_on() -> str:

@@ -76,7 +76,7 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
     parsed = parse_shape(shape, model=model, beam=args.beam, select=args.select, refine=args.refine,
                          rule=args.refine_rule, refine_iters=args.refine_iters, constrained=not args.unconstrained,
                          graft=not args.no_graft, extend=not args.no_extend, fit=not args.no_fit,
-                         precision=args.precision or INFER_PRECISION)
+                         precision=args.precision or INFER_PRECISION, views=args.views if dim == 3 else 1)
     res, ref, program = parsed.decoded, parsed.refined, parsed.program
     line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
     if dim == 2:
@@ -219,6 +219,9 @@ def register(sub) -> None:
                    help="the model's arithmetic while decoding: auto (default: bfloat16 autocast on a CPU with "
                    "native bfloat16, AVX512-BF16 or AMX, else float32), float32 (what the docs' tables measure) or "
                    "bfloat16; scores stay float32")
+    p.add_argument("--views", type=int, choices=common.VIEWS, default=None,
+                   help="3D inputs: mirror images of the volume one decode reads, their log-probabilities averaged "
+                   "(default 8; 1 is the paper's decoding); 2D inputs are decoded alone")
     p.add_argument("--refine", action="store_true",
                    help="Powell refinement of every valid beam (by chamfer in 2D, by IoU in 3D)")
     p.add_argument("--refine-iters", type=common.int_in(0, common.MAX_REFINE_ITERS), default=None,

@@ -20,6 +20,8 @@ def cmd_evaluate(args) -> int:
     from ..paper.tables import evaluate_model, markdown_tables, nearest_neighbour, table_result  # lazy: loaded when the command runs
 
     refuse_table_over_inputs(args)
+    if args.dim != 3 and max(args.views) > 1:
+        raise SystemExit(f"error: --views {' '.join(map(str, args.views))}: more than 1 view is for 3D models (--dim 3)")
     tests = load_dataset(args.data, args.dim, "test", args.lengths, errors="raise")
     tests = {L: p[: args.per_length] for L, p in tests.items()}
     rows = []
@@ -32,15 +34,19 @@ def cmd_evaluate(args) -> int:
     for name, model in labelled_models(args.weights, args.dim):
         if model.config.dim != args.dim:
             raise SystemExit(f"error: {name} is a {model.config.dim}D model, not {args.dim}D")
-        print(f"decoding with {name} ...", flush=True)
-        rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
-                               constrained=args.constrained, precision=args.precision)
+        views = args.views
+        for v in views:
+            print(f"decoding with {name}" + (f", {v} views" if v > 1 else "") + " ...", flush=True)
+            rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,
+                                   constrained=args.constrained, precision=args.precision, views=v)
         if args.refined:
             from ..paper.tables import evaluate_refined  # lazy: loaded when the command runs
 
-            print(f"parsing with refinement ({name}, {args.refined} per length) ...", flush=True)
-            rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined,
-                                         precision=args.precision))
+            for v in views:
+                print(f"parsing with refinement ({name}, {args.refined} per length"
+                      + (f", {v} views" if v > 1 else "") + ") ...", flush=True)
+                rows.append(evaluate_refined(model, tests, max(args.beams), name=name, per_length=args.refined,
+                                             precision=args.precision, views=v))
     note = "\n\n".join([f"`{command_line(args)}`; beam mode {args.mode!r}, {decoding(args)}; {measured_on()}.",
                         *args.note])
     if write_result_file(args, lambda notes: table_result(rows, args.dim, notes, command_line(args)),
@@ -223,6 +229,9 @@ def register(sub) -> None:
                    help="the model's arithmetic while decoding: float32 (default, the protocol of the published "
                    "tables), bfloat16 (autocast; scores stay float32) or auto (bfloat16 on a CPU with native "
                    "bfloat16, else float32)")
+    e.add_argument("--views", type=int, choices=common.VIEWS, nargs="+", default=[1],
+                   help="3D: mirror images of each volume one decode reads (default 1, the paper's decoding); "
+                   "several values give rows for each")
     e.add_argument("--refined", type=common.per_length, default=0, metavar="N",
                    help="add a row of the whole parse (the widest beam, the closest beam, refinement, the short "
                    "rule: what parse --select match --refine writes) on the first N test programs per length")

@@ -47,27 +47,28 @@ class Row:
 
 def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), name: str = "model",
                    batch: int = 50, mode: str = "improved", constrained: bool = False,
-                   precision: str = "float32") -> list[Row]:
+                   precision: str = "float32", views: int = 1) -> list[Row]:
     """Score ``model`` on ``{length: programs}`` for each beam width, decoding in ``precision``
-    (:data:`csgnet.decode.PRECISIONS`; float32, the tables' protocol, by default).
+    (:data:`csgnet.decode.PRECISIONS`; float32, the tables' protocol, by default) with ``views`` mirror views
+    (:data:`csgnet.decode.VIEWS`; 1, the paper's decoding, by default).
 
-    Returns rows ``"{name} k=K top-1"`` and, for K > 1, ``"{name} k=K best-of-k (oracle)"``; their
-    ``seconds`` is the decoding + rendering time per image.
+    Returns rows ``"{name} k=K top-1"`` and, for K > 1, ``"{name} k=K best-of-k (oracle)"`` (with ``views`` > 1,
+    ``"{name} k=K, V views ..."``); their ``seconds`` is the decoding + rendering time per image.
     """
     dim = model.config.dim
     model.eval()
     rows: dict[str, Row] = {}
     for k in beams:
-        top = rows.setdefault(f"{name} k={k} top-1", Row(f"{name} k={k} top-1"))
-        best = rows.setdefault(f"{name} k={k} best-of-k (oracle)", Row(f"{name} k={k} best-of-k (oracle)")) \
-            if k > 1 else None
+        label = f"{name} k={k}" + (f", {views} views" if views > 1 else "")
+        top = rows.setdefault(f"{label} top-1", Row(f"{label} top-1"))
+        best = rows.setdefault(f"{label} best-of-k (oracle)", Row(f"{label} best-of-k (oracle)")) if k > 1 else None
         seconds, images = 0.0, 0
         for L, progs in sorted(tests.items()):
             ious, cds, biou, bcd = [], [], [], []
             for lo in range(0, len(progs), batch):
                 tgt = render_programs(progs[lo: lo + batch], dim)
                 t0 = time.perf_counter()
-                dec = decode(model, tgt, k, mode=mode, constrained=constrained, precision=precision)
+                dec = decode(model, tgt, k, mode=mode, constrained=constrained, precision=precision, views=views)
                 _, iou, cd = score_beams(dec, tgt)
                 seconds += time.perf_counter() - t0
                 images += tgt.shape[0]
@@ -88,15 +89,17 @@ def evaluate_model(model, tests: dict[int, list[Program]], beams=(1, 5, 10), nam
 
 
 def evaluate_refined(model, tests: dict[int, list[Program]], beam: int = 10, name: str = "model",
-                     per_length: int | None = None, rule: str = "short", precision: str = "float32") -> Row:
+                     per_length: int | None = None, rule: str = "short", precision: str = "float32",
+                     views: int = 1) -> Row:
     """The whole parse of :func:`csgnet.inference.parse_shape` (beam search, the beam closest to the target,
     refinement of every valid beam, the ``rule``'s choice) on the first ``per_length`` targets per length:
-    a row ``"{name} k=K + refinement ({rule})"`` with the chosen programs' IoU (and chamfer in 2D);
-    ``seconds`` per image. Decoded in ``precision`` (float32, the tables' protocol, by default)."""
+    a row ``"{name} k=K + refinement ({rule})"`` (``"{name} k=K, V views + ..."`` with ``views`` > 1) with the
+    chosen programs' IoU (and chamfer in 2D); ``seconds`` per image. Decoded in ``precision`` (float32, the
+    tables' protocol, by default) with ``views`` mirror views (1, the paper's decoding, by default)."""
     from ..inference import parse_shape  # lazy: inference brings PIL (users' images)
 
     dim = model.config.dim
-    row = Row(f"{name} k={beam} + refinement ({rule})")
+    row = Row(f"{name} k={beam}" + (f", {views} views" if views > 1 else "") + f" + refinement ({rule})")
     t0, images = time.perf_counter(), 0
     for L, progs in sorted(tests.items()):
         progs = progs[:per_length] if per_length else progs
@@ -106,7 +109,7 @@ def evaluate_refined(model, tests: dict[int, list[Program]], beam: int = 10, nam
         ious, cds = [], []
         for target in targets:
             parsed = parse_shape(target, model=model, beam=beam, select="match", refine=True, rule=rule,
-                                 precision=precision)
+                                 precision=precision, views=views)
             iou, cd = parsed.refined.after if parsed.refined is not None else (parsed.decoded.iou, parsed.decoded.chamfer)
             ious.append(iou)
             cds.append(cd)
