@@ -458,6 +458,31 @@ def test_beam_search_programs_are_unchanged(name):
     assert decoded.texts() == EXPECTED[name]["beam3"]
 
 
+# what infer and parse decode by default in 3D: the volume with its seven mirror images (csgnet.decode.VIEWS),
+# on targets that are not mirror-symmetric (the ones above are, so every view reads the same volume)
+TARGETS_3D_VIEWS = ["cu(24,32,40,16)sp(40,24,32,12)-", "cy(24,40,32,8,16)cu(40,24,24,16)+",
+                    "sp(16,16,48,12)sp(48,48,16,12)+"]
+EXPECTED_3D_VIEWS = {
+    "greedy": ["cu(24,32,40,16)cu(24,32,40,16)+", "cy(24,40,32,8,16)cu(40,24,24,16)+",
+               "sp(16,16,48,12)sp(48,48,16,12)+"],
+    "beam3": [
+        ["cu(24,32,40,16)cu(24,32,40,16)+", "cu(24,32,40,16)cu(24,32,40,16)-", "cu(24,32,40,16)cu(24,32,40,16)*"],
+        ["cy(24,40,32,8,16)cu(40,24,24,16)+", "cu(40,24,24,16)cy(24,40,32,8,16)+",
+         "cu(40,24,32,16)cy(24,40,24,8,16)+"],
+        ["sp(48,48,16,12)sp(16,16,48,12)+", "sp(16,16,48,12)sp(48,48,16,12)+", "sp(16,48,48,12)sp(48,48,16,12)+"],
+    ],
+}
+
+
+def test_the_default_3d_views_decode_the_same_programs():
+    from csgnet.inference import INFER_VIEWS
+
+    model = load_pretrained(3)
+    targets = torch.as_tensor(csgnet.render(TARGETS_3D_VIEWS, dim=3))
+    assert [b[0] for b in decode(model, targets, 1, views=INFER_VIEWS[3]).texts()] == EXPECTED_3D_VIEWS["greedy"]
+    assert decode(model, targets, 3, views=INFER_VIEWS[3]).texts() == EXPECTED_3D_VIEWS["beam3"]
+
+
 def test_load_pretrained_names_every_shipped_model_and_refuses_the_others():
     assert set(SHIPPED.values()) <= set(EXPECTED) and set(PRETRAINED.values()) <= set(SHIPPED.values())
     for (dim, kind, tuning), file in SHIPPED.items():
