@@ -23,8 +23,8 @@ _TABLE5_NOTES = ("--note", "The paper's Table 5: nearest neighbour 73.2 (its own
                  "--note", "Our nearest neighbour searches the 7,000 training programs of this set; the model trained "
                  "on 210,000 others (docs/compute_plan.md).",
                  "--note", "Rows without views decode as the paper does; '8 views' rows decode each volume together "
-                 "with its seven mirror images (what infer and parse do by default in 3D, csgnet.decode.VIEWS): "
-                 "one program per beam, at about eight times the decoding cost.")
+                 "with its seven mirror images (what infer and parse do by default in 3D, csgnet.decode.VIEWS), "
+                 "one program per beam.")
 
 EXPERIMENTS: tuple[Experiment, ...] = (
     Experiment(
