@@ -27,7 +27,9 @@ computes it natively, float32 elsewhere).
 images of each target at once: the model reads the target flipped along some axes, its log-probabilities are
 mapped back through the same flip of every primitive's centre, and each step takes the mean log-probability over
 the views (a product of experts). Greedy and beam search then run on that mean exactly as on one model's, so
-``beam=1`` with ``views=8`` is still one arg-max decode, at about ``views`` times the cost.
+``beam=1`` with ``views=8`` is still one arg-max decode; the model's work grows with the views (the wall time less,
+since each beam is rendered and scored once: Table 5 in docs/csgnet.md). A decoded program's ``logprob`` is then
+that mean summed over its steps, not one model's log-probability.
 """
 from __future__ import annotations
 
@@ -186,7 +188,11 @@ def mirror(axes: tuple[int, ...], swap: bool = False, dim: int = 3) -> tuple[tor
 
 
 class _Views:
-    """The mirror maps of ``views`` views, ``(G, V)`` each, and the combination of their log-probabilities."""
+    """The mirror maps of ``views`` views, ``(G, V)`` each, and the combination of their log-probabilities.
+
+    A view whose mirror image of a chosen primitive is missing from the vocabulary reads that primitive as
+    itself, which draws something else in its frame; from that step on it no longer votes for that row
+    (``dropped``, reordered with the rows' parents)."""
 
     def __init__(self, views: int, dim: int, device):
         self.views = VIEWS[views]
@@ -194,28 +200,38 @@ class _Views:
         self.index = torch.stack([m[0] for m in maps]).to(device)
         self.missing = torch.stack([m[1] for m in maps]).to(device)
         self.G = len(self.views)
+        self.dropped: torch.Tensor | None = None  # (G, R): view g no longer votes for row r
 
     def targets(self, targets: torch.Tensor) -> torch.Tensor:
         """``(G·N, ...)``: every view of every target, view-major."""
         return targets if self.G == 1 else torch.cat([flip_view(targets, a, s) for a, s in self.views])
 
     def combine(self, logp: torch.Tensor) -> torch.Tensor:
-        """``(G·R, V)`` per-view log-probabilities -> ``(R, V)`` their mean in the target's own frame (a token
-        whose mirror image is missing in a view is averaged over the other views)."""
+        """``(G·R, V)`` per-view log-probabilities -> ``(R, V)`` their mean in the target's own frame, over the
+        views that still vote for the row and have the token's mirror image."""
         if self.G == 1:
             return logp
         per = logp.view(self.G, -1, logp.shape[1])
+        if self.dropped is None:
+            self.dropped = torch.zeros((self.G, per.shape[1]), dtype=torch.bool, device=logp.device)
         canon = torch.stack([per[g].index_select(1, self.index[g]) for g in range(self.G)])
-        canon = canon.masked_fill(self.missing[:, None, :], float("nan"))
-        return canon.nanmean(0)  # view 0 (the target itself) misses nothing, so no entry is all-NaN
+        canon = canon.masked_fill(self.missing[:, None, :] | self.dropped[:, :, None], float("nan"))
+        return canon.nanmean(0)  # view 0 (the target itself) misses nothing and is never dropped
 
     def tokens(self, tok: torch.Tensor) -> torch.Tensor:
-        """``(R,)`` tokens in the target's frame -> ``(G·R,)`` each view's own."""
-        return tok if self.G == 1 else torch.cat([self.index[g].index_select(0, tok) for g in range(self.G)])
+        """``(R,)`` tokens in the target's frame -> ``(G·R,)`` each view's own (a view without the token's image
+        gets the token itself and stops voting for the row)."""
+        if self.G == 1:
+            return tok
+        self.dropped = self.dropped | self.missing[:, tok]
+        return torch.cat([self.index[g].index_select(0, tok) for g in range(self.G)])
 
     def rows(self, parent: torch.Tensor, R: int) -> torch.Tensor:
         """``(R,)`` parents of the target's rows -> ``(G·R,)`` of every view's rows."""
-        return parent if self.G == 1 else torch.cat([parent + g * R for g in range(self.G)])
+        if self.G == 1:
+            return parent
+        self.dropped = self.dropped.index_select(1, parent)
+        return torch.cat([parent + g * R for g in range(self.G)])
 
 
 def _token_classes(dim: int, device) -> tuple[torch.Tensor, torch.Tensor, int]:
@@ -237,8 +253,9 @@ class _Rows:
         self.device = targets.device
         self.is_draw, self.is_op, self.stop = _token_classes(cfg.dim, self.device)
         self.kinds = primitive_cache(cfg.dim, self.device).kinds
-        self.targets = targets.repeat_interleave(repeat, 0) if repeat > 1 else targets
-        B = self.targets.shape[0]
+        # only CSGNetStack reads every row's target again (at each step); CSGNet encodes each target once
+        self.targets = targets.repeat_interleave(repeat, 0) if repeat > 1 and cfg.stack else targets
+        B = targets.shape[0] * repeat
         self.B = B
         if cfg.stack:
             self.machine = StackMachine(B, cfg.dim, max(max_len, cfg.stack_k), self.device)

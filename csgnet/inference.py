@@ -62,8 +62,9 @@ bfloat16 autocast on a CPU with native bfloat16 (AVX512-BF16 or AMX), float32 el
 measurement behind it."""
 INFER_VIEWS = {2: 1, 3: 8}
 """The mirror views (:data:`csgnet.decode.VIEWS`) :func:`infer` and :func:`parse_shape` decode with by default, per
-dimension: in 3D one decode reads the volume and its seven mirror images (``python bench/decode_views.py``
-measures what that buys and costs); 2D decodes the image alone."""
+dimension: in 3D one decode reads the volume and its seven mirror images (``python -m csgnet evaluate --dim 3 --data
+data/synthetic --beams 1 10 --views 1 2 4 8 16 --nn-train 0 --per-length 100`` measures what each count buys and
+costs: docs/csgnet.md, "Mirror views"); 2D decodes the image alone."""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -254,7 +255,8 @@ class Inference:
 
     Attributes:
         text: program text.
-        score: its log-probability under the model.
+        score: its log-probability under the model (decoded with several mirror views: the views' mean
+            log-probability, summed over the program's steps).
         iou: IoU with the input (2D: ``|A∧B| / |A∨B|``; 3D: ``/ (|A∨B| + 1)``).
         chamfer: the paper's 2D chamfer distance in pixels (NaN in 3D).
         valid: the program is valid (an invalid one renders empty).

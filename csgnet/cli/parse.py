@@ -70,15 +70,17 @@ def _scores_line(iou: float, chamfer: float, program) -> str:
 def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> dict:
     """Infer, optionally refine, report and write one input's program (``parse``: one
     :func:`csgnet.inference.parse_shape`); returns its record for the results file."""
-    from ..inference import INFER_PRECISION, parse_shape  # lazy: loaded when the command runs
+    from ..inference import INFER_PRECISION, INFER_VIEWS, parse_shape  # lazy: loaded when the command runs
 
     dim = shape.ndim
     parsed = parse_shape(shape, model=model, beam=args.beam, select=args.select, refine=args.refine,
                          rule=args.refine_rule, refine_iters=args.refine_iters, constrained=not args.unconstrained,
                          graft=not args.no_graft, extend=not args.no_extend, fit=not args.no_fit,
                          precision=args.precision or INFER_PRECISION, views=args.views if dim == 3 else 1)
+    views = (args.views or INFER_VIEWS[3]) if dim == 3 else 1
     res, ref, program = parsed.decoded, parsed.refined, parsed.program
-    line = f"{src}: {res.text}\n  log-probability {res.score:.3f}, IoU {100 * res.iou:.2f}%"
+    score = "log-probability" if views == 1 else f"mean log-probability over {views} views"
+    line = f"{src}: {res.text}\n  {score} {res.score:.3f}, IoU {100 * res.iou:.2f}%"
     if dim == 2:
         line += f", chamfer {res.chamfer:.3f} px"
     if not res.valid:
@@ -179,15 +181,19 @@ def cmd_parse(args) -> int:
         return 2
     status = 0
     records = []
+    dims = set()
     for src, stem in zip(args.inputs, stems):
         try:
             shape, frame = load_shape_framed(src)  # a mesh's outputs are written in its own units
+            dims.add(shape.ndim)
             model = _parse_model(models, shape.ndim, args.model)
             records.append(_parse_one(src, shape, stem, model, args, frame))
         except (InputError, ParseError, ValueError, OSError) as e:
             print(f"error: {located(src, e)}", file=sys.stderr)
             records.append({"input": str(src), "error": located(src, e)})
             status = 2
+    if args.views is not None and args.views > 1 and dims == {2}:
+        print(f"note: --views {args.views} was not used: it is for 3D inputs, and every input was 2D", file=sys.stderr)
     if out.is_dir():
         results = write_result(_results_path(out), _results(records, args))
         print(f"results of the {len(records)} inputs: {results}")

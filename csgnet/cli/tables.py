@@ -34,7 +34,7 @@ def cmd_evaluate(args) -> int:
     for name, model in labelled_models(args.weights, args.dim):
         if model.config.dim != args.dim:
             raise SystemExit(f"error: {name} is a {model.config.dim}D model, not {args.dim}D")
-        views = args.views
+        views = list(dict.fromkeys(args.views))  # a value given twice gives its rows once
         for v in views:
             print(f"decoding with {name}" + (f", {v} views" if v > 1 else "") + " ...", flush=True)
             rows += evaluate_model(model, tests, tuple(args.beams), name=name, mode=args.mode,

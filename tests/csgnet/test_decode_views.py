@@ -8,17 +8,18 @@ import csgnet
 from csgnet.decode import VIEWS, beam_search, check_views, decode, flip_view, greedy, mirror
 from csgnet.inference import infer
 from csgnet.models import CSGNet, preset
+from csgnet.renderer import stack_trace
 from csgnet.vocab import vocabulary
 
 TEXTS = ["sp(32,32,32,16)", "cu(24,32,40,16)sp(40,24,32,12)-", "cy(24,40,32,8,16)cu(32,32,24,20)+"]
 
 
-def tiny(dim=3, seed=0):
+def tiny(dim=3, seed=0, stack=False):
     torch.manual_seed(seed)
     cfg = dict(hidden=32, channels=(4, 4, 4), enc_dropout=0.0, dropout=0.0)
     if dim == 3:
         cfg.update(channels=(2, 2, 2), input_pool=4)
-    return CSGNet(preset("small", dim, False, **cfg)).eval()
+    return CSGNet(preset("small", dim, stack, **cfg)).eval()
 
 
 def volumes(texts):
@@ -52,32 +53,61 @@ def test_the_first_view_is_the_target_and_sets_grow():
     assert torch.equal(flip_view(flip_view(t, (0, 2)), (0, 2)), t)  # no primitive reaches voxel plane 0
 
 
-def test_views_decoding_scores_are_the_mean_of_the_views_teacher_forced_logprobs():
-    m = tiny(seed=1)
-    with torch.no_grad():
-        m.head[-1].bias[m.stop] += 2.0  # beams that end before max_len, so that '$' is scored too
-    tgt = volumes(TEXTS[:2])
-    views = VIEWS[4]
-    d = beam_search(m, tgt, 3, max_len=5, views=4)
-    compared = 0
-    for i in range(2):
-        for j in range(3):
+@pytest.mark.parametrize("stack", [False, True])
+@pytest.mark.parametrize("n_views", [4, 16])
+def test_views_decoding_scores_are_the_mean_of_the_views_teacher_forced_logprobs(n_views, stack):
+    """Every beam's score is, step by step, the mean over the views still voting of each view's teacher-forced
+    log-probability of the token mirrored into that view (fed its own mirrored prefix and, for CSGNetStack, the
+    stack of that prefix); a view stops voting from the first token it has no image of."""
+    m = tiny(seed=1, stack=stack)
+    v = vocabulary(3)
+    with torch.no_grad():  # favour primitives off every mirror plane, so that every view maps them elsewhere
+        for text in ("p(16,24,40,8)", "p(40,16,24,12)", "u(24,40,16,8)"):
+            m.head[-1].bias[v.tokens.index(text)] += 4.0
+    tgt = volumes(TEXTS)
+    views = VIEWS[n_views]
+    d = beam_search(m, tgt, 4, max_len=5, views=n_views, constrained=True)
+    compared = mirrored = 0
+    for i in range(len(TEXTS)):
+        for j in range(4):
             n = int(d.lengths[i, j])
-            if n >= 5 or not bool(d.valid[i, j]):
+            if not bool(d.valid[i, j]):
                 continue
-            seq = torch.cat([d.tokens[i, j, :n], torch.tensor([m.stop])])
+            # the program and its '$', or at max_len the program alone (decoding stops there)
+            seq = torch.cat([d.tokens[i, j, :n], torch.tensor([m.stop] if n < 5 else [], dtype=torch.long)])
             per_view = []
             for axes, swap in views:
                 index, missing = mirror(axes, swap)
-                s = index[seq]  # a token without an image in this view is read as itself and not averaged
+                s = index[seq]  # a token without an image in this view is fed as itself
                 tok_in = torch.cat([torch.tensor([m.start]), s[:-1]])[None]
+                st = stack_trace(s[None, :-1], 3, k=m.config.stack_k) if stack else None
                 with torch.no_grad():
-                    lp = F.log_softmax(m(flip_view(tgt[i: i + 1], axes, swap), tok_in, None), -1)[0]
-                per_view.append(lp.gather(1, s[:, None])[:, 0].masked_fill(missing[seq], float("nan")))
+                    lp = F.log_softmax(m(flip_view(tgt[i: i + 1], axes, swap), tok_in, st), -1)[0]
+                off = missing[seq].long().cummax(0).values.bool()  # from its first missing token on
+                per_view.append(lp.gather(1, s[:, None])[:, 0].masked_fill(off, float("nan")))
+                mirrored += int(n >= 3 and bool(((s[:n] != seq[:n]) & ~off[:n]).any()))
             expected = float(torch.stack(per_view).nanmean(0).sum())
-            assert expected == pytest.approx(float(d.logprob[i, j]), abs=1e-3)
+            assert expected == pytest.approx(float(d.logprob[i, j]), abs=1e-5)
             compared += 1
-    assert compared >= 2
+    assert compared >= 4 and mirrored >= 1  # programs of several primitives, mapped to other tokens by some view
+
+
+def test_a_view_that_cannot_follow_a_primitive_stops_voting_for_that_row():
+    from csgnet.decode import _Views
+
+    vw = _Views(2, 3, "cpu")  # the volume and its mirror image along x
+    V = len(vocabulary(3))
+    _, missing = mirror((0,))
+    gone = int(torch.nonzero(missing)[0])  # a cube at the grid's upper x edge: no image along x
+    logp = torch.cat([torch.zeros(2, V), torch.full((2, V), -1.0)])  # view 0 says 0, view 1 says -1, two rows
+    c = vw.combine(logp)
+    assert c[0, 0] == -0.5 and c[0, gone] == 0.0  # the missing token: view 0 alone
+    assert torch.equal(vw.tokens(torch.tensor([gone, 0]))[2:], torch.tensor([gone, int(mirror((0,))[0][0])]))
+    c = vw.combine(logp)
+    assert (c[0] == 0.0).all() and c[1, 0] == -0.5  # row 0 lost view 1's vote, row 1 did not
+    vw.rows(torch.tensor([1, 0]), 2)  # beams exchange places: the vote follows the row
+    c = vw.combine(logp)
+    assert c[0, 0] == -0.5 and (c[1] == 0.0).all()
 
 
 @pytest.mark.parametrize("width", [1, 3])
@@ -109,6 +139,21 @@ def test_one_view_is_the_plain_decode_and_views_keep_the_output_shape():
 def test_bad_views_are_refused_by_name(bad):
     with pytest.raises(ValueError, match="views must be one of"):
         check_views(bad, 3)
+
+
+def test_more_than_one_view_is_refused_for_2d_and_bad_views_before_any_work(tmp_path, capsys):
+    from csgnet.__main__ import main
+    from csgnet.inference import parse_shape
+
+    with pytest.raises(ValueError, match="views must be one of"):
+        parse_shape(tmp_path / "not_read.png", views=3)  # refused before the file is looked at
+    with pytest.raises(SystemExit, match="more than 1 view is for 3D models"):
+        main(["evaluate", "--dim", "2", "--data", str(tmp_path), "--views", "1", "8"])
+    img = tmp_path / "c.png"
+    assert main(["render", "c(32,32,16)", "-o", str(img)]) == 0
+    capsys.readouterr()
+    assert main(["parse", str(img), "--beam", "1", "--views", "8", "--out", str(tmp_path / "out")]) == 0
+    assert "note: --views 8 was not used: it is for 3D inputs, and every input was 2D" in capsys.readouterr().err
 
 
 def test_more_than_one_view_is_refused_for_2d():
