@@ -53,6 +53,8 @@ def main(argv=None) -> int:
     ap.add_argument("--weights", default=None, help="weights file (default: the shipped default model)")
     ap.add_argument("--per-length", type=int, default=20)
     ap.add_argument("--beam", type=int, default=10)
+    ap.add_argument("--views", type=int, choices=(1, 2, 4, 8, 16), default=1,
+                    help="3D: mirror views per decode (csgnet.decode.VIEWS; default 1; parse decodes 3D with 8)")
     ap.add_argument("--penalties", type=float, nargs="+", default=list(DEFAULT_PENALTIES))
     ap.add_argument("--refine-iters", type=int, default=None, help="Powell iterations (default: to convergence)")
     ap.add_argument("--threads", type=int, default=1)
@@ -65,7 +67,8 @@ def main(argv=None) -> int:
     programs = [p for ps in load_dataset(args.data, args.dim, "val").values() for p in ps[: args.per_length]]
     targets = render([p.text() for p in programs], args.dim)
     t0 = time.process_time()
-    starts = infer(model, targets, beam=args.beam, select="match", precision="float32")  # the same on every CPU
+    starts = infer(model, targets, beam=args.beam, select="match", precision="float32",  # the same on every CPU
+                   views=args.views if args.dim == 3 else 1)
     per_penalty: dict[float, list[tuple[float, int, int]]] = {lam: [] for lam in args.penalties}
     for prog, target, start in zip(programs, targets, starts):
         valid = [parse(b, args.dim) for b in start.beams if is_valid_text(b, args.dim)]
@@ -103,8 +106,9 @@ def main(argv=None) -> int:
         cols = [column("penalty", "λ (IoU per primitive)"), column("iou", "mean IoU", 2, 100.0),
                 column("primitives", "mean primitives", 2), column("truth", "true primitives", 2),
                 column("length_error", "mean abs. length error", 3), column("longer", "longer than the truth (%)", 1, 100.0)]
+        views = f"{args.views} mirror views, " if args.dim == 3 and args.views > 1 else ""
         notes = [f"{len(programs)} validation programs ({args.per_length} per length) of {args.data}, beam {args.beam}, "
-                 f"model {args.weights or 'the shipped default'}. Chosen: λ = {chosen:g}, the largest whose mean IoU is at "
+                 f"{views}model {args.weights or 'the shipped default'}. Chosen: λ = {chosen:g}, the largest whose mean IoU is at "
                  f"most {100 * MAX_VAL_IOU_COST:g} points below λ = 0's."]
         print(f"wrote {write_result(args.out, make_result(f'The short rule: price per primitive ({args.dim}D)', cols, rows, notes, command))}")
     return 0
