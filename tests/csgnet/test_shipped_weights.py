@@ -14,7 +14,7 @@ import pytest
 import torch
 
 import csgnet
-from csgnet.decode import decode
+from csgnet.decode import VIEWS, decode, flip_view
 from csgnet.inference import PRETRAINED, SHIPPED, WEIGHTS, load_model, load_pretrained, load_shape
 
 HOUSE = Path(__file__).resolve().parents[2] / "examples" / "house.png"
@@ -461,15 +461,15 @@ def test_beam_search_programs_are_unchanged(name):
 # what infer and parse decode by default in 3D: the volume with its seven mirror images (csgnet.decode.VIEWS),
 # on targets that are not mirror-symmetric (the ones above are, so every view reads the same volume)
 TARGETS_3D_VIEWS = ["cu(24,32,40,16)sp(40,24,32,12)-", "cy(24,40,32,8,16)cu(40,24,24,16)+",
-                    "sp(16,16,48,12)sp(48,48,16,12)+"]
+                    "sp(16,16,48,12)sp(48,40,24,8)+"]
 EXPECTED_3D_VIEWS = {
     "greedy": ["cu(24,32,40,16)cu(24,32,40,16)+", "cy(24,40,32,8,16)cu(40,24,24,16)+",
-               "sp(16,16,48,12)sp(48,48,16,12)+"],
+               "sp(48,40,24,8)sp(16,16,48,12)+"],
     "beam3": [
         ["cu(24,32,40,16)cu(24,32,40,16)+", "cu(24,32,40,16)cu(24,32,40,16)-", "cu(24,32,40,16)cu(24,32,40,16)*"],
         ["cy(24,40,32,8,16)cu(40,24,24,16)+", "cu(40,24,24,16)cy(24,40,32,8,16)+",
          "cu(40,24,32,16)cy(24,40,24,8,16)+"],
-        ["sp(48,48,16,12)sp(16,16,48,12)+", "sp(16,16,48,12)sp(48,48,16,12)+", "sp(16,48,48,12)sp(48,48,16,12)+"],
+        ["sp(48,40,24,8)sp(16,16,48,12)+", "sp(16,16,48,12)sp(48,40,24,8)+", "sp(48,40,24,12)sp(16,16,48,8)+"],
     ],
 }
 
@@ -479,6 +479,10 @@ def test_the_default_3d_views_decode_the_same_programs():
 
     model = load_pretrained(3)
     targets = torch.as_tensor(csgnet.render(TARGETS_3D_VIEWS, dim=3))
+    # a target equal to one of its mirror images makes the views' mean score tie two mirrored programs exactly,
+    # and float rounding (thread count) picks between them: none may be
+    for axes, swap in VIEWS[INFER_VIEWS[3]][1:]:
+        assert not (flip_view(targets, axes, swap) == targets).flatten(1).all(1).any(), (axes, swap)
     assert [b[0] for b in decode(model, targets, 1, views=INFER_VIEWS[3]).texts()] == EXPECTED_3D_VIEWS["greedy"]
     assert decode(model, targets, 3, views=INFER_VIEWS[3]).texts() == EXPECTED_3D_VIEWS["beam3"]
 
