@@ -12,13 +12,12 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import hashlib
 import sys
 from importlib import resources
 
 from shapeio.results import column, make_result, markdown, write_result
 from shapeprog.macros import load_library
-from shapeprog.macros.refactored import CHECK_TOL, SHIPPED, read_refactored
+from shapeprog.macros.refactored import CHECK_TOL, SHIPPED, library_sha256, read_refactored
 
 MEASURES = [("f", "f (sum over sub-programs)"), ("lines", "calls after the bbox lines"),
             ("float", "float parameters"), ("cube", "cuboid ids"), ("categorical", "categoricals"),
@@ -32,8 +31,7 @@ def row(category: str) -> dict:
         kib = path.stat().st_size / 1024
     if len(programs) != s["refactored"]:
         raise SystemExit(f"{path}: {len(programs)} programs, its summary says {s['refactored']}")
-    lib = hashlib.sha256(load_library(category).to_text().encode("utf-8")).hexdigest()
-    if s.get("library_sha256") != lib:
+    if s.get("library_sha256") != library_sha256(load_library(category)):
         raise SystemExit(f"{path}: made with another library than the shipped {category} library "
                          f"(regenerate it with the command in its summary)")
     return {"summary": s, "kib": kib}
@@ -67,7 +65,7 @@ def main(argv=None) -> int:
              f"shapeprog.macros.refactored.CHECK_TOL ({CHECK_TOL}).",
              "Each archive was written by: " + "; ".join(f"{c}: `{v['summary'].get('command', '?')}`"
                                                          for c, v in found.items()) + "; the wall times are "
-             "those runs' own (the 2-core CPU, no GPU, beside other jobs), from each archive's summary."]
+             "those runs' own (the 2-core CPU, no GPU), from each archive's summary."]
     columns = [column("measure", "per shape, before → after"), *(column(c, c) for c in found)]
     res = make_result("The shipped refactored corpora", columns, rows(found), notes,
                       command="python bench/shapemod_refactored.py" + (f" --json {args.json}" if args.json else ""))

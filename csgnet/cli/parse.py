@@ -73,11 +73,11 @@ def _parse_one(src, shape: np.ndarray, stem: Path, model, args, frame=None) -> d
     from ..inference import INFER_PRECISION, INFER_VIEWS, parse_shape  # lazy: loaded when the command runs
 
     dim = shape.ndim
+    views = (args.views or INFER_VIEWS[3]) if dim == 3 else 1
     parsed = parse_shape(shape, model=model, beam=args.beam, select=args.select, refine=args.refine,
                          rule=args.refine_rule, refine_iters=args.refine_iters, constrained=not args.unconstrained,
                          graft=not args.no_graft, extend=not args.no_extend, fit=not args.no_fit,
-                         precision=args.precision or INFER_PRECISION, views=args.views if dim == 3 else 1)
-    views = (args.views or INFER_VIEWS[3]) if dim == 3 else 1
+                         precision=args.precision or INFER_PRECISION, views=views)
     res, ref, program = parsed.decoded, parsed.refined, parsed.program
     score = "log-probability" if views == 1 else f"mean log-probability over {views} views"
     line = f"{src}: {res.text}\n  {score} {res.score:.3f}, IoU {100 * res.iou:.2f}%"

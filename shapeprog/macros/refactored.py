@@ -55,8 +55,8 @@ from .execute import execute_hierarchy
 from .lang import MacroError, from_lines
 from .library import Library
 
-__all__ = ["CHUNK", "CHECK_TOL", "MAX_ARCHIVE_BYTES", "SHIPPED", "SUMMARY", "RefactoredCorpus", "ShapeRefactor", "check_target", "load_refactored",
-           "read_refactored", "refactor_corpus", "refactor_texts", "write_refactored"]
+__all__ = ["CHUNK", "CHECK_TOL", "MAX_ARCHIVE_BYTES", "SHIPPED", "SUMMARY", "RefactoredCorpus", "ShapeRefactor", "check_target", "library_sha256",
+           "load_refactored", "read_refactored", "refactor_corpus", "refactor_texts", "write_refactored"]
 
 #: Shapes per executor task.
 CHUNK = 25
@@ -228,6 +228,12 @@ def refactor_texts(category: str, items: Sequence[tuple[int, str]], library, exe
     return [s for p in parts for s in p]
 
 
+def library_sha256(library) -> str:
+    """The hash a refactored corpus's summary records of the library it was made with (``library_sha256``): of
+    its definitions as :meth:`Library.to_text` prints them (no header)."""
+    return hashlib.sha256(library.to_text().encode("utf-8")).hexdigest()
+
+
 def refactor_corpus(category: str, library, library_name: str = "", split: str = "all",
                     limit: int | None = None, seed: int = 0, ids: Sequence[int] | None = None,
                     executor: Executor | None = None, chunk: int = CHUNK, mode: str = "beam",
@@ -258,7 +264,7 @@ def refactor_corpus(category: str, library, library_name: str = "", split: str =
             raise ValueError(f"no program {category}/{i} in the corpus") from None
     shapes = refactor_texts(category, items, library, executor, chunk, mode, max_orders, check)
 
-    meta = {"library_sha256": hashlib.sha256(library.to_text().encode("utf-8")).hexdigest(),
+    meta = {"library_sha256": library_sha256(library),
             "split": None if given else split, "ids": len(ids) if given else None, "limit": limit, "seed": seed,
             "search": mode, "max_orders": max_orders, "library_macros": len(library.macros),
             "library_size": len(library)}
